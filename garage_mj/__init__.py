@@ -1,0 +1,28 @@
+"""garage-mj: adverse underground-garage scenarios for automated valet parking, in MuJoCo.
+
+Stages, one module each: maps -> garage model -> rules/road graph/metrics -> generation env ->
+training and library -> exporters -> cruise testbed -> reports.
+"""
+
+from __future__ import annotations
+
+from garage_mj.blocks import Block
+from garage_mj.garage import Garage, MapError
+from garage_mj.map_io import list_maps, load_map
+from garage_mj.metrics import GarageMetrics, difficulty, evaluate
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Block",
+    "Garage",
+    "GarageMetrics",
+    "MapError",
+    "__version__",
+    "difficulty",
+    "evaluate",
+    "list_maps",
+    "load_map",
+]
+
+from garage_mj import envs as _envs  # noqa: E402,F401  (registers the gymnasium ids)

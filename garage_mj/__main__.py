@@ -1,0 +1,5 @@
+import sys
+
+from garage_mj.cli import main
+
+sys.exit(main())

@@ -1,0 +1,106 @@
+"""Garage metrics (SPEC section 4): coverage, difficulty, stalls and road statistics.
+
+``difficulty(E[Y], E[X])`` is the paper's lambda with the weights of its table of 16 garages;
+``evaluate(garage)`` computes every metric the library stores and the reports show.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from garage_mj.blocks import Block, count_stalls
+from garage_mj.config import DifficultyConfig, RewardConfig
+from garage_mj.garage import Garage
+from garage_mj.roadgraph import analyse
+from garage_mj.rules import road_squares, stall_rule_violations
+
+DEFAULT_DIFFICULTY = DifficultyConfig()
+
+
+def difficulty(
+    mean_intersection_degree: float,
+    mean_road_length: float,
+    config: DifficultyConfig = DEFAULT_DIFFICULTY,
+) -> float:
+    """lambda = w_Y (1 - n_Y) + w_X (1 - n_X), clipped to [0, 1].
+
+    n_Y = (E[Y] - 2) / 2 and n_X = (E[X] - 2) / 4 with the default ranges. Short roads and
+    few-way intersections are harder.
+    """
+    n_y = (mean_intersection_degree - config.intersection_min) / (
+        config.intersection_max - config.intersection_min
+    )
+    n_x = (mean_road_length - config.road_length_min) / (
+        config.road_length_max - config.road_length_min
+    )
+    lam = config.w_intersection * (1.0 - n_y) + config.w_road_length * (1.0 - n_x)
+    return float(min(1.0, max(0.0, lam)))
+
+
+def coverage(grid: np.ndarray, initial: np.ndarray) -> float:
+    """delta = 1 - #FREE(grid) / #FREE(initial)."""
+    free0 = int(np.count_nonzero(initial == Block.FREE))
+    if free0 == 0:
+        return 0.0
+    return 1.0 - int(np.count_nonzero(grid == Block.FREE)) / free0
+
+
+def utility_values(
+    stalls: int, free0: int, x_hist: dict[int, int], y_hist: dict[int, int], reward: RewardConfig
+) -> tuple[float, float, float]:
+    """Performance values (P_s, P_r, P_c) of the utility rules (SPEC section 4).
+
+    P_s = stalls per initial FREE cell; P_r = sum_x P(X=x) w_x[x]; P_c = sum_y P(Y=y) w_y[y].
+    """
+    p_s = stalls / free0 if free0 else 0.0
+    nx = sum(x_hist.values())
+    p_r = sum(k * reward.w_x.get(x, 0.0) for x, k in x_hist.items()) / nx if nx else 0.0
+    ny = sum(y_hist.values())
+    p_c = sum(k * reward.w_y.get(y, 0.0) for y, k in y_hist.items()) / ny if ny else 0.0
+    return p_s, p_r, p_c
+
+
+@dataclass(frozen=True)
+class GarageMetrics:
+    coverage: float  # delta, share of initial FREE cells painted
+    difficulty: float  # lambda in [0, 1]
+    stalls: int
+    mean_road_length: float  # E[X], cells per segment clipped to [2, 6]
+    mean_intersection_degree: float  # E[Y], 2 when there is no key node of degree >= 2
+    connected: bool  # entrance and exit joined by road-like cells
+    valid: bool  # no 2x2 road square and the stall rule holds everywhere
+    usable: bool  # connected and valid
+    segments: int
+    road_cells: int
+    tiles: dict[str, int]
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def evaluate(garage: Garage, config: DifficultyConfig = DEFAULT_DIFFICULTY) -> GarageMetrics:
+    """Every metric of ``garage``, recomputed from its grid."""
+    grid = garage.grid
+    a = analyse(grid)
+    lo, hi = config.road_length_min, config.road_length_max
+    xs = [min(max(s.length, lo), hi) for s in a.segments]
+    ys = a.intersection_degrees()
+    ex = float(np.mean(xs)) if xs else float(lo)
+    ey = float(np.mean(ys)) if ys else float(config.intersection_min)
+    connected = a.connected(garage.entrance, garage.exit)
+    valid = not road_squares(grid) and not stall_rule_violations(grid, garage.six_stall_axis)
+    return GarageMetrics(
+        coverage=coverage(grid, garage.initial),
+        difficulty=difficulty(ey, ex, config),
+        stalls=count_stalls(grid),
+        mean_road_length=ex,
+        mean_intersection_degree=ey,
+        connected=connected,
+        valid=valid,
+        usable=connected and valid,
+        segments=len(a.segments),
+        road_cells=len(a.masks),
+        tiles=a.tile_counts(),
+    )

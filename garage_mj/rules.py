@@ -1,0 +1,78 @@
+"""The painter's rules (SPEC section 3): the stall rule and the 2x2 road-square rule.
+
+Pure functions over a grid; the generation env applies them locally after each move, and the
+validity check applies them to a whole grid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from garage_mj.blocks import PAINTABLE, ROAD_LIKE_TABLE, Block
+from garage_mj.garage import Axis
+
+_W, _E, _N, _S = 0, 1, 2, 3
+
+
+def stall_code(road_sides: int, touches_obstacle: bool, axis: Axis) -> Block:
+    """Block a FREE/stall cell must hold given the bitmask of its ROAD sides (0 W, 1 E, 2 N, 3 S).
+
+    - no ROAD side: FREE
+    - ROAD on both sides along the six-stall axis: STALL6
+    - one ROAD side, or the only symmetric pair is on the wrong axis with two sides: (OBST_)STALL3
+    - otherwise (a corner, three or four sides): (OBST_)STALL4
+    """
+    if road_sides == 0:
+        return Block.FREE
+    ew = (road_sides & 0b0011) == 0b0011
+    ns = (road_sides & 0b1100) == 0b1100
+    if (ns and axis == "NS") or (ew and axis == "EW"):
+        return Block.STALL6
+    n = bin(road_sides).count("1")
+    if n == 1 or (n == 2 and (ew or ns)):
+        return Block.OBST_STALL3 if touches_obstacle else Block.STALL3
+    return Block.OBST_STALL4 if touches_obstacle else Block.STALL4
+
+
+def expected_cell(grid: np.ndarray, r: int, c: int, axis: Axis) -> Block:
+    """What the stall rule says cell (r, c) of ``grid`` must hold (it must be FREE or a stall)."""
+    h, w = grid.shape
+    sides = 0
+    obstacle = False
+    for d, (rr, cc) in enumerate(((r, c - 1), (r, c + 1), (r - 1, c), (r + 1, c))):
+        if 0 <= rr < h and 0 <= cc < w:
+            v = grid[rr, cc]
+            if v == Block.ROAD:
+                sides |= 1 << d
+            elif v == Block.OBSTACLE:
+                obstacle = True
+    return stall_code(sides, obstacle, axis)
+
+
+def completes_square(is_road_like, r: int, c: int) -> bool:
+    """Would making (r, c) road-like complete a 2x2 square of road-like cells?
+
+    ``is_road_like(r, c)`` answers for the other cells (False off the grid).
+    """
+    for dr in (-1, 1):
+        for dc in (-1, 1):
+            if is_road_like(r + dr, c) and is_road_like(r, c + dc) and is_road_like(r + dr, c + dc):
+                return True
+    return False
+
+
+def road_squares(grid: np.ndarray) -> list[tuple[int, int]]:
+    """Top-left corners of every 2x2 square of road-like cells in ``grid``."""
+    road = ROAD_LIKE_TABLE[grid]
+    sq = road[:-1, :-1] & road[1:, :-1] & road[:-1, 1:] & road[1:, 1:]
+    return [(int(r), int(c)) for r, c in np.argwhere(sq)]
+
+
+def stall_rule_violations(grid: np.ndarray, axis: Axis) -> list[tuple[int, int]]:
+    """Cells that are FREE or a stall but not what the stall rule says."""
+    bad = []
+    paintable = np.isin(grid, [int(b) for b in PAINTABLE])
+    for r, c in np.argwhere(paintable):
+        if grid[r, c] != expected_cell(grid, int(r), int(c), axis):
+            bad.append((int(r), int(c)))
+    return bad
