@@ -1,0 +1,160 @@
+"""Stall geometry: where every parking stall of a garage lies in the world (SPEC section 6).
+
+Pure: garage in, stalls out. A block is 9 m x 9 m; a row of three 2.5 m x 4.5 m stalls sits
+against the block edge that touches a ROAD cell, centred along it, each stall facing that road.
+
+- STALL3 / OBST_STALL3: one row of three against one road side.
+- STALL6: two back-to-back rows of three, one against each road of the six-stall axis pair.
+- STALL4 / OBST_STALL4: a row of three against one road side plus a lone stall against a
+  perpendicular road side, clear of the row.
+- Obstructed blocks (codes 3 and 9) get two pillars at the front corners of the row, next to
+  the road: what makes parking there harder.
+
+Sides are chosen in the fixed order north, south, west, east, so the layout is deterministic.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from garage_mj.blocks import STALLS_PER_BLOCK, Block
+from garage_mj.garage import Garage
+from garage_mj.geometry import DELTAS, EAST, NORTH, OPPOSITE, SOUTH, WEST
+from garage_mj.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig, cell_center
+
+SIDE_ORDER = (NORTH, SOUTH, WEST, EAST)
+_AXIS_PAIR = {"NS": (NORTH, SOUTH), "EW": (WEST, EAST)}
+
+
+@dataclass(frozen=True)
+class Stall:
+    id: int  # index in the garage, row-major over blocks
+    block: tuple[int, int]  # (row, col) of the stall block
+    x: float  # [m] stall centre
+    y: float  # [m]
+    yaw: float  # [rad] direction the stall opens to (towards its road)
+    side: int  # grid direction of its road from the block (0 W, 1 E, 2 N, 3 S)
+    road_cell: tuple[int, int]  # the ROAD cell it faces
+    road_x: float  # [m] point on the near lane of that road, beside the stall
+    road_y: float  # [m]
+    obstructed: bool  # in an OBST_STALL3/OBST_STALL4 block
+
+    @property
+    def corners(self) -> list[tuple[float, float]]:
+        """Rectangle corners (x, y) [m], counter-clockwise."""
+        return rectangle(self.x, self.y, self.yaw, DEFAULT_WORLD.stall_length, DEFAULT_WORLD.stall_width)
+
+
+@dataclass(frozen=True)
+class Pillar:
+    block: tuple[int, int]
+    x: float  # [m] centre
+    y: float  # [m]
+
+
+@dataclass(frozen=True)
+class StallLayout:
+    stalls: tuple[Stall, ...]
+    pillars: tuple[Pillar, ...]  # obstruction pillars of obstructed blocks
+
+
+def rectangle(x: float, y: float, yaw: float, length: float, width: float) -> list[tuple[float, float]]:
+    """Corners of a length x width rectangle centred at (x, y), its length along ``yaw``."""
+    ca, sa = math.cos(yaw), math.sin(yaw)
+    out = []
+    for sl, sw in ((1, 1), (-1, 1), (-1, -1), (1, -1)):
+        dx, dy = sl * length / 2, sw * width / 2
+        out.append((x + dx * ca - dy * sa, y + dx * sa + dy * ca))
+    return out
+
+
+def _road_sides(grid, r: int, c: int) -> list[int]:
+    h, w = grid.shape
+    out = []
+    for d in SIDE_ORDER:
+        rr, cc = r + DELTAS[d][0], c + DELTAS[d][1]
+        if 0 <= rr < h and 0 <= cc < w and grid[rr, cc] == Block.ROAD:
+            out.append(d)
+    return out
+
+
+def _plan(code: Block, sides: list[int], axis: str) -> list[tuple[int, int]]:
+    """(side, stalls) rows for a block: which road sides get a row of 3 or a lone stall."""
+    if code == Block.STALL6:
+        a, b = _AXIS_PAIR[axis]
+        if a in sides and b in sides:
+            return [(a, 3), (b, 3)]
+        return []
+    if code in (Block.STALL3, Block.OBST_STALL3):
+        return [(sides[0], 3)] if sides else []
+    # four stalls: a row against one side, a lone stall against a perpendicular side
+    for main in sides:
+        perp = [s for s in sides if s not in (main, OPPOSITE[main])]
+        unpaired = OPPOSITE[main] not in sides
+        if perp and (unpaired or len(sides) == 2):
+            return [(main, 3), (perp[0], 1)]
+    return []
+
+
+def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLayout:
+    """Every stall of ``garage`` with its pose and the road point beside it."""
+    grid = garage.grid
+    rows = grid.shape[0]
+    half = world.block / 2
+    margin = (world.block - world.road_width) / 2  # [m] from block edge to the road's lane edge
+    stalls: list[Stall] = []
+    pillars: list[Pillar] = []
+    for r in range(grid.shape[0]):
+        for c in range(grid.shape[1]):
+            code = Block(int(grid[r, c]))
+            if code not in STALLS_PER_BLOCK:
+                continue
+            sides = _road_sides(grid, r, c)
+            plan = _plan(code, sides, garage.six_stall_axis)
+            if sum(n for _, n in plan) != STALLS_PER_BLOCK[code]:
+                raise ValueError(
+                    f"garage {garage.name!r}, row {r}, column {c}: {code.name} does not fit its road "
+                    f"sides {sorted(sides)}; the grid breaks the stall rule (check metrics.evaluate(...).valid)"
+                )
+            cx, cy = cell_center(r, c, rows, world)
+            obstructed = code in (Block.OBST_STALL3, Block.OBST_STALL4)
+            row_side = plan[0][0]
+            for side, n in plan:
+                ux, uy = WORLD_DIR[side]
+                tx, ty = -uy, ux
+                depth = half - world.stall_length / 2
+                if n == 3:
+                    offsets = [(k - 1) * world.stall_width for k in range(3)]
+                else:  # lone stall: on the far side of the block from the row, clear of it
+                    ax, ay = WORLD_DIR[row_side]
+                    s = -(world.stall_width / 2 + 0.25)
+                    offsets = [s * (ax * tx + ay * ty)]
+                for off in offsets:
+                    x = cx + ux * depth + tx * off
+                    y = cy + uy * depth + ty * off
+                    reach = world.stall_length / 2 + margin + world.lane_width / 2
+                    stalls.append(
+                        Stall(
+                            id=len(stalls),
+                            block=(r, c),
+                            x=x,
+                            y=y,
+                            yaw=DIR_YAW[side],
+                            side=side,
+                            road_cell=(r + DELTAS[side][0], c + DELTAS[side][1]),
+                            road_x=x + ux * reach,
+                            road_y=y + uy * reach,
+                            obstructed=obstructed,
+                        )
+                    )
+            if obstructed:
+                ux, uy = WORLD_DIR[row_side]
+                tx, ty = -uy, ux
+                front = half - world.pillar_size / 2
+                along = 1.5 * world.stall_width + world.pillar_size / 2
+                for sgn in (-1, 1):
+                    pillars.append(
+                        Pillar((r, c), cx + ux * front + sgn * tx * along, cy + uy * front + sgn * ty * along)
+                    )
+    return StallLayout(tuple(stalls), tuple(pillars))
