@@ -7,11 +7,12 @@ dict or a TOML file and rejects unknown keys, so a typo never passes silently.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
+
+import tomllib
 
 T = TypeVar("T")
 
