@@ -1,0 +1,26 @@
+"""Shared fixtures: tiny painted garages made deterministically by the scripted painter."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import pytest  # noqa: E402
+
+from garage_mj import Garage  # noqa: E402
+from garage_mj.painter import paint_garage  # noqa: E402
+
+SHIPPED_MAPS = ["tiny_7x11", "m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u"]
+
+
+@pytest.fixture(scope="session")
+def painted_tiny() -> Garage:
+    """A usable painted tiny_7x11 garage (same every run)."""
+    return paint_garage("tiny_7x11", seed=1)
+
+
+@pytest.fixture(scope="session")
+def painted_maps() -> dict[str, Garage]:
+    """One usable painted garage per shipped map (same every run)."""
+    return {m: paint_garage(m, seed=3) for m in SHIPPED_MAPS}
