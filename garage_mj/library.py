@@ -1,0 +1,374 @@
+"""The scenario library: every usable garage met during training, in one SQLite file.
+
+One file (``library.sqlite``) in WAL mode holds the table ``garages``; a garage found twice is
+stored once (``hash`` is UNIQUE). Several training processes may write to the same file at the
+same time: each insert is its own short transaction and writers wait up to
+:data:`BUSY_TIMEOUT_S` for the lock.
+
+Opening a file checks it before SQLite touches it: the 100-byte header must carry the SQLite
+magic, the garage-mj application id and a schema version this code knows. A foreign, corrupt
+or newer file raises :class:`LibraryError` naming the file and the fix, and nothing on disk
+changes (the check reads bytes, then opens the file ``immutable``, which writes nothing).
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import struct
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garage_mj.garage import Garage
+from garage_mj.metrics import evaluate
+
+#: Schema version written to ``PRAGMA user_version``; bump it with a migration.
+SCHEMA_VERSION = 1
+#: ``PRAGMA application_id`` of a garage-mj library ("GMJL" in ASCII).
+APPLICATION_ID = 0x474D4A4C
+BUSY_TIMEOUT_S = 60.0  # [s] a writer waits this long for another writer's lock
+SQLITE_MAGIC = b"SQLite format 3\x00"
+DIFFICULTY_BIN = 0.1  # width of the difficulty strata of :meth:`Library.sample`
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS garages (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    map TEXT NOT NULL,
+    run TEXT NOT NULL,
+    seed INTEGER NOT NULL,
+    episode INTEGER NOT NULL,
+    timestep INTEGER NOT NULL,
+    hash TEXT NOT NULL UNIQUE,
+    rows INTEGER NOT NULL,
+    cols INTEGER NOT NULL,
+    grid TEXT NOT NULL,
+    initial TEXT NOT NULL,
+    six_stall_axis TEXT NOT NULL CHECK (six_stall_axis IN ('NS', 'EW')),
+    coverage REAL NOT NULL,
+    difficulty REAL NOT NULL,
+    stalls INTEGER NOT NULL,
+    mean_road_length REAL NOT NULL,
+    mean_intersection_degree REAL NOT NULL,
+    created_at TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS garages_map_difficulty ON garages (map, difficulty);
+CREATE INDEX IF NOT EXISTS garages_run ON garages (run);
+"""
+_COLUMNS = (
+    "id, map, run, seed, episode, timestep, hash, grid, initial, six_stall_axis, coverage, "
+    "difficulty, stalls, mean_road_length, mean_intersection_degree, created_at"
+)
+
+
+class LibraryError(Exception):
+    """A library file cannot be used (foreign, corrupt, newer schema, missing)."""
+
+
+@dataclass(frozen=True)
+class GarageRecord:
+    """One row of the library; :attr:`garage` rebuilds the :class:`Garage`."""
+
+    id: int
+    map: str
+    run: str
+    seed: int
+    episode: int
+    timestep: int
+    hash: str
+    grid: list[list[int]]
+    initial: list[list[int]]
+    six_stall_axis: str
+    coverage: float
+    difficulty: float
+    stalls: int
+    mean_road_length: float
+    mean_intersection_degree: float
+    created_at: str
+
+    @property
+    def garage(self) -> Garage:
+        return Garage(
+            np.array(self.grid), np.array(self.initial), six_stall_axis=self.six_stall_axis,  # type: ignore[arg-type]
+            name=f"{self.map}#{self.id}",
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+def _check_header(path: Path) -> int:
+    """Validate the file header without SQLite; returns its schema version (0: empty file)."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(100)
+    except OSError as exc:
+        raise LibraryError(f"{path}: cannot read the library: {exc.strerror}") from None
+    if not head:
+        return 0
+    if len(head) < 100 or not head.startswith(SQLITE_MAGIC):
+        raise LibraryError(
+            f"{path} is not an SQLite database (corrupt, or another kind of file); "
+            "pass a garage-mj library.sqlite or a new path"
+        )
+    user_version, application_id = struct.unpack(">I4xI", head[60:72])
+    if application_id != APPLICATION_ID:
+        raise LibraryError(
+            f"{path} is an SQLite database but not a garage-mj library; "
+            "pass a garage-mj library.sqlite or a new path"
+        )
+    if user_version > SCHEMA_VERSION:
+        raise LibraryError(
+            f"{path} has library schema version {user_version}, newer than this garage-mj "
+            f"understands ({SCHEMA_VERSION}); upgrade garage-mj to read it"
+        )
+    return user_version
+
+
+def _check_body(path: Path) -> None:
+    """Read the schema through an ``immutable`` connection (writes nothing, not even -wal/-shm)."""
+    if Path(f"{path}-wal").exists():
+        return  # a writer is live or crashed: SQLite must replay the WAL, the normal open checks
+    for attempt in range(2):
+        try:
+            con = sqlite3.connect(f"{path.resolve().as_uri()}?immutable=1", uri=True)
+            try:
+                con.execute("SELECT name FROM sqlite_master").fetchall()
+                con.execute("SELECT count(*) FROM garages").fetchone()
+            finally:
+                con.close()
+            return
+        except sqlite3.DatabaseError as exc:
+            if attempt == 0:
+                time.sleep(0.2)  # a checkpoint in another process may have torn our read
+                continue
+            raise LibraryError(
+                f"{path} is a damaged garage-mj library ({exc}); restore it from a backup or "
+                "pass a new path"
+            ) from None
+
+
+class Library:
+    """The scenario library in one SQLite file.
+
+    Args:
+        path: the ``library.sqlite`` file.
+        create: make the file if it does not exist (readers pass ``False`` to get a clear error).
+    """
+
+    def __init__(self, path: str | Path, *, create: bool = True) -> None:
+        self.path = Path(path)
+        exists = self.path.exists()
+        if not exists and not create:
+            raise LibraryError(f"no library at {self.path}; train first (garage-mj train) or pass --library")
+        if exists and self.path.is_dir():
+            raise LibraryError(f"{self.path} is a folder; pass the library file (library.sqlite)")
+        version = _check_header(self.path) if exists else 0
+        if version:
+            _check_body(self.path)
+        if not exists:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
+            self._con.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
+            if version < SCHEMA_VERSION:
+                self._create_schema()
+            if self._con.execute("PRAGMA journal_mode").fetchone()[0] != "wal":
+                self._con.execute("PRAGMA journal_mode = WAL")
+            self._con.execute("PRAGMA synchronous = NORMAL")  # WAL + NORMAL: durable across a process kill
+        except sqlite3.DatabaseError as exc:
+            raise LibraryError(f"{self.path}: cannot open the library ({exc})") from None
+
+    def _create_schema(self) -> None:
+        con = self._con
+        con.execute("BEGIN IMMEDIATE")
+        try:
+            app, ver = (con.execute(f"PRAGMA {p}").fetchone()[0] for p in ("application_id", "user_version"))
+            if (app, ver) == (APPLICATION_ID, SCHEMA_VERSION):
+                con.execute("COMMIT")  # another process created it first
+                return
+            tables = [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")]
+            if app == 0 and tables:
+                raise LibraryError(f"{self.path} is an SQLite database but not a garage-mj library")
+            for statement in _SCHEMA.split(";"):
+                if statement.strip():
+                    con.execute(statement)
+            con.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+            con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            con.execute("COMMIT")
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
+
+    # -- context manager --------------------------------------------------------------------------
+    def close(self) -> None:
+        self._con.close()
+
+    def __enter__(self) -> Library:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- writing ----------------------------------------------------------------------------------
+    def add(self, garage: Garage, *, map: str, run: str, seed: int, episode: int, timestep: int) -> int | None:
+        """Store ``garage`` with its provenance; returns the new id, or ``None`` if already stored.
+
+        The metrics are recomputed from the grid (:func:`garage_mj.metrics.evaluate`), so what
+        the library says about a garage is what the rest of garage-mj computes for it.
+        """
+        m = evaluate(garage)
+        h, w = garage.shape
+        row = (
+            map, run, int(seed), int(episode), int(timestep), garage.canonical_hash(), h, w,
+            json.dumps(garage.grid.tolist()), json.dumps(garage.initial.tolist()), garage.six_stall_axis,
+            m.coverage, m.difficulty, m.stalls, m.mean_road_length, m.mean_intersection_degree,
+            datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        )
+        cur = self._con.execute(
+            "INSERT OR IGNORE INTO garages (map, run, seed, episode, timestep, hash, rows, cols, grid, "
+            "initial, six_stall_axis, coverage, difficulty, stalls, mean_road_length, "
+            "mean_intersection_degree, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            row,
+        )
+        return int(cur.lastrowid) if cur.rowcount == 1 and cur.lastrowid is not None else None
+
+    # -- reading ----------------------------------------------------------------------------------
+    def _record(self, row: tuple) -> GarageRecord:
+        values = list(row)
+        values[7] = json.loads(values[7])
+        values[8] = json.loads(values[8])
+        return GarageRecord(*values)
+
+    def get(self, id: int) -> GarageRecord:
+        """The record with ``id``; :class:`LibraryError` if there is none."""
+        row = self._con.execute(f"SELECT {_COLUMNS} FROM garages WHERE id = ?", (int(id),)).fetchone()
+        if row is None:
+            raise LibraryError(f"{self.path} has no garage with id {id}; list them with garage-mj library ls")
+        return self._record(row)
+
+    @staticmethod
+    def _where(
+        map: str | None, difficulty: tuple[float, float] | None, coverage: tuple[float, float] | None,
+        run: str | None = None,
+    ) -> tuple[str, list[Any]]:
+        clauses, params = [], []
+        if map is not None:
+            clauses.append("map = ?")
+            params.append(map)
+        if run is not None:
+            clauses.append("run = ?")
+            params.append(run)
+        for col, rng in (("difficulty", difficulty), ("coverage", coverage)):
+            if rng is not None:
+                lo, hi = rng
+                if lo > hi:
+                    raise ValueError(f"{col} range ({lo}, {hi}) is empty; give LO <= HI")
+                clauses.append(f"{col} BETWEEN ? AND ?")
+                params += [float(lo), float(hi)]
+        return (" WHERE " + " AND ".join(clauses)) if clauses else "", params
+
+    def query(
+        self,
+        map: str | None = None,
+        difficulty: tuple[float, float] | None = None,
+        coverage: tuple[float, float] | None = None,
+        limit: int | None = None,
+        run: str | None = None,
+    ) -> list[GarageRecord]:
+        """Records matching every given filter (ranges are inclusive), oldest first."""
+        where, params = self._where(map, difficulty, coverage, run)
+        sql = f"SELECT {_COLUMNS} FROM garages{where} ORDER BY id"
+        if limit is not None:
+            if limit < 0:
+                raise ValueError(f"limit must be >= 0, got {limit}")
+            sql += f" LIMIT {int(limit)}"
+        return [self._record(r) for r in self._con.execute(sql, params)]
+
+    def count(self, map: str | None = None, run: str | None = None) -> int:
+        where, params = self._where(map, None, None, run)
+        return int(self._con.execute(f"SELECT count(*) FROM garages{where}", params).fetchone()[0])
+
+    def points(self, map: str | None = None) -> np.ndarray:
+        """An N x 2 array of (difficulty, coverage), for the heatmaps."""
+        where, params = self._where(map, None, None)
+        rows = self._con.execute(f"SELECT difficulty, coverage FROM garages{where} ORDER BY id", params).fetchall()
+        return np.array(rows, dtype=float).reshape(-1, 2)
+
+    def maps(self) -> list[str]:
+        return [r[0] for r in self._con.execute("SELECT DISTINCT map FROM garages ORDER BY map")]
+
+    def sample(
+        self,
+        n: int,
+        seed: int,
+        stratify: str | None = "difficulty",
+        map: str | None = None,
+        difficulty: tuple[float, float] | None = None,
+        coverage: tuple[float, float] | None = None,
+    ) -> list[GarageRecord]:
+        """``n`` distinct records drawn with ``seed`` (all of them when fewer match), sorted by id.
+
+        ``stratify="difficulty"`` spreads the draw evenly over difficulty bins of width
+        :data:`DIFFICULTY_BIN` (a bin with too few garages gives all it has and the rest go to
+        the others), so rare hard or easy garages are not drowned out; ``None`` draws uniformly.
+        """
+        if n < 0:
+            raise ValueError(f"n must be >= 0, got {n}")
+        if stratify not in (None, "difficulty"):
+            raise ValueError(f"stratify must be 'difficulty' or None, got {stratify!r}")
+        where, params = self._where(map, difficulty, coverage)
+        rows = self._con.execute(f"SELECT id, difficulty FROM garages{where} ORDER BY id", params).fetchall()
+        rng = np.random.default_rng(seed)
+        if n >= len(rows):
+            chosen = [r[0] for r in rows]
+        elif stratify is None:
+            chosen = [rows[i][0] for i in rng.choice(len(rows), size=n, replace=False)]
+        else:
+            bins: dict[int, list[int]] = {}
+            n_bins = round(1 / DIFFICULTY_BIN)
+            for id_, d in rows:
+                bins.setdefault(min(int(d / DIFFICULTY_BIN), n_bins - 1), []).append(id_)
+            quota = _allocate(n, {b: len(ids) for b, ids in bins.items()})
+            chosen = []
+            for b in sorted(bins):
+                ids = bins[b]
+                chosen += [ids[i] for i in rng.choice(len(ids), size=quota[b], replace=False)]
+        return [self.get(i) for i in sorted(chosen)]
+
+    def stats(self) -> dict[str, Any]:
+        """Per-map counts and the range and mean of the metrics, plus the runs that fed it."""
+        out: dict[str, Any] = {"path": str(self.path), "schema_version": SCHEMA_VERSION, "total": self.count()}
+        per_map = {}
+        for row in self._con.execute(
+            "SELECT map, count(*), count(DISTINCT run), min(difficulty), avg(difficulty), max(difficulty), "
+            "min(coverage), avg(coverage), max(coverage), avg(stalls), max(stalls) FROM garages "
+            "GROUP BY map ORDER BY map"
+        ):
+            per_map[row[0]] = {
+                "garages": row[1], "runs": row[2],
+                "difficulty": {"min": row[3], "mean": row[4], "max": row[5]},
+                "coverage": {"min": row[6], "mean": row[7], "max": row[8]},
+                "stalls": {"mean": row[9], "max": row[10]},
+            }
+        out["maps"] = per_map
+        return out
+
+
+def _allocate(n: int, sizes: dict[int, int]) -> dict[int, int]:
+    """Split ``n`` draws as evenly as possible over bins of the given sizes (sum(sizes) >= n)."""
+    quota = dict.fromkeys(sizes, 0)
+    left = n
+    open_bins = sorted(sizes)
+    while left > 0:
+        share, extra = divmod(left, len(open_bins))
+        for i, b in enumerate(open_bins):
+            take = min(share + (i < extra), sizes[b] - quota[b])
+            quota[b] += take
+            left -= take
+        open_bins = [b for b in open_bins if quota[b] < sizes[b]]
+    return quota

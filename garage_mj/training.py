@@ -1,0 +1,429 @@
+"""DQN training on GarageGenEnv that feeds the scenario library (paper Sec. "RL Experiments").
+
+``train(map, timesteps, seed, out_dir)`` runs stable-baselines3 DQN with an MLP policy. Every
+finished episode is logged by SB3's ``Monitor`` (``out_dir/monitor.csv``: return, length) and,
+when its garage is usable, committed to the library at once, so a crash loses no garage that
+was reported. Checkpoints (model + episode/timestep counters) are written atomically every
+``checkpoint_every`` timesteps and on Ctrl-C; ``resume=True`` continues from the newest one.
+
+A run folder holds ``run.json`` (the manifest: map, seed, config, progress, throughput),
+``monitor.csv``, ``checkpoints/`` and, at the end, ``final_model.zip``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+from garage_mj.config import ConfigError, load_config
+from garage_mj.envs.gen_env import GarageGenEnv
+from garage_mj.library import Library
+from garage_mj.map_io import load_map
+
+MANIFEST = "run.json"
+MONITOR = "monitor.csv"
+CHECKPOINTS = "checkpoints"
+FINAL_MODEL = "final_model.zip"
+LIBRARY = "library.sqlite"
+KEEP_CHECKPOINTS = 2  # older checkpoints are deleted
+PROGRESS_EVERY = 256  # [timesteps] between progress-bar refreshes
+
+
+class TrainingError(Exception):
+    """A training run cannot start or resume (bad folder, mismatched manifest)."""
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    """SB3 DQN hyper-parameters and the env settings of a run (TOML-loadable, unknown keys rejected).
+
+    The defaults are tuned so that a few thousand steps on ``tiny_7x11`` already learn to avoid
+    walls and reach the exit sometimes; the paper's 2,000,000-step runs use them unchanged.
+    """
+
+    learning_rate: float = 5e-4
+    buffer_size: int = 50_000  # [transitions] ~4 KB each with the 7x7 view
+    learning_starts: int = 1_000  # [timesteps] of random actions before the first update
+    batch_size: int = 64
+    tau: float = 1.0  # 1: hard target-network update
+    gamma: float = 0.99
+    train_freq: int = 4  # [timesteps] between gradient updates
+    gradient_steps: int = 1
+    n_steps: int = 1  # n-step returns
+    target_update_interval: int = 1_000  # [timesteps]
+    exploration_fraction: float = 0.2  # share of the run over which epsilon decays
+    exploration_initial_eps: float = 1.0
+    exploration_final_eps: float = 0.05
+    max_grad_norm: float = 10.0
+    net_arch: tuple[int, ...] = (256, 256)  # hidden layer widths of the Q-network
+    checkpoint_every: int = 25_000  # [timesteps] between checkpoints
+    save_replay_buffer: bool = False  # also checkpoint the replay buffer (large: buffer_size x 4 KB)
+    torch_threads: int = 1  # CPU threads for torch; 1 is fastest for this small MLP
+    view_size: int = 7  # env: side of the observed window (odd)
+    max_errors: int = 10  # env: errors allowed per episode
+
+    def __post_init__(self) -> None:
+        arch = tuple(self.net_arch)
+        if not arch or not all(isinstance(w, int) and not isinstance(w, bool) and w > 0 for w in arch):
+            raise ConfigError(f"DQNConfig: net_arch must be a list of positive integers, got {self.net_arch!r}")
+        object.__setattr__(self, "net_arch", arch)
+        for name in ("buffer_size", "batch_size", "train_freq", "gradient_steps", "n_steps",
+                     "target_update_interval", "checkpoint_every", "torch_threads"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"DQNConfig: {name} must be >= 1, got {getattr(self, name)}")
+        if self.learning_starts < 0:
+            raise ConfigError(f"DQNConfig: learning_starts must be >= 0, got {self.learning_starts}")
+        for name in ("exploration_fraction", "exploration_initial_eps", "exploration_final_eps", "tau"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ConfigError(f"DQNConfig: {name} must be in [0, 1], got {getattr(self, name)}")
+        if not 0.0 < self.gamma <= 1.0:
+            raise ConfigError(f"DQNConfig: gamma must be in (0, 1], got {self.gamma}")
+
+    def dqn_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of ``stable_baselines3.DQN``."""
+        keys = ("learning_rate", "buffer_size", "learning_starts", "batch_size", "tau", "gamma", "train_freq",
+                "gradient_steps", "n_steps", "target_update_interval", "exploration_fraction",
+                "exploration_initial_eps", "exploration_final_eps", "max_grad_norm")
+        kw = {k: getattr(self, k) for k in keys}
+        kw["policy_kwargs"] = {"net_arch": list(self.net_arch)}
+        return kw
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["net_arch"] = list(self.net_arch)
+        return d
+
+
+def load_dqn_config(source: str | Path | dict[str, Any] | None = None, **overrides: Any) -> DQNConfig:
+    """A :class:`DQNConfig` from a TOML file or dict (a ``[dqn]`` table or top-level keys)."""
+    if isinstance(source, (str, Path)):
+        import tomllib
+
+        path = Path(source)
+        try:
+            data = tomllib.loads(path.read_text())
+        except FileNotFoundError:
+            raise ConfigError(f"config file {path} does not exist") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{path} is not valid TOML: {exc}") from None
+        if set(data) == {"dqn"}:
+            data = data["dqn"]
+        try:
+            return load_config(DQNConfig, data, **overrides)
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
+    return load_config(DQNConfig, source, **overrides)
+
+
+# -- env wrappers ---------------------------------------------------------------------------------
+class FinalGarage(gym.Wrapper):
+    """Puts the episode's final :class:`Garage` into ``info["final_garage"]`` when it ends.
+
+    The vectorised env resets right after the last step, so the callback could not read the
+    final matrix from the env any more; the info dict carries it across.
+    """
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if terminated or truncated:
+            info["final_garage"] = self.env.unwrapped.garage()
+        return obs, reward, terminated, truncated, info
+
+
+class StepTimer(gym.Wrapper):
+    """Adds up the wall time spent inside ``step``/``reset`` of the wrapped env (the env's share)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.seconds = 0.0
+
+    def step(self, action):
+        t0 = time.perf_counter()
+        out = self.env.step(action)
+        self.seconds += time.perf_counter() - t0
+        return out
+
+    def reset(self, **kwargs):
+        t0 = time.perf_counter()
+        out = self.env.reset(**kwargs)
+        self.seconds += time.perf_counter() - t0
+        return out
+
+
+def make_env(map: str, config: DQNConfig, monitor_path: Path | None) -> StepTimer:
+    """GarageGenEnv -> FinalGarage -> Monitor (episode returns to ``monitor_path``) -> StepTimer."""
+    from stable_baselines3.common.monitor import Monitor
+
+    env: gym.Env = GarageGenEnv(map=map, view_size=config.view_size, max_errors=config.max_errors)
+    env = FinalGarage(env)
+    fresh = monitor_path is None or not monitor_path.exists()
+    env = Monitor(env, str(monitor_path) if monitor_path else None, override_existing=fresh)
+    return StepTimer(env)
+
+
+# -- callbacks ------------------------------------------------------------------------------------
+class LibraryCallback(BaseCallback):
+    """Counts episodes and commits the final garage of every usable one to the library."""
+
+    def __init__(self, library: Library, *, map: str, run: str, seed: int, episodes: int = 0) -> None:
+        super().__init__()
+        self.library, self.map, self.run, self.seed = library, map, run, seed
+        self.episodes = episodes  # episodes finished so far in this run (continues on resume)
+        self.stored = 0  # garages stored by this process
+        self.usable = 0  # usable episodes met by this process (stored or duplicate)
+
+    def _on_step(self) -> bool:
+        for done, info in zip(self.locals["dones"], self.locals["infos"]):
+            if not done:
+                continue
+            garage = info.get("final_garage")
+            if info.get("usable") and garage is not None:
+                self.usable += 1
+                new = self.library.add(
+                    garage, map=self.map, run=self.run, seed=self.seed, episode=self.episodes,
+                    timestep=self.num_timesteps,
+                )
+                self.stored += new is not None
+            self.episodes += 1
+        return True
+
+
+class ProgressCallback(BaseCallback):
+    """A tqdm bar over the run's timesteps with episodes and garages stored."""
+
+    def __init__(self, total: int, initial: int, library_cb: LibraryCallback, desc: str, enabled: bool) -> None:
+        super().__init__()
+        self.total, self.initial, self.library_cb, self.desc, self.enabled = total, initial, library_cb, desc, enabled
+        self.bar = None
+
+    def _on_training_start(self) -> None:
+        if self.enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=self.total, initial=self.initial, desc=self.desc, unit="step",
+                            dynamic_ncols=True, smoothing=0.05)
+
+    def _on_step(self) -> bool:
+        if self.bar is not None and self.n_calls % PROGRESS_EVERY == 0:
+            self.bar.update(self.num_timesteps - self.bar.n)
+            self.bar.set_postfix(episodes=self.library_cb.episodes, stored=self.library_cb.stored, refresh=False)
+        return True
+
+    def _on_training_end(self) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.update(self.num_timesteps - self.bar.n)
+            self.bar.close()
+            self.bar = None
+
+
+class CheckpointEvery(BaseCallback):
+    """Saves a checkpoint every ``every`` timesteps through ``save`` (see :func:`_save_checkpoint`)."""
+
+    def __init__(self, every: int, save: Callable[[], None]) -> None:
+        super().__init__()
+        self.every, self.save = every, save
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps % self.every == 0:
+            self.save()
+        return True
+
+
+# -- run folder -----------------------------------------------------------------------------------
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write JSON atomically (temp file + rename), so a kill never leaves half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def read_manifest(out_dir: str | Path) -> dict[str, Any]:
+    """The ``run.json`` of a run folder; :class:`TrainingError` if there is none."""
+    path = Path(out_dir) / MANIFEST
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise TrainingError(f"{out_dir} holds no training run (no {MANIFEST})") from None
+    except json.JSONDecodeError as exc:
+        raise TrainingError(f"{path} is not valid JSON ({exc}); delete the run folder and train again") from None
+
+
+def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
+    """The newest complete checkpoint (model zip + counters) of a run folder, if any."""
+    best = None
+    for state_path in (out_dir / CHECKPOINTS).glob("step_*.json"):
+        model = state_path.with_suffix(".zip")
+        if not model.exists():
+            continue
+        try:
+            state = json.loads(state_path.read_text())
+        except json.JSONDecodeError:
+            continue
+        if best is None or state["timesteps"] > best[1]["timesteps"]:
+            best = (model, state)
+    return best
+
+
+def _truncate_monitor(path: Path, episodes: int) -> None:
+    """Keep the monitor's two header lines and its first ``episodes`` rows (the checkpoint's past)."""
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    keep = lines[: 2 + episodes]
+    if len(keep) != len(lines):
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text("".join(keep))
+        os.replace(tmp, path)
+
+
+def _count_run(library_path: Path, run: str) -> int:
+    with Library(library_path) as lib:
+        return lib.count(run=run)
+
+
+def train(
+    map: str,
+    timesteps: int,
+    seed: int,
+    out_dir: str | Path,
+    config: DQNConfig | None = None,
+    resume: bool = False,
+    library_path: str | Path | None = None,
+    progress: bool = True,
+    callbacks: list[BaseCallback] | None = None,
+) -> dict[str, Any]:
+    """Train DQN for ``timesteps`` in total on ``map``; returns the final manifest.
+
+    Args:
+        map: shipped map name or map file.
+        timesteps: total timesteps of the run (on resume, the run stops when it has this many).
+        seed: seeds torch, numpy, the action space and the env.
+        out_dir: the run folder (created; must not hold another run unless ``resume``).
+        config: hyper-parameters (default :class:`DQNConfig`); on resume the run's own config is used.
+        resume: continue the run in ``out_dir`` from its newest checkpoint.
+        library_path: where usable garages go (default ``out_dir/library.sqlite``).
+        progress: show a tqdm progress bar.
+        callbacks: extra SB3 callbacks (tests, instrumentation).
+    """
+    import torch
+    from stable_baselines3 import DQN
+
+    if timesteps < 1:
+        raise TrainingError(f"--timesteps must be >= 1, got {timesteps}")
+    out = Path(out_dir)
+    garage = load_map(map)  # validates the map before anything is written
+    map_name = garage.name
+    if resume:
+        manifest = read_manifest(out)
+        for key, value in (("map", map_name), ("seed", seed)):
+            if manifest[key] != value:
+                raise TrainingError(f"{out} is a run with {key} {manifest[key]!r}, not {value!r}; pass the same --{key}")
+        run_config = load_dqn_config(manifest["config"])
+        if config is not None and config != run_config:
+            raise TrainingError(f"{out} was trained with another config; resume it without --config")
+        config = run_config
+    else:
+        if (out / MANIFEST).exists():
+            raise TrainingError(f"{out} already holds a run; pass --resume to continue it or choose a new --out")
+        config = config or DQNConfig()
+        manifest = {
+            "run": f"{map_name}_s{seed}_{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}",
+            "map": map_name, "map_source": str(map), "seed": seed, "algo": "dqn", "config": config.to_dict(),
+            "status": "running", "timesteps": 0, "episodes": 0,
+        }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / CHECKPOINTS).mkdir(exist_ok=True)
+    library_path = Path(library_path) if library_path is not None else out / LIBRARY
+    manifest.update(target_timesteps=timesteps, library=str(library_path))
+
+    checkpoint = latest_checkpoint(out) if resume else None
+    done_steps, done_episodes = (checkpoint[1]["timesteps"], checkpoint[1]["episodes"]) if checkpoint else (0, 0)
+    if resume and done_steps >= timesteps and manifest.get("status") == "finished":
+        return manifest
+    _truncate_monitor(out / MONITOR, done_episodes)
+    if not checkpoint:
+        (out / MONITOR).unlink(missing_ok=True)
+
+    torch.set_num_threads(config.torch_threads)
+    env = make_env(map, config, out / MONITOR)
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    venv = DummyVecEnv([lambda: env])
+    if checkpoint:
+        model = DQN.load(checkpoint[0], env=venv, device="cpu")
+        buffer = checkpoint[0].with_name(checkpoint[0].stem + "_replay.pkl")
+        if buffer.exists():
+            model.load_replay_buffer(buffer)
+        model.set_random_seed(seed + done_steps)  # a fresh, reproducible stream after the checkpoint
+    else:
+        model = DQN("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **config.dqn_kwargs())
+
+    library = Library(library_path)
+    lib_cb = LibraryCallback(library, map=map_name, run=manifest["run"], seed=seed, episodes=done_episodes)
+
+    def save_checkpoint() -> None:
+        step = model.num_timesteps
+        stem = out / CHECKPOINTS / f"step_{step:09d}"
+        tmp = stem.with_name(stem.name + ".tmp.zip")
+        model.save(tmp)
+        os.replace(tmp, stem.with_suffix(".zip"))
+        if config.save_replay_buffer:
+            tmp_buf = stem.with_name(stem.name + "_replay.tmp.pkl")
+            model.save_replay_buffer(tmp_buf)
+            os.replace(tmp_buf, stem.with_name(stem.name + "_replay.pkl"))
+        _write_json(stem.with_suffix(".json"), {"timesteps": step, "episodes": lib_cb.episodes})
+        states = sorted((out / CHECKPOINTS).glob("step_*.json"))
+        for old in states[:-KEEP_CHECKPOINTS]:
+            for path in (old, old.with_suffix(".zip"), old.with_name(old.stem + "_replay.pkl")):
+                path.unlink(missing_ok=True)
+        manifest.update(timesteps=step, episodes=lib_cb.episodes)
+        _write_json(out / MANIFEST, manifest)
+
+    bar = ProgressCallback(timesteps, done_steps, lib_cb, f"{map_name} seed {seed}", progress)
+    cbs = [lib_cb, CheckpointEvery(config.checkpoint_every, save_checkpoint), bar, *(callbacks or [])]
+    manifest["status"] = "running"
+    _write_json(out / MANIFEST, manifest)
+    t0 = time.perf_counter()
+    steps0 = model.num_timesteps
+    try:
+        if timesteps > done_steps:
+            model.learn(total_timesteps=timesteps - done_steps, callback=CallbackList(cbs),
+                        reset_num_timesteps=not checkpoint)
+    except KeyboardInterrupt:
+        bar.close()
+        save_checkpoint()
+        manifest["status"] = "interrupted"
+        _write_json(out / MANIFEST, manifest)
+        raise
+    finally:
+        wall = time.perf_counter() - t0
+        bar.close()
+        library.close()
+        venv.close()
+    model.save(out / FINAL_MODEL)
+    steps = model.num_timesteps - steps0
+    manifest.update(
+        status="finished", timesteps=model.num_timesteps, episodes=lib_cb.episodes,
+        garages_stored=_count_run(library_path, manifest["run"]),
+        last_session={
+            "timesteps": steps, "wall_s": round(wall, 3),
+            "timesteps_per_s": round(steps / wall, 1) if wall > 0 else None,
+            "env_share": round(env.seconds / wall, 4) if wall > 0 else None,
+            "usable_episodes": lib_cb.usable, "garages_stored": lib_cb.stored,
+        },
+    )
+    _write_json(out / MANIFEST, manifest)
+    return manifest
