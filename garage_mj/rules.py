@@ -76,3 +76,15 @@ def stall_rule_violations(grid: np.ndarray, axis: Axis) -> list[tuple[int, int]]
         if grid[r, c] != expected_cell(grid, int(r), int(c), axis):
             bad.append((int(r), int(c)))
     return bad
+
+
+def apply_stall_rule(grid: np.ndarray, axis: Axis) -> np.ndarray:
+    """A copy of ``grid`` with every FREE/stall cell recoloured by the stall rule.
+
+    Handy for garages drawn by hand: paint the ROAD cells, then derive the stalls.
+    """
+    out = np.array(grid, copy=True)
+    paintable = np.isin(out, [int(b) for b in PAINTABLE])
+    for r, c in np.argwhere(paintable):
+        out[r, c] = expected_cell(out, int(r), int(c), axis)
+    return out
