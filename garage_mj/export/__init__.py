@@ -1,0 +1,1 @@
+"""Exporters: MJCF scene, meshes, preview and asset packs (and the OpenDRIVE writer)."""
