@@ -1,0 +1,207 @@
+"""The ego car: attach ``models/car`` to an arena and turn high-level commands into actuator controls.
+
+Commands are a throttle/brake pedal ``throttle`` in [-1, 1] and a steering request ``steer`` in
+[-1, 1] (positive = left). The pedal is an acceleration request: +1 raises the cruise speed at
+``max_accel``, -1 lowers it at ``max_decel`` and also applies the wheel brakes, 0 holds the current
+speed. The car never reverses. Steering moves toward ``steer * max_steer`` at ``steer_rate`` and is
+split into Ackermann angles for the two front wheels; the rear wheels get per-side speeds (an
+electronic differential). The paper's discrete actions map onto the same commands.
+"""
+
+from __future__ import annotations
+
+import enum
+import importlib.resources
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+CAR_MODEL = "car"  # folder under garage_mj.models
+EGO_NAME = "ego"  # attachment name: every ego geom becomes "ego/..." (semantics: EGO_CAR)
+
+
+@dataclass(frozen=True)
+class CarConfig:
+    """Limits of the ego car in a garage (SPEC section 7 cruise tests)."""
+
+    max_speed: float = 4.0  # [m/s] garage speed limit (~15 km/h)
+    max_accel: float = 2.0  # [m/s^2] full throttle
+    max_decel: float = 5.0  # [m/s^2] full brake
+    max_steer: float = 0.7  # [rad] bicycle-model road-wheel angle at full lock (~40 deg)
+    steer_rate: float = 0.8  # [rad/s] how fast the road wheels turn
+    speed_lead: float = 1.0  # [m/s] most the cruise speed may run ahead of the real speed (no windup)
+    brake_gain: float = 1.0  # wheel brake ctrl at full brake, 0..1 (the damper actuators)
+
+
+class DiscreteAction(enum.IntEnum):
+    """The paper's cruise actions (Sec. "Garage Difficulty Verification")."""
+
+    ACCELERATE = 0
+    TURN_LEFT = 1
+    TURN_RIGHT = 2
+    BRAKE = 3
+
+
+#: (throttle, steer) per discrete action: turning keeps the speed, accelerating straightens up.
+DISCRETE_COMMANDS: dict[DiscreteAction, tuple[float, float]] = {
+    DiscreteAction.ACCELERATE: (1.0, 0.0),
+    DiscreteAction.TURN_LEFT: (0.0, 1.0),
+    DiscreteAction.TURN_RIGHT: (0.0, -1.0),
+    DiscreteAction.BRAKE: (-1.0, 0.0),
+}
+
+
+def command_from_action(action) -> tuple[float, float]:
+    """``(throttle, steer)`` from a discrete action (int) or a continuous ``[throttle, steer]``."""
+    arr = np.asarray(action)
+    if arr.ndim == 0:
+        try:
+            return DISCRETE_COMMANDS[DiscreteAction(int(arr))]
+        except ValueError:
+            raise ValueError(f"discrete action {action!r} is not one of 0..{len(DiscreteAction) - 1}") from None
+    if arr.shape != (2,):
+        raise ValueError(f"continuous action must be [throttle, steer], got shape {arr.shape}")
+    return float(np.clip(arr[0], -1.0, 1.0)), float(np.clip(arr[1], -1.0, 1.0))
+
+
+def car_xml_path():
+    """Path (importlib resource) of ``models/car/car.xml``."""
+    return importlib.resources.files("garage_mj.models") / CAR_MODEL / "car.xml"
+
+
+def car_mjcf(name: str = EGO_NAME):
+    """The car as a ``dm_control.mjcf`` model named ``name``, without its free joint (for attaching)."""
+    from dm_control import mjcf
+
+    with importlib.resources.as_file(car_xml_path()) as path:
+        model = mjcf.from_path(str(path))
+    model.model = name
+    model.find("joint", "root").remove()
+    return model
+
+
+def attach_car(arena, x: float, y: float, yaw: float, name: str = EGO_NAME):
+    """Attach a free car to ``arena`` (an ``mjcf.RootElement``) at ground pose (x [m], y [m], yaw [rad]).
+
+    Returns the attachment frame. The arena must use radians (``<compiler angle="radian"/>``), as
+    the car model does.
+    """
+    if arena.compiler.angle == "degree":
+        raise ValueError("the arena uses angle=\"degree\"; the car needs <compiler angle=\"radian\"/>")
+    frame = arena.attach(car_mjcf(name))
+    frame.pos = [x, y, 0.0]
+    frame.quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+    frame.add("freejoint", name=f"{name}_root")
+    return frame
+
+
+def compile_mjcf(root) -> mujoco.MjModel:
+    """Compile an ``mjcf.RootElement`` (with its assets) into an ``MjModel``."""
+    return mujoco.MjModel.from_xml_string(root.to_xml_string(), assets=root.get_assets())
+
+
+class Car:
+    """A car inside a compiled model, found by name prefix (``"ego/"`` attached, ``""`` standalone).
+
+    Holds the controller state (cruise speed, steering angle); :meth:`control` writes ``data.ctrl``.
+    """
+
+    def __init__(self, model: mujoco.MjModel, config: CarConfig | None = None, prefix: str = f"{EGO_NAME}/"):
+        self.model = model
+        self.config = config or CarConfig()
+        self.prefix = prefix
+
+        def ident(kind, name):
+            i = mujoco.mj_name2id(model, kind, prefix + name)
+            if i < 0:
+                raise ValueError(f"the model has no car {kind.name[6:].lower()} named {prefix + name!r}")
+            return i
+
+        A = mujoco.mjtObj.mjOBJ_ACTUATOR
+        self.chassis = ident(mujoco.mjtObj.mjOBJ_BODY, "chassis")
+        self._steer = [ident(A, "steer_left"), ident(A, "steer_right")]
+        self._drive = [ident(A, "drive_left"), ident(A, "drive_right")]
+        self._brake = [ident(A, f"brake_{w}") for w in ("fl", "fr", "rl", "rr")]
+        # the free joint sits on the chassis (standalone) or on the attachment frame above it
+        root = self.chassis
+        while model.body_jntnum[root] == 0 or model.jnt_type[model.body_jntadr[root]] != mujoco.mjtJoint.mjJNT_FREE:
+            root = int(model.body_parentid[root])
+            if root == 0:
+                raise ValueError(f"the car {prefix!r} has no free joint")
+        self.root_body = root
+        jnt = int(model.body_jntadr[root])
+        self._qadr = int(model.jnt_qposadr[jnt])
+        self._vadr = int(model.jnt_dofadr[jnt])
+        # geometry from the compiled model, not duplicated constants
+        body = {w: ident(mujoco.mjtObj.mjOBJ_BODY, w) for w in ("steer_fl", "steer_fr", "wheel_rl")}
+        self.wheelbase = float(model.body_pos[body["steer_fl"], 0] - model.body_pos[body["wheel_rl"], 0])  # [m]
+        self.track = float(model.body_pos[body["steer_fl"], 1] - model.body_pos[body["steer_fr"], 1])  # [m]
+        self.wheel_radius = float(model.geom_size[ident(mujoco.mjtObj.mjOBJ_GEOM, "wheel_rl"), 0])  # [m]
+        subtree = {root}
+        for b in range(root + 1, model.nbody):
+            if int(model.body_parentid[b]) in subtree:
+                subtree.add(b)
+        self.bodies = frozenset(subtree)
+        self.geoms = frozenset(int(g) for g in np.flatnonzero(np.isin(model.geom_bodyid, list(subtree))))
+        self.cruise_speed = 0.0  # [m/s]
+        self.steer_angle = 0.0  # [rad] bicycle-model angle
+
+    # -- state -----------------------------------------------------------------------------------
+    def pose(self, data: mujoco.MjData) -> tuple[float, float, float]:
+        """(x [m], y [m], yaw [rad]) of the chassis centre."""
+        xmat = data.xmat[self.chassis]
+        return float(data.xpos[self.chassis, 0]), float(data.xpos[self.chassis, 1]), math.atan2(xmat[3], xmat[0])
+
+    def speed(self, data: mujoco.MjData) -> float:
+        """Signed forward speed [m/s] of the chassis."""
+        vel = np.empty(6)
+        mujoco.mj_objectVelocity(self.model, data, mujoco.mjtObj.mjOBJ_XBODY, self.chassis, vel, 1)
+        return float(vel[3])
+
+    def reset(self, data: mujoco.MjData, x: float, y: float, yaw: float) -> None:
+        """Place the car at rest at ground pose (x, y, yaw), wheels straight; clears controller state."""
+        q = self._qadr
+        # every car joint (wheels, steering) back to its reference, then the free joint pose
+        for b in self.bodies:
+            for j in range(self.model.body_jntadr[b], self.model.body_jntadr[b] + self.model.body_jntnum[b]):
+                a, n = int(self.model.jnt_qposadr[j]), (7 if self.model.jnt_type[j] == 0 else 1)
+                data.qpos[a : a + n] = self.model.qpos0[a : a + n]
+        data.qpos[q : q + 3] = (x, y, self.model.qpos0[q + 2])
+        data.qpos[q + 3 : q + 7] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        for b in self.bodies:
+            d0, dn = int(self.model.body_dofadr[b]), int(self.model.body_dofnum[b])
+            if dn:
+                data.qvel[d0 : d0 + dn] = 0.0
+        self.cruise_speed = 0.0
+        self.steer_angle = 0.0
+        data.ctrl[self._steer + self._drive + self._brake] = 0.0
+        mujoco.mj_forward(self.model, data)
+
+    # -- control ---------------------------------------------------------------------------------
+    def control(self, data: mujoco.MjData, throttle: float, steer: float, dt: float) -> None:
+        """Apply one control period of ``dt`` seconds: update cruise speed and steering, write ctrl."""
+        cfg = self.config
+        u = float(np.clip(throttle, -1.0, 1.0))
+        s = float(np.clip(steer, -1.0, 1.0))
+        rate = cfg.max_accel if u >= 0 else cfg.max_decel
+        v = self.cruise_speed + u * rate * dt
+        ceiling = min(cfg.max_speed, max(self.speed(data), 0.0) + cfg.speed_lead)
+        self.cruise_speed = float(np.clip(v, 0.0, max(ceiling, 0.0)))
+        step = cfg.steer_rate * dt
+        self.steer_angle += float(np.clip(s * cfg.max_steer - self.steer_angle, -step, step))
+        tan_d = math.tan(self.steer_angle)
+        half = self.track / 2
+        # Ackermann: both front wheels point at the same turning centre on the rear axle line
+        data.ctrl[self._steer[0]] = math.atan(self.wheelbase * tan_d / (self.wheelbase - half * tan_d))
+        data.ctrl[self._steer[1]] = math.atan(self.wheelbase * tan_d / (self.wheelbase + half * tan_d))
+        omega = self.cruise_speed / self.wheel_radius  # [rad/s]
+        curvature = tan_d / self.wheelbase  # [1/m]
+        data.ctrl[self._drive[0]] = omega * (1 - half * curvature)
+        data.ctrl[self._drive[1]] = omega * (1 + half * curvature)
+        data.ctrl[self._brake] = max(0.0, -u) * cfg.brake_gain
+
+    def act(self, data: mujoco.MjData, action, dt: float) -> None:
+        """:meth:`control` from a discrete action or a continuous ``[throttle, steer]``."""
+        self.control(data, *command_from_action(action), dt)
