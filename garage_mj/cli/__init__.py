@@ -12,7 +12,7 @@ import importlib
 import sys
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ["maps", "demo"]
+COMMANDS = ["maps", "demo", "export"]
 
 
 class UserError(Exception):

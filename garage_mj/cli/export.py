@@ -1,0 +1,76 @@
+"""``garage-mj export``: asset packs (OpenDRIVE, MJCF, GLB/OBJ, preview) for garages.
+
+``--garage garage.json`` exports one garage; ``--library FILE`` exports the library's garages
+that pass the filters. Packs land in ``--out DIR`` (one folder each, plus ``index.json``);
+complete packs are skipped, partial ones repaired.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from garage_mj.cli import UserError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "export",
+        help="export garages as asset packs (xodr, MJCF, GLB/OBJ, preview)",
+        description="Write one asset pack folder per garage under --out, plus index.json. "
+        "Re-running skips complete packs and repairs partial ones.",
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--garage", type=Path, metavar="FILE", help="a garage JSON file (Garage.to_json)")
+    src.add_argument("--library", type=Path, metavar="FILE", help="a scenario library (library.sqlite)")
+    p.add_argument("--map", help="library filter: map name")
+    p.add_argument("--difficulty", type=float, nargs=2, metavar=("LO", "HI"), help="library filter, inclusive")
+    p.add_argument("--coverage", type=float, nargs=2, metavar=("LO", "HI"), help="library filter, inclusive")
+    p.add_argument("--limit", type=int, help="library filter: at most N garages")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the packs")
+    p.add_argument("--force", action="store_true", help="rebuild packs that are already complete")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _from_library(args: argparse.Namespace) -> list:
+    from garage_mj.library import Library, LibraryError
+
+    try:
+        lib = Library(args.library, create=False)
+    except LibraryError as exc:
+        raise UserError(str(exc)) from None
+    with lib:
+        try:
+            records = lib.query(
+                map=args.map,
+                difficulty=tuple(args.difficulty) if args.difficulty else None,
+                coverage=tuple(args.coverage) if args.coverage else None,
+                limit=args.limit,
+            )
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+    if not records:
+        raise UserError(f"no garage in {args.library} matches the filters; widen them or check --map")
+    return [r.garage for r in records]
+
+
+def run(args: argparse.Namespace) -> int:
+    from garage_mj.export.pack import export_packs
+    from garage_mj.garage import Garage
+
+    if args.garage is not None:
+        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.limit)):
+            raise UserError("--map, --difficulty, --coverage and --limit filter a --library, not a --garage")
+        try:
+            text = args.garage.read_text()
+        except OSError as exc:
+            raise UserError(f"cannot read {args.garage}: {exc.strerror}") from None
+        garages = [Garage.from_json(text, source=str(args.garage))]
+    else:
+        garages = _from_library(args)
+    paths = export_packs(garages, args.out, force=args.force, progress=not args.quiet, total=len(garages))
+    for path in paths:
+        print(path)
+    print(f"{len(paths)} pack(s) in {args.out} (index: {args.out / 'index.json'})")
+    return 0
