@@ -1,0 +1,144 @@
+"""Outcome of one cruise test, decided by the environment (SPEC section 7), never by the driver.
+
+:class:`OutcomeMonitor` is pure: ``update(time, position, speed, contacts)`` looks at the car's
+state and the contacts of this step and returns an :class:`Outcome` once the test is over.
+:func:`ego_contacts` turns MuJoCo contacts into the (semantic class, geom name) pairs it reads.
+
+Checks, in this order: collision (ego touches a wall, pillar, obstacle or parked car), success
+(within ``goal_tolerance`` of the goal), deadlock (farther than ``max_deviation`` from the route,
+or less than ``stuck_progress`` of progress along the route in ``stuck_time``), timeout
+(``time_limit = route length / min_mean_speed + time_slack``).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from garage_mj.route import Route
+from garage_mj.semantics import COLLIDABLE, Semantic
+
+
+class OutcomeKind(str, enum.Enum):
+    """How a test ended."""
+
+    SUCCESS = "success"
+    COLLISION = "collision"
+    TIMEOUT = "timeout"
+    DEADLOCK = "deadlock"
+
+
+FAILURES = (OutcomeKind.COLLISION, OutcomeKind.TIMEOUT, OutcomeKind.DEADLOCK)
+
+
+@dataclass(frozen=True)
+class OutcomeConfig:
+    """Thresholds of the outcome classes."""
+
+    goal_tolerance: float = 1.5  # [m] car centre this close to the goal point: success
+    min_mean_speed: float = 0.7  # [m/s] slowest mean speed still in time
+    time_slack: float = 10.0  # [s] added to the time limit (start-up, junctions)
+    max_deviation: float = 3.5  # [m] farther than this from the route: deadlock (lost)
+    stuck_time: float = 8.0  # [s] window in which the car must make progress
+    stuck_progress: float = 0.5  # [m] progress along the route needed in that window
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One contact of the ego car: the other geom's class and name."""
+
+    semantic: Semantic
+    geom: str
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """The end of a test: kind, simulated time [s], a readable reason, and what was hit (collisions)."""
+
+    kind: OutcomeKind
+    time: float
+    reason: str
+    hit_class: str | None = None  # semantic class name, e.g. "pillar"
+    hit_geom: str | None = None  # MJCF geom name, e.g. "pillar_2_4/column"
+
+    @property
+    def success(self) -> bool:
+        return self.kind is OutcomeKind.SUCCESS
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["kind"] = self.kind.value
+        return d
+
+
+def ego_contacts(model, data, ego_geoms: Iterable[int], geom_classes: np.ndarray) -> list[Contact]:
+    """Contacts between an ego geom and a non-ego geom in ``data``, with the other geom's class."""
+    import mujoco
+
+    ego = ego_geoms if isinstance(ego_geoms, (set, frozenset)) else set(ego_geoms)
+    out = []
+    for i in range(data.ncon):
+        c = data.contact[i]
+        g1, g2 = int(c.geom1), int(c.geom2)
+        if (g1 in ego) == (g2 in ego):
+            continue
+        other = g2 if g1 in ego else g1
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, other) or f"#{other}"
+        out.append(Contact(Semantic(int(geom_classes[other])), name))
+    return out
+
+
+class OutcomeMonitor:
+    """Watches one test on ``route`` and says when and how it ended."""
+
+    def __init__(self, route: Route, config: OutcomeConfig | None = None, goal=None) -> None:
+        self.route = route
+        self.config = config or OutcomeConfig()
+        self.goal = np.asarray(route.goal if goal is None else goal, dtype=float)[:2]
+        self.reset()
+
+    @property
+    def time_limit(self) -> float:
+        """[s] from the route length and the minimum mean speed."""
+        return self.route.length / self.config.min_mean_speed + self.config.time_slack
+
+    def reset(self) -> None:
+        self.progress = 0.0  # [m] furthest arc length reached
+        self.deviation = 0.0  # [m] distance to the route at the last update
+        self.outcome: Outcome | None = None
+        self._mark_time = 0.0  # start of the current progress window
+        self._mark_progress = 0.0
+
+    def update(self, time: float, position, speed: float, contacts: Iterable[Contact] = ()) -> Outcome | None:
+        """Feed one step; returns the outcome when the test ends (and keeps returning it)."""
+        if self.outcome is not None:
+            return self.outcome
+        cfg = self.config
+        for c in contacts:
+            if c.semantic in COLLIDABLE:
+                return self._end(OutcomeKind.COLLISION, time, f"hit {c.semantic.name.lower()} {c.geom}",
+                                 c.semantic.name.lower(), c.geom)
+        p = np.asarray(position, dtype=float)[:2]
+        goal_dist = float(np.linalg.norm(p - self.goal))
+        if goal_dist <= cfg.goal_tolerance:
+            return self._end(OutcomeKind.SUCCESS, time, f"reached the goal ({goal_dist:.2f} m)")
+        window = 2.0 * cfg.max_deviation + cfg.stuck_progress + abs(speed) * 1.0
+        s, dist = self.route.project(p, self.progress - window, self.progress + window)
+        self.deviation = dist
+        if dist > cfg.max_deviation:
+            return self._end(OutcomeKind.DEADLOCK, time, f"{dist:.1f} m off the route")
+        self.progress = max(self.progress, s)
+        if self.progress - self._mark_progress >= cfg.stuck_progress:
+            self._mark_time, self._mark_progress = time, self.progress
+        elif time - self._mark_time >= cfg.stuck_time:
+            return self._end(OutcomeKind.DEADLOCK, time, f"no progress for {time - self._mark_time:.1f} s")
+        if time >= self.time_limit:
+            return self._end(OutcomeKind.TIMEOUT, time, f"time limit {self.time_limit:.1f} s reached")
+        return None
+
+    def _end(self, kind: OutcomeKind, time: float, reason: str, hit_class=None, hit_geom=None) -> Outcome:
+        self.outcome = Outcome(kind, float(time), reason, hit_class, hit_geom)
+        return self.outcome

@@ -1,0 +1,77 @@
+"""A route as a 2D polyline in world coordinates: length, projection of the car, lookahead points.
+
+Pure geometry (no MuJoCo): the drive env builds a :class:`Route` from the lane graph, the outcome
+monitor measures progress and deviation on it, and the env gives drivers the lookahead point.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class Route:
+    """Polyline through ``points`` (N >= 2, metres, world frame x east / y north)."""
+
+    def __init__(self, points) -> None:
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        keep = np.ones(len(pts), dtype=bool)
+        keep[1:] = np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-9  # drop repeated points
+        pts = pts[keep]
+        if len(pts) < 2:
+            raise ValueError("a route needs at least two distinct points")
+        self.points = pts
+        seg = np.diff(pts, axis=0)
+        self._seg = seg
+        self._seg_len = np.linalg.norm(seg, axis=1)
+        self._cum = np.concatenate([[0.0], np.cumsum(self._seg_len)])
+
+    @property
+    def length(self) -> float:
+        """Total length [m]."""
+        return float(self._cum[-1])
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The last point."""
+        return self.points[-1]
+
+    def project(self, point, s_min: float = 0.0, s_max: float | None = None) -> tuple[float, float]:
+        """(arc length s [m] of the nearest route point, distance [m] to it), searching s in [s_min, s_max].
+
+        A window keeps tracking monotonic where the route passes close to itself.
+        """
+        p = np.asarray(point, dtype=float)[:2]
+        s_max = self.length if s_max is None else s_max
+        t = np.einsum("ij,ij->i", p - self.points[:-1], self._seg) / self._seg_len**2
+        s = self._cum[:-1] + np.clip(t, 0.0, 1.0) * self._seg_len
+        s = np.clip(s, s_min, s_max)
+        s = np.clip(s, self._cum[:-1], self._cum[1:])  # stay on each segment
+        foot = self.points[:-1] + ((s - self._cum[:-1]) / self._seg_len)[:, None] * self._seg
+        dist = np.linalg.norm(foot - p, axis=1)
+        valid = (self._cum[1:] >= s_min) & (self._cum[:-1] <= s_max)
+        if not valid.any():
+            valid[:] = True
+        dist = np.where(valid, dist, np.inf)
+        i = int(np.argmin(dist))
+        return float(s[i]), float(dist[i])
+
+    def point_at(self, s: float) -> np.ndarray:
+        """The route point at arc length ``s`` (clamped to the route)."""
+        s = min(max(s, 0.0), self.length)
+        i = min(int(np.searchsorted(self._cum, s, side="right")) - 1, len(self._seg) - 1)
+        return self.points[i] + (s - self._cum[i]) / self._seg_len[i] * self._seg[i]
+
+    def heading_at(self, s: float) -> float:
+        """Direction [rad] of the route at arc length ``s``."""
+        s = min(max(s, 0.0), self.length)
+        i = min(int(np.searchsorted(self._cum, s, side="right")) - 1, len(self._seg) - 1)
+        return math.atan2(self._seg[i, 1], self._seg[i, 0])
+
+
+def to_car_frame(point, x: float, y: float, yaw: float) -> np.ndarray:
+    """A world point in the car frame (x forward, y left) of a car at (x, y, yaw)."""
+    dx, dy = float(point[0]) - x, float(point[1]) - y
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([c * dx + s * dy, -s * dx + c * dy])

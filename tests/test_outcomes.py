@@ -1,0 +1,111 @@
+"""Outcome classification: each class forced on a straight or L-shaped route, plus MuJoCo contacts."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from garage_mj.outcomes import Contact, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.route import Route, to_car_frame
+from garage_mj.semantics import Semantic, geom_classes
+
+L_ROUTE = Route([(0, 0), (20, 0), (20, 20)])  # 40 m
+
+
+def drive(monitor: OutcomeMonitor, path, speed=2.0, dt=0.1, contacts_at=None):
+    """Feed positions along ``path`` (one per step); returns the outcome or None."""
+    for k, p in enumerate(path):
+        contacts = contacts_at(k) if contacts_at else ()
+        out = monitor.update(k * dt, p, speed, contacts)
+        if out is not None:
+            return out
+    return None
+
+
+def along(route: Route, step: float):
+    return [route.point_at(s) for s in np.arange(0.0, route.length + step, step)]
+
+
+def test_route_geometry():
+    assert L_ROUTE.length == pytest.approx(40.0)
+    assert np.allclose(L_ROUTE.point_at(30.0), (20, 10))
+    s, d = L_ROUTE.project((10, 1.5))
+    assert s == pytest.approx(10.0) and d == pytest.approx(1.5)
+    assert L_ROUTE.heading_at(25.0) == pytest.approx(np.pi / 2)
+    assert np.allclose(to_car_frame((1, 1), 0, 0, np.pi / 2), (1, -1))
+    with pytest.raises(ValueError):
+        Route([(0, 0), (0, 0)])
+
+
+def test_success_at_goal():
+    out = drive(OutcomeMonitor(L_ROUTE), along(L_ROUTE, 0.2))
+    assert out.kind is OutcomeKind.SUCCESS and out.success
+    assert np.linalg.norm(np.asarray(L_ROUTE.goal) - L_ROUTE.point_at(out.time / 0.1 * 0.2)) <= 1.5 + 1e-9
+
+
+def test_collision_records_what_was_hit():
+    hit = Contact(Semantic.PILLAR, "pillar_2_4/column")
+    floor = Contact(Semantic.FLOOR, "floor")
+    out = drive(OutcomeMonitor(L_ROUTE), along(L_ROUTE, 0.2),
+                contacts_at=lambda k: [floor, hit] if k == 30 else [floor])
+    assert out.kind is OutcomeKind.COLLISION
+    assert (out.hit_class, out.hit_geom) == ("pillar", "pillar_2_4/column")
+    assert out.time == pytest.approx(3.0)
+    assert out.as_dict()["kind"] == "collision"
+
+
+def test_floor_and_markings_are_not_collisions():
+    touches = [Contact(Semantic.FLOOR, "floor"), Contact(Semantic.STALL_MARKING, "stallmark_1")]
+    out = drive(OutcomeMonitor(L_ROUTE), along(L_ROUTE, 0.2), contacts_at=lambda k: touches)
+    assert out.kind is OutcomeKind.SUCCESS
+
+
+def test_timeout_from_route_length():
+    cfg = OutcomeConfig(min_mean_speed=1.0, time_slack=5.0, stuck_time=1000.0)
+    mon = OutcomeMonitor(L_ROUTE, cfg)
+    assert mon.time_limit == pytest.approx(45.0)
+    out = drive(mon, along(L_ROUTE, 0.05))  # 0.5 m/s: too slow
+    assert out.kind is OutcomeKind.TIMEOUT and out.time == pytest.approx(45.0)
+
+
+def test_deadlock_when_stuck():
+    cfg = OutcomeConfig(stuck_time=5.0)
+    path = along(Route([(0, 0), (6, 0)]), 0.2) + [np.array([6.0, 0.0])] * 200
+    out = drive(OutcomeMonitor(L_ROUTE, cfg), path)
+    assert out.kind is OutcomeKind.DEADLOCK and "no progress" in out.reason
+    assert 5.0 <= out.time - 3.0 <= 5.2  # stopped at t = 3 s
+
+
+def test_deadlock_when_off_route():
+    path = [np.array([x, 0.0]) for x in np.arange(0, 10, 0.2)] + [np.array([10.0, -y]) for y in np.arange(0, 6, 0.2)]
+    out = drive(OutcomeMonitor(L_ROUTE, OutcomeConfig(max_deviation=3.0)), path)
+    assert out.kind is OutcomeKind.DEADLOCK and "off the route" in out.reason
+
+
+def test_progress_tracks_the_route_not_a_nearby_later_leg():
+    loop = Route([(0, 0), (10, 0), (10, 2), (0, 2)])  # the return leg passes 2 m away
+    mon = OutcomeMonitor(loop, OutcomeConfig(goal_tolerance=0.5))
+    for k, x in enumerate(np.arange(0, 5, 0.2)):
+        mon.update(k * 0.1, (x, 1.1), 2.0)
+    assert mon.progress < 6.0
+
+
+def test_outcome_is_sticky():
+    mon = OutcomeMonitor(L_ROUTE)
+    first = mon.update(0.0, (0, 0), 0.0, [Contact(Semantic.WALL, "wall_n")])
+    assert mon.update(0.1, (20, 20), 0.0) is first
+
+
+def test_ego_contacts_from_mujoco():
+    xml = """<mujoco><worldbody>
+      <geom name="floor" type="plane" size="5 5 1"/>
+      <geom name="wall_e" type="box" size="0.1 2 1" pos="0.55 0 1"/>
+      <body name="ego/chassis" pos="0 0 0.5"><freejoint/><geom name="ego/body" type="box" size="0.5 0.3 0.5"/></body>
+    </worldbody></mujoco>"""
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    ego = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "ego/body")}
+    found = {(c.semantic, c.geom) for c in ego_contacts(m, d, ego, geom_classes(m))}
+    assert found == {(Semantic.FLOOR, "floor"), (Semantic.WALL, "wall_e")}
