@@ -1,0 +1,69 @@
+"""Helpers shared by the generation-stage subcommands (train, library, plot, show)."""
+
+from __future__ import annotations
+
+import argparse
+import functools
+from collections.abc import Callable
+
+from garage_mj.cli import UserError
+
+
+def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    """Re-raise the stage's own errors (library, training, plots) as one-line :class:`UserError`."""
+    from garage_mj.library import LibraryError
+    from garage_mj.plots import PlotError
+    from garage_mj.training import TrainingError
+
+    @functools.wraps(func)
+    def wrapper(args: argparse.Namespace) -> int:
+        try:
+            return func(args)
+        except (LibraryError, TrainingError, PlotError) as exc:
+            raise UserError(str(exc)) from None
+
+    return wrapper
+
+
+def unit_range(text: str) -> float:
+    """argparse type: a number in [0, 1]."""
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 <= x <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text} is outside [0, 1]")
+    return x
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"{text} is negative")
+    return n
+
+
+def add_filters(p: argparse.ArgumentParser) -> None:
+    """The library filters: --map, --difficulty LO HI, --coverage LO HI, --limit N."""
+    p.add_argument("--map", help="only garages of this map (name as stored, e.g. tiny_7x11)")
+    p.add_argument("--difficulty", nargs=2, type=unit_range, metavar=("LO", "HI"),
+                   help="only difficulty in [LO, HI] (0-1)")
+    p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"),
+                   help="only coverage in [LO, HI] (0-1)")
+    p.add_argument("--limit", type=non_negative_int, help="at most N garages")
+
+
+def filters(args: argparse.Namespace) -> dict:
+    """The filter keyword arguments of :meth:`Library.query` from parsed ``args``."""
+    out = {"map": args.map, "difficulty": args.difficulty, "coverage": args.coverage}
+    for key in ("difficulty", "coverage"):
+        rng = out[key]
+        if rng is not None:
+            if rng[0] > rng[1]:
+                raise UserError(f"--{key} {rng[0]} {rng[1]}: LO is above HI")
+            out[key] = tuple(rng)
+    return out

@@ -1,0 +1,59 @@
+"""``garage-mj plot convergence|heatmap``: the generation stage's figures as PNG files."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from garage_mj.cli import UserError
+from garage_mj.cli._common import user_errors
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plot", help="convergence curves and difficulty/coverage heatmaps (PNG)")
+    psub = p.add_subparsers(dest="plot_command", metavar="FIGURE", required=True)
+    c = psub.add_parser(
+        "convergence",
+        help="return vs episode: mean over runs of each map with a 95%% confidence band",
+        description="Reads monitor.csv of each run folder (written by 'garage-mj train'), groups runs by "
+        "map, and draws the mean return per episode with a 95%% t-interval over the runs (one panel per map).",
+    )
+    c.add_argument("runs", nargs="+", type=Path, metavar="RUN", help="run folders (or their monitor.csv)")
+    c.add_argument("--out", type=Path, default=Path("convergence.png"), help="PNG file (default: convergence.png)")
+    c.add_argument("--smooth", type=int, default=1, metavar="N", help="moving mean over N episodes (default: 1, none)")
+    c.set_defaults(func=_convergence)
+    h = psub.add_parser(
+        "heatmap",
+        help="difficulty (x) vs coverage (y) of a map's garages, count per 0.1 cell",
+        description="Counts the library's garages of one map in 0.1 x 0.1 cells of difficulty and coverage.",
+    )
+    h.add_argument("--library", type=Path, required=True, help="library file (library.sqlite)")
+    h.add_argument("--map", required=True, help="map name as stored (see 'garage-mj library stats')")
+    h.add_argument("--out", type=Path, help="PNG file (default: heatmap_MAP.png)")
+    h.set_defaults(func=_heatmap)
+
+
+@user_errors
+def _convergence(args: argparse.Namespace) -> int:
+    from garage_mj.plots import convergence
+
+    if args.smooth < 1:
+        raise UserError(f"--smooth must be >= 1, got {args.smooth}")
+    out = convergence(args.runs, args.out, smooth=args.smooth)
+    print(f"convergence of {len(args.runs)} run(s) -> {out}")
+    return 0
+
+
+@user_errors
+def _heatmap(args: argparse.Namespace) -> int:
+    from garage_mj.library import Library
+    from garage_mj.plots import heatmap
+
+    with Library(args.library, create=False) as lib:
+        points = lib.points(args.map)
+        maps = lib.maps()
+    if len(points) == 0:
+        raise UserError(f"{args.library} has no garage of map {args.map!r}; maps in it: {', '.join(maps) or 'none'}")
+    out = heatmap(points, args.out or Path(f"heatmap_{args.map}.png"), title=args.map)
+    print(f"heatmap of {len(points)} garage(s) of {args.map} -> {out}")
+    return 0

@@ -1,0 +1,71 @@
+"""``garage-mj train``: DQN on the generation env; usable garages go into the scenario library."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from garage_mj.cli import UserError
+from garage_mj.cli._common import user_errors
+
+ALGOS = ("dqn",)
+
+
+def _positive(text: str) -> int:
+    try:
+        n = int(text.replace("_", ""))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text} must be >= 1")
+    return n
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "train",
+        help="train DQN on a map; usable garages go into the scenario library",
+        description=(
+            "Train stable-baselines3 DQN on the garage-painting env of one map. Every usable garage "
+            "met during training is committed to the library at once (with run, seed, episode and "
+            "timestep), so an interrupted run loses none. The run folder gets run.json (manifest, "
+            "throughput), monitor.csv (episode returns, for 'garage-mj plot convergence') and "
+            "checkpoints/; Ctrl-C saves a checkpoint, --resume continues from the newest one."
+        ),
+        epilog="example: garage-mj train --map tiny_7x11 --timesteps 20000 --seed 0 --out runs/tiny_s0",
+    )
+    p.add_argument("--map", required=True, help="shipped map name (garage-mj maps list) or map file")
+    p.add_argument("--timesteps", required=True, type=_positive, help="total timesteps of the run")
+    p.add_argument("--seed", required=True, type=int, help="random seed of the run")
+    p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
+    p.add_argument("--algo", default="dqn", choices=ALGOS, help="RL algorithm (default: dqn)")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")
+    p.add_argument("--config", type=Path, help="TOML file of DQN hyper-parameters (keys of DQNConfig; unknown keys are an error)")
+    p.add_argument("--library", type=Path, help="library file (default: OUT/library.sqlite)")
+    p.add_argument("--checkpoint-every", type=_positive, metavar="N", help="timesteps between checkpoints (overrides the config)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+@user_errors
+def run(args: argparse.Namespace) -> int:
+    from garage_mj.training import load_dqn_config, train
+
+    overrides = {"checkpoint_every": args.checkpoint_every} if args.checkpoint_every else {}
+    if args.config is not None and not args.config.is_file():
+        raise UserError(f"config file {args.config} does not exist")
+    config = load_dqn_config(args.config, **overrides) if (args.config or overrides) else None
+    if args.resume and config is not None and args.config is None:
+        raise UserError("--checkpoint-every cannot change a resumed run; drop it or start a new --out")
+    m = train(args.map, args.timesteps, args.seed, args.out, config=config, resume=args.resume,
+              library_path=args.library, progress=not args.no_progress)
+    s = m.get("last_session")
+    print(f"run {m['run']}: {m['timesteps']} timesteps, {m['episodes']} episodes, "
+          f"{m['garages_stored']} garages in {m['library']}")
+    if s and s["timesteps"]:
+        print(f"this session: {s['timesteps']} timesteps in {s['wall_s']:.1f} s = {s['timesteps_per_s']:.0f} "
+              f"timesteps/s, env {100 * s['env_share']:.1f}% of the time, {s['usable_episodes']} usable "
+              f"episodes, {s['garages_stored']} new garages")
+    else:
+        print(f"{args.out} had already finished {m['timesteps']} timesteps; nothing to do")
+    return 0
