@@ -12,7 +12,7 @@ import importlib
 import sys
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ["maps", "demo", "export"]
+COMMANDS = ["maps", "demo", "export", "train", "library", "plot", "show"]
 
 
 class UserError(Exception):
