@@ -24,3 +24,25 @@ def painted_tiny() -> Garage:
 def painted_maps() -> dict[str, Garage]:
     """One usable painted garage per shipped map (same every run)."""
     return {m: paint_garage(m, seed=3) for m in SHIPPED_MAPS}
+
+
+JUNCTIONS_7X11 = """\
+2 2 2 2 2 2 2 2 8 2 2
+2 0 0 1 1 1 1 0 1 0 2
+2 0 0 1 0 0 1 0 1 0 2
+2 1 1 1 1 1 1 1 1 0 2
+2 0 1 0 0 0 1 0 0 0 2
+2 0 1 0 0 0 1 0 0 0 2
+2 2 7 2 2 2 2 2 2 2 2"""
+
+
+@pytest.fixture(scope="session")
+def junction_garage() -> Garage:
+    """A hand-drawn usable tiny garage with two adjacent T junctions, a cross, a loop and a dead end."""
+    import numpy as np
+
+    from garage_mj.map_io import load_map
+    from garage_mj.rules import apply_stall_rule
+
+    grid = np.array([[int(v) for v in line.split()] for line in JUNCTIONS_7X11.splitlines()])
+    return Garage(apply_stall_rule(grid, "NS"), load_map("tiny_7x11").initial, name="junctions_7x11")

@@ -13,7 +13,9 @@ and the lane graph (:mod:`garage_mj.export.lanes`) read this one model.
   edge (paper Sec. "3D Maps Generation"); their arms on that side retreat by half of it.
 - Ordinary and implicit roads carry lane 1 (left, driving towards s = 0) and lane -1 (right,
   driving towards increasing s), each ``lane_width`` wide.
-- Every stall becomes a parking space on the road it faces, at (s, t) of its centre.
+- Every stall becomes a parking space on the road it faces, at (s, t) of its centre; a stall
+  facing a dead end's closed end lies past the road, so its origin is the road end and its
+  offset (du, dv) to the true centre goes with it (the writer spells it as an outline).
 """
 
 from __future__ import annotations
@@ -104,6 +106,8 @@ class ParkingSpace:
     s: float  # [m]
     t: float  # [m], > 0 left of the reference line
     hdg: float  # [rad] stall yaw relative to the road heading at s
+    du: float = 0.0  # [m] stall centre from the (s, t) origin, along the stall's yaw
+    dv: float = 0.0  # [m] and to its left; non-zero only where the stall lies past a road's end
 
 
 @dataclass
@@ -257,8 +261,12 @@ class _Builder:
             else:
                 rid = self.road_of[cell]
                 s, t = self.roads[rid].project(stall.x, stall.y, *self.roads[rid].spans[cell])
-            hdg = wrap(stall.yaw - self.roads[rid].pose(s)[2])
-            out.append(ParkingSpace(stall, rid, s, t, hdg))
+            x, y, h = self.roads[rid].pose(s)
+            ox, oy = x - t * math.sin(h), y + t * math.cos(h)  # origin: (s, t) on the road
+            c, n = math.cos(stall.yaw), math.sin(stall.yaw)
+            du, dv = (stall.x - ox) * c + (stall.y - oy) * n, -(stall.x - ox) * n + (stall.y - oy) * c
+            du, dv = (0.0 if abs(v) < 1e-9 else v for v in (du, dv))
+            out.append(ParkingSpace(stall, rid, s, t, wrap(stall.yaw - h), du, dv))
         return out
 
     def build(self) -> RoadModel:

@@ -122,6 +122,10 @@ def _road(root: etree._Element, model: RoadModel, road: Road, spaces: list[Parki
                 height=0.0,
                 validLength=0.0,
             )
+            outline = _sub(_sub(obj, "outlines"), "outline", id=0, closed="true", fillType="paint")
+            hl, hw = world.stall_length / 2, world.stall_width / 2
+            for k, (su, sv) in enumerate(((1, 1), (-1, 1), (-1, -1), (1, -1))):
+                _sub(outline, "cornerLocal", id=k, u=p.du + su * hl, v=p.dv + sv * hw, z=0.0, height=0.0)
             _sub(obj, "parkingSpace", access="all", restrictions="none")
 
 

@@ -1,0 +1,215 @@
+"""Validate ``garage.xodr`` files with real OpenDRIVE tools: CARLA's parser and the ASAM checker.
+
+- :func:`check_carla` loads the text with ``carla.Map`` (the ``carla`` wheel, extra ``[carla]``)
+  in a child process, counts waypoints per road and follows ``waypoint.next`` from the
+  entrance lane to the exit lane.
+- :func:`check_asam` runs the ASAM Quality Checker (``asam-qc-opendrive``, command
+  ``qc_opendrive``) from its own virtualenv ``.venv-qc`` (it pins numpy < 2) and counts the
+  issues in its XQAR result.
+
+Both take batches (one child process per batch) because starting the tools costs more than
+checking a garage. ``make install`` installs both.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from importlib.util import find_spec
+from pathlib import Path
+
+from lxml import etree
+
+QC_ENV = "GARAGE_MJ_QC_OPENDRIVE"  # optional path to a qc_opendrive executable
+_REPO = Path(__file__).resolve().parents[2]
+_PROBE = Path(__file__).with_name("carla_probe.py")
+_QC_DRIVER = "import sys\nfrom qc_opendrive import main\nfor c in sys.argv[1:]:\n    sys.argv = ['qc_opendrive', '-c', c]\n    main.main()\n"
+
+
+class ToolMissing(RuntimeError):
+    """A validation tool is not installed; the message says how to install it."""
+
+
+class ToolFailed(RuntimeError):
+    """A validation tool crashed or printed something unreadable."""
+
+
+@dataclass(frozen=True)
+class CarlaReport:
+    name: str
+    waypoints: int
+    waypoints_per_road: dict[int, int]
+    roads: tuple[int, ...]  # road ids declared in the file
+    topology_edges: int
+    entrance_reaches_exit: bool
+
+    @property
+    def roads_without_waypoints(self) -> list[int]:
+        return [r for r in self.roads if self.waypoints_per_road.get(r, 0) == 0]
+
+    @property
+    def ok(self) -> bool:
+        return self.entrance_reaches_exit and not self.roads_without_waypoints
+
+
+@dataclass(frozen=True)
+class QcIssue:
+    checker: str
+    level: int  # 1 error, 2 warning, 3 information
+    description: str
+    xpath: str
+
+
+@dataclass(frozen=True)
+class QcReport:
+    path: Path
+    issues: list[QcIssue] = field(default_factory=list)
+    completed: int = 0  # checkers that ran to completion
+    skipped: int = 0  # checkers not applicable to the file's version
+    errored: int = 0  # checkers with an internal error
+
+    @property
+    def ok(self) -> bool:
+        return not self.issues and not self.errored
+
+
+# -- CARLA ---------------------------------------------------------------------------------------
+def _gates(text: str) -> tuple[list[int], list[int], list[int]]:
+    """Road ids, and (road, lane) of the entrance and exit lanes, from the writer's road names."""
+    root = etree.fromstring(text.encode())
+    roads = [int(r.get("id")) for r in root.iter("road")]
+    ent = ext = None
+    for r in root.iter("road"):
+        words = r.get("name", "").split("_")
+        if "entrance" in words:
+            ent = [int(r.get("id")), -1]  # the entrance road starts at the gate, lane -1 drives in
+        if "exit" in words:
+            ext = [int(r.get("id")), -1]  # the exit road ends at the gate, lane -1 drives out
+    if ent is None or ext is None:
+        raise ValueError("the OpenDRIVE text names no entrance_/exit_ road; pass entrance= and exit=")
+    return roads, ent, ext
+
+
+def check_carla_batch(
+    texts: Sequence[str], names: Sequence[str] | None = None, timeout: float = 120.0
+) -> list[CarlaReport]:
+    """:func:`check_carla` for many maps in one child process."""
+    if find_spec("carla") is None:
+        raise ToolMissing(
+            "CARLA's Python package is not installed in this environment; run `make install` "
+            "(or `pip install 'garage-mj[carla]'`, Python 3.10-3.12 on Linux or Windows)"
+        )
+    names = list(names) if names is not None else [f"garage_{i}" for i in range(len(texts))]
+    jobs, declared = [], []
+    for name, text in zip(names, texts):
+        roads, ent, ext = _gates(text)
+        declared.append(tuple(roads))
+        jobs.append({"name": name, "text": text, "entrance": ent, "exit": ext})
+    proc = subprocess.run(
+        [sys.executable, str(_PROBE)], input=json.dumps(jobs), capture_output=True, text=True, timeout=timeout
+    )
+    if proc.returncode != 0:
+        raise ToolFailed(
+            f"CARLA's OpenDRIVE parser crashed (exit code {proc.returncode}) on {names}: "
+            f"{proc.stderr.strip()[-600:] or 'no message'}"
+        )
+    out = json.loads(proc.stdout)
+    return [
+        CarlaReport(
+            name=r["name"],
+            waypoints=r["waypoints"],
+            waypoints_per_road={int(k): v for k, v in r["waypoints_per_road"].items()},
+            roads=roads,
+            topology_edges=r["topology_edges"],
+            entrance_reaches_exit=r["entrance_reaches_exit"],
+        )
+        for r, roads in zip(out, declared)
+    ]
+
+
+def check_carla(xodr_text: str, name: str = "garage") -> CarlaReport:
+    """Load ``xodr_text`` with ``carla.Map`` in a child process; waypoints, topology, entrance -> exit."""
+    return check_carla_batch([xodr_text], [name])[0]
+
+
+# -- ASAM Quality Checker ------------------------------------------------------------------------
+def qc_executable() -> Path:
+    """The ``qc_opendrive`` command: $GARAGE_MJ_QC_OPENDRIVE, the repo's ``.venv-qc``, or PATH."""
+    for cand in (
+        os.environ.get(QC_ENV),
+        _REPO / ".venv-qc" / "bin" / "qc_opendrive",
+        shutil.which("qc_opendrive"),
+    ):
+        if cand and Path(cand).is_file():
+            return Path(cand)
+    raise ToolMissing(
+        "the ASAM OpenDRIVE checker (qc_opendrive) is not installed; run `make install` "
+        f"(it makes .venv-qc with asam-qc-opendrive), or set {QC_ENV} to its path"
+    )
+
+
+def _config(xodr: Path, result: Path) -> str:
+    root = etree.Element("Config")
+    etree.SubElement(root, "Param", name="InputFile", value=str(xodr))
+    bundle = etree.SubElement(root, "CheckerBundle", application="xodrBundle")
+    etree.SubElement(bundle, "Param", name="resultFile", value=str(result))
+    return etree.tostring(root, xml_declaration=True, encoding="UTF-8").decode()
+
+
+def parse_xqar(path: Path, xodr: Path) -> QcReport:
+    """Issues and checker statuses of one XQAR result file."""
+    root = etree.parse(str(path)).getroot()
+    issues, status = [], {"completed": 0, "skipped": 0, "error": 0}
+    for checker in root.iter("Checker"):
+        st = checker.get("status", "")
+        status[st] = status.get(st, 0) + 1
+        for issue in checker.iter("Issue"):
+            loc = issue.find(".//XMLLocation")
+            issues.append(
+                QcIssue(
+                    checker.get("checkerId", ""),
+                    int(issue.get("level", "1")),
+                    issue.get("description", ""),
+                    "" if loc is None else loc.get("xpath", ""),
+                )
+            )
+    return QcReport(xodr, issues, status["completed"], status["skipped"], status["error"])
+
+
+def check_asam_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> list[QcReport]:
+    """:func:`check_asam` for many files in one child process (the checker's start-up dominates)."""
+    exe = qc_executable()
+    python = exe.parent / "python"
+    with tempfile.TemporaryDirectory(prefix="garage_qc_") as tmp:
+        configs, results = [], []
+        for i, p in enumerate(paths):
+            res = Path(tmp) / f"result_{i}.xqar"
+            cfg = Path(tmp) / f"config_{i}.xml"
+            cfg.write_text(_config(Path(p).resolve(), res))
+            configs.append(str(cfg))
+            results.append(res)
+        if python.is_file():  # one interpreter for the batch, through qc_opendrive's own main()
+            cmds = [[str(python), "-c", _QC_DRIVER, *configs]]
+        else:
+            cmds = [[str(exe), "-c", c] for c in configs]
+        for cmd in cmds:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+            if proc.returncode != 0:
+                raise ToolFailed(
+                    f"qc_opendrive failed (exit code {proc.returncode}): {proc.stderr.strip()[-600:]}"
+                )
+        missing = [str(p) for p, r in zip(paths, results) if not r.is_file()]
+        if missing:
+            raise ToolFailed(f"qc_opendrive wrote no result for {missing}")
+        return [parse_xqar(r, Path(p)) for p, r in zip(paths, results)]
+
+
+def check_asam(xodr_path: str | Path) -> QcReport:
+    """Run the ASAM OpenDRIVE Quality Checker on one file; its issues (zero for a good file)."""
+    return check_asam_batch([xodr_path])[0]
