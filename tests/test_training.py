@@ -1,0 +1,134 @@
+"""DQN training: garages reach the library with true metrics, runs resume without loss or duplicates."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from stable_baselines3.common.callbacks import BaseCallback
+
+from garage_mj.config import ConfigError
+from garage_mj.library import Library
+from garage_mj.metrics import evaluate
+from garage_mj.training import DQNConfig, TrainingError, latest_checkpoint, load_dqn_config, train
+
+FAST = DQNConfig(checkpoint_every=1000)
+
+
+class Crash(BaseCallback):
+    """Raises ``exc`` once the run reaches ``at`` timesteps (a crash or a Ctrl-C in the middle)."""
+
+    def __init__(self, at: int, exc: BaseException) -> None:
+        super().__init__()
+        self.at, self.exc = at, exc
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self.at:
+            raise self.exc
+        return True
+
+
+def _monitor_returns(run) -> np.ndarray:
+    return np.loadtxt(run / "monitor.csv", delimiter=",", skiprows=2, ndmin=2)[:, 0]
+
+
+@pytest.fixture(scope="module")
+def run3000(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "tiny_s0"
+    manifest = train("tiny_7x11", 3000, 0, out, FAST, progress=False)
+    return out, manifest
+
+
+def test_training_stores_usable_garages_with_true_metrics(run3000):
+    out, manifest = run3000
+    with Library(out / "library.sqlite") as lib:
+        records = lib.query()
+    assert len(records) >= 1
+    assert manifest["garages_stored"] == len(records)
+    for r in records:
+        m = evaluate(r.garage)
+        assert m.usable
+        assert (r.coverage, r.difficulty, r.stalls) == (m.coverage, m.difficulty, m.stalls)
+        assert (r.mean_road_length, r.mean_intersection_degree) == (m.mean_road_length, m.mean_intersection_degree)
+        assert (r.map, r.seed, r.run) == ("tiny_7x11", 0, manifest["run"])
+        assert 0 <= r.episode < manifest["episodes"] and 0 < r.timestep <= 3000
+
+
+def test_run_folder_manifest_monitor_checkpoints(run3000):
+    out, manifest = run3000
+    on_disk = json.loads((out / "run.json").read_text())
+    assert on_disk["status"] == "finished" and on_disk["timesteps"] == 3000
+    assert len(_monitor_returns(out)) == manifest["episodes"] > 0
+    s = manifest["last_session"]
+    assert s["timesteps"] == 3000 and s["timesteps_per_s"] > 0 and 0 < s["env_share"] < 1
+    assert (out / "final_model.zip").exists()
+    ckpt = latest_checkpoint(out)
+    assert ckpt is not None and ckpt[1]["timesteps"] == 3000
+    assert len(list((out / "checkpoints").glob("step_*.zip"))) == 2  # older ones are pruned
+
+
+def test_same_seed_same_run(tmp_path):
+    a = train("tiny_7x11", 1500, 7, tmp_path / "a", FAST, progress=False)
+    b = train("tiny_7x11", 1500, 7, tmp_path / "b", FAST, progress=False)
+    assert a["episodes"] == b["episodes"]
+    assert np.array_equal(_monitor_returns(tmp_path / "a"), _monitor_returns(tmp_path / "b"))
+
+
+def test_crash_then_resume_keeps_every_garage_once(tmp_path):
+    out = tmp_path / "run"
+    with pytest.raises(RuntimeError, match="boom"):
+        train("tiny_7x11", 4000, 0, out, FAST, progress=False, callbacks=[Crash(2600, RuntimeError("boom"))])
+    with Library(out / "library.sqlite") as lib:
+        before = {r.hash: (r.episode, r.timestep) for r in lib.query()}
+    assert before, "the crashed run should already have reported garages"
+    ckpt = latest_checkpoint(out)
+    assert ckpt is not None and ckpt[1]["timesteps"] == 2000
+    manifest = train("tiny_7x11", 4000, 0, out, progress=False, resume=True)
+    assert manifest["status"] == "finished" and manifest["timesteps"] == 4000
+    with Library(out / "library.sqlite") as lib:
+        after = lib.query()
+    hashes = [r.hash for r in after]
+    assert len(hashes) == len(set(hashes))  # nothing twice
+    assert {h: v for h, v in ((r.hash, (r.episode, r.timestep)) for r in after) if h in before} == before
+    new = [r for r in after if r.hash not in before]
+    assert all(r.timestep > 2000 and r.episode >= ckpt[1]["episodes"] for r in new)
+    # the monitor log continues from the checkpoint's episodes, without the lost ones
+    assert len(_monitor_returns(out)) == manifest["episodes"]
+
+
+def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path):
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train("tiny_7x11", 2500, 1, out, FAST, progress=False, callbacks=[Crash(1500, KeyboardInterrupt())])
+    assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+    ckpt = latest_checkpoint(out)
+    assert ckpt is not None and ckpt[1]["timesteps"] == 1500
+    manifest = train("tiny_7x11", 2500, 1, out, progress=False, resume=True)
+    assert manifest["timesteps"] == 2500 and manifest["last_session"]["timesteps"] == 1000
+    again = train("tiny_7x11", 2500, 1, out, progress=False, resume=True)
+    assert again["timesteps"] == 2500  # a finished run resumes to nothing
+
+
+def test_refuses_to_mix_runs(tmp_path, run3000):
+    out, _ = run3000
+    with pytest.raises(TrainingError, match="already holds a run"):
+        train("tiny_7x11", 100, 0, out, progress=False)
+    with pytest.raises(TrainingError, match="seed"):
+        train("tiny_7x11", 100, 5, out, progress=False, resume=True)
+    with pytest.raises(TrainingError, match="no training run"):
+        train("tiny_7x11", 100, 0, tmp_path / "empty", progress=False, resume=True)
+
+
+def test_config_from_toml(tmp_path):
+    good = tmp_path / "good.toml"
+    good.write_text("[dqn]\nlearning_rate = 0.001\nnet_arch = [64, 64]\n")
+    cfg = load_dqn_config(good)
+    assert cfg.learning_rate == 0.001 and cfg.net_arch == (64, 64)
+    assert cfg.dqn_kwargs()["policy_kwargs"] == {"net_arch": [64, 64]}
+    bad = tmp_path / "bad.toml"
+    bad.write_text("learning_rat = 0.001\n")
+    with pytest.raises(ConfigError, match="unknown key.*learning_rat"):
+        load_dqn_config(bad)
+    with pytest.raises(ConfigError, match="exploration_fraction"):
+        DQNConfig(exploration_fraction=2.0)
