@@ -9,12 +9,14 @@ from __future__ import annotations
 import math
 from collections import Counter
 
+import networkx as nx
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lxml import etree
 
 from garage_mj import evaluate
+from garage_mj.export.lanes import lane_graph_of
 from garage_mj.export.roadmodel import IMPLICIT_ROAD, build_road_model
 from garage_mj.export.validate import (
     ToolFailed,
@@ -194,3 +196,4 @@ def test_road_model_round_trip(seed, map_name):
         arms = bin(a.masks[j.cell]).count("1")
         assert len(j.connections) == arms * (arms - 1)
     assert len(m.parking) == evaluate(g).stalls
+    assert nx.is_strongly_connected(lane_graph_of(m))  # every lane reaches every other
