@@ -1,0 +1,168 @@
+"""The generation experiment: every (map, seed) run of a protocol, one library, the figures.
+
+A protocol TOML (``generation/paper.toml``) names the maps, the seeds, the timesteps per run
+and optionally a ``[dqn]`` table of hyper-parameters. :func:`run_experiment` trains the runs in
+a process pool, each in ``out/runs/<map>/seed_<s>/``; a finished run is skipped and an
+interrupted one resumed, so the command can simply be started again after a crash.
+
+All runs write to one ``out/library.sqlite``: SQLite in WAL mode lets several processes insert
+at once (each insert is a tiny transaction; writers wait on a busy timeout), and the UNIQUE hash
+keeps a garage two runs both found once. Figures go to ``out/figures/``.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tomllib
+
+from garage_mj.config import ConfigError
+from garage_mj.library import Library
+from garage_mj.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
+
+LIBRARY = "library.sqlite"
+MIN_TIMESTEPS = 100  # a scaled run never gets fewer
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """Which runs an experiment makes (``[experiment]`` table) and their DQN config (``[dqn]``)."""
+
+    maps: tuple[str, ...]
+    seeds: tuple[int, ...]
+    timesteps: int
+    dqn: DQNConfig = field(default_factory=DQNConfig)
+    name: str = "experiment"
+
+    def scaled(self, scale: float) -> Protocol:
+        """The same protocol with ``timesteps * scale`` per run (at least :data:`MIN_TIMESTEPS`)."""
+        if not 0 < scale <= 1:
+            raise ConfigError(f"--scale must be in (0, 1], got {scale}")
+        steps = max(MIN_TIMESTEPS, round(self.timesteps * scale))
+        every = min(self.dqn.checkpoint_every, max(MIN_TIMESTEPS, steps // 10))
+        return Protocol(self.maps, self.seeds, steps, load_dqn_config(self.dqn.to_dict(), checkpoint_every=every),
+                        self.name)
+
+
+def load_protocol(path: str | Path) -> Protocol:
+    """Read a protocol TOML; unknown tables or keys are an error."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"protocol file {path} does not exist") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path} is not valid TOML: {exc}") from None
+    unknown = sorted(set(data) - {"experiment", "dqn"})
+    if unknown:
+        raise ConfigError(f"{path}: unknown table(s) {', '.join(unknown)}; known: experiment, dqn")
+    exp = dict(data.get("experiment", {}))
+    known = {"name", "maps", "seeds", "timesteps"}
+    if set(exp) - known:
+        raise ConfigError(f"{path}: unknown key(s) {', '.join(sorted(set(exp) - known))} in [experiment]; "
+                          f"known keys: {', '.join(sorted(known))}")
+    missing = sorted({"maps", "seeds", "timesteps"} - set(exp))
+    if missing:
+        raise ConfigError(f"{path}: [experiment] needs {', '.join(missing)}")
+    maps, seeds, steps = exp["maps"], exp["seeds"], exp["timesteps"]
+    if not isinstance(maps, list) or not maps or not all(isinstance(m, str) for m in maps):
+        raise ConfigError(f"{path}: [experiment] maps must be a non-empty list of map names")
+    if not isinstance(seeds, list) or not seeds or not all(type(s) is int for s in seeds):
+        raise ConfigError(f"{path}: [experiment] seeds must be a non-empty list of integers")
+    if type(steps) is not int or steps < 1:
+        raise ConfigError(f"{path}: [experiment] timesteps must be a positive integer")
+    try:
+        dqn = load_dqn_config(data.get("dqn", {}))
+    except ConfigError as exc:
+        raise ConfigError(f"{path} [dqn]: {exc}") from None
+    return Protocol(tuple(maps), tuple(seeds), steps, dqn, str(exp.get("name", path.stem)))
+
+
+def run_dir(out: Path, map: str, seed: int) -> Path:
+    return out / "runs" / Path(map).stem / f"seed_{seed}"
+
+
+def _status(folder: Path, timesteps: int) -> str:
+    """``new``, ``finished`` (nothing to do) or ``resume``."""
+    if not (folder / MANIFEST).exists():
+        return "new"
+    m = read_manifest(folder)
+    return "finished" if m.get("status") == "finished" and m.get("timesteps", 0) >= timesteps else "resume"
+
+
+def _one_run(map: str, seed: int, timesteps: int, folder: str, library: str, config: dict[str, Any],
+             progress: bool) -> dict[str, Any]:
+    """Worker: train or resume one run (top-level so the process pool can pickle it)."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    resume = (Path(folder) / MANIFEST).exists()
+    return train(map, timesteps, seed, folder, config=None if resume else load_dqn_config(config),
+                 resume=resume, library_path=library, progress=progress)
+
+
+def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progress: bool = True) -> dict[str, Any]:
+    """Train every (map, seed) of ``protocol`` not yet finished, then draw the figures.
+
+    Returns a summary: runs trained and skipped, garages per map, figure paths.
+    """
+    from tqdm import tqdm
+
+    from garage_mj.map_io import load_map
+
+    if workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {workers}")
+    out = Path(out)
+    for m in protocol.maps:
+        load_map(m)  # fail on a bad map before any run starts
+    out.mkdir(parents=True, exist_ok=True)
+    library = out / LIBRARY
+    Library(library).close()  # create it once, before the workers race to
+    jobs, skipped = [], []
+    for m in protocol.maps:
+        for s in protocol.seeds:
+            folder = run_dir(out, m, s)
+            (skipped if _status(folder, protocol.timesteps) == "finished" else jobs).append((m, s, folder))
+    done: list[dict[str, Any]] = []
+    if jobs:
+        bar = tqdm(total=len(jobs), desc=f"{protocol.name}: runs", unit="run", disable=not progress)
+        args = [(m, s, protocol.timesteps, str(f), str(library), protocol.dqn.to_dict(), progress and workers == 1)
+                for m, s, f in jobs]
+        if workers == 1:
+            for a in args:
+                done.append(_one_run(*a))
+                bar.update()
+        else:
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                futures = [pool.submit(_one_run, *a) for a in args]
+                for fut in as_completed(futures):
+                    done.append(fut.result())
+                    bar.update()
+        bar.close()
+    figures = draw_figures(protocol, out)
+    with Library(library) as lib:
+        per_map = {m: lib.count(map=Path(m).stem) for m in protocol.maps}
+    return {"trained": [(d["map"], d["seed"]) for d in done], "skipped": [(m, s) for m, s, _ in skipped],
+            "library": str(library), "garages": per_map, "figures": [str(f) for f in figures],
+            "throughput": {f"{d['map']}/seed_{d['seed']}": d.get("last_session") for d in done}}
+
+
+def draw_figures(protocol: Protocol, out: Path) -> list[Path]:
+    """Convergence curves of all finished runs and one heatmap per map with garages."""
+    from garage_mj.plots import convergence, heatmap
+
+    figures = out / "figures"
+    runs = [run_dir(out, m, s) for m in protocol.maps for s in protocol.seeds]
+    runs = [r for r in runs if (r / "monitor.csv").exists() and _status(r, 1) != "new"]
+    paths = []
+    if runs:
+        paths.append(convergence(runs, figures / "convergence.png", smooth=10))
+    with Library(out / LIBRARY) as lib:
+        for m in protocol.maps:
+            name = Path(m).stem
+            points = lib.points(name)
+            if len(points):
+                paths.append(heatmap(points, figures / f"heatmap_{name}.png", title=name))
+    return paths

@@ -1,0 +1,52 @@
+"""Run a generation protocol: every (map, seed) run, one scenario library, the figures.
+
+    .venv/bin/python generation/run.py generation/smoke.toml --out runs/smoke
+    .venv/bin/python generation/run.py generation/paper.toml --scale 0.01 --workers 2 --out runs/paper_1pct
+
+Finished runs are skipped and interrupted ones resumed, so after a crash start the same command
+again. Logic lives in :mod:`garage_mj.experiment`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from garage_mj.config import ConfigError
+from garage_mj.experiment import load_protocol, run_experiment
+from garage_mj.garage import MapError
+from garage_mj.library import LibraryError
+from garage_mj.plots import PlotError
+from garage_mj.training import TrainingError
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("config", type=Path, help="protocol TOML (generation/paper.toml, generation/smoke.toml)")
+    ap.add_argument("--scale", type=float, default=1.0, help="multiply the timesteps per run (0 < SCALE <= 1)")
+    ap.add_argument("--workers", type=int, default=1, help="runs trained in parallel (processes)")
+    ap.add_argument("--out", type=Path, help="output folder (default: runs/<protocol name>)")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bars")
+    args = ap.parse_args(argv)
+    try:
+        protocol = load_protocol(args.config)
+        if args.scale != 1.0:
+            protocol = protocol.scaled(args.scale)
+        out = args.out or Path("runs") / protocol.name
+        print(f"{protocol.name}: {len(protocol.maps)} map(s) x {len(protocol.seeds)} seed(s) x "
+              f"{protocol.timesteps} timesteps -> {out}")
+        summary = run_experiment(protocol, out, workers=args.workers, progress=not args.no_progress)
+    except (ConfigError, MapError, LibraryError, TrainingError, PlotError) as exc:
+        print(f"run.py: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("run.py: interrupted; run the same command again to resume", file=sys.stderr)
+        return 130
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
