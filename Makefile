@@ -10,7 +10,7 @@ QC_STAMP := $(QC_VENV)/.installed
 QC_OPENDRIVE := asam-qc-opendrive==1.0.0
 export MUJOCO_GL ?= egl
 
-.PHONY: install test demo bench lint clean
+.PHONY: install browser test demo bench lint clean
 
 install: $(STAMP) $(QC_STAMP)
 
@@ -29,7 +29,14 @@ $(QC_STAMP):
 	$(QC_VENV)/bin/python -m pip install -q $(QC_OPENDRIVE)
 	touch $(QC_STAMP)
 
-test: install
+# Headless Chromium + ChromeDriver (Debian packages) for the report test; installed once when missing.
+browser:
+	@command -v chromium >/dev/null && command -v chromedriver >/dev/null || { \
+	  echo "installing Debian packages chromium chromium-driver (report test)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium chromium-driver >/dev/null; }
+
+test: install browser
 	$(PY) -m pytest -q
 
 demo: install

@@ -78,6 +78,9 @@ def _use_backend(name: str) -> None:
 
 def open_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
     """A ``mujoco.Renderer``, trying EGL then OSMesa; :class:`RenderError` naming the fix if none works."""
+    from mujoco.rendering.classic import gl_context
+
+    original = getattr(gl_context, "GLContext", None)
     errors = []
     for name in _backends():
         try:
@@ -87,6 +90,7 @@ def open_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Rend
             raise  # image larger than the offscreen buffer: a model problem, not GL
         except Exception as exc:  # noqa: BLE001 - each backend fails in its own way
             errors.append(f"{name}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
+    gl_context.GLContext = original
     raise RenderError(f"offscreen rendering unavailable ({'; '.join(errors)}); {GL_FIX}")
 
 

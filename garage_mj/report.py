@@ -1,0 +1,146 @@
+"""The HTML report of a run: one self-contained page plus the PNGs it links.
+
+No network, no scripts: inline CSS, relative links to images and asset packs, so the folder can
+be zipped, mailed or opened from any browser. The data arrives as plain records
+(:class:`ReportData`); this module only lays it out.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import html
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2rem auto;max-width:1100px;
+color:#1d232a;padding:0 1rem;line-height:1.45}
+h1{font-size:1.7rem;margin-bottom:.2rem}h2{border-bottom:2px solid #e3e7ec;padding-bottom:.2rem;margin-top:2.2rem}
+.muted{color:#5d6875}.figs{display:flex;flex-wrap:wrap;gap:1rem}.figs figure{margin:0;flex:1 1 420px}
+img{max-width:100%;border:1px solid #d5dbe1;border-radius:4px;background:#fff}
+table{border-collapse:collapse;width:100%;font-size:.92rem;margin:.6rem 0}
+th,td{border:1px solid #d5dbe1;padding:.3rem .5rem;text-align:right}th{background:#f1f4f7}
+td:first-child,th:first-child{text-align:left}
+.gallery{display:grid;grid-template-columns:repeat(auto-fill,minmax(250px,1fr));gap:1rem}
+.card{border:1px solid #d5dbe1;border-radius:6px;padding:.6rem}.card img{width:100%}
+.card p{margin:.3rem 0;font-size:.88rem}.kpi{display:flex;gap:1.5rem;flex-wrap:wrap}
+.kpi div{background:#f1f4f7;border-radius:6px;padding:.5rem .9rem}.kpi b{font-size:1.25rem;display:block}
+"""
+
+
+@dataclass
+class GalleryItem:
+    garage_id: int | str
+    difficulty: float
+    coverage: float
+    stalls: int
+    preview_png: Path  # top-down picture
+    render_png: Path | None = None  # MuJoCo render
+    pack_dir: Path | None = None  # the asset pack folder
+
+
+@dataclass
+class ReportData:
+    title: str
+    subtitle: str = ""
+    kpis: dict[str, str] = field(default_factory=dict)
+    convergence_png: Path | None = None
+    heatmap_png: Path | None = None
+    gallery: list[GalleryItem] = field(default_factory=list)
+    cruise_columns: list[str] = field(default_factory=list)
+    cruise_rows: list[list[object]] = field(default_factory=list)
+    regression_png: Path | None = None
+    regression_text: str = ""
+    notes: list[str] = field(default_factory=list)
+
+
+def _rel(path: Path | None, out_dir: Path) -> str:
+    return html.escape(Path(os.path.relpath(Path(path).resolve(), out_dir.resolve())).as_posix())
+
+
+def _fmt(v: object) -> str:
+    if isinstance(v, float):
+        return f"{v:.3f}"
+    return html.escape(str(v))
+
+
+def _figure(path: Path | None, caption: str, out_dir: Path) -> str:
+    if path is None:
+        return ""
+    return (
+        f'<figure><img src="{_rel(path, out_dir)}" alt="{html.escape(caption)}">'
+        f"<figcaption class=muted>{html.escape(caption)}</figcaption></figure>"
+    )
+
+
+def render_html(data: ReportData, out_dir: Path) -> str:
+    """The report page as a string; image and pack links are relative to ``out_dir``."""
+    out_dir = Path(out_dir)
+    e = html.escape
+    parts = [
+        "<!doctype html><html lang=en><head><meta charset=utf-8>",
+        "<meta name=viewport content='width=device-width,initial-scale=1'>",
+        f"<title>{e(data.title)}</title><style>{CSS}</style></head><body>",
+        f"<h1>{e(data.title)}</h1><p class=muted>{e(data.subtitle)} &middot; written "
+        f"{_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}</p>",
+    ]
+    if data.kpis:
+        parts.append("<div class=kpi>")
+        parts += [f"<div><b>{e(v)}</b>{e(k)}</div>" for k, v in data.kpis.items()]
+        parts.append("</div>")
+    parts.append("<h2 id=generation>Generation</h2><div class=figs>")
+    parts.append(_figure(data.convergence_png, "Convergence: episode return, mean over seeds, 95% band", out_dir))
+    parts.append(_figure(data.heatmap_png, "Usable garages by difficulty (x) and coverage (y)", out_dir))
+    parts.append("</div>")
+    if data.gallery:
+        parts.append("<h2 id=gallery>Garages</h2><div class=gallery>")
+        for g in data.gallery:
+            imgs = f'<img src="{_rel(g.preview_png, out_dir)}" alt="garage {e(str(g.garage_id))} top-down">'
+            if g.render_png is not None:
+                imgs += f'<img src="{_rel(g.render_png, out_dir)}" alt="garage {e(str(g.garage_id))} MuJoCo render">'
+            link = ""
+            if g.pack_dir is not None:
+                link = f' &middot; <a href="{_rel(g.pack_dir, out_dir)}/">asset pack</a>'
+            parts.append(
+                f"<div class=card>{imgs}<p><b>garage {e(str(g.garage_id))}</b>{link}</p>"
+                f"<p>difficulty {g.difficulty:.3f} &middot; coverage {g.coverage:.2f} &middot; "
+                f"{g.stalls} stalls</p></div>"
+            )
+        parts.append("</div>")
+    if data.cruise_rows:
+        parts.append("<h2 id=cruise>Cruise tests</h2><table id=cruise-table><thead><tr>")
+        parts += [f"<th>{e(c)}</th>" for c in data.cruise_columns]
+        parts.append("</tr></thead><tbody>")
+        for row in data.cruise_rows:
+            parts.append("<tr>" + "".join(f"<td>{_fmt(v)}</td>" for v in row) + "</tr>")
+        parts.append("</tbody></table>")
+    if data.regression_png is not None or data.regression_text:
+        parts.append("<h2 id=regression>Success rate vs difficulty</h2>")
+        if data.regression_text:
+            parts.append(f"<p>{e(data.regression_text)}</p>")
+        parts.append("<div class=figs>" + _figure(data.regression_png, "Linear regression of success rate on difficulty", out_dir) + "</div>")
+    if data.notes:
+        parts.append("<h2 id=notes>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in data.notes) + "</ul>")
+    parts.append("</body></html>")
+    return "\n".join(p for p in parts if p)
+
+
+def write_report(data: ReportData, out_dir: Path, name: str = "report.html") -> Path:
+    """Write the page atomically into ``out_dir``; returns its path."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    missing = [
+        p
+        for p in [data.convergence_png, data.heatmap_png, data.regression_png]
+        + [g.preview_png for g in data.gallery]
+        + [g.render_png for g in data.gallery]
+        if p is not None and not Path(p).is_file()
+    ]
+    if missing:
+        raise FileNotFoundError(f"report images missing: {', '.join(str(m) for m in missing)}")
+    path = out_dir / name
+    tmp = path.with_suffix(".html.tmp")
+    tmp.write_text(render_html(data, out_dir), encoding="utf-8")
+    tmp.replace(path)
+    return path
