@@ -3,7 +3,7 @@
     python eval/bench_export.py [--map m5_13x13_aligned] [--garages 5] [--repeat 3] [--seed 0]
 
 Garages come from the scripted painter (deterministic). Each format is timed in memory (no disk):
-``xodr`` (road model + OpenDRIVE text), ``mjcf`` (dm_control build + XML + MuJoCo compile),
+``xodr`` (road model + OpenDRIVE text), ``lanes`` (road model + lane graph), ``mjcf`` (dm_control build + XML + MuJoCo compile),
 ``meshes`` (trimesh scene + GLB and OBJ bytes), ``preview`` (the PNG picture), and ``pack`` (a
 whole asset pack on disk, hashes included). Target (issue 4): xodr + mjcf < 100 ms.
 """
@@ -19,6 +19,7 @@ from collections.abc import Callable
 import mujoco
 import trimesh
 
+from garage_mj.export.lanes import lane_graph
 from garage_mj.export.meshes import garage_meshes
 from garage_mj.export.mjcf_scene import build_scene
 from garage_mj.export.pack import export_pack
@@ -47,6 +48,7 @@ def _pack(garage: Garage) -> None:
 #: Format -> function doing that export for one garage.
 FORMATS: dict[str, Callable[[Garage], object]] = {
     "xodr": lambda g: write_xodr(g),
+    "lanes": lambda g: lane_graph(g),  # the lane graph routing uses (same road model as xodr)
     "mjcf": _mjcf,
     "meshes": _meshes,
     "preview": render_preview,
