@@ -1,0 +1,141 @@
+"""The driver protocol, driver noise and the shared base class of the built-in drivers.
+
+A driver is the algorithm under test. The drive env calls ``reset(info)`` at the start of a test
+and ``act(obs) -> action`` once per control step. The observation dict holds ``depth`` (H x W
+float32 metres), ``segmentation`` (H x W uint8 :class:`garage_mj.semantics.Semantic` ids),
+optionally ``rgb``, ``waypoint`` (the route point a lookahead distance ahead, in the car frame:
+x forward, y left, metres) and ``speed`` (forward speed, m/s). An action is either the paper's
+discrete index (:class:`garage_mj.vehicle.DiscreteAction`) or ``[throttle, steer]`` in [-1, 1].
+
+``info`` at reset may carry ``seed`` (int), ``action_type`` ("continuous" or "discrete"),
+``dt`` (control period, s) and ``camera`` (a dict of :class:`CameraGeometry` fields).
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from garage_mj.config import load_config
+from garage_mj.vehicle import DiscreteAction
+
+
+@runtime_checkable
+class Driver(Protocol):
+    """What the drive env and ``garage-mj cruise --driver module:Class`` need from a driver."""
+
+    def reset(self, info: dict[str, Any]) -> None: ...
+
+    def act(self, obs: dict[str, Any]) -> Any: ...
+
+
+@dataclass(frozen=True)
+class DriverNoiseConfig:
+    """Imperfections of a driver, so that garage difficulty can show (all zero = perfect)."""
+
+    steer_std: float = 0.0  # std of Gaussian noise on the steer command (range [-1, 1])
+    throttle_std: float = 0.0  # std of Gaussian noise on the throttle command (range [-1, 1])
+    delay_steps: int = 0  # [control steps] reaction delay: commands act this many steps late
+
+
+@dataclass(frozen=True)
+class CarGeometry:
+    """What a driver knows of the car (defaults: ``models/car`` with :class:`~garage_mj.vehicle.CarConfig`)."""
+
+    wheelbase: float = 2.7  # [m]
+    rear_axle: float = -1.35  # [m] rear axle x in the car frame (origin at the car centre)
+    half_width: float = 0.95  # [m]
+    front: float = 2.3  # [m] front bumper x in the car frame
+    max_steer: float = 0.7  # [rad] road-wheel angle at steer = 1
+    max_speed: float = 4.0  # [m/s]
+    max_accel: float = 2.0  # [m/s^2]
+    max_decel: float = 5.0  # [m/s^2]
+
+
+@dataclass(frozen=True)
+class CameraGeometry:
+    """The forward camera in the car frame (defaults: ``front`` camera of ``models/car``)."""
+
+    x: float = 2.25  # [m] forward of the car centre
+    z: float = 1.18  # [m] above the ground
+    pitch: float = math.radians(10.0)  # [rad] downward tilt
+    fovy: float = 90.0  # [deg] vertical field of view (square pixels)
+
+
+def discretize(throttle: float, steer: float, deadband: float = 0.15) -> int:
+    """The paper action closest to ``(throttle, steer)``: brake first, then turning, else accelerate."""
+    if throttle < -0.3:
+        return int(DiscreteAction.BRAKE)
+    if steer > deadband:
+        return int(DiscreteAction.TURN_LEFT)
+    if steer < -deadband:
+        return int(DiscreteAction.TURN_RIGHT)
+    return int(DiscreteAction.ACCELERATE)
+
+
+class BaseDriver:
+    """Common machinery: config loading, seeded noise, reaction delay, continuous/discrete output.
+
+    Subclasses implement :meth:`command` returning ``(throttle, steer)``.
+    """
+
+    config_class: type = object
+
+    def __init__(self, config=None, noise=None, car=None, **overrides) -> None:
+        self.config = config if isinstance(config, self.config_class) else load_config(
+            self.config_class, config, **overrides)
+        self.noise = noise if isinstance(noise, DriverNoiseConfig) else load_config(DriverNoiseConfig, noise)
+        self.car = car if isinstance(car, CarGeometry) else load_config(CarGeometry, car)
+        self.camera = CameraGeometry()
+        self.discrete = False
+        self.dt = 0.1  # [s]
+        self._rng = np.random.default_rng(0)
+        self._queue: collections.deque = collections.deque()
+
+    def reset(self, info: dict[str, Any]) -> None:
+        """Start a test: seed the noise, learn the action type, control period and camera."""
+        self._rng = np.random.default_rng(int(info.get("seed", 0)))
+        self.discrete = info.get("action_type", "continuous") == "discrete"
+        self.dt = float(info.get("dt", self.dt))
+        if "camera" in info:
+            self.camera = load_config(CameraGeometry, info["camera"])
+        self._queue = collections.deque([(0.0, 0.0)] * self.noise.delay_steps)
+
+    def command(self, obs: dict[str, Any]) -> tuple[float, float]:
+        raise NotImplementedError
+
+    def act(self, obs: dict[str, Any]):
+        """The action for this step: command, plus noise and delay, in the env's action type."""
+        throttle, steer = self.command(obs)
+        if self.noise.throttle_std > 0:
+            throttle += float(self._rng.normal(0.0, self.noise.throttle_std))
+        if self.noise.steer_std > 0:
+            steer += float(self._rng.normal(0.0, self.noise.steer_std))
+        self._queue.append((float(np.clip(throttle, -1, 1)), float(np.clip(steer, -1, 1))))
+        throttle, steer = self._queue.popleft()
+        if self.discrete:
+            return discretize(throttle, steer)
+        return np.array([throttle, steer], dtype=np.float32)
+
+    # -- shared control laws ------------------------------------------------------------------
+    def pursuit_curvature(self, target) -> float:
+        """Pure-pursuit curvature [1/m] toward ``target`` (car frame), from the rear axle."""
+        x = float(target[0]) - self.car.rear_axle
+        y = float(target[1])
+        d2 = x * x + y * y
+        return 2.0 * y / d2 if d2 > 1e-6 else 0.0
+
+    def steer_for(self, curvature: float) -> float:
+        """Steer command in [-1, 1] that drives ``curvature``."""
+        return float(np.clip(math.atan(self.car.wheelbase * curvature) / self.car.max_steer, -1.0, 1.0))
+
+    def throttle_for(self, target_speed: float, speed: float, gain: float = 1.0) -> float:
+        """Pedal command toward ``target_speed`` [m/s] (the car's pedal is an acceleration request)."""
+        err = target_speed - speed
+        if err >= 0:
+            return float(np.clip(gain * err / (self.car.max_accel * self.dt * 2), 0.0, 1.0))
+        return float(np.clip(gain * err / (self.car.max_decel * self.dt * 2), -1.0, 0.0))

@@ -1,0 +1,129 @@
+"""``vision``: drives from the camera only, plus the next route waypoint and its own speed.
+
+Each frame, every pixel becomes a 3D point in the car frame (depth along the optical axis and the
+camera geometry). A pixel is an obstacle when segmentation says it is not drivable (anything but
+floor, markings, entrance, exit; background and the ego car excluded) or depth puts it above the
+floor. Candidate arcs (curvatures from full left to full right, plus the pure-pursuit arc to the
+waypoint) are scored by the free distance along them for the car's width; the driver takes the
+arc nearest the waypoint's that is free far enough, and its speed lets it stop before the first
+obstacle on that arc. So what it does depends on what the camera sees: clutter, occlusion and
+narrow passages all show up as failures.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from garage_mj.drivers.base import BaseDriver
+from garage_mj.semantics import DRIVABLE, NUM_CLASSES, Semantic
+
+_NOT_OBSTACLE = np.zeros(NUM_CLASSES, dtype=bool)
+_NOT_OBSTACLE[[int(c) for c in DRIVABLE]] = True
+_NOT_OBSTACLE[[int(Semantic.BACKGROUND), int(Semantic.EGO_CAR)]] = True
+
+
+@dataclass(frozen=True)
+class VisionConfig:
+    """Perception and planning parameters of the vision driver."""
+
+    cruise_speed: float = 2.5  # [m/s]
+    min_speed: float = 0.8  # [m/s] slowest planned speed while the way is free
+    lateral_accel: float = 1.5  # [m/s^2] v <= sqrt(a_lat / |curvature|)
+    comfort_decel: float = 2.5  # [m/s^2] speed lets the car stop in the free distance at this rate
+    margin: float = 0.3  # [m] clearance kept beside the car body
+    stop_distance: float = 0.8  # [m] stop this far before an obstacle
+    needed_free: float = 5.0  # [m] an arc this free is good enough; nearer the waypoint arc wins
+    horizon: float = 15.0  # [m] ignore points farther than this
+    blind_allowance: float = 1.5  # [m] free distance granted beyond where an arc leaves the view
+    near_blind: float = 2.0  # [m] ahead of the camera: below its view anyway, not checked for leaving it
+    obstacle_height: float = 0.15  # [m] a point this high above the floor is an obstacle
+    max_height: float = 2.5  # [m] points higher than this (ceiling) are ignored
+    candidates: int = 15  # arcs from full left to full right
+
+
+class VisionDriver(BaseDriver):
+    """Free-space arc selection from depth + segmentation, toward the route waypoint."""
+
+    config_class = VisionConfig
+
+    def obstacle_points(self, depth: np.ndarray, segmentation: np.ndarray) -> np.ndarray:
+        """(N, 2) obstacle points (x forward, y left, metres) in the car frame."""
+        cam, cfg = self.camera, self.config
+        h, w = depth.shape
+        tan_v = math.tan(math.radians(cam.fovy) / 2)
+        tan_h = tan_v * w / h
+        u = ((np.arange(w) + 0.5) / w * 2 - 1) * tan_h  # right positive
+        v = (1 - (np.arange(h) + 0.5) / h * 2) * tan_v  # up positive (row 0 is the top)
+        c, s = math.cos(cam.pitch), math.sin(cam.pitch)
+        d = depth.astype(np.float64)
+        x = cam.x + d * (c + v[:, None] * s)
+        y = -d * u[None, :]
+        z = cam.z + d * (v[:, None] * c - s)
+        seg = np.clip(segmentation, 0, NUM_CLASSES - 1)
+        hit = (~_NOT_OBSTACLE[seg]) | (z > cfg.obstacle_height) & (seg != int(Semantic.BACKGROUND))
+        hit &= (seg != int(Semantic.EGO_CAR)) & (z < cfg.max_height) & (x < cfg.horizon + cam.x)
+        return np.stack([x[hit], y[hit]], axis=1)
+
+    def free_distance(self, points: np.ndarray, curvatures: np.ndarray, seen_only: bool = True) -> np.ndarray:
+        """Free distance [m] ahead of the front bumper along each arc (driven by the rear axle).
+
+        An obstacle blocks an arc when it lies in the band the car body sweeps (inner rear edge to
+        outer front corner). With ``seen_only``, the part of an arc the camera cannot see counts as
+        free for only ``blind_allowance`` metres, so the car creeps, not races, into the unseen.
+        """
+        cfg, car = self.config, self.car
+        k = curvatures[:, None]
+        straight = np.abs(k) < 1e-4
+        radius = 1.0 / np.where(straight, 1.0, k)
+        r_abs = np.abs(radius)
+        front = car.front - car.rear_axle  # [m] bumper ahead of the rear axle
+        half = car.half_width + cfg.margin
+        first = np.full(len(curvatures), np.inf)
+        if len(points):
+            xr = points[:, 0] - car.rear_axle
+            y = points[:, 1]
+            r = np.hypot(xr, y - radius)
+            theta = np.arctan2(xr, r_abs - np.sign(radius) * y)
+            r_out = np.hypot(r_abs + half, front)
+            in_band = np.where(straight, np.abs(y) < half, (r > r_abs - half) & (r < r_out))
+            along = np.where(straight, xr, r_abs * theta)
+            ahead = np.where(straight, xr > 0, theta > 0)
+            first = np.where(ahead & in_band, along, np.inf).min(axis=1)
+        if not seen_only:
+            return np.clip(first - front, 0.0, cfg.horizon)
+        # where each arc's centre line leaves the camera's horizontal field of view
+        cam = self.camera
+        half_fov = math.atan(math.tan(math.radians(cam.fovy) / 2))  # square images: h fov = v fov
+        s = np.arange(cam.x - car.rear_axle + cfg.near_blind, cfg.horizon + front, 0.25)[None, :]
+        px = np.where(straight, s, r_abs * np.sin(s / r_abs))
+        py = np.where(straight, 0.0, radius * (1 - np.cos(s / r_abs)))
+        bearing = np.abs(np.arctan2(py, px - (cam.x - car.rear_axle)))
+        unseen = (bearing > half_fov) | (np.where(straight, 0.0, s / r_abs) > math.pi / 2)
+        seen_to = np.where(unseen.any(axis=1), s[0, np.argmax(unseen, axis=1)], np.inf)
+        first = np.minimum(first, seen_to + cfg.blind_allowance)
+        return np.clip(first - front, 0.0, cfg.horizon)
+
+    def command(self, obs: dict[str, Any]) -> tuple[float, float]:
+        cfg, car = self.config, self.car
+        speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
+        k_goal = self.pursuit_curvature(np.asarray(obs["waypoint"], dtype=float))
+        k_max = math.tan(car.max_steer) / car.wheelbase
+        k_goal = float(np.clip(k_goal, -k_max, k_max))
+        arcs = np.append(np.linspace(-k_max, k_max, cfg.candidates), k_goal)
+        points = self.obstacle_points(obs["depth"], obs["segmentation"])
+        clear = self.free_distance(points, arcs, seen_only=False)  # blocked by what is seen
+        good = clear >= min(cfg.needed_free, clear.max())
+        cost = np.abs(arcs - k_goal) + np.where(good, 0.0, np.inf)
+        cost[-1] -= 1e-9  # ties go to the waypoint arc itself
+        best = int(np.argmin(cost))
+        kappa = float(arcs[best])
+        room = float(self.free_distance(points, arcs[best : best + 1])[0])  # also bounded by the view
+        v = cfg.cruise_speed
+        if abs(kappa) > 1e-6:
+            v = min(v, max(cfg.min_speed, math.sqrt(cfg.lateral_accel / abs(kappa))))
+        v = min(v, math.sqrt(2 * cfg.comfort_decel * max(room - cfg.stop_distance, 0.0)))
+        return self.throttle_for(v, speed), self.steer_for(kappa)

@@ -1,0 +1,40 @@
+"""``waypoint``: the baseline driver, pure pursuit on the route's lookahead point, blind to the camera.
+
+It is privileged in that it trusts the route completely and ignores everything the camera sees,
+so its failures come only from geometry the car cannot follow (tight curves, narrow passages).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from garage_mj.drivers.base import BaseDriver
+
+
+@dataclass(frozen=True)
+class WaypointConfig:
+    """Speed policy of the pure-pursuit driver."""
+
+    cruise_speed: float = 3.0  # [m/s] on straight road
+    min_speed: float = 1.0  # [m/s] never plan slower than this (except to stop)
+    lateral_accel: float = 1.5  # [m/s^2] comfort limit: v <= sqrt(a_lat / |curvature|)
+
+
+class WaypointDriver(BaseDriver):
+    """Pure pursuit toward ``obs["waypoint"]`` with a curvature-limited speed."""
+
+    config_class = WaypointConfig
+
+    def command(self, obs: dict[str, Any]) -> tuple[float, float]:
+        cfg: WaypointConfig = self.config
+        target = np.asarray(obs["waypoint"], dtype=float)
+        speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
+        kappa = self.pursuit_curvature(target)
+        v = cfg.cruise_speed
+        if abs(kappa) > 1e-6:
+            v = min(v, max(cfg.min_speed, math.sqrt(cfg.lateral_accel / abs(kappa))))
+        return self.throttle_for(v, speed), self.steer_for(kappa)
