@@ -289,6 +289,14 @@ def _truncate_monitor(path: Path, episodes: int) -> None:
         os.replace(tmp, path)
 
 
+def _run_id(map_name: str, seed: int, out: Path) -> str:
+    """``<map>_s<seed>_<UTC time>_<folder digest>``: unique per run folder and start."""
+    import hashlib
+
+    digest = hashlib.sha1(str(out.resolve()).encode()).hexdigest()[:6]
+    return f"{map_name}_s{seed}_{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}_{digest}"
+
+
 def _count_run(library_path: Path, run: str) -> int:
     with Library(library_path) as lib:
         return lib.count(run=run)
@@ -340,7 +348,7 @@ def train(
             raise TrainingError(f"{out} already holds a run; pass --resume to continue it or choose a new --out")
         config = config or DQNConfig()
         manifest = {
-            "run": f"{map_name}_s{seed}_{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}",
+            "run": _run_id(map_name, seed, out),
             "map": map_name, "map_source": str(map), "seed": seed, "algo": "dqn", "config": config.to_dict(),
             "status": "running", "timesteps": 0, "episodes": 0,
         }

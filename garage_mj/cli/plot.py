@@ -16,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "convergence",
         help="return vs episode: mean over runs of each map with a 95%% confidence band",
         description="Reads monitor.csv of each run folder (written by 'garage-mj train'), groups runs by "
-        "map, and draws the mean return per episode with a 95%% t-interval over the runs (one panel per map).",
+        "map, and draws the mean return per episode with a 95% t-interval over the runs (one panel per map).",
     )
     c.add_argument("runs", nargs="+", type=Path, metavar="RUN", help="run folders (or their monitor.csv)")
     c.add_argument("--out", type=Path, default=Path("convergence.png"), help="PNG file (default: convergence.png)")
