@@ -6,7 +6,12 @@ training and library -> exporters -> cruise testbed -> reports.
 
 from __future__ import annotations
 
-from garage_mj.blocks import Block
+import os as _os
+
+# MuJoCo reads MUJOCO_GL once, when it is first imported: default to headless EGL before any import.
+_os.environ.setdefault("MUJOCO_GL", "egl")
+
+from garage_mj.blocks import Block  # noqa: E402
 from garage_mj.garage import Garage, MapError
 from garage_mj.map_io import list_maps, load_map
 from garage_mj.metrics import GarageMetrics, difficulty, evaluate
