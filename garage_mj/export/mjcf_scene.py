@@ -10,9 +10,15 @@ an empty stall's car sits :data:`HIDDEN_DEPTH` below the floor, out of sight and
 :func:`set_parked` moves the cars of a compiled ``mujoco.MjModel`` up or down; ``build_scene(...,
 parked=ids)`` sets the initial occupancy in the MJCF itself.
 
-Geom groups: 0 solid structure (floor, walls, obstacles, pillars), 2 visual-only geoms (markings,
-gate patches, car bodywork), 3 car collision boxes (hidden by default), 4 the ceiling (hidden by
-default so the ``overview`` camera sees the floor; enable ``scene_option.geomgroup[4]`` to draw it).
+Geom groups: 0 solid geoms that draw and collide (floor, walls, obstacles, pillars, parked cars),
+2 visual-only geoms (markings, gate patches), 4 the ceiling (hidden by default so the ``overview``
+camera sees the floor; enable ``scene_option.geomgroup[4]`` to draw it).
+
+Speed (issue 4: XODR + MJCF < 100 ms per 13x13 garage, ``eval/bench_export.py``): ``dm_control``
+costs about 60 us per element, 1 ms per ``default`` class, and as much again per array attribute
+written to XML, so the scene keeps few default classes, names every element (unnamed ones are
+written slowly), sets attributes in one ``add`` call, and stamps models as ``name`` + ``class``
+geoms (:mod:`garage_mj.export.templates`).
 """
 
 from __future__ import annotations
@@ -98,35 +104,26 @@ def build_scene(
     _setup(root, layout)
     wb = root.worldbody
     for box in layout.boxes:
-        attrs = dict(name=box.name, pos=list(box.center), size=list(box.half))
-        if box.collides:
-            attrs.update(dclass="structure", material=_MATERIALS[box.cls])
-        else:
-            attrs.update(dclass="marking", material=_MATERIALS[box.cls])
-        if box.name == "ceiling":
-            attrs["group"] = CEILING_GROUP
-        wb.add("geom", **attrs)
+        # one add() with every attribute: each later assignment costs dm_control a validation pass
+        extra = {"group": CEILING_GROUP} if box.name == "ceiling" else {}
+        wb.add("geom", name=box.name, dclass="structure" if box.collides else "marking",
+               material=_MATERIALS[box.cls], pos=box.center, size=box.half, **extra)
     for cls, pos in ((Semantic.ENTRANCE, garage.entrance), (Semantic.EXIT, garage.exit)):
         x, y = layout_cell(layout, pos)
         wb.add("site", name=cls.name.lower(), pos=[x, y, 0.05], size=[0.2], group=VISUAL_GROUP,
                rgba=list(CLASS_RGBA[cls]))
 
     pillar = load_template(PILLAR)
-    install(root, pillar)
-    scale_z = world.ceiling_height / 3.0  # the pillar model is 3.0 m high
+    install(root, pillar, z_scale=world.ceiling_height / 3.0)  # the pillar model is 3.0 m high
     for p in layout.pillars:
-        body = stamp(wb, pillar, p.name, [p.x, p.y, 0.0], p.yaw)
-        if abs(scale_z - 1.0) > 1e-9:
-            for g in body.geom:
-                g.size = [g.size[0], g.size[1], g.size[2] * scale_z]
-                g.pos = [g.pos[0], g.pos[1], g.pos[2] * scale_z]
+        stamp(wb, pillar, p.name, (p.x, p.y, 0.0), p.yaw)
 
     car = load_template(PARKED_CAR)
     install(root, car)
     occupied = None if parked is None else set(parked)
     for p in layout.parked_cars:
         z = 0.0 if occupied is None or p.stall_id in occupied else -HIDDEN_DEPTH
-        stamp(wb, car, p.name, [p.x, p.y, z], p.yaw)
+        stamp(wb, car, p.name, (p.x, p.y, z), p.yaw)
     return root
 
 
