@@ -1,8 +1,16 @@
-"""Offscreen camera sensor: RGB, depth in metres and SPEC section 6 segmentation via ``mujoco.Renderer``.
+"""Offscreen camera sensor: RGB, depth in metres and SPEC section 6 segmentation.
 
 Rendering is headless. ``MUJOCO_GL`` defaults to ``egl`` (set here if this module is the first to
 import MuJoCo; ``garage_mj`` sets it too); when EGL cannot start, OSMesa is tried, and when
 neither works one :class:`RenderError` line names the fix.
+
+Speed (software GL renders most frames of a cruise test): the camera drives MuJoCo's renderer
+directly instead of ``mujoco.Renderer``, with one ``mjv_updateScene`` and ONE segmentation pass per
+frame, reading the ID colours and the depth buffer of the same frame (``mujoco.Renderer`` renders
+twice and maps ids in Python). Geoms whose bounding sphere lies outside the view frustum (or
+beyond ``far``) are left out of the scene before it is built, so a frame costs what the camera
+sees, not the size of the garage. Markings stay in: segmentation shows road and stall markings.
+RGB, when asked for, is one more ordinary pass.
 """
 
 from __future__ import annotations
@@ -63,35 +71,48 @@ def _backends() -> list[str]:
     return [asked, "osmesa"] if asked == "egl" else [asked]
 
 
-def _use_backend(name: str) -> None:
-    """Point ``mujoco.Renderer`` at GL backend ``name`` (it reads the module-level GLContext)."""
-    from mujoco.rendering.classic import gl_context
-
+def _gl_context_class(name: str):
+    """The ``GLContext`` class of backend ``name`` (MuJoCo's default for glfw and friends)."""
     if name == "egl":
         from mujoco.egl import GLContext
     elif name == "osmesa":
         from mujoco.osmesa import GLContext
     else:
-        return  # glfw and friends: what MuJoCo chose at import
-    gl_context.GLContext = GLContext
+        from mujoco.rendering.classic.gl_context import GLContext
+    return GLContext
 
 
-def open_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
-    """A ``mujoco.Renderer``, trying EGL then OSMesa; :class:`RenderError` naming the fix if none works."""
-    from mujoco.rendering.classic import gl_context
+def open_context(model: mujoco.MjModel, height: int, width: int):
+    """``(gl_context, mjr_context)`` for offscreen rendering, trying EGL then OSMesa.
 
-    original = getattr(gl_context, "GLContext", None)
+    Raises :class:`RenderError` naming the fix when no backend works, and ``ValueError`` when the
+    image is larger than the model's offscreen buffer (a model problem, not GL).
+    """
+    if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
+        raise ValueError(f"image {width}x{height} exceeds the model's offscreen buffer "
+                         f"{model.vis.global_.offwidth}x{model.vis.global_.offheight}")
     errors = []
     for name in _backends():
+        gl = None
         try:
-            _use_backend(name)
-            return mujoco.Renderer(model, height=height, width=width)
-        except ValueError:
-            raise  # image larger than the offscreen buffer: a model problem, not GL
+            gl = _gl_context_class(name)(width, height)
+            gl.make_current()
+            ctx = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+            mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, ctx)
+            ctx.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
+            return gl, ctx
         except Exception as exc:  # noqa: BLE001 - each backend fails in its own way
             errors.append(f"{name}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
-    gl_context.GLContext = original
+            if gl is not None:
+                try:
+                    gl.free()
+                except Exception:  # noqa: BLE001 - a half-made context may not free cleanly
+                    pass
     raise RenderError(f"offscreen rendering unavailable ({'; '.join(errors)}); {GL_FIX}")
+
+
+CULL_MARGIN = np.deg2rad(2.0)  # [rad] widens the culling frustum: never cull a geom at the image edge
+_HIDDEN_GROUP = 5  # geom group the culled geoms visit while the scene is built (hidden in the option)
 
 
 class Camera:
@@ -101,7 +122,7 @@ class Camera:
     :class:`garage_mj.semantics.Semantic` ids. Sets the model's clipping planes to ``near``/``far``.
     """
 
-    def __init__(self, model: mujoco.MjModel, config: CameraConfig | None = None):
+    def __init__(self, model: mujoco.MjModel, config: CameraConfig | None = None, cull: bool = True):
         self.config = cfg = config or CameraConfig()
         self.model = model
         self.camera_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, cfg.camera)
@@ -114,68 +135,144 @@ class Camera:
         if model.vis.global_.offwidth < cfg.width or model.vis.global_.offheight < cfg.height:
             model.vis.global_.offwidth = max(model.vis.global_.offwidth, cfg.width)
             model.vis.global_.offheight = max(model.vis.global_.offheight, cfg.height)
-        self._renderer = open_renderer(model, cfg.height, cfg.width)
-        flags = self._renderer.scene.flags
+        self._gl, self._ctx = open_context(model, cfg.height, cfg.width)
+        self._rect = mujoco.MjrRect(0, 0, cfg.width, cfg.height)
+        self._scene = mujoco.MjvScene(model, maxgeom=model.ngeom + model.nsite + 100)
+        self._option = mujoco.MjvOption()
+        self._option.geomgroup[_HIDDEN_GROUP] = 0
+        self._perturb = mujoco.MjvPerturb()
+        self._cam = mujoco.MjvCamera()
+        self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._cam.fixedcamid = self.camera_id
+        flags = self._scene.flags
         flags[mujoco.mjtRndFlag.mjRND_SHADOW] = cfg.shadows
         flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = cfg.shadows
+        self._rgb_buf = np.empty((cfg.height, cfg.width, 3), np.uint8)
+        self._depth_buf = np.empty((cfg.height, cfg.width), np.float32)
         # class per geom id, plus one slot (index ngeom) for background and non-geom objects
         self._lut = np.append(geom_classes(model), 0).astype(np.uint8)
+        perspective = model.cam_projection[self.camera_id] == mujoco.mjtProjection.mjPROJ_PERSPECTIVE
+        # a camera with a physical sensor size gets its frustum from intrinsics, not fovy: no culling
+        self._cull = cull and perspective and not model.cam_sensorsize[self.camera_id].any()
+        if self._cull:
+            half_y = np.deg2rad(float(model.cam_fovy[self.camera_id])) / 2
+            half_x = np.arctan(np.tan(half_y) * cfg.width / cfg.height)
+            a, b = half_x + CULL_MARGIN, half_y + CULL_MARGIN
+            # outward normals of the four side planes in camera coordinates (x right, y up, -z ahead)
+            self._planes = np.array([[np.cos(a), 0, np.sin(a)], [-np.cos(a), 0, np.sin(a)],
+                                     [0, np.cos(b), np.sin(b)], [0, -np.cos(b), np.sin(b)]])
+            # planes (rbound 0) are unbounded and always drawn
+            self._radius = np.where(model.geom_rbound > 0, model.geom_rbound, np.inf)
+
+    def _culled(self, data: mujoco.MjData) -> np.ndarray:
+        """Bool per geom: its bounding sphere lies wholly outside the view frustum."""
+        cid = self.camera_id
+        rel = (data.geom_xpos - data.cam_xpos[cid]) @ data.cam_xmat[cid].reshape(3, 3)  # camera coordinates
+        r = self._radius
+        ahead = -rel[:, 2]
+        out = (ahead < self.config.near - r) | (ahead - r > self.config.far)
+        out |= (rel @ self._planes.T > r[:, None]).any(axis=1)
+        return out
 
     def _update(self, data: mujoco.MjData) -> None:
-        self._renderer.update_scene(data, camera=self.camera_id)
-
-    def _depth(self) -> np.ndarray:
-        r = self._renderer
-        r.enable_depth_rendering()
+        m = self.model
+        if not self._cull:
+            mujoco.mjv_updateScene(m, data, self._option, self._perturb, self._cam,
+                                   mujoco.mjtCatBit.mjCAT_ALL, self._scene)
+            return
+        culled = self._culled(data)
+        groups = m.geom_group.copy()
+        m.geom_group[culled] = _HIDDEN_GROUP
         try:
-            depth = r.render()
+            mujoco.mjv_updateScene(m, data, self._option, self._perturb, self._cam,
+                                   mujoco.mjtCatBit.mjCAT_ALL, self._scene)
         finally:
-            r.disable_depth_rendering()
-        return np.minimum(depth, np.float32(self.config.far), out=depth)
+            m.geom_group[:] = groups
 
-    def _segmentation(self) -> np.ndarray:
-        r = self._renderer
-        r.enable_segmentation_rendering()
-        try:
-            raw = r.render()
-        finally:
-            r.disable_segmentation_rendering()
-        objid, objtype = raw[..., 0], raw[..., 1]
-        idx = np.where(objtype == int(mujoco.mjtObj.mjOBJ_GEOM), objid, self.model.ngeom)
-        return self._lut[idx]
+    def _draw(self, segment: bool) -> None:
+        flags = self._scene.flags
+        flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = segment
+        flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = segment
+        if self._ctx is None:
+            raise RuntimeError("render cannot be called after close")
+        self._gl.make_current()
+        mujoco.mjr_render(self._rect, self._scene, self._ctx)
+
+    def _rgb(self) -> np.ndarray:
+        self._draw(segment=False)
+        mujoco.mjr_readPixels(self._rgb_buf, None, self._rect, self._ctx)
+        return self._rgb_buf[::-1].copy()
+
+    def _depth_and_segmentation(self) -> tuple[np.ndarray, np.ndarray]:
+        """One segmentation pass: its ID colours and its depth buffer, read together."""
+        self._draw(segment=True)
+        mujoco.mjr_readPixels(self._rgb_buf, self._depth_buf, self._rect, self._ctx)
+        cfg = self.config
+        # depth: undo the reversed-Z perspective projection (as mujoco.Renderer does), in float64
+        near, far = np.float32(cfg.near), np.float32(cfg.far)
+        z = self._depth_buf[::-1].astype(np.float64)
+        if self._scene.camera[0].orthographic:
+            metres = far - z * (far - near)
+        else:
+            c = np.float32(-0.5) * (-(far + near) / (far - near)) - np.float32(0.5)
+            d = np.float32(-0.5) * (-(np.float32(2) * far * near) / (far - near))
+            metres = d / (z + c)
+        depth = np.minimum(metres, far).astype(np.float32)
+        # segmentation: colour = scene geom index + 1 (0 = nothing); scene geom -> model geom -> class
+        rgb = self._rgb_buf[::-1].astype(np.int32)
+        segid = rgb[..., 0] | (rgb[..., 1] << 8) | (rgb[..., 2] << 16)
+        scn = self._scene
+        n = scn.ngeom
+        table = np.zeros(n + 2, np.uint8)  # [0] nothing, [1..n] scene geoms, [n+1] out of range
+        geom = int(mujoco.mjtObj.mjOBJ_GEOM)
+        ids = np.array([g.objid if g.objtype == geom else -1 for g in scn.geoms[:n]], np.int64)
+        table[1:n + 1] = self._lut[np.where(ids >= 0, ids, self.model.ngeom)]
+        return depth, table[np.minimum(segid, n + 1)]
 
     def render(self, data: mujoco.MjData) -> dict[str, np.ndarray]:
         """The images the config asks for, from the current state of ``data``."""
         self._update(data)
         out: dict[str, np.ndarray] = {}
         if self.config.rgb:
-            out["rgb"] = self._renderer.render()
-        if self.config.depth:
-            out["depth"] = self._depth()
-        if self.config.segmentation:
-            out["segmentation"] = self._segmentation()
+            out["rgb"] = self._rgb()
+        if self.config.depth or self.config.segmentation:
+            depth, seg = self._depth_and_segmentation()
+            if self.config.depth:
+                out["depth"] = depth
+            if self.config.segmentation:
+                out["segmentation"] = seg
         return out
 
     def rgb(self, data: mujoco.MjData) -> np.ndarray:
         """(H, W, 3) uint8 colour image."""
         self._update(data)
-        return self._renderer.render()
+        return self._rgb()
 
     def depth(self, data: mujoco.MjData) -> np.ndarray:
         """(H, W) float32 depth [m]."""
         self._update(data)
-        return self._depth()
+        return self._depth_and_segmentation()[0]
 
     def segmentation(self, data: mujoco.MjData) -> np.ndarray:
         """(H, W) uint8 semantic class ids."""
         self._update(data)
-        return self._segmentation()
+        return self._depth_and_segmentation()[1]
 
     def close(self) -> None:
         """Free the GL context (also done when garbage-collected)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        if self._ctx is not None:
+            self._gl.make_current()
+            self._ctx.free()
+            self._ctx = None
+        if self._gl is not None:
+            self._gl.free()
+            self._gl = None
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - interpreter shutdown may have torn GL down already
+            pass
 
     def __enter__(self) -> Camera:
         return self

@@ -8,7 +8,6 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj import sensors
 from garage_mj.semantics import Semantic, classify_name, geom_classes, unclassified_geoms
 from garage_mj.sensors import Camera, CameraConfig, RenderError
 from tests._scenes import build
@@ -67,11 +66,12 @@ def test_missing_gl_names_the_fix(monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("eglInitialize failed")
 
-    monkeypatch.setattr(mujoco, "Renderer", broken)
+    monkeypatch.setattr(mujoco, "MjrContext", broken)
     model, _, _ = build()
     with pytest.raises(RenderError, match=r"apt-get install libegl1 libgl1-mesa-dri.*MUJOCO_GL=osmesa") as err:
-        sensors.open_renderer(model, 64, 64)
+        Camera(model)
     assert "\n" not in str(err.value)
+    assert "eglInitialize failed" in str(err.value)
 
 
 def test_depth_and_segmentation_are_fast_enough():
@@ -84,3 +84,34 @@ def test_depth_and_segmentation_are_fast_enough():
             cam.render(data)
         fps = n / (time.perf_counter() - t0)
     assert fps > 50, f"{fps:.0f} depth+segmentation frames/s"
+
+
+def _reference(model, data, camera="ego/front", size=64):
+    """Depth [m] and segmentation classes from two ``mujoco.Renderer`` passes (the slow, plain way)."""
+    classes = np.append(geom_classes(model), 0)
+    renderer = mujoco.Renderer(model, size, size)
+    try:
+        renderer.update_scene(data, camera=camera)
+        renderer.enable_depth_rendering()
+        depth = renderer.render()
+        renderer.disable_depth_rendering()
+        renderer.enable_segmentation_rendering()
+        raw = renderer.render()
+    finally:
+        renderer.close()
+    geom = raw[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)
+    return depth, classes[np.where(geom, raw[..., 0], model.ngeom)]
+
+
+@pytest.mark.parametrize("cull", [True, False])
+def test_one_pass_matches_mujoco_renderer(cull):
+    boxes = PILLAR_AHEAD + [("wall_l", (6.0, 2.5, 1.5), (1.0, 0.1, 1.5)), ("obstacle_far", (30.0, -3.0, 0.5), (1, 1, 0.5)),
+                            ("wall_behind", (-8.0, 0.0, 1.5), (0.1, 5.0, 1.5)), ("roadmark_0", (4.0, 0.0, 0.005), (1.5, 0.1, 0.005))]
+    model, data, _ = build(boxes, pose=(0.0, 0.0, 0.1))
+    with Camera(model, cull=cull) as cam:
+        img = cam.render(data)
+    ref_depth, ref_seg = _reference(model, data)
+    far = cam.config.far
+    np.testing.assert_allclose(img["depth"], np.minimum(ref_depth, far), rtol=1e-4, atol=1e-4)
+    np.testing.assert_array_equal(img["segmentation"], ref_seg)
+    assert {Semantic.PILLAR, Semantic.WALL, Semantic.OBSTACLE, Semantic.ROAD_MARKING} <= set(np.unique(ref_seg))
