@@ -1,0 +1,295 @@
+"""GarageDriveEnv: one cruise test (SPEC section 7) in a MuJoCo garage with the camera car.
+
+The scene (garage + every stall's parked car + the ego car) is built and compiled ONCE per env.
+``reset(seed)`` then draws, from the seed alone: the target stall, which other stalls hold a
+parked car (each with probability ``occupancy``; the target stall itself is always empty, its
+neighbours are not kept free, as in a real garage), and the start pose noise. Parked cars of
+empty stalls move below the floor (:func:`~garage_mj.export.mjcf_scene.set_parked`), so a reset
+never recompiles.
+
+The route runs from the entrance on the right-hand lanes of the lane graph to the lane point
+beside the target stall (on whichever lane of its road is reached sooner); the goal is the
+route's last point. The car starts
+:data:`START_OFFSET` metres along the route, so it is wholly inside the garage.
+
+Outcomes are the environment's (:class:`~garage_mj.outcomes.OutcomeMonitor`): ``success`` and
+``collision``/``deadlock`` terminate, ``timeout`` truncates. The reward is route progress [m]
+per step, plus :data:`SUCCESS_REWARD` or :data:`COLLISION_PENALTY` at the end.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from garage_mj.config import load_config
+from garage_mj.export.lanes import entrance_pose, lane_graph
+from garage_mj.export.lanes import route as lane_route
+from garage_mj.export.mjcf_scene import build_scene, parked_car_bodies, set_parked
+from garage_mj.garage import Garage
+from garage_mj.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.route import Route, to_car_frame
+from garage_mj.semantics import Semantic, geom_classes
+from garage_mj.sensors import Camera, CameraConfig
+from garage_mj.stalls import stall_layout
+from garage_mj.vehicle import Car, CarConfig, DiscreteAction, attach_car, compile_mjcf
+from garage_mj.world import cell_center
+
+LOOKAHEAD = 4.0  # [m] the observed waypoint lies this far ahead of the car's route progress
+START_OFFSET = 3.0  # [m] start this far along the route from the entrance lane's first point
+GOAL_SNAP = 3.5  # [m] a lane point farther than this from a stall's road point does not serve it
+MAX_EXTENT = 1000.0  # [m] bound of the waypoint observation (far beyond any garage)
+MAX_SPEED = 50.0  # [m/s] bound of the speed observation
+SUCCESS_REWARD = 10.0
+COLLISION_PENALTY = -10.0
+ACTION_TYPES = ("discrete", "continuous")
+
+
+def _as(cls: type, value: Any) -> Any:
+    """A config of ``cls`` from an instance, a dict (unknown keys rejected) or None (defaults)."""
+    return value if isinstance(value, cls) else load_config(cls, value)
+
+
+class GarageDriveEnv(gym.Env):
+    """Drive from the entrance to a target stall (registered as ``garage_mj/GarageDrive-v0``).
+
+    Args:
+        garage: the :class:`Garage` to drive in (or give ``pack``).
+        pack: an asset pack folder (``garage-mj export``); its ``garage.json`` is used.
+        action_type: ``"discrete"`` (the paper's :class:`DiscreteAction`) or ``"continuous"``
+            (``[throttle/brake, steer]`` in [-1, 1]).
+        occupancy: probability that a non-target stall holds a parked car.
+        start_noise: (position [m], yaw [rad]) half-widths of the uniform start pose noise;
+            the position noise is lateral to the route.
+        camera, car, outcome: :class:`CameraConfig`, :class:`CarConfig`, :class:`OutcomeConfig`
+            or dicts of their fields. The camera rate sets the control period.
+        rgb: also observe the colour image.
+        render_mode: ``"rgb_array"`` renders the ``ego/top`` camera (``render_size`` pixels).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        garage: Garage | None = None,
+        pack: str | Path | None = None,
+        action_type: str = "discrete",
+        occupancy: float = 0.5,
+        start_noise: tuple[float, float] = (0.3, 0.05),
+        camera: CameraConfig | dict[str, Any] | None = None,
+        car: CarConfig | dict[str, Any] | None = None,
+        outcome: OutcomeConfig | dict[str, Any] | None = None,
+        rgb: bool = False,
+        render_mode: str | None = None,
+        render_size: tuple[int, int] = (320, 240),
+    ) -> None:
+        if (garage is None) == (pack is None):
+            raise ValueError("GarageDriveEnv needs exactly one of garage= or pack=")
+        if pack is not None:
+            from garage_mj.export.pack import load_pack
+
+            garage = load_pack(pack).garage
+        if action_type not in ACTION_TYPES:
+            raise ValueError(f"action_type must be one of {ACTION_TYPES}, got {action_type!r}")
+        if not 0.0 <= occupancy <= 1.0:
+            raise ValueError(f"occupancy must be in [0, 1], got {occupancy}")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        assert garage is not None
+        self.garage = garage
+        self.action_type = action_type
+        self.occupancy = float(occupancy)
+        self.start_noise = (float(start_noise[0]), float(start_noise[1]))
+        cam = _as(CameraConfig, camera)
+        if rgb and not cam.rgb:
+            cam = CameraConfig(**{**cam.__dict__, "rgb": True})
+        self.camera_config = cam
+        self.car_config = _as(CarConfig, car)
+        self.outcome_config = _as(OutcomeConfig, outcome)
+        self.render_mode = render_mode
+        self.render_size = render_size
+        self.dt = cam.period  # [s] control period
+
+        self._build()
+        self._routes: dict[int, np.ndarray | None] = {}
+        self.targets = [s.id for s in self.stalls if self._route_points(s.id) is not None]
+        if not self.targets:
+            raise ValueError(f"garage {garage.name!r}: no stall can be reached from the entrance")
+
+        h, w = cam.height, cam.width
+        obs = {
+            "depth": spaces.Box(0.0, cam.far, (h, w), np.float32),
+            "segmentation": spaces.Box(0, max(Semantic), (h, w), np.uint8),
+            "waypoint": spaces.Box(-MAX_EXTENT, MAX_EXTENT, (2,), np.float32),
+            "speed": spaces.Box(-MAX_SPEED, MAX_SPEED, (1,), np.float32),
+        }
+        if cam.rgb:
+            obs["rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
+        self.observation_space = spaces.Dict(obs)
+        if action_type == "discrete":
+            self.action_space: spaces.Space = spaces.Discrete(len(DiscreteAction))
+        else:
+            self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.route: Route | None = None
+        self.monitor: OutcomeMonitor | None = None
+
+    # -- scene -------------------------------------------------------------------------------------
+    def _build(self) -> None:
+        root = build_scene(self.garage)
+        self._entrance = entrance_pose(self.garage)
+        attach_car(root, *self._entrance)
+        self.model = compile_mjcf(root)
+        self.data = mujoco.MjData(self.model)
+        self.car = Car(self.model, self.car_config)
+        self.classes = geom_classes(self.model)
+        self.camera = Camera(self.model, self.camera_config)
+        self._top: Camera | None = None
+        self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
+        self.graph = lane_graph(self.garage)
+        self.stalls = stall_layout(self.garage).stalls
+        self.parkable = sorted(parked_car_bodies(self.model))
+
+    def _route_points(self, stall_id: int) -> np.ndarray | None:
+        """Shortest lane route from the entrance to a lane point beside the stall (None: unreachable).
+
+        The stall's road point lies on the near lane of its road; its mirror image on the far lane
+        is a goal too (a driver passes the stall on either lane), so only dead ends need a U-turn.
+        """
+        if stall_id not in self._routes:
+            s = self.stalls[stall_id]
+            cx, cy = cell_center(*s.road_cell, self.garage.shape[0])
+            u = np.array([math.cos(s.yaw), math.sin(s.yaw)])
+            near = np.array([s.road_x, s.road_y])
+            far = near - 2.0 * float((near - (cx, cy)) @ u) * u
+            best = None
+            for goal in (near, far):
+                try:
+                    pts = lane_route(self.graph, self._entrance[:2], goal)
+                except ValueError:
+                    continue
+                if len(pts) < 2 or np.linalg.norm(pts[-1] - goal) > GOAL_SNAP:
+                    continue
+                length = Route(pts).length
+                if length > START_OFFSET + 2.0 and (best is None or length < best[0]):
+                    best = (length, pts)
+            self._routes[stall_id] = None if best is None else best[1]
+        return self._routes[stall_id]
+
+    # -- gym API -----------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Draw target stall, parked cars and start pose from ``seed``.
+
+        ``options`` may fix ``target`` (stall id), ``occupied`` (stall ids) or ``start`` ((x, y, yaw)).
+        """
+        super().reset(seed=seed)
+        rng = self.np_random
+        options = options or {}
+        target = int(options["target"]) if "target" in options else int(rng.choice(self.targets))
+        if target not in self.targets:
+            raise ValueError(f"stall {target} cannot be reached; reachable stalls: {self.targets}")
+        occupied_draw = rng.random(len(self.parkable)) < self.occupancy
+        occupied = [sid for sid, o in zip(self.parkable, occupied_draw, strict=True) if o and sid != target]
+        if "occupied" in options:
+            occupied = [int(s) for s in options["occupied"] if int(s) != target]
+        lateral = rng.uniform(-1.0, 1.0) * self.start_noise[0]
+        dyaw = rng.uniform(-1.0, 1.0) * self.start_noise[1]
+
+        self.target = target
+        self.occupied = occupied
+        self.route = Route(self._route_points(target))
+        self.monitor = OutcomeMonitor(self.route, self.outcome_config)
+        heading = self.route.heading_at(START_OFFSET)
+        p = self.route.point_at(START_OFFSET)
+        x = float(p[0]) - math.sin(heading) * lateral
+        y = float(p[1]) + math.cos(heading) * lateral
+        yaw = heading + dyaw
+        if "start" in options:  # an explicit (x, y, yaw) start pose, for forced scenarios
+            x, y, yaw = (float(v) for v in options["start"])
+        mujoco.mj_resetData(self.model, self.data)
+        set_parked(self.model, None, occupied)
+        self.car.reset(self.data, x, y, yaw)  # runs mj_forward
+        self.monitor.progress = START_OFFSET  # [m] the car starts this far along the route
+        self.path_length = 0.0  # [m] driven
+        self._last_xy = (x, y)
+        self.outcome: Outcome | None = None
+        return self._observe(), self._info()
+
+    def step(self, action):
+        if self.monitor is None:
+            raise RuntimeError("call reset() before step()")
+        if self.outcome is not None:
+            raise RuntimeError("the episode is over; call reset()")
+        before = self.monitor.progress
+        self.car.act(self.data, action, self.dt)
+        contacts = []
+        for _ in range(self.n_substeps):
+            mujoco.mj_step(self.model, self.data)
+            if self.data.ncon:
+                contacts += ego_contacts(self.model, self.data, self.car.geoms, self.classes)
+        x, y, _ = self.car.pose(self.data)
+        self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])
+        self._last_xy = (x, y)
+        self.outcome = self.monitor.update(self.data.time, (x, y), self.car.speed(self.data), contacts)
+        reward = self.monitor.progress - before
+        terminated = truncated = False
+        if self.outcome is not None:
+            truncated = self.outcome.kind is OutcomeKind.TIMEOUT
+            terminated = not truncated
+            if self.outcome.kind is OutcomeKind.SUCCESS:
+                reward += SUCCESS_REWARD
+            elif self.outcome.kind is OutcomeKind.COLLISION:
+                reward += COLLISION_PENALTY
+        return self._observe(), float(reward), terminated, truncated, self._info()
+
+    def _observe(self) -> dict[str, np.ndarray]:
+        x, y, yaw = self.car.pose(self.data)
+        obs = self.camera.render(self.data)
+        target = self.route.point_at(self.monitor.progress + LOOKAHEAD)
+        obs["waypoint"] = to_car_frame(target, x, y, yaw).astype(np.float32)
+        obs["speed"] = np.array([self.car.speed(self.data)], dtype=np.float32)
+        return obs
+
+    def _info(self) -> dict[str, Any]:
+        x, y, yaw = self.car.pose(self.data)
+        info: dict[str, Any] = {
+            "target_stall": self.target,
+            "route_length": self.route.length,
+            "time_limit": self.monitor.time_limit,
+            "time": float(self.data.time),
+            "path_length": self.path_length,
+            "progress": self.monitor.progress,
+            "pose": (x, y, yaw),
+            "parked": len(self.occupied),
+        }
+        if self.outcome is not None:
+            info.update(outcome=self.outcome.kind.value, reason=self.outcome.reason,
+                        hit=self.outcome.hit_class, hit_geom=self.outcome.hit_geom)
+        return info
+
+    def driver_info(self, seed: int = 0) -> dict[str, Any]:
+        """What a :class:`~garage_mj.drivers.Driver` gets at reset: seed, action type, period."""
+        return {"seed": int(seed), "action_type": self.action_type, "dt": self.dt,
+                "target_stall": self.target, "route_length": self.route.length}
+
+    def render(self) -> np.ndarray | None:
+        """The ``ego/top`` camera in colour (``render_mode="rgb_array"``)."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._top is None:
+            w, h = self.render_size
+            self._top = Camera(self.model, CameraConfig(camera="ego/top", width=w, height=h, rgb=True,
+                                                        depth=False, segmentation=False,
+                                                        near=self.camera_config.near, far=self.camera_config.far))
+        return self._top.render(self.data)["rgb"]
+
+    def close(self) -> None:
+        for cam in (self.camera, self._top):
+            if cam is not None:
+                cam.close()
+        self._top = None

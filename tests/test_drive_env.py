@@ -1,0 +1,155 @@
+"""GarageDrive-v0: spaces, check_env, seeded determinism, and every outcome forced through the env."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import garage_mj.envs  # noqa: F401  (registers the ids)
+from garage_mj.drivers import load_driver
+from garage_mj.envs.drive_env import START_OFFSET, GarageDriveEnv
+from garage_mj.export.mjcf_scene import parked_stalls
+
+ENV_ID = "garage_mj/GarageDrive-v0"
+FULL = np.array([1.0, 0.0], dtype=np.float32)
+BRAKE = np.array([-1.0, 0.0], dtype=np.float32)
+
+
+def rollout(env, policy, max_steps: int = 2000):
+    """Step ``policy(obs)`` (after a reset) until the episode ends; returns info, rewards, term, trunc."""
+    obs = None
+    rewards = []
+    for _ in range(max_steps):
+        obs, r, term, trunc, info = env.step(policy(obs))
+        rewards.append(r)
+        if term or trunc:
+            return info, rewards, term, trunc
+    raise AssertionError("the episode did not end")
+
+
+def drive(env, driver_name: str, seed: int, **reset_options):
+    driver = load_driver(driver_name)
+    obs, info = env.reset(seed=seed, options=reset_options or None)
+    driver.reset(env.unwrapped.driver_info(seed))
+    trajectory = []
+    while True:
+        obs, _, term, trunc, info = env.step(driver.act(obs))
+        trajectory.append(info["pose"])
+        if term or trunc:
+            return info, np.array(trajectory)
+
+
+@pytest.fixture(scope="module")
+def env(painted_tiny):
+    e = gym.make(ENV_ID, garage=painted_tiny, action_type="continuous")
+    yield e
+    e.close()
+
+
+def test_check_env_and_spaces(painted_tiny):
+    env = gym.make(ENV_ID, garage=painted_tiny, action_type="discrete", rgb=True).unwrapped
+    check_env(env, skip_render_check=True)
+    obs, info = env.reset(seed=3)
+    assert obs["depth"].dtype == np.float32 and obs["depth"].shape == (64, 64)
+    assert obs["segmentation"].dtype == np.uint8 and obs["rgb"].shape == (64, 64, 3)
+    assert obs["waypoint"].shape == (2,) and obs["waypoint"][0] > 0  # ahead of the car
+    assert info["target_stall"] in env.targets and info["route_length"] > START_OFFSET
+    assert env.action_space.n == 4
+    env.close()
+
+
+def test_reset_draws_everything_from_the_seed(env):
+    u = env.unwrapped
+    draws = []
+    for seed in (0, 1, 0):
+        _, info = env.reset(seed=seed)
+        draws.append((info["target_stall"], tuple(parked_stalls(u.model)), info["pose"]))
+    assert draws[0] == draws[2]
+    assert draws[0] != draws[1]
+    assert draws[0][0] not in draws[0][1]  # the target stall is always empty
+
+
+def test_occupancy_fraction(painted_tiny):
+    env = GarageDriveEnv(garage=painted_tiny, occupancy=0.0)
+    env.reset(seed=0)
+    assert parked_stalls(env.model) == []
+    env.close()
+    env = GarageDriveEnv(garage=painted_tiny, occupancy=1.0)
+    _, info = env.reset(seed=0)
+    assert len(parked_stalls(env.model)) == len(env.parkable) - 1
+    env.close()
+
+
+@pytest.mark.parametrize("driver", ["waypoint", "vision"])
+def test_builtin_drivers_reach_the_goal_deterministically(env, driver):
+    info, traj = drive(env, driver, seed=2)
+    assert info["outcome"] == "success", info["reason"]
+    assert info["path_length"] > 0.8 * (info["route_length"] - START_OFFSET)
+    again, traj2 = drive(env, driver, seed=2)
+    assert again["outcome"] == info["outcome"] and again["time"] == info["time"]
+    np.testing.assert_array_equal(traj, traj2)
+
+
+def test_registered_id_is_deterministic_under_a_seed(painted_tiny):
+    def run():
+        env = gym.make(ENV_ID, garage=painted_tiny, action_type="discrete")
+        obs, _ = env.reset(seed=7)
+        env.action_space.seed(7)
+        out = []
+        for _ in range(30):
+            obs, r, term, trunc, info = env.step(env.action_space.sample())
+            out.append((r, info["pose"], float(obs["depth"].sum()), int(obs["segmentation"].sum())))
+            if term or trunc:
+                break
+        env.close()
+        return out
+
+    assert run() == run()
+
+
+def test_collision_with_the_border_is_recorded_with_its_class(painted_tiny):
+    env = gym.make(ENV_ID, garage=painted_tiny, action_type="continuous", outcome={"max_deviation": 100.0})
+    env.reset(seed=0, options={"start": (22.0, 4.5, np.pi), "occupied": []})  # west along the south road
+    info, _, term, trunc = rollout(env, lambda _: FULL)
+    env.close()
+    assert term and not trunc
+    assert info["outcome"] == "collision" and info["hit"] == "obstacle"
+    assert info["hit_geom"].startswith("obstacle_")
+
+
+def test_collision_with_a_parked_car(painted_tiny):
+    env = gym.make(ENV_ID, garage=painted_tiny, action_type="continuous", occupancy=1.0,
+                   outcome={"max_deviation": 100.0})
+    env.reset(seed=0)
+    info, rewards, term, _ = rollout(env, lambda _: FULL)  # straight on at the first bend
+    assert info["outcome"] == "collision" and info["hit"] == "parked_car"
+    assert rewards[-1] < 0
+    env.close()
+
+
+def test_braking_forever_deadlocks(env):
+    env.reset(seed=0)
+    info, _, term, _ = rollout(env, lambda _: BRAKE)
+    assert term and info["outcome"] == "deadlock" and "no progress" in info["reason"]
+
+
+def test_timeout_truncates(painted_tiny):
+    env = gym.make(ENV_ID, garage=painted_tiny, action_type="discrete",
+                   outcome={"min_mean_speed": 1000.0, "time_slack": 2.0})
+    env.reset(seed=0)
+    info, _, term, trunc = rollout(env, lambda _: 3)  # BRAKE
+    assert trunc and not term and info["outcome"] == "timeout"
+    env.close()
+
+
+def test_bad_arguments_are_one_clear_error(painted_tiny):
+    from garage_mj.config import ConfigError
+
+    with pytest.raises(ValueError, match="exactly one of garage= or pack="):
+        GarageDriveEnv()
+    with pytest.raises(ValueError, match="action_type"):
+        GarageDriveEnv(garage=painted_tiny, action_type="joystick")
+    with pytest.raises(ConfigError, match="unknown key"):
+        GarageDriveEnv(garage=painted_tiny, car={"max_sped": 3.0})
