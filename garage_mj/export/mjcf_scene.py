@@ -27,12 +27,13 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import mujoco
+import numpy as np
 from dm_control import mjcf
 
-from garage_mj.export.layout import CLASS_RGBA, SceneLayout, build_layout
+from garage_mj.export.layout import CLASS_RGBA, Box, SceneLayout, build_layout
 from garage_mj.export.templates import PARKED_CAR, PILLAR, install, load_template, stamp
 from garage_mj.garage import Garage
-from garage_mj.semantics import Semantic
+from garage_mj.semantics import Semantic, geom_name
 from garage_mj.world import DEFAULT_WORLD, WorldConfig
 
 TIMESTEP = 0.005  # [s] physics step; the static scene needs little, the ego car's model may override
@@ -44,6 +45,17 @@ CEILING_GROUP = 4
 VISUAL_GROUP = 2
 SCENE_XML = "scene.xml"
 
+#: Corners and outward triangles (counter-clockwise seen from outside) of the box [-1, 1]^3.
+_UNIT_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+_UNIT_FACES = np.array([
+    [0, 1, 3], [0, 3, 2],  # x = -1
+    [4, 6, 7], [4, 7, 5],  # x = +1
+    [0, 4, 5], [0, 5, 1],  # y = -1
+    [2, 3, 7], [2, 7, 6],  # y = +1
+    [0, 2, 6], [0, 6, 4],  # z = -1
+    [1, 5, 7], [1, 7, 3],  # z = +1
+])
+
 _MATERIALS = {
     Semantic.FLOOR: "floor",
     Semantic.ROAD_MARKING: "roadmark",
@@ -53,6 +65,15 @@ _MATERIALS = {
     Semantic.ENTRANCE: "entrance",
     Semantic.EXIT: "exit",
 }
+
+
+def _boxes_mesh(boxes: list[Box]) -> tuple[np.ndarray, np.ndarray]:
+    """Flat ``(vertex, face)`` arrays of one mesh made of axis-aligned ``boxes`` (8 corners, 12 triangles each)."""
+    centers = np.array([b.center for b in boxes])
+    halves = np.array([b.half for b in boxes])
+    vertex = centers[:, None, :] + halves[:, None, :] * _UNIT_CORNERS[None]
+    face = _UNIT_FACES[None] + 8 * np.arange(len(boxes))[:, None, None]
+    return vertex.ravel(), face.ravel()
 
 
 def _setup(root: mjcf.RootElement, layout: SceneLayout) -> None:
@@ -103,11 +124,24 @@ def build_scene(
     root = mjcf.RootElement(model=f"garage_{garage.name}" if garage.name else "garage")
     _setup(root, layout)
     wb = root.worldbody
+    painted: dict[Semantic, list[Box]] = {}
     for box in layout.boxes:
+        if not box.collides:
+            painted.setdefault(box.cls, []).append(box)
+            continue
         # one add() with every attribute: each later assignment costs dm_control a validation pass
         extra = {"group": CEILING_GROUP} if box.name == "ceiling" else {}
-        wb.add("geom", name=box.name, dclass="structure" if box.collides else "marking",
-               material=_MATERIALS[box.cls], pos=box.center, size=box.half, **extra)
+        wb.add("geom", name=box.name, dclass="structure", material=_MATERIALS[box.cls], pos=box.center,
+               size=box.half, **extra)
+    for cls, boxes in painted.items():
+        if len(boxes) == 1:
+            (box,) = boxes
+            wb.add("geom", name=box.name, dclass="marking", material=_MATERIALS[cls], pos=box.center, size=box.half)
+        else:  # a hundred stall lines as one mesh geom: one element instead of one per line
+            name = geom_name(cls)
+            vertex, face = _boxes_mesh(boxes)
+            root.asset.add("mesh", name=name, vertex=vertex, face=face)
+            wb.add("geom", name=name, dclass="marking", type="mesh", mesh=name, material=_MATERIALS[cls])
     for cls, pos in ((Semantic.ENTRANCE, garage.entrance), (Semantic.EXIT, garage.exit)):
         x, y = layout_cell(layout, pos)
         wb.add("site", name=cls.name.lower(), pos=[x, y, 0.05], size=[0.2], group=VISUAL_GROUP,
