@@ -16,7 +16,8 @@ camera sees the floor; enable ``scene_option.geomgroup[4]`` to draw it).
 
 Speed (issue 4: XODR + MJCF < 100 ms per 13x13 garage, ``eval/bench_export.py``): ``dm_control``
 costs about 60 us per element, 1 ms per ``default`` class, and as much again per array attribute
-written to XML, so the scene keeps few default classes, names every element (unnamed ones are
+written to XML, so the scene draws all painted lines of one class as one mesh geom (``stallmark``,
+``roadmark``: a box per line, 8 corners and 12 triangles each), keeps few default classes, names every element (unnamed ones are
 written slowly), sets attributes in one ``add`` call, and stamps models as ``name`` + ``class``
 geoms (:mod:`garage_mj.export.templates`).
 """
