@@ -17,9 +17,9 @@ camera sees the floor; enable ``scene_option.geomgroup[4]`` to draw it).
 Speed (issue 4: XODR + MJCF < 100 ms per 13x13 garage, ``eval/bench_export.py``): ``dm_control``
 costs about 60 us per element, 1 ms per ``default`` class, and as much again per array attribute
 written to XML, so the scene draws all painted lines of one class as one mesh geom (``stallmark``,
-``roadmark``: a box per line, 8 corners and 12 triangles each), keeps few default classes, names every element (unnamed ones are
-written slowly), sets attributes in one ``add`` call, and stamps models as ``name`` + ``class``
-geoms (:mod:`garage_mj.export.templates`).
+``roadmark``: a box per line, 8 corners and 12 triangles each), keeps few default classes, names
+every element (unnamed ones are written slowly), sets attributes in one ``add`` call, and stamps
+models as ``name`` + ``class`` geoms (:mod:`garage_mj.export.templates`).
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ _MATERIALS = {
 
 
 def _boxes_mesh(boxes: list[Box]) -> tuple[np.ndarray, np.ndarray]:
-    """Flat ``(vertex, face)`` arrays of one mesh made of axis-aligned ``boxes`` (8 corners, 12 triangles each)."""
+    """Flat ``(vertex, face)`` arrays of one mesh of axis-aligned ``boxes`` (8 corners, 12 triangles each)."""
     centers = np.array([b.center for b in boxes])
     halves = np.array([b.half for b in boxes])
     vertex = centers[:, None, :] + halves[:, None, :] * _UNIT_CORNERS[None]
@@ -137,7 +137,8 @@ def build_scene(
     for cls, boxes in painted.items():
         if len(boxes) == 1:
             (box,) = boxes
-            wb.add("geom", name=box.name, dclass="marking", material=_MATERIALS[cls], pos=box.center, size=box.half)
+            wb.add("geom", name=box.name, dclass="marking", material=_MATERIALS[cls], pos=box.center,
+                   size=box.half)
         else:  # a hundred stall lines as one mesh geom: one element instead of one per line
             name = geom_name(cls)
             vertex, face = _boxes_mesh(boxes)
