@@ -20,6 +20,15 @@ _EXPORTS: dict[str, str] = {
     "exit_pose": "lanes",
     "check_carla": "validate",
     "check_asam": "validate",
+    "export_pack": "pack",
+    "export_packs": "pack",
+    "load_pack": "pack",
+    "PackError": "pack",
+    "build_scene": "mjcf_scene",
+    "compile_scene": "mjcf_scene",
+    "set_parked": "mjcf_scene",
+    "garage_meshes": "meshes",
+    "write_preview": "preview",
 }
 
 __all__ = sorted(_EXPORTS)
