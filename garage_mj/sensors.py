@@ -10,7 +10,14 @@ frame, reading the ID colours and the depth buffer of the same frame (``mujoco.R
 twice and maps ids in Python). Geoms whose bounding sphere lies outside the view frustum (or
 beyond ``far``) are left out of the scene before it is built, so a frame costs what the camera
 sees, not the size of the garage. Markings stay in: segmentation shows road and stall markings.
-RGB, when asked for, is one more ordinary pass.
+RGB, when asked for, is one more ordinary pass. Depth/segmentation-only cameras also render into a
+framebuffer of exactly the image size with no multisampling and one quad per box face.
+
+Profile (m5_13x13_aligned, 64x64, Mesa llvmpipe, 2 cores): mujoco.Renderer spent ~4.3 ms a frame
+in two ``mjr_render`` passes plus Python (float64 depth, a per-geom Python loop for ids);
+``mjv_updateScene`` and ``mjr_readPixels`` cost <0.1 ms. ``mjr_render`` is ~10-35 us per drawn
+geom (box faces of 4x4 quads, 4x MSAA on a 1280x960 buffer) and ~0 for an empty scene, so the
+wins are one pass, fewer drawn geoms (culling) and cheaper geoms: ~0.6-1 ms a frame.
 """
 
 from __future__ import annotations
@@ -82,15 +89,27 @@ def _gl_context_class(name: str):
     return GLContext
 
 
-def open_context(model: mujoco.MjModel, height: int, width: int):
+def open_context(model: mujoco.MjModel, height: int, width: int, lean: bool = False):
     """``(gl_context, mjr_context)`` for offscreen rendering, trying EGL then OSMesa.
 
-    Raises :class:`RenderError` naming the fix when no backend works, and ``ValueError`` when the
-    image is larger than the model's offscreen buffer (a model problem, not GL).
+    The offscreen framebuffer is exactly ``width`` x ``height``. ``lean`` (images nobody looks at:
+    depth, segmentation) also drops multisampling and subdivides box faces into one quad, not
+    ``vis.quality.numquads``^2; under software GL these make a frame ~3x faster (profile in the
+    module docstring). The model is left as it was: a later ``mujoco.Renderer`` sees its own settings.
+    Raises :class:`RenderError` naming the fix when no backend works.
     """
-    if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
-        raise ValueError(f"image {width}x{height} exceeds the model's offscreen buffer "
-                         f"{model.vis.global_.offwidth}x{model.vis.global_.offheight}")
+    vis = model.vis
+    saved = (vis.global_.offwidth, vis.global_.offheight, vis.quality.offsamples, vis.quality.numquads)
+    vis.global_.offwidth, vis.global_.offheight = width, height
+    if lean:
+        vis.quality.offsamples, vis.quality.numquads = 0, 1
+    try:
+        return _open_context(model, height, width)
+    finally:
+        vis.global_.offwidth, vis.global_.offheight, vis.quality.offsamples, vis.quality.numquads = saved
+
+
+def _open_context(model: mujoco.MjModel, height: int, width: int):
     errors = []
     for name in _backends():
         gl = None
@@ -132,10 +151,7 @@ class Camera:
         extent = float(model.stat.extent)
         model.vis.map.znear = cfg.near / extent
         model.vis.map.zfar = cfg.far / extent
-        if model.vis.global_.offwidth < cfg.width or model.vis.global_.offheight < cfg.height:
-            model.vis.global_.offwidth = max(model.vis.global_.offwidth, cfg.width)
-            model.vis.global_.offheight = max(model.vis.global_.offheight, cfg.height)
-        self._gl, self._ctx = open_context(model, cfg.height, cfg.width)
+        self._gl, self._ctx = open_context(model, cfg.height, cfg.width, lean=not cfg.rgb)
         self._rect = mujoco.MjrRect(0, 0, cfg.width, cfg.height)
         self._scene = mujoco.MjvScene(model, maxgeom=model.ngeom + model.nsite + 100)
         self._option = mujoco.MjvOption()

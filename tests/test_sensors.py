@@ -112,6 +112,6 @@ def test_one_pass_matches_mujoco_renderer(cull):
         img = cam.render(data)
     ref_depth, ref_seg = _reference(model, data)
     far = cam.config.far
-    np.testing.assert_allclose(img["depth"], np.minimum(ref_depth, far), rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(img["depth"], np.minimum(ref_depth, far), rtol=1e-4, atol=1e-3)  # [m]: one quad per box face, not 4x4
     np.testing.assert_array_equal(img["segmentation"], ref_seg)
     assert {Semantic.PILLAR, Semantic.WALL, Semantic.OBSTACLE, Semantic.ROAD_MARKING} <= set(np.unique(ref_seg))
