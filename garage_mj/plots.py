@@ -29,6 +29,7 @@ from garage_mj.roadgraph import Tile, analyse  # noqa: E402
 BIN = 0.1  # heatmap cell width in difficulty and coverage
 CONFIDENCE = 0.95
 DPI = 120
+MAX_PANEL_COLUMNS = 3  # convergence panels per row
 
 #: Colour of each block code in :func:`garage_png`.
 BLOCK_COLOURS = {
@@ -110,8 +111,12 @@ def convergence(runs: Sequence[str | Path], out: str | Path, smooth: int = 1) ->
         if len(returns) == 0:
             raise PlotError(f"{run}: the monitor log has no finished episode yet")
         by_map.setdefault(_run_map(Path(run)), []).append(_smooth(returns, smooth))
-    fig, axes = plt.subplots(1, len(by_map), figsize=(5 * len(by_map), 3.6), squeeze=False)
-    for ax, (name, curves) in zip(axes[0], sorted(by_map.items())):
+    cols = min(MAX_PANEL_COLUMNS, len(by_map))
+    rows = -(-len(by_map) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 3.6 * rows), squeeze=False)
+    for ax in axes.flat[len(by_map):]:
+        ax.set_visible(False)
+    for ax, (name, curves) in zip(axes.flat, by_map.items()):  # maps in the order given
         mean, half = mean_ci(curves)
         ep = np.arange(len(mean))
         ax.fill_between(ep, mean - half, mean + half, color="#9ecae1", alpha=0.6, lw=0,
