@@ -1,0 +1,317 @@
+"""Batch cruise evaluation (SPEC section 7): N tests per garage with a driver, over a process pool.
+
+Each test is one episode of ``garage_mj/GarageDrive-v0`` whose seed derives from (run seed,
+garage hash, test index), so results do not depend on the worker count or order. A worker keeps
+one env (one compiled MuJoCo scene) per garage and tests arrive grouped by garage, so a scene is
+built at most once per worker and garage.
+
+Outputs in ``out_dir``: ``tests.csv`` (one row per test, appended and flushed as each test ends,
+so a crash or Ctrl-C loses nothing and a re-run skips what is there), ``summary.csv`` (the
+paper's table columns per garage), ``summary.json`` and ``regression.png`` (Pearson r and the
+linear regression of success rate on difficulty), and ``run.json`` (the settings; a re-run
+with other settings is refused).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import multiprocessing as mp
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garage_mj.analysis import PAPER_R, regression, regression_plot
+from garage_mj.garage import Garage
+from garage_mj.metrics import evaluate
+
+TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "outcome", "hit",
+                "hit_geom", "time", "path_length", "route_length", "difficulty", "mean_road_length",
+                "mean_intersection_degree", "wall_s")
+SUMMARY_COLUMNS = ("garage", "difficulty", "E[X]", "E[Y]", "tests", "successes", "collisions", "timeouts",
+                   "deadlocks", "success_pct")
+
+
+class CruiseError(Exception):
+    """A cruise run cannot go on (settings differ from the out dir's run, a driver crashed)."""
+
+
+@dataclass(frozen=True)
+class CruiseSource:
+    """One garage to test, with the metrics the summary reports."""
+
+    name: str  # row key in the CSVs (pack folder, "map#id", or the garage's name)
+    garage: Garage
+    difficulty: float
+    mean_road_length: float  # E[X]
+    mean_intersection_degree: float  # E[Y]
+
+    @property
+    def hash(self) -> str:
+        return self.garage.canonical_hash()
+
+    @classmethod
+    def from_garage(cls, garage: Garage, name: str | None = None) -> CruiseSource:
+        m = evaluate(garage)
+        name = name or f"{garage.name or 'garage'}-{garage.canonical_hash()[:8]}"
+        return cls(name, garage, m.difficulty,
+                   m.mean_road_length, m.mean_intersection_degree)
+
+    @classmethod
+    def from_pack(cls, path: str | Path) -> CruiseSource:
+        from garage_mj.export.pack import load_pack
+
+        pack = load_pack(path)
+        return cls.from_garage(pack.garage, Path(pack.path).name)
+
+    @classmethod
+    def from_record(cls, record: Any) -> CruiseSource:
+        """From a :class:`garage_mj.library.GarageRecord`."""
+        return cls(f"{record.map}#{record.id}", record.garage, record.difficulty, record.mean_road_length,
+                   record.mean_intersection_degree)
+
+
+@dataclass(frozen=True)
+class CruiseSettings:
+    """What makes two runs comparable; stored in ``run.json``."""
+
+    driver: str = "vision"  # built-in name or module:Class
+    seed: int = 0
+    action_type: str = "discrete"
+    occupancy: float = 0.5
+    env: dict[str, Any] = field(default_factory=dict)  # more GarageDriveEnv keyword arguments
+    driver_kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class CruiseResult:
+    """Where a run wrote its outputs, and its regression."""
+
+    out_dir: Path
+    tests_run: int  # tests run by this call (the rest were in tests.csv already)
+    rows: list[dict[str, str]]
+    summary: list[dict[str, Any]]
+    stats: dict[str, Any]
+
+
+def cruise_seed(seed: int, garage_hash: str, index: int) -> int:
+    """The seed of test ``index`` on a garage: a function of (run seed, garage hash, index) only."""
+    digest = hashlib.sha256(f"{seed}:{garage_hash}:{index}".encode()).digest()
+    return int.from_bytes(digest[:4], "little")
+
+
+# -- one test, in a worker ----------------------------------------------------------------------------
+_CACHE: dict[str, Any] = {}
+
+
+def _env_for(source: CruiseSource, settings: CruiseSettings):
+    """The worker's env for ``source`` (built once; the previous garage's env is closed)."""
+    from garage_mj.envs.drive_env import GarageDriveEnv
+
+    if _CACHE.get("hash") != source.hash:
+        if "env" in _CACHE:
+            _CACHE.pop("env").close()
+        _CACHE["env"] = GarageDriveEnv(garage=source.garage, action_type=settings.action_type,
+                                       occupancy=settings.occupancy, **settings.env)
+        _CACHE["hash"] = source.hash
+    return _CACHE["env"]
+
+
+def _driver_for(settings: CruiseSettings):
+    from garage_mj.drivers import load_driver
+
+    key = (settings.driver, json.dumps(settings.driver_kwargs, sort_keys=True))
+    if _CACHE.get("driver_key") != key:
+        _CACHE["driver"] = load_driver(settings.driver, **settings.driver_kwargs)
+        _CACHE["driver_key"] = key
+    return _CACHE["driver"]
+
+
+def run_test(source: CruiseSource, index: int, settings: CruiseSettings) -> dict[str, Any]:
+    """Run test ``index`` on ``source``; returns its CSV row."""
+    env, driver = _env_for(source, settings), _driver_for(settings)
+    seed = cruise_seed(settings.seed, source.hash, index)
+    start = time.perf_counter()
+    obs, info = env.reset(seed=seed)
+    try:
+        driver.reset(env.driver_info(seed))
+        while True:
+            obs, _, term, trunc, info = env.step(driver.act(obs))
+            if term or trunc:
+                break
+    except Exception as exc:  # a user's driver may raise anything; name it, keep the traceback
+        raise CruiseError(f"driver {settings.driver!r} failed on {source.name} test {index}: "
+                          f"{type(exc).__name__}: {exc}") from exc
+    return {
+        "garage": source.name, "garage_hash": source.hash, "test": index, "seed": seed,
+        "driver": settings.driver, "target_stall": info["target_stall"], "outcome": info["outcome"],
+        "hit": info["hit"] or "", "hit_geom": info["hit_geom"] or "", "time": round(info["time"], 3),
+        "path_length": round(info["path_length"], 3), "route_length": round(info["route_length"], 3),
+        "difficulty": source.difficulty, "mean_road_length": source.mean_road_length,
+        "mean_intersection_degree": source.mean_intersection_degree,
+        "wall_s": round(time.perf_counter() - start, 3),
+    }
+
+
+def _task(job: tuple[CruiseSource, int, CruiseSettings]) -> dict[str, Any]:
+    return run_test(*job)
+
+
+# -- files ------------------------------------------------------------------------------------------
+def read_tests(path: Path) -> list[dict[str, str]]:
+    """Complete rows of ``tests.csv``; a torn last line (crash mid-write) is dropped from the file."""
+    if not path.is_file():
+        return []
+    text = path.read_text()
+    rows = list(csv.DictReader(text.splitlines()))
+    good = [r for r in rows if None not in r and all(r.get(c) not in (None, "") for c in ("outcome", "wall_s"))]
+    if len(good) != len(rows) or (text and not text.endswith("\n")):
+        _write_csv(path, TEST_COLUMNS, good)
+    return good
+
+
+def _write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict[str, Any]]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    tmp.replace(path)
+
+
+def _check_settings(out: Path, settings: CruiseSettings) -> None:
+    path = out / "run.json"
+    mine = json.loads(json.dumps(asdict(settings)))
+    if path.is_file():
+        theirs = json.loads(path.read_text())
+        if theirs != mine:
+            diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
+            raise CruiseError(f"{out} holds a run with other settings ({', '.join(diff)}); "
+                              "use another --out or the same settings to resume it")
+    else:
+        path.write_text(json.dumps(mine, indent=2) + "\n")
+
+
+def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -> list[dict[str, Any]]:
+    """One row per garage with tests: the paper's table columns."""
+    out = []
+    for s in sources:
+        mine = [r for r in rows if r["garage_hash"] == s.hash]
+        if not mine:
+            continue
+        kinds = [r["outcome"] for r in mine]
+        out.append({
+            "garage": s.name, "difficulty": round(s.difficulty, 4), "E[X]": round(s.mean_road_length, 3),
+            "E[Y]": round(s.mean_intersection_degree, 3), "tests": len(mine),
+            "successes": kinds.count("success"), "collisions": kinds.count("collision"),
+            "timeouts": kinds.count("timeout"), "deadlocks": kinds.count("deadlock"),
+            "success_pct": round(100.0 * kinds.count("success") / len(mine), 2),
+        })
+    return out
+
+
+def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
+                  settings: CruiseSettings) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """``summary.csv``, ``summary.json`` and ``regression.png`` from the test rows."""
+    summary = summarize(rows, sources)
+    _write_csv(out / "summary.csv", SUMMARY_COLUMNS, summary)
+    fit = regression([r["difficulty"] for r in summary], [r["success_pct"] for r in summary])
+    walls = [float(r["wall_s"]) for r in rows]
+    sims = [float(r["time"]) for r in rows]
+    stats = {**fit.as_dict(), "paper_r": PAPER_R, "garages": len(summary), "tests": len(rows),
+             "driver": settings.driver, "seed": settings.seed,
+             "success_pct": round(100.0 * sum(r["outcome"] == "success" for r in rows) / max(len(rows), 1), 2),
+             "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
+             "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}
+    (out / "summary.json").write_text(json.dumps(stats, indent=2) + "\n")
+    regression_plot([r["difficulty"] for r in summary], [r["success_pct"] for r in summary],
+                    out / "regression.png", title=f"Cruise success vs. difficulty ({settings.driver})")
+    return summary, stats
+
+
+# -- the run ----------------------------------------------------------------------------------------
+def _jobs(sources: Sequence[CruiseSource], tests: int, done: set[tuple[str, int]],
+          settings: CruiseSettings) -> list[tuple[CruiseSource, int, CruiseSettings]]:
+    return [(s, i, settings) for s in sources for i in range(tests) if (s.hash, i) not in done]
+
+
+def _results(jobs: list, workers: int) -> Iterator[dict[str, Any]]:
+    if workers <= 1 or len(jobs) <= 1:
+        try:
+            for job in jobs:
+                yield _task(job)
+        finally:
+            if "env" in _CACHE:
+                _CACHE.pop("env").close()
+                _CACHE.pop("hash", None)
+        return
+    # spawn: each worker opens its own GL context; tests in garage order, one at a time
+    with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
+        yield from pool.imap_unordered(_task, jobs, chunksize=1)
+
+
+def run_cruise(
+    sources: Sequence[CruiseSource | Garage],
+    tests: int,
+    driver: str = "vision",
+    workers: int = 1,
+    seed: int = 0,
+    out_dir: str | Path = "cruise",
+    *,
+    action_type: str = "discrete",
+    occupancy: float = 0.5,
+    env: dict[str, Any] | None = None,
+    driver_kwargs: dict[str, Any] | None = None,
+    max_tests: int | None = None,
+    progress: bool = True,
+) -> CruiseResult:
+    """Run ``tests`` tests on every source with ``driver``; resumable (see the module docstring).
+
+    ``max_tests`` stops after that many new tests (a deliberate partial run); ``progress``
+    shows a tqdm bar. Raises :class:`CruiseError`, ``DriverError`` (bad driver) before any test.
+    """
+    from garage_mj.drivers import resolve_driver
+
+    if tests < 1:
+        raise ValueError(f"tests must be >= 1, got {tests}")
+    resolve_driver(driver)  # fail fast, in this process, with the loader's one-line message
+    srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
+    hashes = [s.hash for s in srcs]
+    if len(set(hashes)) != len(hashes):
+        raise CruiseError("the same garage is listed twice; give each garage once")
+    settings = CruiseSettings(driver, int(seed), action_type, float(occupancy), dict(env or {}),
+                              dict(driver_kwargs or {}))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _check_settings(out, settings)
+    csv_path = out / "tests.csv"
+    rows = read_tests(csv_path)
+    done = {(r["garage_hash"], int(r["test"])) for r in rows}
+    jobs = _jobs(srcs, tests, done, settings)
+    if max_tests is not None:
+        jobs = jobs[:max_tests]
+    new = 0
+    if jobs:
+        from tqdm import tqdm
+
+        fresh = not csv_path.is_file()
+        with csv_path.open("a", newline="") as f, tqdm(total=len(jobs), disable=not progress,
+                                                       desc="cruise", unit="test") as bar:
+            writer = csv.DictWriter(f, fieldnames=TEST_COLUMNS)
+            if fresh:
+                writer.writeheader()
+            for row in _results(jobs, workers):
+                writer.writerow(row)
+                f.flush()
+                rows.append({k: str(v) for k, v in row.items()})
+                new += 1
+                bar.update()
+    wanted = {(s.hash, i) for s in srcs for i in range(tests)}
+    mine = [r for r in rows if (r["garage_hash"], int(r["test"])) in wanted]
+    summary, stats = write_outputs(out, mine, srcs, settings)
+    return CruiseResult(out, new, mine, summary, stats)
