@@ -12,7 +12,7 @@ import importlib
 import sys
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ["maps", "demo", "export", "train", "library", "plot", "show"]
+COMMANDS = ["maps", "demo", "export", "train", "library", "plot", "show", "cruise"]
 
 
 class UserError(Exception):

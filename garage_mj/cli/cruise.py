@@ -1,0 +1,113 @@
+"""``garage-mj cruise``: batch cruise tests of a driver over packs or library garages (SPEC section 7)."""
+
+from __future__ import annotations
+
+import argparse
+import functools
+from collections.abc import Callable
+from pathlib import Path
+
+from garage_mj.cli import UserError
+from garage_mj.cli._common import add_filters, filters, non_negative_int, unit_range
+
+
+def _positive(text: str) -> int:
+    n = non_negative_int(text)
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text} is not >= 1")
+    return n
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "cruise", help="run cruise tests of a driver in garages and correlate success with difficulty",
+        description="Run --tests cruise tests per garage with --driver in GarageDrive-v0 over a process "
+                    "pool. Writes tests.csv (appended as tests end; a re-run resumes), summary.csv, "
+                    "summary.json (Pearson r, regression) and regression.png into --out.")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--packs", type=Path, metavar="DIR", help="a folder of asset packs (garage-mj export)")
+    src.add_argument("--library", type=Path, metavar="FILE", help="a garage library (garage-mj train)")
+    add_filters(p)
+    p.add_argument("--sample", type=_positive, metavar="N",
+                   help="with --library: N garages stratified by difficulty (seeded by --seed)")
+    p.add_argument("--tests", type=_positive, default=50, help="tests per garage (default 50)")
+    p.add_argument("--driver", default="vision", help="built-in driver (waypoint, vision) or module:Class")
+    p.add_argument("--workers", type=_positive, default=1, help="worker processes (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="run seed; test seeds derive from it (default 0)")
+    p.add_argument("--out", type=Path, default=Path("cruise"), help="output folder (default ./cruise)")
+    p.add_argument("--action-type", choices=("discrete", "continuous"), default="discrete",
+                   help="the paper's 4 actions or [throttle, steer] (default discrete)")
+    p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
+    p.add_argument("--video", type=Path, metavar="PATH.mp4",
+                   help="instead of the batch, write an MP4 of one test (the first garage, --video-test)")
+    p.add_argument("--video-test", type=non_negative_int, default=0, help="test index for --video (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_errors(run))
+
+
+def _errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    @functools.wraps(func)
+    def wrapper(args: argparse.Namespace) -> int:
+        from garage_mj.cruise import CruiseError
+        from garage_mj.drivers import DriverError
+        from garage_mj.export.pack import PackError
+        from garage_mj.library import LibraryError
+
+        try:
+            return func(args)
+        except (CruiseError, DriverError, PackError, LibraryError) as exc:
+            raise UserError(str(exc)) from None
+
+    return wrapper
+
+
+def sources(args: argparse.Namespace) -> list:
+    """The garages to test, from ``--packs`` or ``--library`` with the filters."""
+    from garage_mj.cruise import CruiseSource
+
+    if args.packs is not None:
+        if not args.packs.is_dir():
+            raise UserError(f"--packs {args.packs}: no such folder; export packs with garage-mj export")
+        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.sample)):
+            raise UserError("--map/--difficulty/--coverage/--sample filter a --library, not --packs")
+        dirs = sorted(d for d in args.packs.iterdir() if (d / "manifest.json").is_file())
+        if args.limit is not None:
+            dirs = dirs[: args.limit]
+        found = [CruiseSource.from_pack(d) for d in dirs]
+    else:
+        from garage_mj.library import Library, LibraryError
+
+        if not args.library.is_file():
+            raise LibraryError(f"{args.library}: no such library file; build one with garage-mj train")
+        with Library(args.library, create=False) as lib:
+            f = filters(args)
+            if args.sample is not None:
+                records = lib.sample(args.sample, args.seed, map=f["map"], difficulty=f["difficulty"],
+                                     coverage=f["coverage"])
+                records = records[: args.limit] if args.limit is not None else records
+            else:
+                records = lib.query(limit=args.limit, **f)
+        found = [CruiseSource.from_record(r) for r in records]
+    if not found:
+        raise UserError("no garages match; check the source folder or loosen the filters")
+    return found
+
+
+def run(args: argparse.Namespace) -> int:
+    from garage_mj.cruise import run_cruise
+
+    srcs = sources(args)
+    if args.video is not None:
+        from garage_mj.video import record_video
+
+        path = record_video(srcs[0], args.video, driver=args.driver, seed=args.seed, test=args.video_test,
+                            action_type=args.action_type, occupancy=args.occupancy)
+        print(f"wrote {path} ({srcs[0].name}, test {args.video_test}, driver {args.driver})")
+        return 0
+    res = run_cruise(srcs, args.tests, args.driver, args.workers, args.seed, args.out,
+                     action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet)
+    s = res.stats
+    r = "n/a" if s["r"] is None else f"{s['r']:.3f}"
+    print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): success {s['success_pct']}%, "
+          f"Pearson r(difficulty, success) = {r} (paper {s['paper_r']}); results in {res.out_dir}")
+    return 0
