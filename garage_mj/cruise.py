@@ -99,6 +99,27 @@ class CruiseResult:
     stats: dict[str, Any]
 
 
+def painted_sources(map: str, n: int, seed: int = 0, oversample: int = 4) -> list[CruiseSource]:
+    """``n`` garages of ``map`` painted by the scripted painter, spread evenly over difficulty.
+
+    Paints ``oversample * n`` candidates (distinct garages) and keeps the ones at evenly spaced
+    difficulty ranks, standing in for a library's stratified sample when there is no library.
+    """
+    from garage_mj.painter import paint_garage
+
+    found: dict[str, CruiseSource] = {}
+    for k in range(oversample * n * 3):
+        if len(found) >= oversample * n:
+            break
+        g = paint_garage(map, seed=seed * 10_007 + k)
+        found.setdefault(g.canonical_hash(), CruiseSource.from_garage(g, f"{map}-painted{k}"))
+    ranked = sorted(found.values(), key=lambda s: (s.difficulty, s.name))
+    if len(ranked) <= n:
+        return ranked
+    picks = np.linspace(0, len(ranked) - 1, n).round().astype(int)
+    return [ranked[i] for i in picks]
+
+
 def cruise_seed(seed: int, garage_hash: str, index: int) -> int:
     """The seed of test ``index`` on a garage: a function of (run seed, garage hash, index) only."""
     digest = hashlib.sha256(f"{seed}:{garage_hash}:{index}".encode()).digest()
