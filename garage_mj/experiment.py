@@ -18,9 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import tomllib
-
-from garage_mj.config import ConfigError
+from garage_mj.config import ConfigError, tomllib
 from garage_mj.library import Library
 from garage_mj.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
 

@@ -107,7 +107,7 @@ class DQNConfig:
 def load_dqn_config(source: str | Path | dict[str, Any] | None = None, **overrides: Any) -> DQNConfig:
     """A :class:`DQNConfig` from a TOML file or dict (a ``[dqn]`` table or top-level keys)."""
     if isinstance(source, (str, Path)):
-        import tomllib
+        from garage_mj.config import tomllib
 
         path = Path(source)
         try:
