@@ -1,55 +1,46 @@
-"""``garage-mj demo``: the main job on a small garage, end to end with what exists."""
+"""``garage-mj demo``: the main job end to end on a small garage, with an HTML report."""
 
 from __future__ import annotations
 
 import argparse
 
-import gymnasium as gym
-import numpy as np
+from garage_mj.demo import DemoConfig, demo_config, run_demo
 
-from garage_mj.metrics import evaluate
-from garage_mj.textdraw import draw
+_D = DemoConfig()
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
-        help="run the main job on a small garage",
-        description="Random-policy generation on a map: prints each episode's metrics and "
-        "draws the best usable garage (highest return) as text.",
+        help="the main job end to end on a small garage, with an HTML report",
+        description=(
+            "Train DQN on a map (short run, 2 seeds), fill a scenario library with every usable garage, "
+            "export asset packs for a difficulty-stratified sample, run cruise tests with the built-in "
+            "drivers (waypoint, vision), and write OUT/report.html with the PNGs it links. Stages resume: "
+            "re-running reuses finished training, complete packs and finished tests."
+        ),
     )
-    p.add_argument("--map", default="tiny_7x11", help="shipped map name or map file (default: tiny_7x11)")
-    p.add_argument("--episodes", type=int, default=20, help="episodes to run (default: 20)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    p.add_argument("--map", default=_D.map, help=f"shipped map name or map file (default: {_D.map})")
+    p.add_argument("--timesteps", type=int, default=_D.timesteps,
+                   help=f"DQN timesteps per training seed (default: {_D.timesteps})")
+    p.add_argument("--garages", type=int, default=_D.garages,
+                   help=f"garages to export and test (default: {_D.garages})")
+    p.add_argument("--tests", type=int, default=_D.tests,
+                   help=f"cruise tests per garage and driver (default: {_D.tests})")
+    p.add_argument("--workers", type=int, default=_D.workers, help=f"cruise worker processes (default: {_D.workers})")
+    p.add_argument("--seed", type=int, default=_D.seed, help=f"seed of sampling and tests (default: {_D.seed})")
+    p.add_argument("--out", default=_D.out, help=f"output folder (default: {_D.out})")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    env = gym.make("garage_mj/GarageGen-v0", map=args.map)
-    rng = np.random.default_rng(args.seed)
-    best = None
-    print(f"random-policy generation on {args.map}, {args.episodes} episodes, seed {args.seed}")
-    for ep in range(args.episodes):
-        obs, info = env.reset(seed=args.seed + ep)
-        ret, done = 0.0, False
-        while not done:
-            obs, r, term, trunc, info = env.step(int(rng.integers(4)))
-            ret += r
-            done = term or trunc
-        g = env.unwrapped.garage()
-        m = evaluate(g)
-        print(
-            f"episode {ep:3d}  return {ret:8.1f}  usable {str(m.usable):5}  coverage {m.coverage:.2f}  "
-            f"difficulty {m.difficulty:.3f}  stalls {m.stalls:3d}  E[X] {m.mean_road_length:.2f}  "
-            f"E[Y] {m.mean_intersection_degree:.2f}  errors {info['errors']}"
-        )
-        if info["usable"] and (best is None or ret > best[0]):
-            best = (ret, ep, g, m)
-    env.close()
-    if best is None:
-        print("no usable garage this time; try more --episodes")
-        return 0
-    ret, ep, g, m = best
-    print(f"\nbest usable garage: episode {ep}, return {ret:.1f}, stalls {m.stalls}, axis {g.six_stall_axis}")
-    print(draw(g.grid, legend=True))
+    from garage_mj.cli import UserError
+
+    for name in ("timesteps", "garages", "tests", "workers"):
+        if getattr(args, name) < 1:
+            raise UserError(f"--{name} must be >= 1")
+    cfg = demo_config(map=args.map, timesteps=args.timesteps, garages=args.garages, tests=args.tests,
+                      workers=args.workers, seed=args.seed, out=args.out)
+    report = run_demo(cfg)
+    print(f"open {report} in a browser")
     return 0
