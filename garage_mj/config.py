@@ -99,6 +99,17 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
     return value  # Optional/Union/Literal and friends: trusted as given
 
 
+def read_toml(path: str | Path, what: str = "config file") -> dict[str, Any]:
+    """Parse a TOML file; a missing or malformed file is a :class:`ConfigError` naming it."""
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{what} {path} does not exist") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path} is not valid TOML: {exc}") from None
+
+
 def load_config(cls: type[T], source: dict[str, Any] | str | Path | None = None, **overrides) -> T:
     """Build config ``cls`` from a mapping or a TOML file, plus keyword overrides.
 
@@ -107,14 +118,8 @@ def load_config(cls: type[T], source: dict[str, Any] | str | Path | None = None,
     data: dict[str, Any] = {}
     where = cls.__name__
     if isinstance(source, (str, Path)):
-        path = Path(source)
-        where = str(path)
-        try:
-            data = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise ConfigError(f"config file {path} does not exist") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{path} is not valid TOML: {exc}") from None
+        where = str(source)
+        data = read_toml(source)
     elif source is not None:
         data = dict(source)
     data.update(overrides)

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from garage_mj.config import ConfigError, tomllib
+from garage_mj.config import ConfigError, read_toml
 from garage_mj.library import Library
 from garage_mj.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
 
@@ -49,12 +49,7 @@ class Protocol:
 def load_protocol(path: str | Path) -> Protocol:
     """Read a protocol TOML; unknown tables or keys are an error."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"protocol file {path} does not exist") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path} is not valid TOML: {exc}") from None
+    data = read_toml(path, "protocol file")
     unknown = sorted(set(data) - {"experiment", "dqn"})
     if unknown:
         raise ConfigError(f"{path}: unknown table(s) {', '.join(unknown)}; known: experiment, dqn")

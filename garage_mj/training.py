@@ -107,15 +107,10 @@ class DQNConfig:
 def load_dqn_config(source: str | Path | dict[str, Any] | None = None, **overrides: Any) -> DQNConfig:
     """A :class:`DQNConfig` from a TOML file or dict (a ``[dqn]`` table or top-level keys)."""
     if isinstance(source, (str, Path)):
-        from garage_mj.config import tomllib
+        from garage_mj.config import read_toml
 
         path = Path(source)
-        try:
-            data = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise ConfigError(f"config file {path} does not exist") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{path} is not valid TOML: {exc}") from None
+        data = read_toml(path)
         if set(data) == {"dqn"}:
             data = data["dqn"]
         try:
