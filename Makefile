@@ -49,4 +49,4 @@ lint: install
 	$(VENV)/bin/ruff check garage_mj tests eval generation
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) $(QC_VENV) build *.egg-info .pytest_cache
