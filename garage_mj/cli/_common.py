@@ -36,15 +36,24 @@ def unit_range(text: str) -> float:
     return x
 
 
-def non_negative_int(text: str) -> int:
-    """argparse type: an integer >= 0."""
+def _int_at_least(text: str, low: int, problem: str) -> int:
     try:
-        n = int(text)
+        n = int(text.replace("_", ""))  # 2_000_000 reads like the TOML protocols
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"{text} is negative")
+    if n < low:
+        raise argparse.ArgumentTypeError(f"{text} {problem}")
     return n
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    return _int_at_least(text, 0, "is negative")
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    return _int_at_least(text, 1, "must be >= 1")
 
 
 def add_filters(p: argparse.ArgumentParser) -> None:

@@ -8,14 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import add_filters, filters, non_negative_int, unit_range
-
-
-def _positive(text: str) -> int:
-    n = non_negative_int(text)
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"{text} is not >= 1")
-    return n
+from garage_mj.cli._common import add_filters, filters, non_negative_int, positive_int, unit_range
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,11 +21,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--packs", type=Path, metavar="DIR", help="a folder of asset packs (garage-mj export)")
     src.add_argument("--library", type=Path, metavar="FILE", help="a garage library (garage-mj train)")
     add_filters(p)
-    p.add_argument("--sample", type=_positive, metavar="N",
+    p.add_argument("--sample", type=positive_int, metavar="N",
                    help="with --library: N garages stratified by difficulty (seeded by --seed)")
-    p.add_argument("--tests", type=_positive, default=50, help="tests per garage (default 50)")
+    p.add_argument("--tests", type=positive_int, default=50, help="tests per garage (default 50)")
     p.add_argument("--driver", default="vision", help="built-in driver (waypoint, vision) or module:Class")
-    p.add_argument("--workers", type=_positive, default=1, help="worker processes (default 1)")
+    p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
     p.add_argument("--seed", type=int, default=0, help="run seed; test seeds derive from it (default 0)")
     p.add_argument("--out", type=Path, default=Path("cruise"), help="output folder (default ./cruise)")
     p.add_argument("--action-type", choices=("discrete", "continuous"), default="discrete",

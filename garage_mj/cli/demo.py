@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from garage_mj.cli._common import positive_int
 from garage_mj.demo import DemoConfig, demo_config, run_demo
 
 _D = DemoConfig()
@@ -21,24 +22,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("--map", default=_D.map, help=f"shipped map name or map file (default: {_D.map})")
-    p.add_argument("--timesteps", type=int, default=_D.timesteps,
+    p.add_argument("--timesteps", type=positive_int, default=_D.timesteps,
                    help=f"DQN timesteps per training seed (default: {_D.timesteps})")
-    p.add_argument("--garages", type=int, default=_D.garages,
+    p.add_argument("--garages", type=positive_int, default=_D.garages,
                    help=f"garages to export and test (default: {_D.garages})")
-    p.add_argument("--tests", type=int, default=_D.tests,
+    p.add_argument("--tests", type=positive_int, default=_D.tests,
                    help=f"cruise tests per garage and driver (default: {_D.tests})")
-    p.add_argument("--workers", type=int, default=_D.workers, help=f"cruise worker processes (default: {_D.workers})")
+    p.add_argument("--workers", type=positive_int, default=_D.workers, help=f"cruise worker processes (default: {_D.workers})")
     p.add_argument("--seed", type=int, default=_D.seed, help=f"seed of sampling and tests (default: {_D.seed})")
     p.add_argument("--out", default=_D.out, help=f"output folder (default: {_D.out})")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.cli import UserError
-
-    for name in ("timesteps", "garages", "tests", "workers"):
-        if getattr(args, name) < 1:
-            raise UserError(f"--{name} must be >= 1")
     cfg = demo_config(map=args.map, timesteps=args.timesteps, garages=args.garages, tests=args.tests,
                       workers=args.workers, seed=args.seed, out=args.out)
     report = run_demo(cfg)

@@ -6,19 +6,9 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import user_errors
+from garage_mj.cli._common import positive_int, user_errors
 
 ALGOS = ("dqn",)
-
-
-def _positive(text: str) -> int:
-    try:
-        n = int(text.replace("_", ""))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"{text} must be >= 1")
-    return n
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,14 +25,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         epilog="example: garage-mj train --map tiny_7x11 --timesteps 20000 --seed 0 --out runs/tiny_s0",
     )
     p.add_argument("--map", required=True, help="shipped map name (garage-mj maps list) or map file")
-    p.add_argument("--timesteps", required=True, type=_positive, help="total timesteps of the run")
+    p.add_argument("--timesteps", required=True, type=positive_int, help="total timesteps of the run")
     p.add_argument("--seed", required=True, type=int, help="random seed of the run")
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
     p.add_argument("--algo", default="dqn", choices=ALGOS, help="RL algorithm (default: dqn)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")
     p.add_argument("--config", type=Path, help="TOML file of DQN hyper-parameters (keys of DQNConfig; unknown keys are an error)")
     p.add_argument("--library", type=Path, help="library file (default: OUT/library.sqlite)")
-    p.add_argument("--checkpoint-every", type=_positive, metavar="N", help="timesteps between checkpoints (overrides the config)")
+    p.add_argument("--checkpoint-every", type=positive_int, metavar="N", help="timesteps between checkpoints (overrides the config)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
