@@ -49,18 +49,6 @@ def expected_cell(grid: np.ndarray, r: int, c: int, axis: Axis) -> Block:
     return stall_code(sides, obstacle, axis)
 
 
-def completes_square(is_road_like, r: int, c: int) -> bool:
-    """Would making (r, c) road-like complete a 2x2 square of road-like cells?
-
-    ``is_road_like(r, c)`` answers for the other cells (False off the grid).
-    """
-    for dr in (-1, 1):
-        for dc in (-1, 1):
-            if is_road_like(r + dr, c) and is_road_like(r, c + dc) and is_road_like(r + dr, c + dc):
-                return True
-    return False
-
-
 def road_squares(grid: np.ndarray) -> list[tuple[int, int]]:
     """Top-left corners of every 2x2 square of road-like cells in ``grid``."""
     road = ROAD_LIKE_TABLE[grid]
