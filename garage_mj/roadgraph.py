@@ -95,6 +95,15 @@ class RoadAnalysis:
         counts = Counter(t.name.lower() for t in self.tiles.values())
         return {t.name.lower(): counts.get(t.name.lower(), 0) for t in Tile}
 
+    def edges(self) -> set[frozenset[tuple[int, int]]]:
+        """Undirected edges of the road graph (pairs of 4-adjacent road-like cells)."""
+        return {
+            frozenset((p, (p[0] + dr, p[1] + dc)))
+            for p, m in self.masks.items()
+            for d, (dr, dc) in enumerate(DELTAS)
+            if m >> d & 1
+        }
+
     def component(self, start: tuple[int, int]) -> set[tuple[int, int]]:
         """Road-like cells reachable from ``start`` (empty if ``start`` is not road-like)."""
         if start not in self.masks:

@@ -26,7 +26,6 @@ from garage_mj.export.validate import (
     qc_executable,
 )
 from garage_mj.export.xodr import write_xodr
-from garage_mj.geometry import DELTAS
 from garage_mj.painter import paint_garage
 from garage_mj.roadgraph import analyse
 from garage_mj.stalls import stall_layout
@@ -182,13 +181,7 @@ def test_road_model_round_trip(seed, map_name):
     g = paint_garage(map_name, seed=seed)
     m = build_road_model(g)
     a = analyse(g.grid)
-    grid_edges = {
-        frozenset((p, (p[0] + dr, p[1] + dc)))
-        for p, mask in a.masks.items()
-        for d, (dr, dc) in enumerate(DELTAS)
-        if mask >> d & 1
-    }
-    assert _model_edges(m) == grid_edges
+    assert _model_edges(m) == a.edges()
     covered = Counter(c for r in m.roads.values() for c in r.spans)
     covered.update(j.cell for j in m.junctions.values())
     assert set(covered) == set(a.masks) and set(covered.values()) == {1}
