@@ -57,7 +57,7 @@ def _render_overview(garage, path: Path, width: int = 480, height: int = 360) ->
     """A MuJoCo render of the garage's scene from the top-down ``overview`` camera."""
     import mujoco
 
-    from garage_mj.export.mjcf_scene import compile_scene
+    from garage_mj.scene.mjcf_scene import compile_scene
 
     model = compile_scene(garage)
     model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)

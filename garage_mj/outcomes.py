@@ -18,8 +18,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from garage_mj.route import Route
-from garage_mj.semantics import COLLIDABLE, Semantic
+from garage_mj.scene.route import Route
+from garage_mj.scene.semantics import COLLIDABLE, Semantic
 
 
 class OutcomeKind(str, enum.Enum):

@@ -31,7 +31,7 @@ from dataclasses import dataclass  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from garage_mj.semantics import geom_classes  # noqa: E402
+from garage_mj.scene.semantics import geom_classes  # noqa: E402
 
 GL_FIX = (
     "MUJOCO_GL=egl needs libEGL/Mesa (apt-get install libegl1 libgl1-mesa-dri), "
@@ -138,7 +138,7 @@ class Camera:
     """Renders one MJCF camera of a compiled model: ``render(data) -> {"rgb"?, "depth", "segmentation"}``.
 
     Depth is float32 metres along the optical axis, clipped to ``far``; segmentation is uint8
-    :class:`garage_mj.semantics.Semantic` ids. Sets the model's clipping planes to ``near``/``far``.
+    :class:`garage_mj.scene.semantics.Semantic` ids. Sets the model's clipping planes to ``near``/``far``.
     """
 
     def __init__(self, model: mujoco.MjModel, config: CameraConfig | None = None, cull: bool = True):

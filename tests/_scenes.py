@@ -7,8 +7,8 @@ import numpy as np
 from dm_control import mjcf
 
 from garage_mj.outcomes import OutcomeMonitor, ego_contacts
-from garage_mj.route import Route, to_car_frame
-from garage_mj.semantics import geom_classes
+from garage_mj.scene.route import Route, to_car_frame
+from garage_mj.scene.semantics import geom_classes
 from garage_mj.sensors import Camera, CameraConfig
 from garage_mj.vehicle import Car, attach_car, compile_mjcf
 

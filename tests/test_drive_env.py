@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 import garage_mj.envs  # noqa: F401  (registers the ids)
 from garage_mj.drivers import load_driver
 from garage_mj.envs.drive_env import START_OFFSET, GarageDriveEnv
-from garage_mj.export.mjcf_scene import parked_stalls
+from garage_mj.scene.mjcf_scene import parked_stalls
 
 ENV_ID = "garage_mj/GarageDrive-v0"
 FULL = np.array([1.0, 0.0], dtype=np.float32)

@@ -8,11 +8,11 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from garage_mj.export.lanes import entrance_pose, exit_pose, lane_graph, nearest_node, route
-from garage_mj.export.roadmodel import build_road_model
 from garage_mj.painter import paint_garage
-from garage_mj.roadnet import RoadTile, road_network
-from garage_mj.stalls import stall_layout
+from garage_mj.scene.lanes import entrance_pose, exit_pose, lane_graph, nearest_node, route
+from garage_mj.scene.roadmodel import build_road_model
+from garage_mj.scene.roadnet import RoadTile, road_network
+from garage_mj.scene.stalls import stall_layout
 
 STEP_TOLERANCE = 1.0  # [m] a route may stop this far from a goal on a lane centre (waypoint spacing)
 CURVE_TOLERANCE = 3.3  # [m] road points beside curve tiles lie off the arc's lane (stalls assume straights)

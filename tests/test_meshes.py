@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from garage_mj.export.layout import build_layout
 from garage_mj.export.meshes import CLASS_NAMES, garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import render_preview, write_preview
-from garage_mj.semantics import Semantic
+from garage_mj.scene.layout import build_layout
+from garage_mj.scene.semantics import Semantic
 
 EXPECTED = {"floor", "wall", "obstacle", "parkedcar", "stallmark", "roadmark", "entrance", "exit", "pillar"}
 

@@ -6,8 +6,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.export.layout import build_layout, cover_cells, merge_intervals
-from garage_mj.export.mjcf_scene import (
+from garage_mj.map_io import load_map
+from garage_mj.metrics import evaluate
+from garage_mj.scene.layout import build_layout, cover_cells, merge_intervals
+from garage_mj.scene.mjcf_scene import (
     HIDDEN_DEPTH,
     build_scene,
     compile_scene,
@@ -16,10 +18,8 @@ from garage_mj.export.mjcf_scene import (
     set_parked,
     write_scene,
 )
-from garage_mj.map_io import load_map
-from garage_mj.metrics import evaluate
-from garage_mj.semantics import Semantic, geom_classes, unclassified_geoms
-from garage_mj.stalls import stall_layout
+from garage_mj.scene.semantics import Semantic, geom_classes, unclassified_geoms
+from garage_mj.scene.stalls import stall_layout
 
 
 def _step_one_second(model: mujoco.MjModel) -> mujoco.MjData:

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from garage_mj.outcomes import Contact, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
-from garage_mj.route import Route, to_car_frame
-from garage_mj.semantics import Semantic, geom_classes
+from garage_mj.scene.route import Route, to_car_frame
+from garage_mj.scene.semantics import Semantic, geom_classes
 
 L_ROUTE = Route([(0, 0), (20, 0), (20, 20)])  # 40 m
 

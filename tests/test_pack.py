@@ -10,7 +10,6 @@ import trimesh
 
 from garage_mj.cli import main
 from garage_mj.export import pack as pack_mod
-from garage_mj.export.mjcf_scene import parked_car_bodies
 from garage_mj.export.pack import (
     INDEX,
     MANIFEST,
@@ -23,6 +22,7 @@ from garage_mj.export.pack import (
 )
 from garage_mj.library import Library
 from garage_mj.metrics import evaluate
+from garage_mj.scene.mjcf_scene import parked_car_bodies
 
 
 def test_round_trip(painted_tiny, tmp_path):

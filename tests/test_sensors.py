@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.semantics import Semantic, classify_name, geom_classes, unclassified_geoms
+from garage_mj.scene.semantics import Semantic, classify_name, geom_classes, unclassified_geoms
 from garage_mj.sensors import Camera, CameraConfig, RenderError
 from tests._scenes import build
 

@@ -16,8 +16,6 @@ from hypothesis import strategies as st
 from lxml import etree
 
 from garage_mj import evaluate
-from garage_mj.export.lanes import lane_graph_of
-from garage_mj.export.roadmodel import IMPLICIT_ROAD, build_road_model
 from garage_mj.export.validate import (
     ToolFailed,
     ToolMissing,
@@ -28,7 +26,9 @@ from garage_mj.export.validate import (
 from garage_mj.export.xodr import write_xodr
 from garage_mj.painter import paint_garage
 from garage_mj.roadgraph import analyse
-from garage_mj.stalls import stall_layout
+from garage_mj.scene.lanes import lane_graph_of
+from garage_mj.scene.roadmodel import IMPLICIT_ROAD, build_road_model
+from garage_mj.scene.stalls import stall_layout
 
 BROKEN = "broken_shifted_connecting_road"
 

@@ -2,18 +2,20 @@
 
 A driver is the algorithm under test. The drive env calls ``reset(info)`` at the start of a test
 and ``act(obs) -> action`` once per control step. The observation dict holds ``depth`` (H x W
-float32 metres), ``segmentation`` (H x W uint8 :class:`garage_mj.semantics.Semantic` ids),
+float32 metres), ``segmentation`` (H x W uint8 :class:`garage_mj.scene.semantics.Semantic` ids),
 optionally ``rgb``, ``waypoint`` (the route point a lookahead distance ahead, in the car frame:
 x forward, y left, metres) and ``speed`` (forward speed, m/s). An action is either the paper's
 discrete index (:class:`garage_mj.vehicle.DiscreteAction`) or ``[throttle, steer]`` in [-1, 1].
 
 ``info`` at reset may carry ``seed`` (int), ``action_type`` ("continuous" or "discrete"),
-``dt`` (control period, s) and ``camera`` (a dict of :class:`CameraGeometry` fields).
+``dt`` (control period, s), ``camera`` (a dict of :class:`CameraGeometry` fields) and ``car``
+(a :class:`garage_mj.vehicle.CarGeometry`).
 """
 
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
@@ -21,7 +23,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from garage_mj.config import load_config
-from garage_mj.vehicle import DiscreteAction
+from garage_mj.vehicle import CarGeometry, DiscreteAction, car_geometry
 
 
 @runtime_checkable
@@ -43,20 +45,6 @@ class DriverNoiseConfig:
 
 
 @dataclass(frozen=True)
-class CarGeometry:
-    """What a driver knows of the car (defaults: ``models/car`` with :class:`~garage_mj.vehicle.CarConfig`)."""
-
-    wheelbase: float = 2.7  # [m]
-    rear_axle: float = -1.35  # [m] rear axle x in the car frame (origin at the car centre)
-    half_width: float = 0.95  # [m]
-    front: float = 2.3  # [m] front bumper x in the car frame
-    max_steer: float = 0.7  # [rad] road-wheel angle at steer = 1
-    max_speed: float = 4.0  # [m/s]
-    max_accel: float = 2.0  # [m/s^2]
-    max_decel: float = 5.0  # [m/s^2]
-
-
-@dataclass(frozen=True)
 class CameraGeometry:
     """The forward camera in the car frame (defaults: ``front`` camera of ``models/car``)."""
 
@@ -64,6 +52,14 @@ class CameraGeometry:
     z: float = 1.18  # [m] above the ground
     pitch: float = math.radians(10.0)  # [rad] downward tilt
     fovy: float = 90.0  # [deg] vertical field of view (square pixels)
+
+
+def _car(car: CarGeometry | dict[str, Any] | None) -> CarGeometry:
+    """A :class:`CarGeometry`: as given, or ``models/car``'s with the fields of a dict replaced."""
+    if isinstance(car, CarGeometry):
+        return car
+    load_config(CarGeometry, car or {})  # unknown keys are an error
+    return dataclasses.replace(car_geometry(), **(car or {}))
 
 
 def discretize(throttle: float, steer: float, deadband: float = 0.15) -> int:
@@ -89,7 +85,7 @@ class BaseDriver:
         self.config = config if isinstance(config, self.config_class) else load_config(
             self.config_class, config, **overrides)
         self.noise = noise if isinstance(noise, DriverNoiseConfig) else load_config(DriverNoiseConfig, noise)
-        self.car = car if isinstance(car, CarGeometry) else load_config(CarGeometry, car)
+        self.car = _car(car)
         self.camera = CameraGeometry()
         self.discrete = False
         self.dt = 0.1  # [s]
@@ -103,6 +99,9 @@ class BaseDriver:
         self.dt = float(info.get("dt", self.dt))
         if "camera" in info:
             self.camera = load_config(CameraGeometry, info["camera"])
+        if "car" in info:  # the env's car (one source: models/car and its CarConfig)
+            car = info["car"]
+            self.car = _car(car)
         self._queue = collections.deque([(0.0, 0.0)] * self.noise.delay_steps)
 
     def command(self, obs: dict[str, Any]) -> tuple[float, float]:

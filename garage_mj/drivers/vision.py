@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.drivers.base import BaseDriver
-from garage_mj.semantics import DRIVABLE, NUM_CLASSES, Semantic
+from garage_mj.scene.semantics import DRIVABLE, NUM_CLASSES, Semantic
 
 _NOT_OBSTACLE = np.zeros(NUM_CLASSES, dtype=bool)
 _NOT_OBSTACLE[[int(c) for c in DRIVABLE]] = True

@@ -4,7 +4,7 @@ The scene (garage + every stall's parked car + the ego car) is built and compile
 ``reset(seed)`` then draws, from the seed alone: the target stall, which other stalls hold a
 parked car (each with probability ``occupancy``; the target stall itself is always empty, its
 neighbours are not kept free, as in a real garage), and the start pose noise. Parked cars of
-empty stalls move below the floor (:func:`~garage_mj.export.mjcf_scene.set_parked`), so a reset
+empty stalls move below the floor (:func:`~garage_mj.scene.mjcf_scene.set_parked`), so a reset
 never recompiles.
 
 The route runs from the entrance on the right-hand lanes of the lane graph to the lane point
@@ -29,17 +29,17 @@ import numpy as np
 from gymnasium import spaces
 
 from garage_mj.config import load_config
-from garage_mj.export.lanes import entrance_pose, lane_graph
-from garage_mj.export.lanes import route as lane_route
-from garage_mj.export.mjcf_scene import build_scene, parked_car_bodies, set_parked
 from garage_mj.garage import Garage
 from garage_mj.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
-from garage_mj.route import Route, to_car_frame
-from garage_mj.semantics import Semantic, geom_classes
+from garage_mj.scene.lanes import entrance_pose, lane_graph
+from garage_mj.scene.lanes import route as lane_route
+from garage_mj.scene.mjcf_scene import build_scene, parked_car_bodies, set_parked
+from garage_mj.scene.route import Route, to_car_frame
+from garage_mj.scene.semantics import Semantic, geom_classes
+from garage_mj.scene.stalls import stall_layout
+from garage_mj.scene.world import cell_center
 from garage_mj.sensors import Camera, CameraConfig
-from garage_mj.stalls import stall_layout
 from garage_mj.vehicle import Car, CarConfig, DiscreteAction, attach_car, compile_mjcf
-from garage_mj.world import cell_center
 
 LOOKAHEAD = 4.0  # [m] the observed waypoint lies this far ahead of the car's route progress
 START_OFFSET = 3.0  # [m] start this far along the route from the entrance lane's first point

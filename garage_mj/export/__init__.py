@@ -1,7 +1,9 @@
-"""Exporters: MJCF scene, meshes, preview and asset packs (and the OpenDRIVE writer).
+"""Writers: OpenDRIVE, meshes, preview, asset packs and their validators.
 
-Public names load lazily (``from garage_mj.export import write_xodr``), so importing one
-exporter does not import the others' dependencies.
+The 3D world they write (road model, lanes, layout, MJCF scene) lives in :mod:`garage_mj.scene`;
+this package only turns it into files. Public names load lazily
+(``from garage_mj.export import write_xodr``), so importing one writer does not import the
+others' dependencies.
 """
 
 from __future__ import annotations
@@ -12,21 +14,12 @@ from importlib import import_module
 _EXPORTS: dict[str, str] = {
     "write_xodr": "xodr",
     "XodrResult": "xodr",
-    "build_road_model": "roadmodel",
-    "RoadModel": "roadmodel",
-    "lane_graph": "lanes",
-    "route": "lanes",
-    "entrance_pose": "lanes",
-    "exit_pose": "lanes",
     "check_carla": "validate",
     "check_asam": "validate",
     "export_pack": "pack",
     "export_packs": "pack",
     "load_pack": "pack",
     "PackError": "pack",
-    "build_scene": "mjcf_scene",
-    "compile_scene": "mjcf_scene",
-    "set_parked": "mjcf_scene",
     "garage_meshes": "meshes",
     "write_preview": "preview",
 }

@@ -1,9 +1,9 @@
 """Meshes of a garage (``garage.glb``, ``garage.obj`` + ``.mtl``) with trimesh, for other engines.
 
-Same geometry as the MJCF scene (both draw :func:`garage_mj.export.layout.build_layout`): floor,
+Same geometry as the MJCF scene (both draw :func:`garage_mj.scene.layout.build_layout`): floor,
 walls, obstacles, pillars, markings, gate patches and the parked cars' visual boxes. One mesh per
 semantic class, each with its own material named after the class (``floor``, ``wall``,
-``parkedcar``, ...) and coloured by :data:`~garage_mj.export.layout.CLASS_RGBA`, so Blender, Unity,
+``parkedcar``, ...) and coloured by :data:`~garage_mj.scene.layout.CLASS_RGBA`, so Blender, Unity,
 Unreal or CARLA users can re-material a class at once.
 
 Axes: the files follow glTF, Y up: file (x, y, z) = world (x east, z up, -y north), metres. The
@@ -20,11 +20,11 @@ import numpy as np
 import trimesh
 from trimesh.visual.material import PBRMaterial
 
-from garage_mj.export.layout import CLASS_RGBA, SceneLayout, build_layout
-from garage_mj.export.templates import PARKED_CAR, PILLAR, Template, load_template
 from garage_mj.garage import Garage
-from garage_mj.semantics import PREFIXES, Semantic
-from garage_mj.world import DEFAULT_WORLD, WorldConfig
+from garage_mj.scene.layout import CLASS_RGBA, SceneLayout, build_layout
+from garage_mj.scene.semantics import PREFIXES, Semantic
+from garage_mj.scene.templates import PARKED_CAR, PILLAR, Template, load_template
+from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
 #: World (z up) -> file (glTF, y up).
 Z_UP_TO_Y_UP = trimesh.transformations.rotation_matrix(-math.pi / 2, [1, 0, 0])

@@ -25,11 +25,11 @@ from pathlib import Path
 from tqdm import tqdm
 
 from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
-from garage_mj.export.mjcf_scene import SCENE_XML, write_scene
 from garage_mj.export.preview import write_preview
 from garage_mj.export.xodr import write_xodr
 from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
+from garage_mj.scene.mjcf_scene import SCENE_XML, write_scene
 
 MANIFEST = "manifest.json"
 INDEX = "index.json"

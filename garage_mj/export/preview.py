@@ -13,12 +13,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from garage_mj.export.layout import CLASS_RGBA, SceneLayout, build_layout
 from garage_mj.garage import Garage
-from garage_mj.roadnet import road_network
-from garage_mj.semantics import Semantic
-from garage_mj.stalls import rectangle
-from garage_mj.world import DEFAULT_WORLD, WorldConfig
+from garage_mj.scene.layout import CLASS_RGBA, SceneLayout, build_layout
+from garage_mj.scene.roadnet import road_network
+from garage_mj.scene.semantics import Semantic
+from garage_mj.scene.stalls import rectangle
+from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
 PIXELS_PER_METRE = 8.0  # [px/m] a 13x13 garage (117 m) is about 950 px wide
 MARGIN = 1.0  # [m] around the outer walls

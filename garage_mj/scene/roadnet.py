@@ -22,7 +22,7 @@ from garage_mj.blocks import Block
 from garage_mj.garage import Garage
 from garage_mj.geometry import DELTAS, EAST, NORTH, SOUTH, WEST
 from garage_mj.roadgraph import Tile, analyse
-from garage_mj.world import DEFAULT_WORLD, WorldConfig, cell_center
+from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig, cell_center
 
 
 class RoadTile(Enum):

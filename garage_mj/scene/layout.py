@@ -2,8 +2,8 @@
 
 The MJCF builder and the mesh writer both draw this one layout, so the 3D scene, the GLB and the
 OBJ always hold the same geometry. Positions come only from the shared road network
-(:mod:`garage_mj.roadnet`), the stall geometry (:mod:`garage_mj.stalls`) and the world
-conventions (:mod:`garage_mj.world`).
+(:mod:`garage_mj.scene.roadnet`), the stall geometry (:mod:`garage_mj.scene.stalls`) and the world
+conventions (:mod:`garage_mj.scene.world`).
 
 What it holds (z up, floor top at z = 0):
 - one floor slab under the whole grid;
@@ -24,10 +24,10 @@ import numpy as np
 from garage_mj.blocks import ROAD_LIKE_TABLE, STALL_TABLE, Block
 from garage_mj.garage import Garage
 from garage_mj.geometry import OPPOSITE
-from garage_mj.roadnet import RoadTile, road_network
-from garage_mj.semantics import Semantic, geom_name
-from garage_mj.stalls import stall_layout
-from garage_mj.world import DEFAULT_WORLD, WORLD_DIR, WorldConfig
+from garage_mj.scene.roadnet import RoadNetwork, RoadTile, road_network
+from garage_mj.scene.semantics import Semantic, geom_name
+from garage_mj.scene.stalls import StallLayout, stall_layout
+from garage_mj.scene.world import DEFAULT_WORLD, WORLD_DIR, WorldConfig
 
 FLOOR_THICKNESS = 0.1  # [m] floor slab, top face at z = 0
 CEILING_THICKNESS = 0.2  # [m]
@@ -154,16 +154,17 @@ def _segment(x0: float, y0: float, x1: float, y1: float) -> tuple[str, float, fl
     return ("y", x0, y0, y1)
 
 
-def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bool = False) -> SceneLayout:
-    """The scene layout of ``garage`` (see the module docstring)."""
+def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bool = False, *,
+                 network: RoadNetwork | None = None, stalls: StallLayout | None = None) -> SceneLayout:
+    """The scene layout of ``garage`` (see the module docstring); ``network``/``stalls`` are derived if not given."""
     grid = garage.grid
     rows, cols = grid.shape
     b = world.block
     sx, sy = cols * b, rows * b
     h = world.ceiling_height
     t = world.wall_thickness
-    net = road_network(garage, world)
-    stalls = stall_layout(garage, world)
+    net = network or road_network(garage, world)
+    stalls = stalls or stall_layout(garage, world)
     boxes: list[Box] = [
         Box("floor", Semantic.FLOOR, (sx / 2, sy / 2, -FLOOR_THICKNESS / 2), (sx / 2, sy / 2, FLOOR_THICKNESS / 2), True)
     ]

@@ -1,6 +1,6 @@
 """Lane graph and routing: the OpenDRIVE road network, reachable from Python without XML.
 
-Built from the same :class:`~garage_mj.export.roadmodel.RoadModel` the ``garage.xodr`` writer
+Built from the same :class:`~garage_mj.scene.roadmodel.RoadModel` the ``garage.xodr`` writer
 spells, so a route here is a route in CARLA. Nodes are waypoints on lane centre lines, in
 driving direction (right-hand traffic): ``(road id, lane id, index)`` with attributes
 ``pos=(x, y)`` [m] and ``heading`` [rad]. Edges follow the lanes, the lane links across
@@ -17,7 +17,7 @@ import networkx as nx
 import numpy as np
 
 from garage_mj.garage import Garage
-from garage_mj.world import DEFAULT_WORLD, WorldConfig
+from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
 from .planview import sample
 from .roadmodel import Road, RoadModel, build_road_model
@@ -93,9 +93,9 @@ def _link(g: nx.DiGraph, lane: tuple[int, int], count: dict, node: Node, end: bo
     g.add_edge(a, b, length=math.dist(g.nodes[a]["pos"], g.nodes[b]["pos"]), kind="link")
 
 
-def lane_graph(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> nx.DiGraph:
+def lane_graph(garage: Garage, world: WorldConfig = DEFAULT_WORLD, model: RoadModel | None = None) -> nx.DiGraph:
     """Directed graph of right-hand lane waypoints of ``garage`` (see the module docstring)."""
-    g = lane_graph_of(build_road_model(garage, world))
+    g = lane_graph_of(model or build_road_model(garage, world))
     g.graph["name"] = garage.name
     return g
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from garage_mj.blocks import STALLS_PER_BLOCK, Block
 from garage_mj.garage import Garage
 from garage_mj.geometry import DELTAS, EAST, NORTH, OPPOSITE, SOUTH, WEST
-from garage_mj.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig, cell_center
+from garage_mj.scene.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig, cell_center
 
 SIDE_ORDER = (NORTH, SOUTH, WEST, EAST)
 _AXIS_PAIR = {"NS": (NORTH, SOUTH), "EW": (WEST, EAST)}
@@ -39,11 +39,18 @@ class Stall:
     road_x: float  # [m] point on the near lane of that road, beside the stall
     road_y: float  # [m]
     obstructed: bool  # in an OBST_STALL3/OBST_STALL4 block
+    length: float = DEFAULT_WORLD.stall_length  # [m] along yaw, from the world the stall was laid out in
+    width: float = DEFAULT_WORLD.stall_width  # [m]
 
     @property
     def corners(self) -> list[tuple[float, float]]:
         """Rectangle corners (x, y) [m], counter-clockwise."""
-        return rectangle(self.x, self.y, self.yaw, DEFAULT_WORLD.stall_length, DEFAULT_WORLD.stall_width)
+        return rectangle(self.x, self.y, self.yaw, self.length, self.width)
+
+    @property
+    def entry(self) -> tuple[float, float]:
+        """Midpoint [m] of the stall's open short side, the one facing its road."""
+        return (self.x + math.cos(self.yaw) * self.length / 2, self.y + math.sin(self.yaw) * self.length / 2)
 
 
 @dataclass(frozen=True)
@@ -146,6 +153,8 @@ def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLay
                             road_x=x + ux * reach,
                             road_y=y + uy * reach,
                             obstructed=obstructed,
+                            length=world.stall_length,
+                            width=world.stall_width,
                         )
                     )
             if obstructed:

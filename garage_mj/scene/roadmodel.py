@@ -1,8 +1,8 @@
 """Road model: the garage's roads as OpenDRIVE sees them, before any XML.
 
-Built from the road network matrix (:mod:`garage_mj.roadnet`) and the stall geometry
-(:mod:`garage_mj.stalls`) only. Both the OpenDRIVE writer (:mod:`garage_mj.export.xodr`)
-and the lane graph (:mod:`garage_mj.export.lanes`) read this one model.
+Built from the road network matrix (:mod:`garage_mj.scene.roadnet`) and the stall geometry
+(:mod:`garage_mj.scene.stalls`) only. Both the OpenDRIVE writer (:mod:`garage_mj.export.xodr`)
+and the lane graph (:mod:`garage_mj.scene.lanes`) read this one model.
 
 - Runs of dead-end, straight, curve and gate tiles merge into one road each (lines, and a
   quarter circle of radius B/2 per curve tile). Dead ends and gates end their road at the far
@@ -25,9 +25,9 @@ from dataclasses import dataclass, field
 
 from garage_mj.garage import Garage
 from garage_mj.geometry import DELTAS, OPPOSITE
-from garage_mj.roadnet import RoadNetwork, RoadTile, road_network
-from garage_mj.stalls import Stall, stall_layout
-from garage_mj.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig
+from garage_mj.scene.roadnet import RoadNetwork, RoadTile, road_network
+from garage_mj.scene.stalls import Stall, StallLayout, stall_layout
+from garage_mj.scene.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig
 
 from .planview import Pose, Segment, connect, merge_lines, pose_at, wrap
 
@@ -128,10 +128,12 @@ class RoadModel:
 
 
 class _Builder:
-    def __init__(self, garage: Garage, world: WorldConfig) -> None:
+    def __init__(self, garage: Garage, world: WorldConfig, network: RoadNetwork | None = None,
+                 stalls: StallLayout | None = None) -> None:
         self.garage = garage
         self.world = world
-        self.net: RoadNetwork = road_network(garage, world)
+        self.net: RoadNetwork = network or road_network(garage, world)
+        self.stalls: StallLayout = stalls or stall_layout(garage, world)
         self.jcells = sorted(p for p, c in self.net.cells.items() if c.tile in JUNCTION_TILES)
         self.jid = {p: 1000 + i for i, p in enumerate(self.jcells)}
         self.roads: dict[int, Road] = {}
@@ -247,7 +249,7 @@ class _Builder:
     # -- stalls --------------------------------------------------------------------------------
     def parking(self, junctions: dict[int, Junction]) -> list[ParkingSpace]:
         out = []
-        for stall in stall_layout(self.garage, self.world).stalls:
+        for stall in self.stalls.stalls:
             cell = stall.road_cell
             if cell in self.jid:
                 candidates = []
@@ -308,6 +310,11 @@ class _Builder:
         )
 
 
-def build_road_model(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> RoadModel:
-    """The road model of ``garage``: roads, junctions, connecting roads and parking spaces."""
-    return _Builder(garage, world).build()
+def build_road_model(garage: Garage, world: WorldConfig = DEFAULT_WORLD, *, network: RoadNetwork | None = None,
+                     stalls: StallLayout | None = None) -> RoadModel:
+    """The road model of ``garage``: roads, junctions, connecting roads and parking spaces.
+
+    ``network`` and ``stalls`` (the garage's road network matrix and stall layout) are derived
+    when not given; :class:`garage_mj.scene.GarageScene` passes the ones it already holds.
+    """
+    return _Builder(garage, world, network, stalls).build()

@@ -19,11 +19,12 @@ costs about 60 us per element, 1 ms per ``default`` class, and as much again per
 written to XML, so the scene draws all painted lines of one class as one mesh geom (``stallmark``,
 ``roadmark``: a box per line, 8 corners and 12 triangles each), keeps few default classes, names
 every element (unnamed ones are written slowly), sets attributes in one ``add`` call, and stamps
-models as ``name`` + ``class`` geoms (:mod:`garage_mj.export.templates`).
+models as ``name`` + ``class`` geoms (:mod:`garage_mj.scene.templates`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -31,16 +32,18 @@ import mujoco
 import numpy as np
 from dm_control import mjcf
 
-from garage_mj.export.layout import CLASS_RGBA, Box, SceneLayout, build_layout
-from garage_mj.export.templates import PARKED_CAR, PILLAR, install, load_template, stamp
 from garage_mj.garage import Garage
-from garage_mj.semantics import Semantic, geom_name
-from garage_mj.world import DEFAULT_WORLD, WorldConfig
+from garage_mj.scene.layout import CLASS_RGBA, Box, SceneLayout, build_layout
+from garage_mj.scene.semantics import Semantic, geom_name
+from garage_mj.scene.templates import PARKED_CAR, PILLAR, install, load_template, stamp
+from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
 TIMESTEP = 0.005  # [s] physics step; the static scene needs little, the ego car's model may override
 HIDDEN_DEPTH = 10.0  # [m] below the floor: where the car of an empty stall waits
 CAMERA_HEIGHT = 40.0  # [m] above the floor, overview camera
 CAMERA_MARGIN = 1.05  # overview camera frame = grid extent x this
+MAX_ORTHO_FOVY = 179.0  # [m] MuJoCo rejects fovy >= 180, also as an orthographic view height
+WIDE_FOVY = 45.0  # [deg] perspective overview of garages too large for the orthographic one
 OFFSCREEN = (1280, 960)  # [px] largest offscreen render the scene allows
 CEILING_GROUP = 4
 VISUAL_GROUP = 2
@@ -101,9 +104,13 @@ def _setup(root: mjcf.RootElement, layout: SceneLayout) -> None:
                        diffuse=[0.5, 0.5, 0.5], castshadow=False)
     root.worldbody.add("light", name="fill", pos=[sx / 2, sy / 2, light_z], dir=[0, 0, -1],
                        diffuse=[0.25, 0.25, 0.25], castshadow=False, attenuation=[1, 0, 0], cutoff=80)
-    aspect_extent = max(sx, sy) * CAMERA_MARGIN
-    root.worldbody.add("camera", name="overview", pos=[sx / 2, sy / 2, CAMERA_HEIGHT], projection="orthographic",
-                       fovy=aspect_extent)
+    extent = max(sx, sy) * CAMERA_MARGIN  # [m] the view's height
+    if extent < MAX_ORTHO_FOVY:
+        root.worldbody.add("camera", name="overview", pos=[sx / 2, sy / 2, CAMERA_HEIGHT], projection="orthographic",
+                           fovy=extent)
+    else:  # MuJoCo caps fovy below 180 even for orthographic cameras: look down from high enough instead
+        height = extent / 2 / math.tan(math.radians(WIDE_FOVY) / 2)
+        root.worldbody.add("camera", name="overview", pos=[sx / 2, sy / 2, height], fovy=WIDE_FOVY)
 
 
 def build_scene(
@@ -112,6 +119,7 @@ def build_scene(
     world: WorldConfig = DEFAULT_WORLD,
     parked: Iterable[int] | None = None,
     ceiling: bool = False,
+    layout: SceneLayout | None = None,
 ) -> mjcf.RootElement:
     """The MJCF scene of ``garage``.
 
@@ -120,8 +128,9 @@ def build_scene(
         parked: stall ids with a parked car in place; ``None`` fills every stall. Cars of the
             other stalls wait below the floor (see :func:`set_parked`).
         ceiling: add the ceiling slab (geom group 4, hidden by default in renders).
+        layout: the garage's :class:`SceneLayout` when already built (``ceiling`` is then its own).
     """
-    layout = build_layout(garage, world, ceiling=ceiling)
+    layout = layout or build_layout(garage, world, ceiling=ceiling)
     root = mjcf.RootElement(model=f"garage_{garage.name}" if garage.name else "garage")
     _setup(root, layout)
     wb = root.worldbody

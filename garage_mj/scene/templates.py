@@ -4,7 +4,7 @@
 cars costs about a second (a deep copy and a namespace per car). A scene instead copies a model's
 default classes and materials once, then stamps its body per placement: a body named after the
 placement (``parkedcar_12``) holding the model's geoms. The semantic class still comes from the
-body name (:mod:`garage_mj.semantics`).
+body name (:mod:`garage_mj.scene.semantics`).
 
 Speed: ``dm_control.mjcf`` costs about 60 us to create an element and as much again per array
 attribute (``pos``, ``size``) it writes to XML. :func:`install` therefore turns every geom of the
