@@ -1,0 +1,143 @@
+"""Learning-quality check of DQN configs: seeds x maps x timesteps, resumable, one run at a time.
+
+    taskset -c 1 .venv/bin/python eval/compare_dqn.py --configs baseline default \\
+        [--maps tiny_7x11 m5_13x13_aligned] [--seeds 0 1 2] [--timesteps 200000] [--out runs/compare_dqn]
+    .venv/bin/python eval/compare_dqn.py --summary-only      # the table from what has finished
+
+``baseline`` is the DQNConfig that was the default before the throughput work (written out here, so
+it does not move when the default changes); ``default`` is today's ``DQNConfig()``. Each run is a normal
+training run folder ``OUT/<config>/<map>_s<seed>``; a finished one is skipped, an interrupted one
+resumes from its newest checkpoint. Per run: mean return of the last 100 episodes (``monitor.csv``),
+distinct usable garages stored in the run's library, and timesteps/s. The summary (per config and map:
+mean and 95% t-interval over seeds) goes to ``docs/compare_dqn.csv`` and is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from garage_mj.training import DQNConfig, read_manifest, train
+
+# the default DQNConfig before the throughput work (commit 1efa9fa), the reference configuration
+BASELINE = dict(
+    learning_rate=5e-4, buffer_size=50_000, learning_starts=1_000, batch_size=64, tau=1.0, gamma=0.99,
+    train_freq=4, gradient_steps=1, n_steps=1, target_update_interval=1_000, exploration_fraction=0.2,
+    exploration_initial_eps=1.0, exploration_final_eps=0.05, max_grad_norm=10.0, net_arch=(256, 256),
+    torch_threads=1, view_size=7, max_errors=10,
+)
+LAST_EPISODES = 100  # episodes averaged for the final return
+# two-sided 95% Student t quantiles by degrees of freedom
+T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
+
+
+def config_named(name: str, checkpoint_every: int) -> DQNConfig:
+    if name == "baseline":
+        return DQNConfig(**BASELINE, checkpoint_every=checkpoint_every)
+    if name == "default":
+        return DQNConfig(checkpoint_every=checkpoint_every)
+    raise SystemExit(f"unknown config {name!r}: use baseline or default")
+
+
+def run_result(run: Path) -> dict | None:
+    """Metrics of a finished run folder, or None."""
+    try:
+        manifest = read_manifest(run)
+    except Exception:
+        return None
+    if manifest.get("status") != "finished":
+        return None
+    returns = np.loadtxt(run / "monitor.csv", delimiter=",", skiprows=2, ndmin=2)[:, 0]
+    session = manifest.get("last_session", {})
+    return {
+        "timesteps": manifest["timesteps"], "episodes": manifest["episodes"],
+        "return_last100": float(returns[-LAST_EPISODES:].mean()),
+        "garages_stored": manifest["garages_stored"],
+        "timesteps_per_s": session.get("timesteps_per_s"),
+        "config": manifest["config"],
+    }
+
+
+def interval(values: list[float]) -> tuple[float, float]:
+    """Mean and the half-width of its 95% t-interval (nan for fewer than 2 values)."""
+    a = np.asarray(values, dtype=float)
+    if len(a) < 2:
+        return float(a.mean()) if len(a) else math.nan, math.nan
+    return float(a.mean()), T95.get(len(a) - 1, 1.96) * float(a.std(ddof=1)) / math.sqrt(len(a))
+
+
+def summarise(out: Path, csv_path: Path) -> None:
+    rows = []
+    for cfg_dir in sorted(p for p in out.iterdir() if p.is_dir()):
+        by_map: dict[tuple[str, int], list[tuple[int, dict]]] = {}
+        for run in sorted(cfg_dir.iterdir()):
+            res = run_result(run)
+            if res is None:
+                continue
+            map_name, seed = run.name.rsplit("_s", 1)
+            by_map.setdefault((map_name, res["timesteps"]), []).append((int(seed), res))
+        for (map_name, steps), runs in sorted(by_map.items()):
+            ret = interval([r["return_last100"] for _, r in runs])
+            gar = interval([r["garages_stored"] for _, r in runs])
+            tps = interval([r["timesteps_per_s"] for _, r in runs if r["timesteps_per_s"]])
+            rows.append({
+                "config": cfg_dir.name, "map": map_name, "timesteps": steps,
+                "seeds": " ".join(str(s) for s, _ in sorted(runs, key=lambda x: x[0])),
+                "return_last100_mean": round(ret[0], 2), "return_last100_ci95": round(ret[1], 2),
+                "garages_mean": round(gar[0], 1), "garages_ci95": round(gar[1], 1),
+                "timesteps_per_s_mean": round(tps[0], 0),
+                "per_seed_return": " ".join(f"{r['return_last100']:.1f}" for _, r in sorted(runs, key=lambda x: x[0])),
+                "per_seed_garages": " ".join(str(r["garages_stored"]) for _, r in sorted(runs, key=lambda x: x[0])),
+                "config_json": json.dumps(runs[0][1]["config"], sort_keys=True),
+            })
+    if not rows:
+        print("no finished runs yet")
+        return
+    csv_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(csv_path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"{'config':<10} {'map':<18} {'steps':>7} {'seeds':>6} {'return last 100':>20} {'garages':>16} {'ts/s':>6}")
+    for r in rows:
+        print(f"{r['config']:<10} {r['map']:<18} {r['timesteps']:>7} {r['seeds']:>6} "
+              f"{r['return_last100_mean']:>11.1f} +- {r['return_last100_ci95']:>5.1f} "
+              f"{r['garages_mean']:>8.1f} +- {r['garages_ci95']:>5.1f} {r['timesteps_per_s_mean']:>6.0f}")
+    print(f"wrote {csv_path}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--configs", nargs="+", default=["baseline", "default"])
+    ap.add_argument("--maps", nargs="+", default=["tiny_7x11", "m5_13x13_aligned"])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    ap.add_argument("--timesteps", type=int, default=200_000)
+    ap.add_argument("--out", type=Path, default=Path("runs/compare_dqn"))
+    ap.add_argument("--csv", type=Path, default=Path("docs/compare_dqn.csv"))
+    ap.add_argument("--summary-only", action="store_true")
+    args = ap.parse_args()
+    if not args.summary_only:
+        for name in args.configs:
+            config = config_named(name, checkpoint_every=max(args.timesteps // 8, 1))
+            for seed in args.seeds:
+                for map_name in args.maps:
+                    run = args.out / name / f"{map_name}_s{seed}"
+                    if run_result(run) is not None:
+                        continue
+                    resume = (run / "run.json").exists()
+                    m = train(map_name, args.timesteps, seed, run, None if resume else config,
+                              resume=resume, progress=False)
+                    s = m["last_session"]
+                    print(f"{name} {map_name} seed {seed}: {s['timesteps_per_s']} timesteps/s, "
+                          f"{m['garages_stored']} garages", flush=True)
+                    summarise(args.out, args.csv)
+    summarise(args.out, args.csv)
+
+
+if __name__ == "__main__":
+    main()
