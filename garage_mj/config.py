@@ -18,10 +18,12 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the same parser from PyPI
     import tomli as tomllib
 
+from garage_mj.errors import GarageMJError
+
 T = TypeVar("T")
 
 
-class ConfigError(ValueError):
+class ConfigError(GarageMJError, ValueError):
     """A configuration file or mapping is malformed (unknown key, wrong type)."""
 
 

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.analysis import PAPER_R, regression, regression_plot
+from garage_mj.errors import GarageMJError
 from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
 
@@ -37,7 +38,7 @@ SUMMARY_COLUMNS = ("garage", "difficulty", "E[X]", "E[Y]", "tests", "successes",
                    "deadlocks", "success_pct")
 
 
-class CruiseError(Exception):
+class CruiseError(GarageMJError):
     """A cruise run cannot go on (settings differ from the out dir's run, a driver crashed)."""
 
 

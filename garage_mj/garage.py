@@ -14,12 +14,13 @@ from typing import Any, Literal
 import numpy as np
 
 from garage_mj.blocks import INITIAL_CODES, NUM_CODES, STALL_CODES, Block
+from garage_mj.errors import GarageMJError
 
 Axis = Literal["NS", "EW"]
 AXES: tuple[Axis, ...] = ("NS", "EW")
 
 
-class MapError(ValueError):
+class MapError(GarageMJError, ValueError):
     """A map or garage breaks a rule of SPEC section 2. The message names where and which."""
 
 

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from garage_mj.errors import GarageMJError
 from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
 
@@ -65,7 +66,7 @@ _COLUMNS = (
 )
 
 
-class LibraryError(Exception):
+class LibraryError(GarageMJError):
     """A library file cannot be used (foreign, corrupt, newer schema, missing)."""
 
 

@@ -23,6 +23,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from garage_mj.blocks import NUM_CODES, Block  # noqa: E402
 from garage_mj.garage import Garage  # noqa: E402
+from garage_mj.errors import GarageMJError  # noqa: E402
 from garage_mj.geometry import DELTAS  # noqa: E402
 from garage_mj.roadgraph import Tile, analyse  # noqa: E402
 
@@ -47,7 +48,7 @@ BLOCK_COLOURS = {
 TILE_MARKERS = {Tile.DEAD_END: "s", Tile.CURVE: "o", Tile.T: "^", Tile.CROSS: "P", Tile.ISOLATED: "x"}
 
 
-class PlotError(ValueError):
+class PlotError(GarageMJError, ValueError):
     """The data for a figure is missing or unusable (no runs, no monitor log, no garages)."""
 
 

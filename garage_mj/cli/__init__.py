@@ -1,21 +1,28 @@
 """The ``garage-mj`` command line. Each subcommand lives in its own module of this package.
 
 A module in :data:`COMMANDS` exposes ``register(subparsers)``, which adds its parser and sets
-``func`` to a handler ``(args) -> int``. Errors a user can cause are raised as
-:class:`UserError` (or a ``MapError``/``ConfigError``) and printed as one line, no traceback.
+``func`` to a handler ``(args) -> int``. Errors a user can cause derive from
+:class:`garage_mj.errors.GarageMJError` (``UserError``, ``MapError``, ``ConfigError``,
+``LibraryError``, ``PackError``, ``CruiseError``, ...) and are printed as one line with exit
+status 2, no traceback; so are file-system failures (read-only or full folder: ``OSError``).
+Modules here import heavy packages (torch, SB3, MuJoCo, matplotlib) inside the handlers only,
+so ``--help`` and the light commands start fast.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
+
+from garage_mj.errors import GarageMJError
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ["maps", "demo", "export", "train", "library", "plot", "show", "cruise"]
 
 
-class UserError(Exception):
+class UserError(GarageMJError):
     """A problem the user can fix; printed as one line and exit status 2."""
 
 
@@ -36,10 +43,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    from garage_mj.config import ConfigError
-    from garage_mj.garage import MapError
+def one_line(text: object, limit: int = 600) -> str:
+    """``text`` on one line, at most ``limit`` characters (a message may quote user input)."""
+    line = " ".join(str(text).split())
+    return line if len(line) <= limit else line[: limit - 3] + "..."
 
+
+def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -47,8 +57,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except (UserError, MapError, ConfigError) as exc:
-        print(f"garage-mj {args.command}: error: {exc}", file=sys.stderr)
+    except GarageMJError as exc:
+        print(f"garage-mj {args.command}: error: {one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the file system refused: read-only or full folder, a file in the way
+        where = f" {exc.filename}" if exc.filename else ""
+        hint = ("free some disk space and run again (finished work is kept)"
+                if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "check the path and its permissions")
+        print(f"garage-mj {args.command}: error:{where}: {one_line(exc.strerror or exc)}; {hint}",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"garage-mj {args.command}: interrupted", file=sys.stderr)

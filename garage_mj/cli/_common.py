@@ -4,23 +4,30 @@ from __future__ import annotations
 
 import argparse
 import functools
+import sys
 from collections.abc import Callable
 
 from garage_mj.cli import UserError
+from garage_mj.errors import GarageMJError
 
 
 def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    """Re-raise the stage's own errors (library, training, plots) as one-line :class:`UserError`."""
-    from garage_mj.library import LibraryError
-    from garage_mj.plots import PlotError
-    from garage_mj.training import TrainingError
+    """Re-raise ``TrainingError`` (not a :class:`GarageMJError` yet) as a one-line :class:`UserError`.
+
+    The check looks the class up in ``sys.modules`` so that decorating imports neither torch nor SB3.
+    """
 
     @functools.wraps(func)
     def wrapper(args: argparse.Namespace) -> int:
         try:
             return func(args)
-        except (LibraryError, TrainingError, PlotError) as exc:
-            raise UserError(str(exc)) from None
+        except GarageMJError:
+            raise
+        except Exception as exc:
+            training = sys.modules.get("garage_mj.training")
+            if training is not None and isinstance(exc, training.TrainingError):
+                raise UserError(str(exc)) from None
+            raise
 
     return wrapper
 

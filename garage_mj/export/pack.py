@@ -27,6 +27,7 @@ from tqdm import tqdm
 from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import write_preview
 from garage_mj.export.xodr import write_xodr
+from garage_mj.errors import GarageMJError
 from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
 from garage_mj.scene.mjcf_scene import SCENE_XML, write_scene
@@ -39,7 +40,7 @@ PACK_FILES = ("garage.json", "garage.xodr", SCENE_XML, "garage.glb", "garage.obj
 _TOOLS = ("garage-mj", "mujoco", "dm-control", "trimesh")
 
 
-class PackError(Exception):
+class PackError(GarageMJError):
     """A pack folder cannot be used; the message names the folder and the fix."""
 
 

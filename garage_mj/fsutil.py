@@ -1,0 +1,158 @@
+"""File-system helpers every writer shares: atomic writes and output-folder locks.
+
+* :func:`atomic_write` writes a file through a temp file made with ``mkstemp`` in the target's
+  own folder (``O_EXCL``, unpredictable name, never follows a planted symlink), fsyncs it and
+  renames it over the target, so a reader sees the old file or the new one, never half of one.
+* :class:`FolderLock` marks an output folder as in use by one long job (``cruise``, ``export``,
+  ``train``, ``demo``); a second job into the same folder is refused with one line naming the
+  first one's pid. The lock is an ``flock`` on ``.garage-mj.lock``, so the kernel drops it when
+  its process dies, even by ``kill -9``: a stale lock file never blocks a later run.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from garage_mj.errors import FolderBusy, GarageMJError
+
+LOCK_NAME = ".garage-mj.lock"
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def public_mode(directory: bool = False) -> int:
+    """The mode a normal ``open``/``mkdir`` would give under the process umask (e.g. 0644/0755)."""
+    return (0o777 if directory else 0o666) & ~_umask()
+
+
+def make_temp_dir(parent: Path, prefix: str, suffix: str) -> Path:
+    """``mkdtemp`` in ``parent`` (unpredictable, created exclusively), then the umask's usual mode.
+
+    ``mkdtemp`` makes folders 0700; a published pack should be readable like any other folder.
+    """
+    tmp = Path(tempfile.mkdtemp(prefix=prefix, suffix=suffix, dir=parent))
+    os.chmod(tmp, public_mode(directory=True))
+    return tmp
+
+
+def write_error(path: str | Path, exc: OSError) -> GarageMJError:
+    """A one-line error for a failed write (read-only folder, disk full, name too long...)."""
+    why = exc.strerror or str(exc)
+    hint = {errno.EACCES: "make the folder writable or choose another output folder",
+            errno.EROFS: "choose an output folder on a writable file system",
+            errno.ENOSPC: "free some disk space and run again (finished work is kept)",
+            errno.EDQUOT: "free some disk space and run again (finished work is kept)",
+            errno.ENOTDIR: "a file stands where a folder is needed; choose another output folder",
+            errno.EEXIST: "a file stands where a folder is needed; choose another output folder",
+            errno.ENAMETOOLONG: "use a shorter name"}.get(exc.errno or 0, "check the path and run again")
+    return GarageMJError(f"cannot write {path}: {why}; {hint}")
+
+
+def atomic_write(path: str | Path, data: str | bytes) -> Path:
+    """Write ``data`` to ``path`` atomically and durably (mkstemp in its folder, fsync, rename)."""
+    path = Path(path)
+    raw = data.encode() if isinstance(data, str) else data
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(raw)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, public_mode())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    fsync_dir(path.parent)
+    return path
+
+
+def fsync_dir(folder: str | Path) -> None:
+    """fsync a folder so that a rename in it survives a power cut (best effort)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def ensure_dir(path: str | Path, what: str = "output folder") -> Path:
+    """``mkdir -p`` with one-line errors (a file in the way, a read-only parent)."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise GarageMJError(f"{what} {path} is a file, not a folder; choose another path")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise write_error(path, exc) from None
+    return path
+
+
+class FolderLock:
+    """Exclusive lock of an output folder for one long job; a context manager.
+
+    ``what`` names the job (``"garage-mj cruise"``); a second holder gets :class:`FolderBusy`:
+    "FOLDER is in use by garage-mj cruise (pid 1234); wait for it to finish or use another folder".
+    """
+
+    def __init__(self, folder: str | Path, what: str) -> None:
+        self.folder = Path(folder)
+        self.what = what
+        self._fd: int | None = None
+
+    def acquire(self) -> FolderLock:
+        ensure_dir(self.folder)
+        path = self.folder / LOCK_NAME
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, public_mode())
+        except OSError as exc:
+            raise write_error(path, exc) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
+            except (ValueError, UnicodeDecodeError):
+                holder = {}
+            os.close(fd)
+            who = f"{holder.get('what', 'another garage-mj process')} (pid {holder.get('pid', '?')})"
+            raise FolderBusy(f"{self.folder} is in use by {who}; wait for it to finish or use "
+                             "another output folder") from None
+        info = json.dumps({"pid": os.getpid(), "what": self.what, "argv": sys.argv[1:8]}).encode()
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, info, 0)
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        if self._fd is not None:
+            try:
+                os.ftruncate(self._fd, 0)
+            except OSError:
+                pass
+            os.close(self._fd)  # closing drops the flock; the empty file stays (harmless)
+            self._fd = None
+
+    def __enter__(self) -> FolderLock:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
