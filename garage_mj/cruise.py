@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import json
 import multiprocessing as mp
+import os
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
@@ -28,6 +30,7 @@ import numpy as np
 
 from garage_mj.analysis import PAPER_R, regression, regression_plot
 from garage_mj.errors import GarageMJError
+from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir
 from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
 
@@ -185,38 +188,84 @@ def _task(job: tuple[CruiseSource, int, CruiseSettings]) -> dict[str, Any]:
 
 
 # -- files ------------------------------------------------------------------------------------------
+def _is_header(fields: Sequence[str]) -> bool:
+    return "garage_hash" in fields and "outcome" in fields
+
+
+def _complete(row: dict[str, str]) -> bool:
+    """A row a test wrote in full: every field present, an outcome, a wall time and a test index."""
+    if any(v is None for v in row.values()) or row.get("outcome", "") == "" or row.get("wall_s", "") == "":
+        return False
+    return row.get("garage_hash", "") != "" and row.get("test", "").isdigit()
+
+
 def read_tests(path: Path) -> list[dict[str, str]]:
-    """Complete rows of ``tests.csv``; a torn last line (crash mid-write) is dropped from the file."""
+    """The complete rows of ``tests.csv``, each (garage_hash, test) once; the file is repaired in place.
+
+    Repairs what a crash, a second run or a careless edit can leave, never dropping a complete
+    row: an empty file or a missing header (the header is written back), a torn last line (a
+    ``kill -9`` mid-write: dropped), a header of other columns (rewritten with
+    :data:`TEST_COLUMNS`), and duplicate (garage_hash, test) rows (the first one is kept).
+    """
     if not path.is_file():
         return []
-    text = path.read_text()
-    rows = list(csv.DictReader(text.splitlines()))
-    good = [r for r in rows if None not in r and all(r.get(c) not in (None, "") for c in ("outcome", "wall_s"))]
-    if len(good) != len(rows) or (text and not text.endswith("\n")):
+    text = path.read_bytes().decode("utf-8", errors="replace")
+    lines = text.splitlines(keepends=True)
+    first = next(csv.reader(lines[:1]), [])
+    has_header = bool(lines) and lines[0].endswith("\n") and _is_header(first)
+    columns = first if has_header else list(TEST_COLUMNS)
+    body = lines[1:] if has_header else lines
+    torn = bool(body) and not body[-1].endswith("\n")
+    if torn:
+        body = body[:-1]
+    good: list[dict[str, str]] = []
+    seen: set[tuple[str, str]] = set()
+    dropped = 0
+    for fields in csv.reader(body):
+        row = dict(zip(columns, fields)) if len(fields) == len(columns) else None
+        if row is None or not _complete(row) or (row["garage_hash"], row["test"]) in seen:
+            dropped += 1
+            continue
+        seen.add((row["garage_hash"], row["test"]))
+        good.append(row)
+    if torn or dropped or not has_header or tuple(columns) != TEST_COLUMNS:
         _write_csv(path, TEST_COLUMNS, good)
     return good
 
 
+def _csv_text(columns: Sequence[str], rows: Iterable[dict[str, Any]]) -> str:
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", restval="")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
+
+
 def _write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict[str, Any]]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-    tmp.replace(path)
+    atomic_write(path, _csv_text(columns, rows))
 
 
 def _check_settings(out: Path, settings: CruiseSettings) -> None:
+    """Store the settings in ``run.json`` (atomically), or refuse a run whose settings differ."""
     path = out / "run.json"
     mine = json.loads(json.dumps(asdict(settings)))
     if path.is_file():
-        theirs = json.loads(path.read_text())
+        try:
+            theirs = json.loads(path.read_bytes().decode("utf-8"))
+            if not isinstance(theirs, dict):
+                raise ValueError("not an object")
+        except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+            if read_tests(out / "tests.csv"):
+                raise CruiseError(f"{path} is damaged ({type(exc).__name__}: {exc}); it holds the settings "
+                                  f"of the tests in {out / 'tests.csv'}: restore it, or use another --out") from None
+            theirs = mine  # no test was recorded under it: nothing to lose, write it afresh
+            atomic_write(path, json.dumps(mine, indent=2) + "\n")
         if theirs != mine:
             diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
             raise CruiseError(f"{out} holds a run with other settings ({', '.join(diff)}); "
                               "use another --out or the same settings to resume it")
     else:
-        path.write_text(json.dumps(mine, indent=2) + "\n")
+        atomic_write(path, json.dumps(mine, indent=2) + "\n")
 
 
 def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -> list[dict[str, Any]]:
@@ -250,7 +299,7 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
              "success_pct": round(100.0 * sum(r["outcome"] == "success" for r in rows) / max(len(rows), 1), 2),
              "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
              "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}
-    (out / "summary.json").write_text(json.dumps(stats, indent=2) + "\n")
+    atomic_write(out / "summary.json", json.dumps(stats, indent=2) + "\n")
     regression_plot([r["difficulty"] for r in summary], [r["success_pct"] for r in summary],
                     out / "regression.png", title=f"Cruise success vs. difficulty ({settings.driver})")
     return summary, stats
@@ -308,8 +357,14 @@ def run_cruise(
         raise CruiseError("the same garage is listed twice; give each garage once")
     settings = CruiseSettings(driver, int(seed), action_type, float(occupancy), dict(env or {}),
                               dict(driver_kwargs or {}))
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = ensure_dir(out_dir, "--out")
+    with FolderLock(out, "garage-mj cruise"):  # a second run into `out` is refused, naming this one
+        return _run_locked(srcs, tests, workers, out, settings, max_tests, progress)
+
+
+def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Path, settings: CruiseSettings,
+                max_tests: int | None, progress: bool) -> CruiseResult:
+    """The body of :func:`run_cruise`, holding the lock of ``out``."""
     _check_settings(out, settings)
     csv_path = out / "tests.csv"
     rows = read_tests(csv_path)
@@ -321,15 +376,15 @@ def run_cruise(
     if jobs:
         from tqdm import tqdm
 
-        fresh = not csv_path.is_file()
+        if not csv_path.is_file():  # read_tests left an existing file with its header and whole lines
+            _write_csv(csv_path, TEST_COLUMNS, [])
         with csv_path.open("a", newline="") as f, tqdm(total=len(jobs), disable=not progress,
                                                        desc="cruise", unit="test") as bar:
             writer = csv.DictWriter(f, fieldnames=TEST_COLUMNS)
-            if fresh:
-                writer.writeheader()
             for row in _results(jobs, workers):
                 writer.writerow(row)
                 f.flush()
+                os.fsync(f.fileno())  # a kill -9 or power cut after this line keeps the row
                 rows.append({k: str(v) for k, v in row.items()})
                 new += 1
                 bar.update()
