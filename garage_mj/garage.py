@@ -18,6 +18,8 @@ from garage_mj.errors import GarageMJError
 
 Axis = Literal["NS", "EW"]
 AXES: tuple[Axis, ...] = ("NS", "EW")
+MAX_SIDE = 64  # [cells] rows or columns of a map or garage (576 m at 9 m per cell); bounds memory and time
+MAX_NAME = 128  # [characters] of a garage name (it becomes part of a pack's folder name)
 
 
 class MapError(GarageMJError, ValueError):
@@ -85,6 +87,8 @@ def validate_initial(grid: np.ndarray, source: str = "map") -> None:
     h, w = grid.shape
     if h < 3 or w < 3:
         raise MapError(f"{source}: the map is {h}x{w}; it needs at least 3 rows and 3 columns")
+    if h > MAX_SIDE or w > MAX_SIDE:
+        raise MapError(f"{source}: the map is {h}x{w}; at most {MAX_SIDE} rows and {MAX_SIDE} columns are supported")
     for r, c in np.argwhere((grid < 0) | (grid >= NUM_CODES)):
         raise MapError(f"{_where(source, r, c)}: {grid[r, c]} is not a block code (0-9)")
     for r, c in np.argwhere(~np.isin(grid, list(INITIAL_CODES))):
@@ -95,6 +99,47 @@ def validate_initial(grid: np.ndarray, source: str = "map") -> None:
             "initial maps hold only 0 FREE, 2 OBSTACLE, 7 ENTRANCE, 8 EXIT"
         )
     find_gates(grid, source)
+
+
+def _code_rows(rows: Any, where: str) -> np.ndarray:
+    """A JSON list of rows of block codes as an int8 array; strict: no strings, floats, booleans."""
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, list) for r in rows):
+        raise MapError(f"{where} must be a non-empty list of rows (lists of block codes 0-{NUM_CODES - 1})")
+    if len(rows) > MAX_SIDE or any(len(r) > MAX_SIDE for r in rows):
+        raise MapError(f"{where} is larger than {MAX_SIDE}x{MAX_SIDE} cells, the largest supported garage")
+    if any(len(r) != len(rows[0]) for r in rows):
+        raise MapError(f"{where} is ragged, not rectangular; every row needs {len(rows[0])} cells")
+    for r, row in enumerate(rows):
+        for c, v in enumerate(row):
+            if type(v) is not int or not 0 <= v < NUM_CODES:
+                raise MapError(f"{where}, row {r}, column {c}: {json.dumps(v)[:20]} is not a block code "
+                               f"(an integer 0-{NUM_CODES - 1})")
+    return np.array(rows, dtype=np.int8)
+
+
+def validate_garage(garage: Garage, source: str | None = None) -> Garage:
+    """Raise :class:`MapError` unless ``garage`` can be exported and driven; returns it.
+
+    The one check of a whole garage, used by export and cruise (:class:`Garage` itself already
+    enforces the shape limits, the codes, the gates and the fixed cells when it is built): the
+    stall rule holds everywhere, no 2x2 square of road-like cells, and the entrance reaches the
+    exit on road. The message names the first offending cell and the fix.
+    """
+    from garage_mj.roadgraph import analyse
+    from garage_mj.rules import expected_cell, road_squares, stall_rule_violations
+
+    src = source or f"garage {garage.name!r}"
+    for r, c in stall_rule_violations(garage.grid, garage.six_stall_axis)[:1]:
+        want = expected_cell(garage.grid, r, c, garage.six_stall_axis)
+        raise MapError(f"{_where(src, r, c)}: {Block(int(garage.grid[r, c])).name} breaks the stall rule "
+                       f"(it must be {want.name}); recolour stalls with garage_mj.rules.apply_stall_rule")
+    for r, c in road_squares(garage.grid)[:1]:
+        raise MapError(f"{_where(src, r, c)}: a 2x2 square of road starts here (rows {r}-{r + 1}, columns "
+                       f"{c}-{c + 1}); roads must not form 2x2 squares")
+    if not analyse(garage.grid).connected(garage.entrance, garage.exit):
+        raise MapError(f"{src}: no road joins the entrance {garage.entrance} to the exit {garage.exit}; "
+                       "only a connected garage can be exported or driven")
+    return garage
 
 
 @dataclass
@@ -109,9 +154,15 @@ class Garage:
     exit: tuple[int, int] = field(init=False)
 
     def __post_init__(self) -> None:
-        self.grid = np.asarray(self.grid, dtype=np.int8)
-        self.initial = np.asarray(self.initial, dtype=np.int8)
+        if not isinstance(self.name, str) or len(self.name) > MAX_NAME:
+            raise MapError(f"garage name {str(self.name)[:40]!r}... is longer than {MAX_NAME} characters; "
+                           "give it a shorter name")
         src = f"garage {self.name!r}"
+        for what in ("grid", "initial"):
+            arr = np.asarray(getattr(self, what))
+            if arr.ndim != 2 or arr.dtype.kind not in "iu" or ((arr < 0) | (arr >= NUM_CODES)).any():
+                raise MapError(f"{src}: {what} must be a 2-D array of block codes 0-{NUM_CODES - 1}")
+            setattr(self, what, arr.astype(np.int8))
         if self.six_stall_axis not in AXES:
             raise MapError(f"{src}: six_stall_axis must be 'NS' or 'EW', not {self.six_stall_axis!r}")
         validate_initial(self.initial, f"{src} (initial map)")
@@ -167,27 +218,25 @@ class Garage:
                 data = json.loads(text)
             except (json.JSONDecodeError, UnicodeDecodeError) as exc:
                 raise MapError(f"{source} is not valid JSON: {exc}") from None
+            except RecursionError:
+                raise MapError(f"{source} is not a garage: JSON nested too deeply") from None
         if not isinstance(data, dict):
             raise MapError(f"{source}: expected an object with name, grid, initial, six_stall_axis")
         missing = [k for k in ("grid", "initial") if k not in data]
         if missing:
             raise MapError(f"{source}: missing key(s) {', '.join(missing)}")
+        grid = _code_rows(data["grid"], f"{source}: grid")
+        initial = _code_rows(data["initial"], f"{source}: initial")
+        name = data.get("name", "garage")
+        if not isinstance(name, str):
+            raise MapError(f"{source}: name must be a string, not {type(name).__name__}")
+        axis = data.get("six_stall_axis", "NS")
+        if not isinstance(axis, str):
+            raise MapError(f"{source}: six_stall_axis must be 'NS' or 'EW'")
         try:
-            grid = np.array(data["grid"], dtype=np.int64)
-            initial = np.array(data["initial"], dtype=np.int64)
-        except (ValueError, TypeError):
-            raise MapError(f"{source}: grid and initial must be rectangular lists of integer rows") from None
-        if grid.ndim != 2 or initial.ndim != 2:
-            raise MapError(f"{source}: grid and initial must be rectangular lists of integer rows")
-        for arr, what in ((grid, "grid"), (initial, "initial")):
-            if ((arr < 0) | (arr >= NUM_CODES)).any():
-                raise MapError(f"{source}: {what} holds codes outside 0-9")
-        return cls(
-            grid,
-            initial,
-            six_stall_axis=data.get("six_stall_axis", "NS"),
-            name=str(data.get("name", "garage")),
-        )
+            return cls(grid, initial, six_stall_axis=axis, name=name)  # type: ignore[arg-type]
+        except MapError as exc:
+            raise MapError(f"{source}: {exc}") from None
 
     def canonical_hash(self) -> str:
         """SHA-256 of shape, grid and six-stall axis: equal garages hash equal."""

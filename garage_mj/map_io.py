@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from garage_mj.garage import Axis, Garage, MapError, validate_initial
+from garage_mj.garage import MAX_SIDE, Axis, Garage, MapError, validate_initial
 
 MAP_SUFFIX = ".txt"
 
@@ -60,7 +60,7 @@ def parse_map_text(text: str, source: str = "map") -> tuple[np.ndarray, str]:
             continue
         row = []
         for col, tok in enumerate(tokens):
-            if not tok.isdigit() or len(tok) != 1:
+            if len(tok) != 1 or tok not in "0123456789":  # not str.isdigit(): "²" is a digit to it
                 raise MapError(
                     f"{source}, line {lineno} (row {len(rows)}), column {col}: bad token {tok!r}; "
                     "cells are single codes 0-9 separated by spaces"
@@ -72,6 +72,9 @@ def parse_map_text(text: str, source: str = "map") -> tuple[np.ndarray, str]:
                 f"the first row has {len(rows[0])}"
             )
         rows.append(row)
+        if len(rows) > MAX_SIDE or len(row) > MAX_SIDE:
+            raise MapError(f"{source}, line {lineno}: the map is larger than {MAX_SIDE}x{MAX_SIDE} cells, "
+                           "the largest supported")
     if not rows:
         raise MapError(f"{source}: the map is empty; write one row of codes per line")
     return np.array(rows, dtype=np.int8), " ".join(description)

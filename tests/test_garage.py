@@ -34,7 +34,7 @@ def test_hash_depends_on_grid_and_axis(painted_tiny):
         (lambda d: d.update(grid=d["grid"][:-1]), "grid is 6x11"),
         (lambda d: d["grid"][0].__setitem__(0, 0), "fixed cell OBSTACLE became FREE"),
         (lambda d: d["grid"][2].__setitem__(3, 2), "OBSTACLE where the initial map is FREE"),
-        (lambda d: d["grid"][2].__setitem__(3, 11), "codes outside 0-9"),
+        (lambda d: d["grid"][2].__setitem__(3, 11), "row 2, column 3: 11 is not a block code"),
         (lambda d: d.update(six_stall_axis="XY"), "six_stall_axis"),
         (lambda d: d.pop("initial"), "missing key(s) initial"),
         (lambda d: d["grid"].__setitem__(1, [0, 1]), "rectangular"),

@@ -7,6 +7,10 @@ and ``manifest.json`` (sha256 of every file, metrics, garage hash, tool versions
 Writes are atomic: a pack is built in a hidden temp folder beside its final path, then renamed
 into place, so a crash never leaves a half pack at the final path. Re-running skips a complete
 pack (manifest present, every hash verifies) and rebuilds a partial or broken one.
+
+A pack is not trusted because it has a manifest: :func:`load_pack` also checks that every listed
+path stays inside the folder (no ``..``, no absolute path, no symlink), that ``garage.json`` is the
+garage the manifest's ``garage_hash`` and the folder name say, and that it is a usable garage.
 """
 
 from __future__ import annotations
@@ -15,7 +19,6 @@ import hashlib
 import json
 import re
 import shutil
-import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -28,7 +31,8 @@ from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import write_preview
 from garage_mj.export.xodr import write_xodr
 from garage_mj.errors import GarageMJError
-from garage_mj.garage import Garage
+from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir, make_temp_dir
+from garage_mj.garage import Garage, MapError, validate_garage
 from garage_mj.metrics import evaluate
 from garage_mj.scene.mjcf_scene import SCENE_XML, write_scene
 
@@ -64,7 +68,7 @@ def _versions() -> dict[str, str]:
 
 def pack_name(garage: Garage) -> str:
     """Folder name of ``garage``'s pack: a filesystem-safe name plus 12 hex digits of its hash."""
-    safe = re.sub(r"[^A-Za-z0-9._-]+", "-", garage.name or "garage").strip("-.") or "garage"
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "-", garage.name or "garage")[:64].strip("-.") or "garage"
     return f"{safe}_{garage.canonical_hash()[:12]}"
 
 
@@ -86,37 +90,70 @@ class Pack:
         return self.path / name
 
 
-def _problem(path: Path) -> str | None:
-    """Why ``path`` is not a complete pack, or None when it is."""
-    if not path.is_dir():
-        return "the folder is missing"
-    mf = path / MANIFEST
-    if not mf.is_file():
-        return f"{MANIFEST} missing"
-    try:
-        manifest = json.loads(mf.read_text())
-        files = manifest["files"]
-    except (json.JSONDecodeError, KeyError, TypeError):
-        return f"{MANIFEST} is unreadable"
-    for name in PACK_FILES:
-        if name not in files:
-            return f"{name} not in the manifest"
-    for name, digest in files.items():
-        f = path / name
-        if not f.is_file():
-            return f"{name} missing"
-        if _sha256(f) != digest:
-            return f"{name} does not match its hash in the manifest"
+def _member_problem(pack: Path, name: str) -> str | None:
+    """Why manifest entry ``name`` is not a plain file inside ``pack``, or None."""
+    parts = name.split("/")
+    if not name or name.startswith("/") or "\\" in name or any(p in ("", ".", "..") for p in parts):
+        return f"the manifest lists {name[:80]!r}, a path outside the pack"
+    p = pack
+    for part in parts:
+        p = p / part
+        if p.is_symlink():
+            return f"{name[:80]} is a symlink; a pack holds plain files only"
+    if not p.is_file():
+        return f"{name[:80]} missing"
     return None
 
 
+def _check(path: Path) -> tuple[str | None, dict]:
+    """(why ``path`` is not a complete, genuine pack or None, its manifest)."""
+    if path.is_symlink() or not path.is_dir():
+        return "the folder is missing", {}
+    mf = path / MANIFEST
+    if mf.is_symlink() or not mf.is_file():
+        return f"{MANIFEST} missing", {}
+    try:
+        manifest = json.loads(mf.read_bytes().decode("utf-8"))
+    except (ValueError, UnicodeDecodeError, RecursionError, OSError) as exc:
+        return f"{MANIFEST} is unreadable ({type(exc).__name__})", {}
+    files = manifest.get("files") if isinstance(manifest, dict) else None
+    if not isinstance(files, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in files.items()):
+        return f"{MANIFEST} has no 'files' table of name -> sha256", {}
+    if not isinstance(manifest.get("garage_hash"), str):
+        return f"{MANIFEST} has no garage_hash", {}
+    for name in PACK_FILES:
+        if name not in files:
+            return f"{name} not in the manifest", {}
+    for name, digest in files.items():
+        problem = _member_problem(path, name)
+        if problem is not None:
+            return problem, {}
+        if _sha256(path / name) != digest:
+            return f"{name} does not match its hash in the manifest", {}
+    try:
+        garage = Garage.from_json((path / "garage.json").read_bytes(), source=str(path / "garage.json"))
+    except MapError as exc:
+        return f"garage.json is not a garage ({exc})", {}
+    digest = garage.canonical_hash()
+    if digest != manifest["garage_hash"]:
+        return "garage.json is not the garage of the manifest's garage_hash", {}
+    if not path.name.endswith(f"_{digest[:12]}"):
+        return f"its folder name does not end in _{digest[:12]}, the hash of its garage.json", {}
+    return None, manifest
+
+
+def _problem(path: Path) -> str | None:
+    """Why ``path`` is not a complete pack, or None when it is."""
+    return _check(path)[0]
+
+
 def load_pack(path: str | Path) -> Pack:
-    """Open a pack folder, verifying every file against the manifest."""
+    """Open a pack folder, verifying every file and the garage against the manifest."""
     path = Path(path)
-    problem = _problem(path)
+    problem, manifest = _check(path)
     if problem is not None:
         raise PackError(f"pack {path} is incomplete: {problem}; re-run garage-mj export to repair it")
-    return Pack(path, json.loads((path / MANIFEST).read_text()))
+    return Pack(path, manifest)
 
 
 def _write_files(garage: Garage, tmp: Path) -> None:
@@ -151,18 +188,20 @@ def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False) -> 
     Skips a complete pack unless ``force``; a partial or broken one is rebuilt. Atomic: files go
     to a temp folder beside the target first, then one rename publishes the pack.
     """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    validate_garage(garage)
+    out_dir = ensure_dir(out_dir, "--out")
     final = out_dir / pack_name(garage)
     if not force and _problem(final) is None:
         return final
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=out_dir))
+    tmp = make_temp_dir(out_dir, f".{final.name}.", ".tmp")
     try:
         _write_files(garage, tmp)
         manifest = _manifest(garage, tmp)
-        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+        atomic_write(tmp / MANIFEST, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+        if final.is_symlink() or final.is_file():
+            final.unlink()
         if final.exists():  # partial, broken or forced: move the old one aside, then drop it
-            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=out_dir))
+            old = make_temp_dir(out_dir, f".{final.name}.", ".old")
             final.rename(old / final.name)
             tmp.rename(final)
             shutil.rmtree(old, ignore_errors=True)
@@ -178,28 +217,53 @@ def export_packs(
     garages: Iterable[Garage], out_dir: str | Path, *, force: bool = False, progress: bool = True,
     total: int | None = None,
 ) -> list[Path]:
-    """Export many packs under ``out_dir`` and write the set's ``index.json``; returns the folders."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for garage in tqdm(garages, total=total, desc="export", unit="pack", disable=not progress):
-        paths.append(export_pack(garage, out_dir, force=force))
-    write_index(out_dir)
+    """Export many packs under ``out_dir`` and write the set's ``index.json``; returns the folders.
+
+    Holds the lock of ``out_dir`` (a second export into it is refused, naming this one) and first
+    removes the hidden temp folders a killed export left behind. Every garage is validated
+    (:func:`garage_mj.garage.validate_garage`) before any file is written.
+    """
+    garages = [validate_garage(g) for g in garages]
+    out_dir = ensure_dir(out_dir, "--out")
+    with FolderLock(out_dir, "garage-mj export"):
+        clean_temp(out_dir)
+        paths = []
+        for garage in tqdm(garages, total=total, desc="export", unit="pack", disable=not progress):
+            paths.append(export_pack(garage, out_dir, force=force))
+        write_index(out_dir)
     return paths
 
 
+_TEMP = re.compile(r"^\..+\.(tmp|old)$")
+
+
+def clean_temp(out_dir: str | Path) -> list[Path]:
+    """Remove the hidden ``.<pack>.*.tmp``/``.old`` folders a killed export left; returns them.
+
+    Call it only while holding the folder's lock: a live export's temp folder looks the same.
+    """
+    gone = []
+    for p in Path(out_dir).iterdir():
+        if _TEMP.match(p.name) and p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+            gone.append(p)
+    return gone
+
+
 def write_index(out_dir: str | Path) -> Path:
-    """(Re)write ``index.json``: one entry per complete pack in ``out_dir``, sorted by folder."""
+    """(Re)write ``index.json``: one entry per complete pack in ``out_dir``, sorted by folder.
+
+    A folder that is not a complete, genuine pack is listed under ``skipped`` with the reason.
+    """
     out_dir = Path(out_dir)
-    entries = []
+    entries, skipped = [], []
     for folder in sorted(p for p in out_dir.iterdir() if p.is_dir() and not p.name.startswith(".")):
-        try:
-            pack = load_pack(folder)
-        except PackError:
+        problem, m = _check(folder)
+        if problem is not None:
+            skipped.append({"folder": folder.name, "problem": problem})
             continue
-        m = pack.manifest
-        entries.append(
-            {
+        try:
+            entry = {
                 "folder": folder.name,
                 "name": m["name"],
                 "garage_hash": m["garage_hash"],
@@ -210,10 +274,9 @@ def write_index(out_dir: str | Path) -> Path:
                 "usable": m["metrics"]["usable"],
                 "created": m["created"],
             }
-        )
-    index = {"format": PACK_FORMAT, "packs": entries, "count": len(entries)}
-    path = out_dir / INDEX
-    tmp = path.with_name(f".{INDEX}.tmp")
-    tmp.write_text(json.dumps(index, indent=2) + "\n")
-    tmp.replace(path)
-    return path
+        except (KeyError, TypeError):
+            skipped.append({"folder": folder.name, "problem": f"{MANIFEST} lacks the metrics"})
+            continue
+        entries.append(entry)
+    index = {"format": PACK_FORMAT, "packs": entries, "count": len(entries), "skipped": skipped}
+    return atomic_write(out_dir / INDEX, json.dumps(index, indent=2) + "\n")
