@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import time
 from collections.abc import Callable
@@ -37,6 +38,10 @@ FINAL_MODEL = "final_model.zip"
 LIBRARY = "library.sqlite"
 KEEP_CHECKPOINTS = 2  # older checkpoints are deleted
 PROGRESS_EVERY = 256  # [timesteps] between progress-bar refreshes
+
+
+MAX_BUFFER_SIZE = 10_000_000  # [transitions] ~40 GB at ~4 KB each: beyond that the run cannot fit in memory
+MAX_VIEW_SIZE = 31  # [cells] side of the observed window; larger than any supported garage needs
 
 
 class TrainingError(Exception):
@@ -73,6 +78,21 @@ class DQNConfig:
     max_errors: int = 10  # env: errors allowed per episode
 
     def __post_init__(self) -> None:
+        if not isinstance(self.net_arch, (list, tuple)):
+            raise ConfigError(f"DQNConfig: net_arch must be a list of positive integers such as [256, 256], "
+                              f"got {self.net_arch!r}")
+        for name in ("learning_rate", "max_grad_norm"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise ConfigError(f"DQNConfig: {name} must be a finite number > 0, got {v!r}")
+        if self.buffer_size > MAX_BUFFER_SIZE:
+            raise ConfigError(f"DQNConfig: buffer_size {self.buffer_size} is above {MAX_BUFFER_SIZE:,} transitions "
+                              "(~4 KB each); choose a smaller replay buffer")
+        if not (isinstance(self.view_size, int) and 1 <= self.view_size <= MAX_VIEW_SIZE and self.view_size % 2):
+            raise ConfigError(f"DQNConfig: view_size must be an odd integer from 1 to {MAX_VIEW_SIZE}, "
+                              f"got {self.view_size!r}")
+        if not isinstance(self.max_errors, int) or self.max_errors < 0:
+            raise ConfigError(f"DQNConfig: max_errors must be an integer >= 0, got {self.max_errors!r}")
         arch = tuple(self.net_arch)
         if not arch or not all(isinstance(w, int) and not isinstance(w, bool) and w > 0 for w in arch):
             raise ConfigError(f"DQNConfig: net_arch must be a list of positive integers, got {self.net_arch!r}")
