@@ -14,6 +14,7 @@ changes (the check reads bytes, then opens the file ``immutable``, which writes 
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import struct
 import time
@@ -25,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.errors import GarageMJError
-from garage_mj.garage import Garage
+from garage_mj.garage import Garage, MapError, validate_garage
 from garage_mj.metrics import evaluate
 
 #: Schema version written to ``PRAGMA user_version``; bump it with a migration.
@@ -65,6 +66,12 @@ _COLUMNS = (
     "difficulty, stalls, mean_road_length, mean_intersection_degree, created_at"
 )
 
+_KINDS: dict[str, type] = {
+    "id": int, "map": str, "run": str, "seed": int, "episode": int, "timestep": int, "hash": str,
+    "grid": list, "initial": list, "six_stall_axis": str, "coverage": float, "difficulty": float,
+    "stalls": int, "mean_road_length": float, "mean_intersection_degree": float, "created_at": str,
+}
+
 
 class LibraryError(GarageMJError):
     """A library file cannot be used (foreign, corrupt, newer schema, missing)."""
@@ -97,6 +104,26 @@ class GarageRecord:
             np.array(self.grid), np.array(self.initial), six_stall_axis=self.six_stall_axis,  # type: ignore[arg-type]
             name=f"{self.map}#{self.id}",
         )
+
+    def verify(self, where: str = "library") -> GarageRecord:
+        """Recompute the garage's hash and metrics from the stored grid; :class:`LibraryError` if any differ.
+
+        SQLite's own checks pass when one digit of a stored grid flips; this catches it before
+        the row is exported or driven. Also checks the garage with :func:`validate_garage`.
+        """
+        fix = "the row was altered after it was stored; delete it or restore the library from a backup"
+        try:
+            garage = validate_garage(self.garage)
+        except MapError as exc:
+            raise LibraryError(f"{where}, row id {self.id}: {exc}; {fix}") from None
+        if garage.canonical_hash() != self.hash:
+            raise LibraryError(f"{where}, row id {self.id}: the grid does not match its stored hash; {fix}")
+        m = evaluate(garage)
+        for col in ("coverage", "difficulty", "stalls", "mean_road_length", "mean_intersection_degree"):
+            if not math.isclose(getattr(m, col), getattr(self, col), rel_tol=1e-9, abs_tol=1e-9):
+                raise LibraryError(f"{where}, row id {self.id}: stored {col} {getattr(self, col)} is not the "
+                                   f"grid's ({getattr(m, col)}); {fix}")
+        return self
 
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -159,10 +186,13 @@ class Library:
     Args:
         path: the ``library.sqlite`` file.
         create: make the file if it does not exist (readers pass ``False`` to get a clear error).
+        readonly: open for reading only (default: ``not create``), so a read-only file or folder
+            can be listed; writing through such a library is refused by SQLite.
     """
 
-    def __init__(self, path: str | Path, *, create: bool = True) -> None:
+    def __init__(self, path: str | Path, *, create: bool = True, readonly: bool | None = None) -> None:
         self.path = Path(path)
+        self.readonly = (not create) if readonly is None else readonly
         exists = self.path.exists()
         if not exists and not create:
             raise LibraryError(f"no library at {self.path}; train first (garage-mj train) or pass --library")
@@ -171,6 +201,11 @@ class Library:
         version = _check_header(self.path) if exists else 0
         if version:
             _check_body(self.path)
+        if self.readonly:
+            if not exists or not version:
+                raise LibraryError(f"{self.path} is an empty file, not a library; train first (garage-mj train)")
+            self._con = self._connect_readonly()
+            return
         if not exists:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
@@ -183,6 +218,18 @@ class Library:
             self._con.execute("PRAGMA synchronous = NORMAL")  # WAL + NORMAL: durable across a process kill
         except sqlite3.DatabaseError as exc:
             raise LibraryError(f"{self.path}: cannot open the library ({exc})") from None
+
+    def _connect_readonly(self) -> sqlite3.Connection:
+        """``mode=ro`` (sees a live writer's WAL); ``immutable`` where SQLite may not create its -shm."""
+        uri = self.path.resolve().as_uri()
+        for query in ("mode=ro", "immutable=1"):
+            try:
+                con = sqlite3.connect(f"{uri}?{query}", uri=True, timeout=BUSY_TIMEOUT_S, isolation_level=None)
+                con.execute("SELECT count(*) FROM garages").fetchone()
+                return con
+            except sqlite3.DatabaseError as exc:
+                err = exc
+        raise LibraryError(f"{self.path}: cannot open the library for reading ({err})") from None
 
     def _create_schema(self) -> None:
         con = self._con
@@ -240,13 +287,36 @@ class Library:
 
     # -- reading ----------------------------------------------------------------------------------
     def _record(self, row: tuple) -> GarageRecord:
+        """A row as a record; a damaged row (bad JSON, text in a numeric column) is a one-line error."""
         values = list(row)
-        values[7] = json.loads(values[7])
-        values[8] = json.loads(values[8])
+        where = f"{self.path}, row id {values[0]}"
+        fix = "the library is damaged: delete that row or restore the file from a backup"
+        for i, name in ((7, "grid"), (8, "initial")):
+            try:
+                values[i] = json.loads(values[i]) if isinstance(values[i], str) else None
+            except (ValueError, RecursionError):
+                values[i] = None
+            if not isinstance(values[i], list):
+                raise LibraryError(f"{where}: column {name} is not a JSON list of rows; {fix}")
+        for i, name in enumerate(_COLUMNS.split(", ")):
+            kind = _KINDS[name]
+            v = values[i]
+            ok = (isinstance(v, str) if kind is str else isinstance(v, list) if kind is list
+                  else isinstance(v, int) if kind is int
+                  else isinstance(v, (int, float)) and math.isfinite(v))
+            if not ok:
+                raise LibraryError(f"{where}: column {name} holds {str(v)[:30]!r}, not a "
+                                   f"{kind.__name__}; {fix}")
         return GarageRecord(*values)
+
+    def verified(self, records: list[GarageRecord]) -> list[GarageRecord]:
+        """``records``, each checked by :meth:`GarageRecord.verify` (for export and cruise)."""
+        return [r.verify(str(self.path)) for r in records]
 
     def get(self, id: int) -> GarageRecord:
         """The record with ``id``; :class:`LibraryError` if there is none."""
+        if not -(2**63) <= int(id) < 2**63:
+            raise LibraryError(f"{self.path} has no garage with id {id}; list them with garage-mj library ls")
         row = self._con.execute(f"SELECT {_COLUMNS} FROM garages WHERE id = ?", (int(id),)).fetchone()
         if row is None:
             raise LibraryError(f"{self.path} has no garage with id {id}; list them with garage-mj library ls")

@@ -63,6 +63,14 @@ def positive_int(text: str) -> int:
     return _int_at_least(text, 1, "must be >= 1")
 
 
+def seed(text: str) -> int:
+    """argparse type: a random seed, an integer in [0, 2**32) as numpy and SB3 require."""
+    n = _int_at_least(text, 0, "is negative; seeds are integers from 0 to 4294967295")
+    if n >= 2**32:
+        raise argparse.ArgumentTypeError(f"{text} is too large; seeds are integers from 0 to 4294967295")
+    return n
+
+
 def add_filters(p: argparse.ArgumentParser) -> None:
     """The library filters: --map, --difficulty LO HI, --coverage LO HI, --limit N."""
     p.add_argument("--map", help="only garages of this map (name as stored, e.g. tiny_7x11)")

@@ -8,7 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import add_filters, filters, non_negative_int, positive_int, unit_range
+from garage_mj.cli._common import add_filters, filters, non_negative_int, positive_int, seed, unit_range
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tests", type=positive_int, default=50, help="tests per garage (default 50)")
     p.add_argument("--driver", default="vision", help="built-in driver (waypoint, vision) or module:Class")
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
-    p.add_argument("--seed", type=int, default=0, help="run seed; test seeds derive from it (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="run seed; test seeds derive from it (default 0)")
     p.add_argument("--out", type=Path, default=Path("cruise"), help="output folder (default ./cruise)")
     p.add_argument("--action-type", choices=("discrete", "continuous"), default="discrete",
                    help="the paper's 4 actions or [throttle, steer] (default discrete)")
@@ -80,6 +80,7 @@ def sources(args: argparse.Namespace) -> list:
                 records = records[: args.limit] if args.limit is not None else records
             else:
                 records = lib.query(limit=args.limit, **f)
+            records = lib.verified(records)  # hash and metrics recomputed: an altered row is refused by id
         found = [CruiseSource.from_record(r) for r in records]
     if not found:
         raise UserError("no garages match; check the source folder or loosen the filters")

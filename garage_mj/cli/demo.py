@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from garage_mj.cli._common import positive_int
+from garage_mj.cli._common import positive_int, seed
 from garage_mj.demo import DemoConfig, demo_config, run_demo
 
 _D = DemoConfig()
@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tests", type=positive_int, default=_D.tests,
                    help=f"cruise tests per garage and driver (default: {_D.tests})")
     p.add_argument("--workers", type=positive_int, default=_D.workers, help=f"cruise worker processes (default: {_D.workers})")
-    p.add_argument("--seed", type=int, default=_D.seed, help=f"seed of sampling and tests (default: {_D.seed})")
+    p.add_argument("--seed", type=seed, default=_D.seed, help=f"seed of sampling and tests (default: {_D.seed})")
     p.add_argument("--out", default=_D.out, help=f"output folder (default: {_D.out})")
     p.set_defaults(func=run)
 

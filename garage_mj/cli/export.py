@@ -50,23 +50,24 @@ def _from_library(args: argparse.Namespace) -> list:
             )
         except ValueError as exc:
             raise UserError(str(exc)) from None
-    if not records:
-        raise UserError(f"no garage in {args.library} matches the filters; widen them or check --map")
+        if not records:
+            raise UserError(f"no garage in {args.library} matches the filters; widen them or check --map")
+        records = lib.verified(records)  # hash and metrics recomputed: an altered row is refused by id
     return [r.garage for r in records]
 
 
 def run(args: argparse.Namespace) -> int:
     from garage_mj.export.pack import export_packs
-    from garage_mj.garage import Garage
+    from garage_mj.garage import Garage, validate_garage
 
     if args.garage is not None:
         if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.limit)):
             raise UserError("--map, --difficulty, --coverage and --limit filter a --library, not a --garage")
         try:
-            text = args.garage.read_text()
+            text = args.garage.read_bytes()
         except OSError as exc:
             raise UserError(f"cannot read {args.garage}: {exc.strerror}") from None
-        garages = [Garage.from_json(text, source=str(args.garage))]
+        garages = [validate_garage(Garage.from_json(text, source=str(args.garage)), str(args.garage))]
     else:
         garages = _from_library(args)
     paths = export_packs(garages, args.out, force=args.force, progress=not args.quiet, total=len(garages))

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import add_filters, filters, non_negative_int, user_errors
+from garage_mj.cli._common import add_filters, filters, non_negative_int, seed, user_errors
 
 HEADER = f"{'id':>6}  {'map':<18} {'seed':>4} {'episode':>7} {'timestep':>9}  {'diff':>5} {'cov':>5} {'stalls':>6} {'E[X]':>5} {'E[Y]':>5}"
 
@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     sample = lsub.add_parser("sample", help="a seeded sample, spread evenly over difficulty")
     sample.add_argument("library", type=Path, metavar="LIBRARY", help="library file (library.sqlite)")
     sample.add_argument("-n", type=non_negative_int, required=True, help="garages to draw")
-    sample.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    sample.add_argument("--seed", type=seed, default=0, help="random seed (default: 0)")
     sample.add_argument("--uniform", action="store_true", help="draw uniformly, not stratified by difficulty")
     add_filters(sample)
     sample.set_defaults(func=_sample)

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import positive_int, user_errors
+from garage_mj.cli._common import positive_int, seed, user_errors
 
 ALGOS = ("dqn",)
 
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--map", required=True, help="shipped map name (garage-mj maps list) or map file")
     p.add_argument("--timesteps", required=True, type=positive_int, help="total timesteps of the run")
-    p.add_argument("--seed", required=True, type=int, help="random seed of the run")
+    p.add_argument("--seed", required=True, type=seed, help="random seed of the run")
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
     p.add_argument("--algo", default="dqn", choices=ALGOS, help="RL algorithm (default: dqn)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")

@@ -132,6 +132,7 @@ def _check(path: Path) -> tuple[str | None, dict]:
             return f"{name} does not match its hash in the manifest", {}
     try:
         garage = Garage.from_json((path / "garage.json").read_bytes(), source=str(path / "garage.json"))
+        validate_garage(garage, str(path / "garage.json"))
     except MapError as exc:
         return f"garage.json is not a garage ({exc})", {}
     digest = garage.canonical_hash()
