@@ -35,19 +35,19 @@ def _say(msg: str) -> None:
     print(f"[demo] {msg}", flush=True)
 
 
-def _train(cfg: DemoConfig, out: Path) -> tuple[Path, list[Path]]:
+def _train(cfg: DemoConfig, out: Path, map_name: str) -> tuple[Path, list[Path]]:
     from garage_mj.training import read_manifest, train
 
     library = out / "library.sqlite"
     runs = []
     for s in cfg.train_seeds:
-        run = out / "runs" / f"{cfg.map}_s{s}"
+        run = out / "runs" / f"{map_name}_s{s}"  # the map's name, never its path: runs stay inside out
         done = (run / "run.json").exists() and read_manifest(run).get("status") == "finished"
         if done and read_manifest(run).get("timesteps", 0) >= cfg.timesteps:
-            _say(f"training {cfg.map} seed {s}: already finished, reusing {run}")
+            _say(f"training {map_name} seed {s}: already finished, reusing {run}")
         else:
             resume = (run / "run.json").exists()
-            _say(f"training DQN on {cfg.map}, seed {s}, {cfg.timesteps} timesteps")
+            _say(f"training DQN on {map_name}, seed {s}, {cfg.timesteps} timesteps")
             train(cfg.map, cfg.timesteps, s, run, resume=resume, library_path=library)
         runs.append(run)
     return library, runs
@@ -78,6 +78,7 @@ def run_demo(cfg: DemoConfig) -> Path:
     from garage_mj import plots
     from garage_mj.export.pack import export_pack
     from garage_mj.library import Library
+    from garage_mj.map_io import load_map
     from garage_mj.report import GalleryItem, ReportData, write_report
 
     t0 = time.perf_counter()
@@ -85,18 +86,19 @@ def run_demo(cfg: DemoConfig) -> Path:
     figs = out / FIGURES
     figs.mkdir(parents=True, exist_ok=True)
 
-    library_path, runs = _train(cfg, out)
+    map_name = load_map(cfg.map).name  # the library stores garages under the map's name, not its path
+    library_path, runs = _train(cfg, out, map_name)
     with Library(library_path) as lib:
-        total = lib.count(map=cfg.map)
+        total = lib.count(map=map_name)
         if total == 0:
             from garage_mj.cli import UserError
 
             raise UserError(f"training on {cfg.map} stored no usable garage; raise --timesteps")
-        points = lib.points(map=cfg.map)
-        sample = lib.sample(cfg.garages, seed=cfg.seed, stratify="difficulty", map=cfg.map)
+        points = lib.points(map=map_name)
+        sample = lib.sample(cfg.garages, seed=cfg.seed, stratify="difficulty", map=map_name)
     _say(f"library {library_path}: {total} usable garages; sampled {len(sample)} stratified by difficulty")
     convergence = plots.convergence(runs, figs / "convergence.png")
-    heatmap = plots.heatmap(points, figs / "heatmap.png", title=cfg.map)
+    heatmap = plots.heatmap(points, figs / "heatmap.png", title=map_name)
 
     _say(f"exporting {len(sample)} asset packs")
     packs_dir = out / "packs"
@@ -117,7 +119,7 @@ def run_demo(cfg: DemoConfig) -> Path:
 
     columns, rows, regression_png, regression_text, kpis = _cruise(cfg, packs, out, figs)
     data = ReportData(
-        title=f"garage-mj demo: {cfg.map}",
+        title=f"garage-mj demo: {map_name}",
         subtitle=f"DQN {cfg.timesteps} timesteps x {len(cfg.train_seeds)} seeds, "
         f"{len(sample)} garages, {cfg.tests} cruise tests per garage and driver",
         kpis={"usable garages": str(total), "asset packs": str(len(packs)), **kpis},

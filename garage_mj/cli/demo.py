@@ -6,6 +6,7 @@ import argparse
 
 from garage_mj.cli._common import positive_int, seed
 from garage_mj.demo import DemoConfig, demo_config, run_demo
+from garage_mj.fsutil import FolderLock
 
 _D = DemoConfig()
 
@@ -37,6 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     cfg = demo_config(map=args.map, timesteps=args.timesteps, garages=args.garages, tests=args.tests,
                       workers=args.workers, seed=args.seed, out=args.out)
-    report = run_demo(cfg)
+    with FolderLock(cfg.out, "garage-mj demo"):  # a second demo into the same --out is refused
+        report = run_demo(cfg)
     print(f"open {report} in a browser")
     return 0

@@ -39,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 @user_errors
 def run(args: argparse.Namespace) -> int:
+    from garage_mj.fsutil import FolderLock
     from garage_mj.training import load_dqn_config, train
 
     overrides = {"checkpoint_every": args.checkpoint_every} if args.checkpoint_every else {}
@@ -47,8 +48,9 @@ def run(args: argparse.Namespace) -> int:
     config = load_dqn_config(args.config, **overrides) if (args.config or overrides) else None
     if args.resume and config is not None and args.config is None:
         raise UserError("--checkpoint-every cannot change a resumed run; drop it or start a new --out")
-    m = train(args.map, args.timesteps, args.seed, args.out, config=config, resume=args.resume,
-              library_path=args.library, progress=not args.no_progress)
+    with FolderLock(args.out, "garage-mj train"):  # a second run into the same --out is refused
+        m = train(args.map, args.timesteps, args.seed, args.out, config=config, resume=args.resume,
+                  library_path=args.library, progress=not args.no_progress)
     s = m.get("last_session")
     print(f"run {m['run']}: {m['timesteps']} timesteps, {m['episodes']} episodes, "
           f"{m['garages_stored']} garages in {m['library']}")

@@ -26,6 +26,9 @@ from pathlib import Path
 
 from lxml import etree
 
+#: No entity expansion, no DTD or network fetches: the files parsed here may come from anywhere.
+_SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False)
+
 QC_ENV = "GARAGE_MJ_QC_OPENDRIVE"  # optional path to a qc_opendrive executable
 _REPO = Path(__file__).resolve().parents[2]
 _PROBE = Path(__file__).with_name("carla_probe.py")
@@ -82,7 +85,7 @@ class QcReport:
 # -- CARLA ---------------------------------------------------------------------------------------
 def _gates(text: str) -> tuple[list[int], list[int], list[int]]:
     """Road ids, and (road, lane) of the entrance and exit lanes, from the writer's road names."""
-    root = etree.fromstring(text.encode())
+    root = etree.fromstring(text.encode(), _SAFE_PARSER)
     roads = [int(r.get("id")) for r in root.iter("road")]
     ent = ext = None
     for r in root.iter("road"):
@@ -164,7 +167,7 @@ def _config(xodr: Path, result: Path) -> str:
 
 def parse_xqar(path: Path, xodr: Path) -> QcReport:
     """Issues and checker statuses of one XQAR result file."""
-    root = etree.parse(str(path)).getroot()
+    root = etree.parse(str(path), _SAFE_PARSER).getroot()
     issues, status = [], {"completed": 0, "skipped": 0, "error": 0}
     for checker in root.iter("Checker"):
         st = checker.get("status", "")
