@@ -8,6 +8,7 @@ of the 13x13 aligned map (SPEC section 5, :data:`PAPER_TABLE`) and a regression 
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -18,6 +19,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from garage_mj.fsutil import atomic_write  # noqa: E402
 
 #: SPEC section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 garages.
 PAPER_TABLE: tuple[tuple[float, float, float, float], ...] = (
@@ -100,8 +103,7 @@ def regression_plot(
     ax.legend(fontsize=8, loc="lower left")
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp.png")
-    fig.savefig(tmp, bbox_inches="tight")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight")
     plt.close(fig)
-    tmp.replace(out)
-    return out
+    return atomic_write(out, buf.getvalue())

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from garage_mj.config import load_config
+from garage_mj.fsutil import atomic_write
 
 FIGURES = "figures"
 
@@ -137,7 +138,7 @@ def run_demo(cfg: DemoConfig) -> Path:
         ],
     )
     report = write_report(data, out)
-    (out / "demo.json").write_text(json.dumps({"config": cfg.__dict__, "seconds": time.perf_counter() - t0}, default=str))
+    atomic_write(out / "demo.json", json.dumps({"config": cfg.__dict__, "seconds": time.perf_counter() - t0}, default=str))
     _say(f"report: {report}  ({time.perf_counter() - t0:.0f} s)")
     return report
 

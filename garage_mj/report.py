@@ -13,6 +13,8 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from garage_mj.fsutil import atomic_write
+
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2rem auto;max-width:1100px;
 color:#1d232a;padding:0 1rem;line-height:1.45}
@@ -140,7 +142,4 @@ def write_report(data: ReportData, out_dir: Path, name: str = "report.html") -> 
     if missing:
         raise FileNotFoundError(f"report images missing: {', '.join(str(m) for m in missing)}")
     path = out_dir / name
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(render_html(data, out_dir), encoding="utf-8")
-    tmp.replace(path)
-    return path
+    return atomic_write(path, render_html(data, out_dir))

@@ -7,12 +7,15 @@ Rendering RGB is the slow part of a test, so videos are small (320 x 240 at the 
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
 import mujoco
 import numpy as np
 
+from garage_mj.fsutil import public_mode
 from garage_mj.sensors import Camera, CameraConfig
 
 VIDEO_SIZE = (320, 240)  # [px] width, height
@@ -83,9 +86,12 @@ def record_video(
                                          segmentation=False))
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.stem + ".tmp.mp4")
+    fd, name = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=".tmp.mp4", dir=out.parent)  # O_EXCL, unpredictable
+    os.close(fd)
+    tmp = Path(name)
     writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(round(1 / env.dt)), (width, height))
     if not writer.isOpened():
+        tmp.unlink(missing_ok=True)
         env.close()
         cam.close()
         raise RuntimeError(f"opencv cannot write MP4 to {tmp}; install opencv-python-headless with FFmpeg")
@@ -104,9 +110,13 @@ def record_video(
             if "outcome" in info:
                 break
             obs, _, _, _, info = env.step(drv.act(obs))
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     finally:
         writer.release()
         cam.close()
         env.close()
+    os.chmod(tmp, public_mode())
     tmp.replace(out)
     return out

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import add_filters, filters, non_negative_int, seed, user_errors
+from garage_mj.fsutil import atomic_write
 
 HEADER = f"{'id':>6}  {'map':<18} {'seed':>4} {'episode':>7} {'timestep':>9}  {'diff':>5} {'cov':>5} {'stalls':>6} {'E[X]':>5} {'E[Y]':>5}"
 
@@ -120,7 +121,7 @@ def _export(args: argparse.Namespace) -> int:
         return 0
     try:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text)
+        atomic_write(args.out, text)
     except OSError as exc:
         raise UserError(f"cannot write {args.out}: {exc.strerror}") from None
     print(f"{len(records)} garage(s) -> {args.out}", file=sys.stderr)

@@ -27,10 +27,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from garage_mj.errors import GarageMJError
 from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import write_preview
 from garage_mj.export.xodr import write_xodr
-from garage_mj.errors import GarageMJError
 from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir, make_temp_dir
 from garage_mj.garage import Garage, MapError, validate_garage
 from garage_mj.metrics import evaluate

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from lxml import etree
 
+from garage_mj.fsutil import atomic_write
 from garage_mj.garage import Garage
 from garage_mj.scene.roadmodel import Link, ParkingSpace, Road, RoadModel, build_road_model
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
@@ -183,8 +184,5 @@ def write_xodr(
     text = to_string(model)
     out = None
     if path is not None:
-        out = Path(path)
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(out)
+        out = atomic_write(path, text)
     return XodrResult(text, model, out)
