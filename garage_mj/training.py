@@ -62,18 +62,19 @@ class DQNConfig:
     batch_size: int = 64
     tau: float = 1.0  # 1: hard target-network update
     gamma: float = 0.99
-    train_freq: int = 4  # [timesteps] between gradient updates
-    gradient_steps: int = 1
+    train_freq: int = 1  # [vector steps] between updates; a vector step is n_envs timesteps
+    gradient_steps: int = 2  # gradient steps per update: with n_envs 8, one per 4 timesteps
     n_steps: int = 1  # n-step returns
     target_update_interval: int = 1_000  # [timesteps]
     exploration_fraction: float = 0.2  # share of the run over which epsilon decays
     exploration_initial_eps: float = 1.0
     exploration_final_eps: float = 0.05
     max_grad_norm: float = 10.0
-    net_arch: tuple[int, ...] = (256, 256)  # hidden layer widths of the Q-network
+    net_arch: tuple[int, ...] = (64, 64)  # hidden layer widths of the Q-network
     checkpoint_every: int = 25_000  # [timesteps] between checkpoints
     save_replay_buffer: bool = False  # also checkpoint the replay buffer (large: buffer_size x 4 KB)
     torch_threads: int = 1  # CPU threads for torch; 1 is fastest for this small MLP
+    n_envs: int = 8  # envs stepped together (DummyVecEnv, one process): one batched action choice
     view_size: int = 7  # env: side of the observed window (odd)
     max_errors: int = 10  # env: errors allowed per episode
 
@@ -98,7 +99,7 @@ class DQNConfig:
             raise ConfigError(f"DQNConfig: net_arch must be a list of positive integers, got {self.net_arch!r}")
         object.__setattr__(self, "net_arch", arch)
         for name in ("buffer_size", "batch_size", "train_freq", "gradient_steps", "n_steps",
-                     "target_update_interval", "checkpoint_every", "torch_threads"):
+                     "target_update_interval", "checkpoint_every", "torch_threads", "n_envs"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"DQNConfig: {name} must be >= 1, got {getattr(self, name)}")
         if self.learning_starts < 0:
@@ -115,13 +116,21 @@ class DQNConfig:
                 "gradient_steps", "n_steps", "target_update_interval", "exploration_fraction",
                 "exploration_initial_eps", "exploration_final_eps", "max_grad_norm")
         kw = {k: getattr(self, k) for k in keys}
-        kw["policy_kwargs"] = {"net_arch": list(self.net_arch)}
+        kw["policy_kwargs"] = {"net_arch": list(self.net_arch), "optimizer_kwargs": _adam_kwargs()}
         return kw
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
         d["net_arch"] = list(self.net_arch)
         return d
+
+
+def _adam_kwargs() -> dict[str, Any]:
+    """Fused Adam where torch has it on CPU (>= 2.4): the same update, one kernel instead of a
+    loop over the parameter tensors (66 us instead of 208 us per step for the (64, 64) Q-network)."""
+    import torch
+
+    return {"fused": True} if torch.torch_version.TorchVersion(torch.__version__) >= "2.4" else {}
 
 
 def load_dqn_config(source: str | Path | dict[str, Any] | None = None, **overrides: Any) -> DQNConfig:
@@ -175,15 +184,30 @@ class StepTimer(gym.Wrapper):
         return out
 
 
-def make_env(map: str, config: DQNConfig, monitor_path: Path | None) -> StepTimer:
-    """GarageGenEnv -> FinalGarage -> Monitor (episode returns to ``monitor_path``) -> StepTimer."""
-    from stable_baselines3.common.monitor import Monitor
-
+def make_env(map: str, config: DQNConfig) -> StepTimer:
+    """GarageGenEnv -> FinalGarage -> StepTimer."""
     env: gym.Env = GarageGenEnv(map=map, view_size=config.view_size, max_errors=config.max_errors)
-    env = FinalGarage(env)
-    fresh = monitor_path is None or not monitor_path.exists()
-    env = Monitor(env, str(monitor_path) if monitor_path else None, override_existing=fresh)
-    return StepTimer(env)
+    return StepTimer(FinalGarage(env))
+
+
+def make_vec_env(map: str, config: DQNConfig, monitor_path: Path | None):
+    """``config.n_envs`` envs in one DummyVecEnv under one VecMonitor; returns (vec env, the envs).
+
+    The VecMonitor writes every finished episode (return, length) of all envs to ``monitor_path``
+    in the order they end, the order :class:`LibraryCallback` counts them in; an existing file is
+    appended to (resume), a missing one is created.
+    """
+    from stable_baselines3.common.monitor import ResultsWriter
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+    envs = [make_env(map, config) for _ in range(config.n_envs)]
+    venv = VecMonitor(DummyVecEnv([lambda e=e: e for e in envs]))
+    if monitor_path is not None:
+        venv.results_writer = ResultsWriter(
+            str(monitor_path), header={"t_start": venv.t_start, "env_id": "garage_mj/GarageGen-v0"},
+            override_existing=not monitor_path.exists(),
+        )
+    return venv, envs
 
 
 # -- callbacks ------------------------------------------------------------------------------------
@@ -250,9 +274,15 @@ class CheckpointEvery(BaseCallback):
     def __init__(self, every: int, save: Callable[[], None]) -> None:
         super().__init__()
         self.every, self.save = every, save
+        self.last = 0
+
+    def _on_training_start(self) -> None:
+        self.last = self.num_timesteps // self.every
 
     def _on_step(self) -> bool:
-        if self.num_timesteps % self.every == 0:
+        # with n_envs > 1 the count moves n_envs at a time: save on crossing each multiple
+        if self.num_timesteps // self.every > self.last:
+            self.last = self.num_timesteps // self.every
             self.save()
         return True
 
@@ -381,10 +411,7 @@ def train(
         (out / MONITOR).unlink(missing_ok=True)
 
     torch.set_num_threads(config.torch_threads)
-    env = make_env(map, config, out / MONITOR)
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    venv = DummyVecEnv([lambda: env])
+    venv, envs = make_vec_env(map, config, out / MONITOR)
     if checkpoint:
         model = DQN.load(checkpoint[0], env=venv, device="cpu")
         buffer = checkpoint[0].with_name(checkpoint[0].stem + "_replay.pkl")
@@ -419,7 +446,7 @@ def train(
     cbs = [lib_cb, CheckpointEvery(config.checkpoint_every, save_checkpoint), bar, *(callbacks or [])]
     manifest["status"] = "running"
     _write_json(out / MANIFEST, manifest)
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     steps0 = model.num_timesteps
     try:
         if timesteps > done_steps:
@@ -432,7 +459,7 @@ def train(
         _write_json(out / MANIFEST, manifest)
         raise
     finally:
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
         bar.close()
         library.close()
         venv.close()
@@ -444,7 +471,9 @@ def train(
         last_session={
             "timesteps": steps, "wall_s": round(wall, 3),
             "timesteps_per_s": round(steps / wall, 1) if wall > 0 else None,
-            "env_share": round(env.seconds / wall, 4) if wall > 0 else None,
+            # CPU time of this process: the throughput figure that other jobs on the machine disturb least
+            "cpu_s": round(cpu, 3), "timesteps_per_cpu_s": round(steps / cpu, 1) if cpu > 0 else None,
+            "env_share": round(sum(e.seconds for e in envs) / wall, 4) if wall > 0 else None,
             "usable_episodes": lib_cb.usable, "garages_stored": lib_cb.stored,
         },
     )

@@ -100,14 +100,15 @@ def test_crash_then_resume_keeps_every_garage_once(tmp_path):
 def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path):
     out = tmp_path / "run"
     with pytest.raises(KeyboardInterrupt):
-        train("tiny_7x11", 2500, 1, out, FAST, progress=False, callbacks=[Crash(1500, KeyboardInterrupt())])
+        # multiples of n_envs (8): the vectorised run counts 8 timesteps per step
+        train("tiny_7x11", 2400, 1, out, FAST, progress=False, callbacks=[Crash(1600, KeyboardInterrupt())])
     assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
     ckpt = latest_checkpoint(out)
-    assert ckpt is not None and ckpt[1]["timesteps"] == 1500
-    manifest = train("tiny_7x11", 2500, 1, out, progress=False, resume=True)
-    assert manifest["timesteps"] == 2500 and manifest["last_session"]["timesteps"] == 1000
-    again = train("tiny_7x11", 2500, 1, out, progress=False, resume=True)
-    assert again["timesteps"] == 2500  # a finished run resumes to nothing
+    assert ckpt is not None and ckpt[1]["timesteps"] == 1600
+    manifest = train("tiny_7x11", 2400, 1, out, progress=False, resume=True)
+    assert manifest["timesteps"] == 2400 and manifest["last_session"]["timesteps"] == 800
+    again = train("tiny_7x11", 2400, 1, out, progress=False, resume=True)
+    assert again["timesteps"] == 2400  # a finished run resumes to nothing
 
 
 def test_refuses_to_mix_runs(tmp_path, run3000):
@@ -125,7 +126,7 @@ def test_config_from_toml(tmp_path):
     good.write_text("[dqn]\nlearning_rate = 0.001\nnet_arch = [64, 64]\n")
     cfg = load_dqn_config(good)
     assert cfg.learning_rate == 0.001 and cfg.net_arch == (64, 64)
-    assert cfg.dqn_kwargs()["policy_kwargs"] == {"net_arch": [64, 64]}
+    assert cfg.dqn_kwargs()["policy_kwargs"]["net_arch"] == [64, 64]
     bad = tmp_path / "bad.toml"
     bad.write_text("learning_rat = 0.001\n")
     with pytest.raises(ConfigError, match="unknown key.*learning_rat"):
