@@ -210,7 +210,8 @@ def read_tests(path: Path) -> list[dict[str, str]]:
     if not path.is_file():
         return []
     text = path.read_bytes().decode("utf-8", errors="replace")
-    lines = text.splitlines(keepends=True)
+    parts = text.split("\n")  # not splitlines(): it also breaks at \r, \x0b, \u2028... inside fields
+    lines = [p + "\n" for p in parts[:-1]] + ([parts[-1]] if parts[-1] else [])
     first = next(csv.reader(lines[:1]), [])
     has_header = bool(lines) and lines[0].endswith("\n") and _is_header(first)
     columns = first if has_header else list(TEST_COLUMNS)

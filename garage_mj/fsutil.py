@@ -59,9 +59,20 @@ def write_error(path: str | Path, exc: OSError) -> GarageMJError:
 
 
 def atomic_write(path: str | Path, data: str | bytes) -> Path:
-    """Write ``data`` to ``path`` atomically and durably (mkstemp in its folder, fsync, rename)."""
+    """Write ``data`` to ``path`` atomically and durably (mkstemp in its folder, fsync, rename).
+
+    A path that names a device or a pipe (``/dev/stdout``) is written in place: renaming over
+    it would replace the device with a file.
+    """
     path = Path(path)
     raw = data.encode() if isinstance(data, str) else data
+    if path.exists() and not path.is_file():
+        if path.is_dir():
+            raise GarageMJError(f"cannot write {path}: it is a folder; name a file")
+        with open(path, "wb") as f:
+            f.write(raw)
+            f.flush()
+        return path
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:

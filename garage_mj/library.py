@@ -220,9 +220,15 @@ class Library:
             raise LibraryError(f"{self.path}: cannot open the library ({exc})") from None
 
     def _connect_readonly(self) -> sqlite3.Connection:
-        """``mode=ro`` (sees a live writer's WAL); ``immutable`` where SQLite may not create its -shm."""
+        """A connection that writes nothing, not even ``-wal``/``-shm`` files.
+
+        With no ``-wal`` beside the file (no writer is live, none crashed) the file is opened
+        ``immutable``; otherwise ``mode=ro``, which reads the writer's WAL (and falls back to
+        ``immutable`` where SQLite cannot use the ``-shm``, e.g. in a read-only folder).
+        """
         uri = self.path.resolve().as_uri()
-        for query in ("mode=ro", "immutable=1"):
+        live = Path(f"{self.path}-wal").exists()
+        for query in ("mode=ro", "immutable=1") if live else ("immutable=1",):
             try:
                 con = sqlite3.connect(f"{uri}?{query}", uri=True, timeout=BUSY_TIMEOUT_S, isolation_level=None)
                 con.execute("SELECT count(*) FROM garages").fetchone()

@@ -7,9 +7,8 @@ import json
 import sys
 from pathlib import Path
 
-from garage_mj.cli import UserError
 from garage_mj.cli._common import add_filters, filters, non_negative_int, seed, user_errors
-from garage_mj.fsutil import atomic_write
+from garage_mj.fsutil import atomic_write, write_error
 
 HEADER = f"{'id':>6}  {'map':<18} {'seed':>4} {'episode':>7} {'timestep':>9}  {'diff':>5} {'cov':>5} {'stalls':>6} {'E[X]':>5} {'E[Y]':>5}"
 
@@ -123,6 +122,6 @@ def _export(args: argparse.Namespace) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(args.out, text)
     except OSError as exc:
-        raise UserError(f"cannot write {args.out}: {exc.strerror}") from None
+        raise write_error(args.out, exc) from None
     print(f"{len(records)} garage(s) -> {args.out}", file=sys.stderr)
     return 0

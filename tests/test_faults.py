@@ -1,0 +1,504 @@
+"""Fuzz and fault suite: bad input gets one line and changes nothing; a crash or a second run loses nothing.
+
+Malformed garages, maps, manifests, configs and library rows go through the real CLI and must
+give one error line, a non-zero exit, no traceback, and leave every file as it was. Real
+``kill -9`` of ``cruise`` (during its first test) and of ``export --library`` (mid-way) are
+resumed and compared with uninterrupted runs; two cruise runs into one folder are started at
+once. Tiny 7x11 garages and a handful of tests keep it fast.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import hashlib
+import io
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from garage_mj.cli import main
+from garage_mj.cruise import TEST_COLUMNS, read_tests
+from garage_mj.export.pack import PackError, export_pack, load_pack
+from garage_mj.garage import Garage, MapError, validate_garage
+from garage_mj.library import Library
+from garage_mj.map_io import load_map, parse_map_text
+from garage_mj.painter import paint_garage
+from garage_mj.rules import apply_stall_rule
+
+CLI = str(Path(sys.executable).with_name("garage-mj"))
+FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+# -- helpers ----------------------------------------------------------------------------------------
+def snapshot(*roots: Path) -> dict[str, bytes]:
+    """Every file under ``roots`` (or the file itself) with its bytes; missing roots are empty."""
+    out = {}
+    for root in roots:
+        paths = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file()) if root.exists() else []
+        for p in paths:
+            out[str(p)] = p.read_bytes()
+    return out
+
+
+def one_line_error(capsys, argv: list[str]) -> str:
+    """Run the CLI in-process; assert a non-zero exit and exactly one error line, no traceback."""
+    try:
+        rc = main(argv)
+    except SystemExit as exc:  # argparse: usage line + one error line
+        rc = exc.code
+    out, err = capsys.readouterr()
+    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("usage:") and not ln.startswith(" ")]
+    assert rc not in (0, None), (out, err)
+    assert "Traceback" not in err + out, err
+    assert len(lines) == 1 and "error" in lines[0], err
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def tiny() -> Garage:
+    return paint_garage("tiny_7x11", seed=1)
+
+
+@pytest.fixture(scope="module")
+def pack_dir(tiny, tmp_path_factory) -> Path:
+    """A folder with one good pack of ``tiny`` (copied, never changed, by the tests)."""
+    out = tmp_path_factory.mktemp("packs")
+    export_pack(tiny, out)
+    return out
+
+
+def copy_packs(src: Path, dst: Path) -> Path:
+    import shutil
+
+    shutil.copytree(src, dst, symlinks=True)
+    return dst
+
+
+def make_library(path: Path, n: int) -> Path:
+    with Library(path) as lib:
+        seed = 0
+        while lib.count() < n:
+            lib.add(paint_garage("tiny_7x11", seed=seed), map="tiny_7x11", run="r", seed=0, episode=seed,
+                    timestep=seed)
+            seed += 1
+    return path
+
+
+# -- malformed garages ------------------------------------------------------------------------------
+def _with_square(g: Garage) -> dict:
+    """``g`` with one 2x2 road square painted in (stall rule reapplied, so only the 2x2 rule breaks)."""
+    grid = g.grid.copy()
+    for r in range(1, grid.shape[0] - 2):
+        for c in range(1, grid.shape[1] - 2):
+            if (g.initial[r:r + 2, c:c + 2] == 0).all() and (grid[r:r + 2, c:c + 2] == 1).sum() >= 2:
+                grid[r:r + 2, c:c + 2] = 1
+                d = json.loads(g.to_json())
+                d["grid"] = apply_stall_rule(grid, g.six_stall_axis).tolist()
+                return d
+    raise AssertionError("no place for a square")
+
+
+def _mutated(g: Garage, how: str):
+    d = json.loads(g.to_json())
+    if how in ("str", "float", "bool", "big", "negative"):
+        d["grid"][1][1] = {"str": "3", "float": 1.5, "bool": True, "big": 2**70, "negative": -1}[how]
+        return json.dumps(d)
+    if how == "infinity":
+        return json.dumps(d).replace('"grid": [[2', '"grid": [[Infinity', 1)
+    if how == "deep":
+        return "[" * 100_000 + "]" * 100_000
+    if how == "not_utf8":
+        return b'{"name": "\xff\xfe", "grid": []}'
+    if how == "long_name":
+        d["name"] = "x" * 5000
+        return json.dumps(d)
+    if how == "square":
+        return json.dumps(_with_square(g))
+    if how == "unconnected":
+        d["grid"] = load_map("tiny_7x11").grid.tolist()
+        return json.dumps(d)
+    if how == "stall_rule":
+        grid = np.array(d["grid"])
+        grid[grid == 3] = 0
+        d["grid"] = grid.tolist()
+        return json.dumps(d)
+    if how == "huge":
+        big = np.zeros((1000, 1000), int)
+        big[[0, -1], :] = 2
+        big[:, [0, -1]] = 2
+        big[0, 5], big[-1, 5] = 8, 7
+        return json.dumps({"name": "huge", "grid": big.tolist(), "initial": big.tolist()})
+    raise ValueError(how)
+
+
+BAD_GARAGES = {"str": "not a block code", "float": "not a block code", "bool": "not a block code",
+               "big": "not a block code", "negative": "not a block code", "infinity": "not a block code",
+               "deep": "nested too deeply", "not_utf8": "not valid JSON", "long_name": "longer than 128",
+               "square": "2x2 square", "unconnected": "no road joins", "stall_rule": "stall rule",
+               "huge": "larger than 64x64"}
+
+
+@pytest.mark.parametrize("how", sorted(BAD_GARAGES))
+def test_export_refuses_a_bad_garage_in_one_line(tiny, tmp_path, capsys, how):
+    text = _mutated(tiny, how)
+    src = tmp_path / "g.json"
+    src.write_bytes(text if isinstance(text, bytes) else text.encode())
+    out = tmp_path / "packs"
+    before = snapshot(src)
+    line = one_line_error(capsys, ["export", "--garage", str(src), "--out", str(out), "--quiet"])
+    assert BAD_GARAGES[how] in line and str(src) in line
+    assert snapshot(src) == before and not out.exists()
+
+
+@FUZZ
+@given(cell=st.one_of(st.integers(), st.floats(allow_nan=True, allow_infinity=True), st.booleans(), st.text(max_size=3),
+                      st.none(), st.lists(st.integers(0, 9), max_size=2)),
+       r=st.integers(0, 6), c=st.integers(0, 10))
+def test_any_json_cell_is_a_garage_or_a_map_error(tiny, cell, r, c):
+    d = json.loads(tiny.to_json())
+    d["grid"][r][c] = cell
+    try:
+        g = Garage.from_json(json.dumps(d))
+    except MapError as exc:
+        assert "\n" not in str(exc)
+        return
+    assert type(cell) is int and 0 <= cell <= 9 and g.grid[r, c] == cell
+    try:
+        validate_garage(g)
+    except MapError:
+        pass
+
+
+@FUZZ
+@given(text=st.text(alphabet="0123456789²¹٣ \t\n#x-", max_size=200))
+def test_any_map_text_parses_or_is_a_map_error(text):
+    try:
+        grid, _ = parse_map_text(text, "fuzz.txt")
+    except MapError as exc:
+        assert str(exc).startswith("fuzz.txt") and "\n" not in str(exc)
+        return
+    assert grid.dtype == np.int8 and ((grid >= 0) & (grid <= 9)).all()
+
+
+def test_map_files_with_odd_tokens_or_bytes_are_one_line(tmp_path, capsys):
+    for name, data in (("sup.txt", "2 2 8 2\n2 ² 0 2\n2 7 2 2\n".encode()), ("latin1.txt", b"2 2 \xe9 2\n"),
+                       ("big.txt", ("0 " * 70 + "\n").encode() * 3)):
+        f = tmp_path / name
+        f.write_bytes(data)
+        line = one_line_error(capsys, ["maps", "show", str(f)])
+        assert str(f) in line
+
+
+# -- malformed configs and arguments -----------------------------------------------------------------
+BAD_CONFIGS = ["view_size = 4", "view_size = 0", "view_size = -3", "max_errors = -1", "learning_rate = -0.001",
+               "learning_rate = nan", "learning_rate = inf", "net_arch = 256", "buffer_size = 1e14",
+               "buffer_size = 100000000000000", "max_grad_norm = -1.0", "gamma = 2.0", "bogus_key = 1",
+               "learning_rate = ", "\xff"]
+
+
+@pytest.mark.parametrize("line", BAD_CONFIGS)
+def test_train_refuses_a_bad_config_in_one_line(tmp_path, capsys, line):
+    cfg = tmp_path / "dqn.toml"
+    cfg.write_bytes(line.encode("latin-1"))
+    out = tmp_path / "run"
+    msg = one_line_error(capsys, ["train", "--map", "tiny_7x11", "--timesteps", "10", "--seed", "0",
+                                  "--out", str(out), "--config", str(cfg)])
+    assert str(cfg) in msg
+    assert not out.exists()
+
+
+def test_bad_arguments_are_one_line(tmp_path, capsys, pack_dir):
+    lib = make_library(tmp_path / "lib.sqlite", 1)
+    a_file = tmp_path / "file"
+    a_file.write_text("x")
+    before = snapshot(tmp_path)
+    one_line_error(capsys, ["cruise", "--packs", str(pack_dir), "--seed", "-1", "--out", str(tmp_path / "c")])
+    line = one_line_error(capsys, ["cruise", "--packs", str(pack_dir), "--tests", "1", "--driver", "waypoint",
+                                   "--out", str(a_file), "--quiet"])
+    assert str(a_file) in line and "is a file" in line
+    line = one_line_error(capsys, ["export", "--library", str(lib), "--out", str(a_file), "--quiet"])
+    assert str(a_file) in line
+    assert "no garage with id" in one_line_error(capsys, ["library", "show", str(lib), str(10**23)])
+    assert snapshot(tmp_path) == before
+
+
+def test_a_full_disk_is_one_line(tmp_path, capsys):
+    """/dev/full answers every write with ENOSPC, as a full disk does (and stays a device)."""
+    full = Path("/dev/full")
+    if not full.exists():
+        pytest.skip("no /dev/full on this system")
+    lib = make_library(tmp_path / "lib.sqlite", 1)
+    line = one_line_error(capsys, ["library", "export-json", str(lib), "--out", str(full)])
+    assert "/dev/full" in line and "disk space" in line
+    assert full.is_char_device()
+
+
+# -- manifests -------------------------------------------------------------------------------------
+def _rehash(pack: Path, **changes) -> None:
+    m = json.loads((pack / "manifest.json").read_text())
+    m.update(changes)
+    (pack / "manifest.json").write_text(json.dumps(m))
+
+
+def _break(pack: Path, how: str, outside: Path) -> None:
+    m = json.loads((pack / "manifest.json").read_text())
+    if how == "not_utf8":
+        (pack / "manifest.json").write_bytes(b"\xff\xfe{")
+    elif how == "files_list":
+        _rehash(pack, files=sorted(m["files"]))
+    elif how == "dotdot":
+        _rehash(pack, files={**m["files"], "../outside.txt": hashlib.sha256(outside.read_bytes()).hexdigest()})
+    elif how == "absolute":
+        _rehash(pack, files={**m["files"], str(outside): hashlib.sha256(outside.read_bytes()).hexdigest()})
+    elif how == "symlink":
+        (pack / "preview.png").unlink()
+        (pack / "preview.png").symlink_to(outside)
+        _rehash(pack, files={**m["files"], "preview.png": hashlib.sha256(outside.read_bytes()).hexdigest()})
+    elif how == "swapped":
+        other = paint_garage("tiny_7x11", seed=2)
+        (pack / "garage.json").write_text(other.to_json())
+        files = {**m["files"], "garage.json": hashlib.sha256((pack / "garage.json").read_bytes()).hexdigest()}
+        _rehash(pack, files=files, garage_hash=other.canonical_hash(), name=other.name)
+    elif how == "deep":
+        (pack / "manifest.json").write_text("[" * 100_000)
+    else:
+        raise ValueError(how)
+
+
+@pytest.mark.parametrize("how", ["not_utf8", "files_list", "dotdot", "absolute", "symlink", "swapped", "deep"])
+def test_a_doctored_pack_is_refused_and_later_exports_work(tiny, pack_dir, tmp_path, capsys, how):
+    packs = copy_packs(pack_dir, tmp_path / "packs")
+    pack = next(p for p in packs.iterdir() if p.is_dir())
+    outside = tmp_path / "outside.txt"
+    outside.write_text("not part of any pack")
+    _break(pack, how, outside)
+    with pytest.raises(PackError, match=f"pack {pack}"):
+        load_pack(pack)
+    before = snapshot(packs, outside)
+    line = one_line_error(capsys, ["cruise", "--packs", str(packs), "--tests", "1", "--driver", "waypoint",
+                                   "--out", str(tmp_path / "cruise"), "--quiet"])
+    assert str(pack) in line
+    assert snapshot(packs, outside) == before
+    # a later export into the folder still works: the bad pack is listed as skipped, then rebuilt
+    src = tmp_path / "g.json"
+    src.write_text(paint_garage("tiny_7x11", seed=4).to_json())
+    assert main(["export", "--garage", str(src), "--out", str(packs), "--quiet"]) == 0
+    index = json.loads((packs / "index.json").read_text())
+    assert [s["folder"] for s in index["skipped"]] == [pack.name]
+    (tmp_path / "t.json").write_text(tiny.to_json())
+    assert main(["export", "--garage", str(tmp_path / "t.json"), "--out", str(packs), "--quiet"]) == 0
+    load_pack(pack)  # repaired
+    assert outside.read_text() == "not part of any pack"
+    capsys.readouterr()
+
+
+# -- library rows ----------------------------------------------------------------------------------
+def _corrupt(lib: Path, how: str) -> None:
+    con = sqlite3.connect(lib)
+    grid = con.execute("SELECT grid FROM garages WHERE id = 1").fetchone()[0]
+    if how == "truncated_grid":
+        con.execute("UPDATE garages SET grid = ? WHERE id = 1", (grid[: len(grid) // 2],))
+    elif how == "text_grid":
+        con.execute("UPDATE garages SET grid = 'hello' WHERE id = 1")
+    elif how == "text_difficulty":
+        con.execute("UPDATE garages SET difficulty = 'hard' WHERE id = 1")
+    elif how == "flipped_digit":  # a stall code 3 -> 4: still a well-formed grid, but not the stored garage
+        i = grid.index("3")
+        con.execute("UPDATE garages SET grid = ? WHERE id = 1", (grid[:i] + "4" + grid[i + 1:],))
+    elif how == "stale_metrics":
+        con.execute("UPDATE garages SET stalls = stalls + 1 WHERE id = 1")
+    con.commit()
+    con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    con.close()
+
+
+@pytest.mark.parametrize("how", ["truncated_grid", "text_grid", "text_difficulty", "flipped_digit", "stale_metrics"])
+def test_a_damaged_library_row_is_refused_with_its_id(tmp_path, capsys, how):
+    lib = make_library(tmp_path / "lib.sqlite", 2)
+    _corrupt(lib, how)
+    before = snapshot(tmp_path)
+    for argv in (["export", "--library", str(lib), "--out", str(tmp_path / "packs"), "--quiet"],
+                 ["cruise", "--library", str(lib), "--tests", "1", "--driver", "waypoint",
+                  "--out", str(tmp_path / "cruise"), "--quiet"]):
+        line = one_line_error(capsys, argv)
+        assert "row id 1" in line and str(lib) in line
+    if how in ("truncated_grid", "text_grid", "text_difficulty"):
+        assert "row id 1" in one_line_error(capsys, ["library", "ls", str(lib)])
+    else:  # well-formed rows still list (the check that recomputes them runs before export and cruise)
+        assert main(["library", "ls", str(lib)]) == 0
+    capsys.readouterr()
+    assert snapshot(tmp_path) == before  # nothing written, not even SQLite's -wal/-shm
+
+
+def test_a_read_only_library_can_be_listed(tmp_path, capsys):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    lib = make_library(folder / "library.sqlite", 2)
+    before = snapshot(folder)
+    os.chmod(lib, 0o444)
+    os.chmod(folder, 0o555)
+    try:
+        assert main(["library", "ls", str(lib)]) == 0
+        assert "2 garage(s)" in capsys.readouterr().out
+    finally:
+        os.chmod(folder, 0o755)
+    assert snapshot(folder) == before
+
+
+# -- tests.csv repair ------------------------------------------------------------------------------
+def _row(i: int) -> dict[str, str]:
+    return {c: f"{c}{i}" for c in TEST_COLUMNS} | {"garage_hash": f"h{i % 3}", "test": str(i), "outcome": "success",
+                                                   "wall_s": "0.5", "hit_geom": 'geom "a", b'}
+
+
+def _csv(rows, header=True) -> str:
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=TEST_COLUMNS)
+    if header:
+        w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+@FUZZ
+@given(n=st.integers(0, 6), header=st.booleans(), cut=st.integers(0, 400), dup=st.booleans())
+def test_read_tests_keeps_every_complete_row(tmp_path, n, header, cut, dup):
+    rows = [_row(i) for i in range(n)]
+    text = _csv(rows + rows[:1] * dup, header)
+    cut = min(cut, len(text))
+    torn = text[: len(text) - cut] if cut else text  # a kill -9 tears the end of the file
+    path = tmp_path / f"t{n}{header}{cut}{dup}.csv"
+    path.write_text(torn)
+    got = read_tests(path)
+    complete = [r for r in rows if _csv([r], header=False) in torn]
+    assert {r["test"] for r in complete} <= {r["test"] for r in got}
+    assert len({(r["garage_hash"], r["test"]) for r in got}) == len(got)
+    assert all(r in rows for r in got)
+    assert path.read_text().startswith(",".join(TEST_COLUMNS) + "\n")  # repaired: header and whole lines
+    assert read_tests(path) == got
+
+
+# -- real kills and concurrent runs ----------------------------------------------------------------
+def _spawn(*args: str) -> subprocess.Popen:
+    return subprocess.Popen([CLI, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for(cond, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+    t0 = time.monotonic()
+    while not cond():
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() - t0 < timeout, "timed out"
+        time.sleep(0.005)
+
+
+def _results(path: Path) -> list[tuple]:
+    with open(path, newline="") as f:
+        return sorted(tuple((k, v) for k, v in r.items() if k != "wall_s") for r in csv.DictReader(f))
+
+
+def test_kill_9_during_the_first_cruise_test_then_resume(pack_dir, tmp_path):
+    out, ref = tmp_path / "killed", tmp_path / "whole"
+    args = ["cruise", "--packs", str(pack_dir), "--tests", "3", "--driver", "waypoint", "--quiet"]
+    proc = _spawn(*args, "--out", str(out))
+    _wait_for(lambda: (out / "tests.csv").exists(), proc)  # written just before the first test starts
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert (out / "tests.csv").read_text().startswith(",".join(TEST_COLUMNS) + "\n")  # the header survived
+    assert subprocess.run([CLI, *args, "--out", str(out)], capture_output=True).returncode == 0  # not locked
+    assert subprocess.run([CLI, *args, "--out", str(ref)], capture_output=True).returncode == 0
+    assert _results(out / "tests.csv") == _results(ref / "tests.csv") and len(_results(ref / "tests.csv")) == 3
+
+
+def test_an_empty_tests_csv_is_repaired_not_mangled(tiny, tmp_path):
+    from garage_mj.cruise import run_cruise
+
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "tests.csv").write_text("")  # what a kill -9 before the first flush used to leave
+    fast = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}
+    for _ in range(3):
+        run_cruise([tiny], 2, "waypoint", out_dir=out, env=fast, progress=False)
+    with open(out / "tests.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["test"] for r in rows] == ["0", "1"]
+    assert list(rows[0]) == list(TEST_COLUMNS)
+    with open(out / "summary.csv", newline="") as f:
+        assert [r["tests"] for r in csv.DictReader(f)] == ["2"]
+
+
+def test_two_cruise_runs_into_one_folder(pack_dir, tmp_path):
+    out = tmp_path / "c"
+    args = ["cruise", "--packs", str(pack_dir), "--tests", "12", "--driver", "waypoint", "--quiet", "--out", str(out)]
+    a, b = _spawn(*args), _spawn(*args)
+    (_, ea), (_, eb) = a.communicate(timeout=300), b.communicate(timeout=300)
+    codes = sorted([(a.returncode, ea, b.pid), (b.returncode, eb, a.pid)])
+    assert [c for c, _, _ in codes] == [0, 2], codes
+    refused, winner = codes[1][1], codes[1][2]
+    assert len(refused.strip().splitlines()) == 1 and f"in use by garage-mj cruise (pid {winner})" in refused
+    rows = _results(out / "tests.csv")
+    assert len(rows) == 12 and len(set(rows)) == 12
+    with open(out / "summary.csv", newline="") as f:
+        assert [r["tests"] for r in csv.DictReader(f)] == ["12"]
+
+
+def test_kill_9_mid_export_then_resume(tmp_path):
+    lib = make_library(tmp_path / "lib.sqlite", 8)
+    out, ref = tmp_path / "killed", tmp_path / "whole"
+    args = ["export", "--library", str(lib), "--quiet"]
+    proc = _spawn(*args, "--out", str(out))
+    _wait_for(lambda: out.is_dir() and any(not p.name.startswith(".") for p in out.iterdir() if p.is_dir()), proc)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (out / "index.json").exists()  # really killed mid-way
+    assert subprocess.run([CLI, *args, "--out", str(out)], capture_output=True).returncode == 0
+    assert subprocess.run([CLI, *args, "--out", str(ref)], capture_output=True).returncode == 0
+    hidden = [p.name for p in out.iterdir() if p.name.startswith(".") and p.name != ".garage-mj.lock"]
+    assert hidden == []  # the killed run's temp folders are gone
+
+    def packs(root: Path) -> dict[str, dict]:
+        return {p.name: json.loads((p / "manifest.json").read_text())["files"]
+                for p in sorted(root.iterdir()) if p.is_dir()}
+
+    assert packs(out) == packs(ref) and len(packs(ref)) == 8
+    assert json.loads((out / "index.json").read_text())["count"] == 8
+    for p in out.iterdir():
+        if p.is_dir():
+            assert p.stat().st_mode & 0o777 == 0o777 & ~_umask()
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def test_truncated_cruise_run_json_is_one_line(pack_dir, tmp_path, capsys):
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "run.json").write_text('{"driver": "wayp')
+    (out / "tests.csv").write_text(_csv([_row(0)]))
+    before = snapshot(out)
+    line = one_line_error(capsys, ["cruise", "--packs", str(pack_dir), "--tests", "1", "--driver", "waypoint",
+                                   "--out", str(out), "--quiet"])
+    assert str(out / "run.json") in line
+    assert {k: v for k, v in snapshot(out).items() if not k.endswith(".lock")} == \
+        {k: v for k, v in before.items() if not k.endswith(".lock")}
+
+
+def test_garage_validation_is_shared_by_export_and_cruise(tiny):
+    for how in ("square", "unconnected", "stall_rule"):
+        g = Garage.from_json(_mutated(tiny, how))
+        with pytest.raises(MapError):
+            validate_garage(g)
+    assert validate_garage(copy.deepcopy(tiny)) == tiny
