@@ -176,3 +176,37 @@ def test_bad_arguments():
     env = make_env()
     with pytest.raises(ValueError, match="action must be 0-3"):
         env.step(4)
+
+
+def test_rgb_array_render_shows_the_car_moving():
+    env = gym.make(ENV_ID, map="tiny_7x11", render_mode="rgb_array")
+    check_env(env.unwrapped)  # with the render check
+    env.reset(seed=0)
+    before = env.render()
+    assert before.shape == (7 * 16, 11 * 16, 3) and before.dtype == np.uint8
+    env.step(env.unwrapped._inward)  # one cell inward: the car moves and paints
+    after = env.render()
+    assert after.shape == before.shape and not np.array_equal(before, after)
+    with pytest.raises(TypeError, match="render_mode"):
+        GarageGenEnv(render_mode="human")
+
+
+def test_render_colours_are_those_of_garage_show():
+    from garage_mj.gridimage import BLOCK_RGB
+    from garage_mj.plots import BLOCK_COLOURS
+
+    for block, hex_colour in BLOCK_COLOURS.items():
+        assert "#" + "".join(f"{v:02x}" for v in BLOCK_RGB[block]) == hex_colour.lower()
+
+
+def test_sb3_make_vec_env_steps_two_envs():
+    from stable_baselines3.common.env_util import make_vec_env
+
+    venv = make_vec_env(ENV_ID, n_envs=2, seed=0, env_kwargs={"map": "tiny_7x11"})
+    obs = venv.reset()
+    assert obs.shape == (2, 7 * 7 * 10 + 7)
+    for _ in range(100):  # long enough for episodes to end and reset inside the vec env
+        obs, rewards, dones, infos = venv.step(np.array([venv.action_space.sample() for _ in range(2)]))
+    assert obs.shape == (2, 7 * 7 * 10 + 7) and rewards.shape == (2,)
+    assert venv.render_mode == "rgb_array" and venv.get_images()[0].shape == (7 * 16, 11 * 16, 3)
+    venv.close()

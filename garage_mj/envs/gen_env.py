@@ -43,10 +43,11 @@ class GarageGenEnv(gym.Env):
         reward: :class:`RewardConfig` or a dict of its fields.
         six_stall_axis: ``"NS"``/``"EW"`` to fix the axis; ``None`` draws it at every reset.
         max_steps: step limit (default 4 * H * W).
-        render_mode: ``"ansi"`` returns the grid as text with the car.
+        render_mode: ``"ansi"`` returns the grid as text with the car; ``"rgb_array"`` an
+            (H * 16, W * 16, 3) uint8 picture of the grid with the car (for ``RecordVideo``).
     """
 
-    metadata = {"render_modes": ["ansi"]}
+    metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 8}
 
     def __init__(
         self,
@@ -65,7 +66,9 @@ class GarageGenEnv(gym.Env):
         if six_stall_axis is not None and six_stall_axis not in AXES:
             raise ValueError(f"six_stall_axis must be 'NS', 'EW' or None, got {six_stall_axis!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+            # TypeError, as gymnasium envs do for an unsupported argument: SB3's make_vec_env first
+            # tries render_mode="rgb_array" and falls back on TypeError only
+            raise TypeError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         base = map if isinstance(map, Garage) else load_map(map)
         self.map_name = base.name
         self.initial = base.initial.copy()
@@ -182,6 +185,10 @@ class GarageGenEnv(gym.Env):
             from garage_mj.textdraw import draw
 
             return draw(self.grid, car=self.pos)
+        if self.render_mode == "rgb_array":
+            from garage_mj.gridimage import grid_image
+
+            return grid_image(self.grid, car=self.pos, heading=self.heading)
         return None
 
     # -- internals -------------------------------------------------------------------------------
