@@ -15,10 +15,12 @@ import hashlib
 import io
 import json
 import os
+import shutil
 import signal
 import sqlite3
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -79,8 +81,6 @@ def pack_dir(tiny, tmp_path_factory) -> Path:
 
 
 def copy_packs(src: Path, dst: Path) -> Path:
-    import shutil
-
     shutil.copytree(src, dst, symlinks=True)
     return dst
 
@@ -341,18 +341,46 @@ def test_a_damaged_library_row_is_refused_with_its_id(tmp_path, capsys, how):
     assert snapshot(tmp_path) == before  # nothing written, not even SQLite's -wal/-shm
 
 
-def test_a_read_only_library_can_be_listed(tmp_path, capsys):
-    folder = tmp_path / "ro"
+def _unprivileged(argv: list[str], home: Path) -> subprocess.CompletedProcess:
+    """Run the CLI as a user that file permissions apply to (``nobody`` via setpriv when we are root)."""
+    env = {**os.environ, "HOME": str(home), "MPLCONFIGDIR": str(home)}
+    prefix: list[str] = []
+    if os.geteuid() == 0:
+        if not shutil.which("setpriv"):
+            pytest.skip("running as root without setpriv: permissions cannot be tested")
+        prefix = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+    return subprocess.run([*prefix, CLI, *argv], capture_output=True, text=True, env=env, timeout=300)
+
+
+@pytest.fixture
+def shared_tmp():
+    """A temp folder other users may enter (pytest's tmp_path is private to its owner)."""
+    path = Path(tempfile.mkdtemp(prefix="garage_mj_faults_"))
+    os.chmod(path, 0o777)
+    yield path
+    for p in path.rglob("*"):
+        if p.is_dir() and not p.is_symlink():
+            os.chmod(p, 0o755)
+    shutil.rmtree(path)
+
+
+def test_read_only_library_lists_and_read_only_out_is_one_line(shared_tmp, tiny):
+    folder = shared_tmp / "ro"
     folder.mkdir()
     lib = make_library(folder / "library.sqlite", 2)
-    before = snapshot(folder)
+    garage = folder / "g.json"
+    garage.write_text(tiny.to_json())
     os.chmod(lib, 0o444)
     os.chmod(folder, 0o555)
-    try:
-        assert main(["library", "ls", str(lib)]) == 0
-        assert "2 garage(s)" in capsys.readouterr().out
-    finally:
-        os.chmod(folder, 0o755)
+    before = snapshot(folder)
+    done = _unprivileged(["library", "ls", str(lib)], shared_tmp)
+    assert done.returncode == 0 and "2 garage(s)" in done.stdout, done.stderr
+    for argv in (["export", "--garage", str(garage), "--out", str(folder / "packs"), "--quiet"],
+                 ["export", "--library", str(lib), "--out", str(folder), "--quiet"]):
+        done = _unprivileged(argv, shared_tmp)
+        err = [ln for ln in done.stderr.splitlines() if ln.startswith("garage-mj")]
+        assert done.returncode == 2 and "Traceback" not in done.stderr and len(err) == 1, done.stderr
+        assert "Permission denied" in err[0] and str(folder) in err[0]
     assert snapshot(folder) == before
 
 
