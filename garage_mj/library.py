@@ -315,6 +315,16 @@ class Library:
                                    f"{kind.__name__}; {fix}")
         return GarageRecord(*values)
 
+    def _check_numbers(self) -> None:
+        """Refuse, naming the row, a library where text stands in a numeric column (aggregates would lie)."""
+        cols = [c for c, k in _KINDS.items() if k in (int, float)]
+        cond = " OR ".join(f"typeof({c}) NOT IN ('integer', 'real')" for c in cols)
+        row = self._con.execute(f"SELECT id, {', '.join(cols)} FROM garages WHERE {cond} LIMIT 1").fetchone()
+        if row is not None:
+            bad = next(c for c, v in zip(cols, row[1:]) if not isinstance(v, (int, float)))
+            raise LibraryError(f"{self.path}, row id {row[0]}: column {bad} holds {str(row[1 + cols.index(bad)])[:30]!r}, "
+                               "not a number; the library is damaged: delete that row or restore the file from a backup")
+
     def verified(self, records: list[GarageRecord]) -> list[GarageRecord]:
         """``records``, each checked by :meth:`GarageRecord.verify` (for export and cruise)."""
         return [r.verify(str(self.path)) for r in records]
@@ -372,6 +382,7 @@ class Library:
 
     def points(self, map: str | None = None) -> np.ndarray:
         """An N x 2 array of (difficulty, coverage), for the heatmaps."""
+        self._check_numbers()
         where, params = self._where(map, None, None)
         rows = self._con.execute(f"SELECT difficulty, coverage FROM garages{where} ORDER BY id", params).fetchall()
         return np.array(rows, dtype=float).reshape(-1, 2)
@@ -398,6 +409,7 @@ class Library:
             raise ValueError(f"n must be >= 0, got {n}")
         if stratify not in (None, "difficulty"):
             raise ValueError(f"stratify must be 'difficulty' or None, got {stratify!r}")
+        self._check_numbers()
         where, params = self._where(map, difficulty, coverage)
         rows = self._con.execute(f"SELECT id, difficulty FROM garages{where} ORDER BY id", params).fetchall()
         rng = np.random.default_rng(seed)
@@ -419,6 +431,7 @@ class Library:
 
     def stats(self) -> dict[str, Any]:
         """Per-map counts and the range and mean of the metrics, plus the runs that fed it."""
+        self._check_numbers()
         out: dict[str, Any] = {"path": str(self.path), "schema_version": SCHEMA_VERSION, "total": self.count()}
         per_map = {}
         for row in self._con.execute(

@@ -333,6 +333,10 @@ def test_a_damaged_library_row_is_refused_with_its_id(tmp_path, capsys, how):
                   "--out", str(tmp_path / "cruise"), "--quiet"]):
         line = one_line_error(capsys, argv)
         assert "row id 1" in line and str(lib) in line
+    if how == "text_difficulty":  # aggregates and sampling would mix text into numbers
+        for argv in (["library", "stats", str(lib)], ["library", "sample", str(lib), "-n", "1"],
+                     ["plot", "heatmap", "--library", str(lib), "--map", "tiny_7x11", "--out", str(tmp_path / "h.png")]):
+            assert "row id 1" in one_line_error(capsys, argv)
     if how in ("truncated_grid", "text_grid", "text_difficulty"):
         assert "row id 1" in one_line_error(capsys, ["library", "ls", str(lib)])
     else:  # well-formed rows still list (the check that recomputes them runs before export and cruise)
