@@ -35,10 +35,11 @@ from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
 
 TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "outcome", "hit",
-                "hit_geom", "time", "path_length", "route_length", "difficulty", "mean_road_length",
+                "hit_geom", "reason", "time", "path_length", "route_length", "difficulty", "mean_road_length",
                 "mean_intersection_degree", "wall_s")
-SUMMARY_COLUMNS = ("garage", "difficulty", "E[X]", "E[Y]", "tests", "successes", "collisions", "timeouts",
-                   "deadlocks", "success_pct")
+#: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
+SUMMARY_COLUMNS = ("garage", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
+                   "collisions", "timeouts", "deadlocks", "success_pct")
 
 
 class CruiseError(GarageMJError):
@@ -142,7 +143,7 @@ def _env_for(source: CruiseSource, settings: CruiseSettings):
         if "env" in _CACHE:
             _CACHE.pop("env").close()
         _CACHE["env"] = GarageDriveEnv(garage=source.garage, action_type=settings.action_type,
-                                       occupancy=settings.occupancy, **settings.env)
+                                       occupancy=settings.occupancy, infeasible="report", **settings.env)
         _CACHE["hash"] = source.hash
     return _CACHE["env"]
 
@@ -164,18 +165,20 @@ def run_test(source: CruiseSource, index: int, settings: CruiseSettings) -> dict
     start = time.perf_counter()
     obs, info = env.reset(seed=seed)
     try:
-        driver.reset(env.driver_info(seed))
-        while True:
-            obs, _, term, trunc, info = env.step(driver.act(obs))
-            if term or trunc:
-                break
+        if info.get("outcome") != "infeasible":  # decided from the scene: never driven
+            driver.reset(env.driver_info(seed))
+            while True:
+                obs, _, term, trunc, info = env.step(driver.act(obs))
+                if term or trunc:
+                    break
     except Exception as exc:  # a user's driver may raise anything; name it, keep the traceback
         raise CruiseError(f"driver {settings.driver!r} failed on {source.name} test {index}: "
                           f"{type(exc).__name__}: {exc}") from exc
     return {
         "garage": source.name, "garage_hash": source.hash, "test": index, "seed": seed,
         "driver": settings.driver, "target_stall": info["target_stall"], "outcome": info["outcome"],
-        "hit": info["hit"] or "", "hit_geom": info["hit_geom"] or "", "time": round(info["time"], 3),
+        "hit": info["hit"] or "", "hit_geom": info["hit_geom"] or "", "reason": info["reason"],
+        "time": round(info["time"], 3),
         "path_length": round(info["path_length"], 3), "route_length": round(info["route_length"], 3),
         "difficulty": source.difficulty, "mean_road_length": source.mean_road_length,
         "mean_intersection_degree": source.mean_intersection_degree,
@@ -277,14 +280,25 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -
         if not mine:
             continue
         kinds = [r["outcome"] for r in mine]
+        feasible = len(mine) - kinds.count("infeasible")
         out.append({
             "garage": s.name, "difficulty": round(s.difficulty, 4), "E[X]": round(s.mean_road_length, 3),
             "E[Y]": round(s.mean_intersection_degree, 3), "tests": len(mine),
+            "infeasible": kinds.count("infeasible"), "feasible": feasible,
             "successes": kinds.count("success"), "collisions": kinds.count("collision"),
             "timeouts": kinds.count("timeout"), "deadlocks": kinds.count("deadlock"),
-            "success_pct": round(100.0 * kinds.count("success") / len(mine), 2),
+            "success_pct": round(100.0 * kinds.count("success") / feasible, 2) if feasible else None,
         })
     return out
+
+
+def _hits(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """Collisions by the class of what was hit."""
+    out: dict[str, int] = {}
+    for r in rows:
+        if r["outcome"] == "collision":
+            out[r["hit"] or "?"] = out.get(r["hit"] or "?", 0) + 1
+    return dict(sorted(out.items()))
 
 
 def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
@@ -292,16 +306,22 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
     """``summary.csv``, ``summary.json`` and ``regression.png`` from the test rows."""
     summary = summarize(rows, sources)
     _write_csv(out / "summary.csv", SUMMARY_COLUMNS, summary)
-    fit = regression([r["difficulty"] for r in summary], [r["success_pct"] for r in summary])
-    walls = [float(r["wall_s"]) for r in rows]
-    sims = [float(r["time"]) for r in rows]
+    rated = [r for r in summary if r["success_pct"] is not None]  # garages with a feasible test
+    fit = regression([r["difficulty"] for r in rated], [r["success_pct"] for r in rated])
+    driven = [r for r in rows if r["outcome"] != "infeasible"]
+    walls = [float(r["wall_s"]) for r in driven]
+    sims = [float(r["time"]) for r in driven]
+    kinds = [r["outcome"] for r in rows]
     stats = {**fit.as_dict(), "paper_r": PAPER_R, "garages": len(summary), "tests": len(rows),
+             "infeasible": kinds.count("infeasible"), "feasible": len(driven),
              "driver": settings.driver, "seed": settings.seed,
-             "success_pct": round(100.0 * sum(r["outcome"] == "success" for r in rows) / max(len(rows), 1), 2),
+             "success_pct": round(100.0 * kinds.count("success") / len(driven), 2) if driven else None,
+             "failures": {k: kinds.count(k) for k in ("collision", "timeout", "deadlock")},
+             "hits": _hits(driven),
              "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
              "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}
     atomic_write(out / "summary.json", json.dumps(stats, indent=2) + "\n")
-    regression_plot([r["difficulty"] for r in summary], [r["success_pct"] for r in summary],
+    regression_plot([r["difficulty"] for r in rated], [r["success_pct"] for r in rated],
                     out / "regression.png", title=f"Cruise success vs. difficulty ({settings.driver})")
     return summary, stats
 

@@ -5,14 +5,19 @@ state and the contacts of this step and returns an :class:`Outcome` once the tes
 :func:`ego_contacts` turns MuJoCo contacts into the (semantic class, geom name) pairs it reads.
 
 Checks, in this order: collision (ego touches a wall, pillar, obstacle or parked car), success
-(within ``goal_tolerance`` of the goal), deadlock (farther than ``max_deviation`` from the route,
-or less than ``stuck_progress`` of progress along the route in ``stuck_time``), timeout
-(``time_limit = route length / min_mean_speed + time_slack``).
+(within ``goal_tolerance`` of the goal pose, heading within ``goal_heading_tolerance``, slower
+than ``goal_speed``), deadlock (farther than ``max_deviation`` from the route, past the goal by
+more than ``goal_tolerance``, or less than ``stuck_progress`` of progress along the route in
+``stuck_time``), timeout (``time_limit = route length / min_mean_speed + time_slack``).
+
+``infeasible`` is not decided here: the drive env gives it before the drive, from the scene alone
+(:mod:`garage_mj.scene.drivable`), and such a test is never driven.
 """
 
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 
@@ -29,6 +34,7 @@ class OutcomeKind(str, enum.Enum):
     COLLISION = "collision"
     TIMEOUT = "timeout"
     DEADLOCK = "deadlock"
+    INFEASIBLE = "infeasible"  # no driver of this car can drive it; decided from the scene, excluded from rates
 
 
 FAILURES = (OutcomeKind.COLLISION, OutcomeKind.TIMEOUT, OutcomeKind.DEADLOCK)
@@ -38,7 +44,9 @@ FAILURES = (OutcomeKind.COLLISION, OutcomeKind.TIMEOUT, OutcomeKind.DEADLOCK)
 class OutcomeConfig:
     """Thresholds of the outcome classes."""
 
-    goal_tolerance: float = 1.5  # [m] car centre this close to the goal point: success
+    goal_tolerance: float = 1.0  # [m] car centre this close to the goal point ...
+    goal_heading_tolerance: float = 0.35  # [rad] ... heading this close to the goal's ...
+    goal_speed: float = 0.5  # [m/s] ... and slower than this: success
     min_mean_speed: float = 0.7  # [m/s] slowest mean speed still in time
     time_slack: float = 10.0  # [s] added to the time limit (start-up, junctions)
     max_deviation: float = 3.5  # [m] farther than this from the route: deadlock (lost)
@@ -95,9 +103,12 @@ class OutcomeMonitor:
     """Watches one test on ``route`` and says when and how it ended."""
 
     def __init__(self, route: Route, config: OutcomeConfig | None = None, goal=None) -> None:
+        """``goal``: (x, y) or (x, y, yaw) [m, rad]; default the route's last point and heading."""
         self.route = route
         self.config = config or OutcomeConfig()
-        self.goal = np.asarray(route.goal if goal is None else goal, dtype=float)[:2]
+        g = np.asarray(route.goal if goal is None else goal, dtype=float).reshape(-1)
+        self.goal = g[:2]
+        self.goal_yaw = float(g[2]) if len(g) > 2 else route.heading_at(route.length)
         self.reset()
 
     @property
@@ -112,7 +123,8 @@ class OutcomeMonitor:
         self._mark_time = 0.0  # start of the current progress window
         self._mark_progress = 0.0
 
-    def update(self, time: float, position, speed: float, contacts: Iterable[Contact] = ()) -> Outcome | None:
+    def update(self, time: float, position, speed: float, contacts: Iterable[Contact] = (),
+               yaw: float | None = None) -> Outcome | None:
         """Feed one step; returns the outcome when the test ends (and keeps returning it)."""
         if self.outcome is not None:
             return self.outcome
@@ -123,8 +135,13 @@ class OutcomeMonitor:
                                  c.semantic.name.lower(), c.geom)
         p = np.asarray(position, dtype=float)[:2]
         goal_dist = float(np.linalg.norm(p - self.goal))
-        if goal_dist <= cfg.goal_tolerance:
-            return self._end(OutcomeKind.SUCCESS, time, f"reached the goal ({goal_dist:.2f} m)")
+        yaw_err = 0.0 if yaw is None else abs(math.remainder(yaw - self.goal_yaw, math.tau))
+        if goal_dist <= cfg.goal_tolerance and yaw_err <= cfg.goal_heading_tolerance and abs(speed) <= cfg.goal_speed:
+            return self._end(OutcomeKind.SUCCESS, time, f"stopped at the goal ({goal_dist:.2f} m, {yaw_err:.2f} rad)")
+        past = float((p - self.goal) @ (math.cos(self.goal_yaw), math.sin(self.goal_yaw)))
+        near_end = self.progress >= self.route.length - cfg.goal_tolerance - 1.0  # [m] (a route may pass the goal's axis earlier)
+        if near_end and past > cfg.goal_tolerance:
+            return self._end(OutcomeKind.DEADLOCK, time, f"overshot the goal by {past:.1f} m")
         window = 2.0 * cfg.max_deviation + cfg.stuck_progress + abs(speed) * 1.0
         s, dist = self.route.project(p, self.progress - window, self.progress + window)
         self.deviation = dist

@@ -51,6 +51,7 @@ class CarGeometry:
     front: float = 2.3  # [m] front bumper x in the car frame
     rear: float = -2.3  # [m] rear bumper x in the car frame
     max_steer: float = 0.7  # [rad] road-wheel angle at steer = 1
+    steer_rate: float = 0.8  # [rad/s] how fast the road wheels turn
     max_speed: float = 4.0  # [m/s]
     max_accel: float = 2.0  # [m/s^2]
     max_decel: float = 5.0  # [m/s^2]
@@ -69,7 +70,7 @@ class CarGeometry:
 def car_geometry(config: CarConfig | None = None) -> CarGeometry:
     """The :class:`CarGeometry` of ``models/car`` under ``config`` (body and axles read from the model)."""
     cfg = config or CarConfig()
-    return CarGeometry(**_car_body(), max_steer=cfg.max_steer, max_speed=cfg.max_speed,
+    return CarGeometry(**_car_body(), max_steer=cfg.max_steer, steer_rate=cfg.steer_rate, max_speed=cfg.max_speed,
                        max_accel=cfg.max_accel, max_decel=cfg.max_decel)
 
 

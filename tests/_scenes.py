@@ -56,16 +56,18 @@ def run_test(boxes, route_points, driver, seed: int = 0, action_type: str = "con
         while data.time < max_time:
             x, y, yaw = car.pose(data)
             target = route.point_at(monitor.progress + LOOKAHEAD)
+            s, _ = route.project((x, y), monitor.progress - 2.0, monitor.progress + 6.0)
             obs = {**camera.render(data), "waypoint": to_car_frame(target, x, y, yaw),
-                   "speed": np.array([car.speed(data)])}
+                   "speed": np.array([car.speed(data)]), "goal": to_car_frame(route.goal, x, y, yaw),
+                   "remaining": np.array([route.length - s]), "pose": np.array([x, y, yaw])}
             car.act(data, driver.act(obs), dt)
             contacts = []
             for _ in range(n_sub):
                 mujoco.mj_step(model, data)
                 contacts += ego_contacts(model, data, car.geoms, classes)
-            x, y, _ = car.pose(data)
+            x, y, yaw = car.pose(data)
             traj.append((x, y))
-            out = monitor.update(data.time, (x, y), car.speed(data), contacts)
+            out = monitor.update(data.time, (x, y), car.speed(data), contacts, yaw=yaw)
             if out is not None:
                 return out, np.array(traj)
     finally:

@@ -147,7 +147,7 @@ def test_timeout_truncates(painted_tiny):
 def test_bad_arguments_are_one_clear_error(painted_tiny):
     from garage_mj.config import ConfigError
 
-    with pytest.raises(ValueError, match="exactly one of garage= or pack="):
+    with pytest.raises(ValueError, match="needs garage="):
         GarageDriveEnv()
     with pytest.raises(ValueError, match="action_type"):
         GarageDriveEnv(garage=painted_tiny, action_type="joystick")

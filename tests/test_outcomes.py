@@ -14,17 +14,20 @@ L_ROUTE = Route([(0, 0), (20, 0), (20, 20)])  # 40 m
 
 
 def drive(monitor: OutcomeMonitor, path, speed=2.0, dt=0.1, contacts_at=None):
-    """Feed positions along ``path`` (one per step); returns the outcome or None."""
+    """Feed positions along ``path`` (one per step; speed 0 where the car stands); returns the outcome or None."""
     for k, p in enumerate(path):
         contacts = contacts_at(k) if contacts_at else ()
-        out = monitor.update(k * dt, p, speed, contacts)
+        standing = k > 0 and np.allclose(p, path[k - 1])
+        out = monitor.update(k * dt, p, 0.0 if standing else speed, contacts)
         if out is not None:
             return out
     return None
 
 
-def along(route: Route, step: float):
-    return [route.point_at(s) for s in np.arange(0.0, route.length + step, step)]
+def along(route: Route, step: float, stop: int = 5):
+    """Points every ``step`` metres to the end of the route, then ``stop`` steps standing there."""
+    pts = [route.point_at(s) for s in np.arange(0.0, route.length, step)] + [route.goal] * (stop + 1)
+    return pts
 
 
 def test_route_geometry():
@@ -41,7 +44,20 @@ def test_route_geometry():
 def test_success_at_goal():
     out = drive(OutcomeMonitor(L_ROUTE), along(L_ROUTE, 0.2))
     assert out.kind is OutcomeKind.SUCCESS and out.success
-    assert np.linalg.norm(np.asarray(L_ROUTE.goal) - L_ROUTE.point_at(out.time / 0.1 * 0.2)) <= 1.5 + 1e-9
+    assert out.time == pytest.approx(0.1 * (round(L_ROUTE.length / 0.2) + 1))  # the first step standing at the goal
+
+
+def test_success_needs_low_speed_and_the_goal_heading():
+    cfg = OutcomeConfig()
+    mon = OutcomeMonitor(L_ROUTE, cfg)
+    mon.progress = 30.0
+    beyond = [(20.0, 10.0 + s) for s in np.arange(0.0, 18.0, 0.3)]  # on through the goal at (20, 20)
+    fast = drive(mon, beyond, speed=3.0)
+    assert fast.kind is OutcomeKind.DEADLOCK and "overshot the goal" in fast.reason  # drove through it
+    mon = OutcomeMonitor(L_ROUTE, cfg)
+    mon.progress = 39.0
+    assert mon.update(0.0, (20.0, 19.8), 0.0, yaw=0.0) is None  # at the goal, but facing east
+    assert mon.update(0.1, (20.0, 19.8), 0.0, yaw=np.pi / 2).kind is OutcomeKind.SUCCESS
 
 
 def test_collision_records_what_was_hit():

@@ -102,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
                      action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet)
     s = res.stats
     r = "n/a" if s["r"] is None else f"{s['r']:.3f}"
-    print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): success {s['success_pct']}%, "
+    print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "
+          f"(excluded), success {s['success_pct']}% of {s['feasible']} feasible, "
           f"Pearson r(difficulty, success) = {r} (paper {s['paper_r']}); results in {res.out_dir}")
     return 0

@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Train DQN on a map (short run, 2 seeds), fill a scenario library with every usable garage, "
             "export asset packs for a difficulty-stratified sample, run cruise tests with the built-in "
-            "drivers (waypoint, vision), and write OUT/report.html with the PNGs it links. Stages resume: "
+            "drivers (oracle, waypoint, vision), and write OUT/report.html with the PNGs it links. Stages resume: "
             "re-running reuses finished training, complete packs and finished tests."
         ),
     )

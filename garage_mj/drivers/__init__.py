@@ -20,6 +20,7 @@ from garage_mj.drivers.base import (
 
 #: Built-in drivers: name -> "module:Class".
 DRIVERS: dict[str, str] = {
+    "oracle": "garage_mj.drivers.oracle:OracleDriver",
     "waypoint": "garage_mj.drivers.waypoint:WaypointDriver",
     "vision": "garage_mj.drivers.vision:VisionDriver",
 }

@@ -132,6 +132,20 @@ class BaseDriver:
         """Steer command in [-1, 1] that drives ``curvature``."""
         return float(np.clip(math.atan(self.car.wheelbase * curvature) / self.car.max_steer, -1.0, 1.0))
 
+    @staticmethod
+    def approach_speed(obs: dict[str, Any], decel: float, creep: float = 0.3, stop_within: float = 0.2) -> float:
+        """[m/s] the fastest speed that still stops at the goal at ``decel`` [m/s^2].
+
+        Reads ``obs["remaining"]`` (route length left to the goal); 0 within ``stop_within``
+        metres; never below ``creep`` before that, so the car does not stall short of the goal.
+        """
+        if "remaining" not in obs:
+            return math.inf
+        left = float(np.asarray(obs["remaining"]).reshape(-1)[0])
+        if left <= stop_within:
+            return 0.0
+        return max(min(creep, left), math.sqrt(2.0 * decel * max(left - stop_within, 0.0)))
+
     def throttle_for(self, target_speed: float, speed: float, gain: float = 1.0) -> float:
         """Pedal command toward ``target_speed`` [m/s] (the car's pedal is an acceleration request)."""
         err = target_speed - speed

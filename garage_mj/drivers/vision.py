@@ -34,6 +34,7 @@ class VisionConfig:
     min_speed: float = 0.8  # [m/s] slowest planned speed while the way is free
     lateral_accel: float = 1.5  # [m/s^2] v <= sqrt(a_lat / |curvature|)
     comfort_decel: float = 2.5  # [m/s^2] speed lets the car stop in the free distance at this rate
+    stop_decel: float = 1.2  # [m/s^2] braking to stop at the goal
     margin: float = 0.3  # [m] clearance kept beside the car body
     stop_distance: float = 0.8  # [m] stop this far before an obstacle
     needed_free: float = 5.0  # [m] an arc this free is good enough; nearer the waypoint arc wins
@@ -126,4 +127,7 @@ class VisionDriver(BaseDriver):
         if abs(kappa) > 1e-6:
             v = min(v, max(cfg.min_speed, math.sqrt(cfg.lateral_accel / abs(kappa))))
         v = min(v, math.sqrt(2 * cfg.comfort_decel * max(room - cfg.stop_distance, 0.0)))
+        v = min(v, self.approach_speed(obs, cfg.stop_decel))
+        if v == 0.0:
+            return -1.0, self.steer_for(kappa)
         return self.throttle_for(v, speed), self.steer_for(kappa)

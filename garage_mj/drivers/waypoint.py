@@ -22,6 +22,7 @@ class WaypointConfig:
     cruise_speed: float = 3.0  # [m/s] on straight road
     min_speed: float = 1.0  # [m/s] never plan slower than this (except to stop)
     lateral_accel: float = 1.5  # [m/s^2] comfort limit: v <= sqrt(a_lat / |curvature|)
+    stop_decel: float = 1.2  # [m/s^2] braking to stop at the goal
 
 
 class WaypointDriver(BaseDriver):
@@ -37,4 +38,7 @@ class WaypointDriver(BaseDriver):
         v = cfg.cruise_speed
         if abs(kappa) > 1e-6:
             v = min(v, max(cfg.min_speed, math.sqrt(cfg.lateral_accel / abs(kappa))))
+        v = min(v, self.approach_speed(obs, cfg.stop_decel))
+        if v == 0.0:
+            return -1.0, self.steer_for(kappa)
         return self.throttle_for(v, speed), self.steer_for(kappa)

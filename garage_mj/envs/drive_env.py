@@ -7,10 +7,14 @@ neighbours are not kept free, as in a real garage), and the start pose noise. Pa
 empty stalls move below the floor (:func:`~garage_mj.scene.mjcf_scene.set_parked`), so a reset
 never recompiles.
 
-The route runs from the entrance on the right-hand lanes of the lane graph to the lane point
-beside the target stall (on whichever lane of its road is reached sooner); the goal is the
-route's last point. The car starts
-:data:`START_OFFSET` metres along the route, so it is wholly inside the garage.
+The route and the goal come from the garage's :class:`~garage_mj.scene.GarageScene` planner
+(:mod:`garage_mj.scene.drivable`): right-hand lane centre lines with turns the car can steer, the
+goal a pose on the lane beside the target stall, the car's swept footprint checked clear of
+every obstacle and stall outline. A target that no driver of this car could reach is
+``infeasible``: with ``infeasible="skip"`` (default) such stalls are never drawn; with
+``"report"`` (the cruise runner) they are drawn like any other and the test ends at reset with
+outcome ``infeasible`` and its reason, never driven. The car starts :data:`START_OFFSET` metres
+along the route, so it is wholly inside the garage.
 
 Outcomes are the environment's (:class:`~garage_mj.outcomes.OutcomeMonitor`): ``success`` and
 ``collision``/``deadlock`` terminate, ``timeout`` truncates. The reward is route progress [m]
@@ -20,7 +24,6 @@ per step, plus :data:`SUCCESS_REWARD` or :data:`COLLISION_PENALTY` at the end.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -31,24 +34,21 @@ from gymnasium import spaces
 from garage_mj.config import load_config
 from garage_mj.garage import Garage
 from garage_mj.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
-from garage_mj.scene.lanes import entrance_pose, lane_graph
-from garage_mj.scene.lanes import route as lane_route
-from garage_mj.scene.mjcf_scene import build_scene, parked_car_bodies, set_parked
+from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan
+from garage_mj.scene.garage_scene import GarageScene
+from garage_mj.scene.mjcf_scene import parked_car_bodies, set_parked
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import Semantic, geom_classes
-from garage_mj.scene.stalls import stall_layout
-from garage_mj.scene.world import cell_center
 from garage_mj.sensors import Camera, CameraConfig
-from garage_mj.vehicle import Car, CarConfig, DiscreteAction, attach_car, compile_mjcf
+from garage_mj.vehicle import Car, CarConfig, DiscreteAction, attach_car, car_geometry, compile_mjcf
 
 LOOKAHEAD = 4.0  # [m] the observed waypoint lies this far ahead of the car's route progress
-START_OFFSET = 3.0  # [m] start this far along the route from the entrance lane's first point
-GOAL_SNAP = 3.5  # [m] a lane point farther than this from a stall's road point does not serve it
 MAX_EXTENT = 1000.0  # [m] bound of the waypoint observation (far beyond any garage)
 MAX_SPEED = 50.0  # [m/s] bound of the speed observation
 SUCCESS_REWARD = 10.0
 COLLISION_PENALTY = -10.0
 ACTION_TYPES = ("discrete", "continuous")
+INFEASIBLE_MODES = ("skip", "report")
 
 
 def _as(cls: type, value: Any) -> Any:
@@ -60,8 +60,7 @@ class GarageDriveEnv(gym.Env):
     """Drive from the entrance to a target stall (registered as ``garage_mj/GarageDrive-v0``).
 
     Args:
-        garage: the :class:`Garage` to drive in (or give ``pack``).
-        pack: an asset pack folder (``garage-mj export``); its ``garage.json`` is used.
+        garage: the :class:`Garage` to drive in (for an asset pack: ``load_pack(folder).garage``).
         action_type: ``"discrete"`` (the paper's :class:`DiscreteAction`) or ``"continuous"``
             (``[throttle/brake, steer]`` in [-1, 1]).
         occupancy: probability that a non-target stall holds a parked car.
@@ -70,6 +69,9 @@ class GarageDriveEnv(gym.Env):
         camera, car, outcome: :class:`CameraConfig`, :class:`CarConfig`, :class:`OutcomeConfig`
             or dicts of their fields. The camera rate sets the control period.
         rgb: also observe the colour image.
+        infeasible: ``"skip"`` draws targets among feasible stalls only; ``"report"`` draws among
+            all stalls and ends an infeasible test at reset (outcome ``infeasible``).
+        drive: :class:`~garage_mj.scene.drivable.DriveConfig` (margins of the feasibility checks).
         render_mode: ``"rgb_array"`` renders the ``ego/top`` camera (``render_size`` pixels).
     """
 
@@ -78,7 +80,6 @@ class GarageDriveEnv(gym.Env):
     def __init__(
         self,
         garage: Garage | None = None,
-        pack: str | Path | None = None,
         action_type: str = "discrete",
         occupancy: float = 0.5,
         start_noise: tuple[float, float] = (0.3, 0.05),
@@ -88,21 +89,21 @@ class GarageDriveEnv(gym.Env):
         rgb: bool = False,
         render_mode: str | None = None,
         render_size: tuple[int, int] = (320, 240),
+        infeasible: str = "skip",
+        drive: DriveConfig | dict[str, Any] | None = None,
     ) -> None:
-        if (garage is None) == (pack is None):
-            raise ValueError("GarageDriveEnv needs exactly one of garage= or pack=")
-        if pack is not None:
-            from garage_mj.export.pack import load_pack
-
-            garage = load_pack(pack).garage
+        if not isinstance(garage, Garage):
+            raise ValueError("GarageDriveEnv needs garage= (a garage_mj.Garage; for a pack: load_pack(folder).garage)")
+        if infeasible not in INFEASIBLE_MODES:
+            raise ValueError(f"infeasible must be one of {INFEASIBLE_MODES}, got {infeasible!r}")
         if action_type not in ACTION_TYPES:
             raise ValueError(f"action_type must be one of {ACTION_TYPES}, got {action_type!r}")
         if not 0.0 <= occupancy <= 1.0:
             raise ValueError(f"occupancy must be in [0, 1], got {occupancy}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        assert garage is not None
         self.garage = garage
+        self.infeasible = infeasible
         self.action_type = action_type
         self.occupancy = float(occupancy)
         self.start_noise = (float(start_noise[0]), float(start_noise[1]))
@@ -111,16 +112,20 @@ class GarageDriveEnv(gym.Env):
             cam = CameraConfig(**{**cam.__dict__, "rgb": True})
         self.camera_config = cam
         self.car_config = _as(CarConfig, car)
+        self.car_geometry = car_geometry(self.car_config)
+        self.drive_config = _as(DriveConfig, drive)
         self.outcome_config = _as(OutcomeConfig, outcome)
         self.render_mode = render_mode
         self.render_size = render_size
         self.dt = cam.period  # [s] control period
 
         self._build()
-        self._routes: dict[int, np.ndarray | None] = {}
-        self.targets = [s.id for s in self.stalls if self._route_points(s.id) is not None]
+        if infeasible == "skip":
+            self.targets = [s.id for s in self.stalls if self.planner.plan(s.id).feasible]
+        else:
+            self.targets = [s.id for s in self.stalls]
         if not self.targets:
-            raise ValueError(f"garage {garage.name!r}: no stall can be reached from the entrance")
+            raise ValueError(f"garage {garage.name!r}: no stall can be reached by a feasible route from the entrance")
 
         h, w = cam.height, cam.width
         obs = {
@@ -128,6 +133,10 @@ class GarageDriveEnv(gym.Env):
             "segmentation": spaces.Box(0, max(Semantic), (h, w), np.uint8),
             "waypoint": spaces.Box(-MAX_EXTENT, MAX_EXTENT, (2,), np.float32),
             "speed": spaces.Box(-MAX_SPEED, MAX_SPEED, (1,), np.float32),
+            "goal": spaces.Box(-MAX_EXTENT, MAX_EXTENT, (2,), np.float32),
+            "remaining": spaces.Box(0.0, MAX_EXTENT, (1,), np.float32),
+            "pose": spaces.Box(np.array([-MAX_EXTENT, -MAX_EXTENT, -np.pi], np.float32),
+                               np.array([MAX_EXTENT, MAX_EXTENT, np.pi], np.float32), dtype=np.float32),
         }
         if cam.rgb:
             obs["rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
@@ -141,8 +150,9 @@ class GarageDriveEnv(gym.Env):
 
     # -- scene -------------------------------------------------------------------------------------
     def _build(self) -> None:
-        root = build_scene(self.garage)
-        self._entrance = entrance_pose(self.garage)
+        self.scene = GarageScene(self.garage)
+        root = self.scene.mjcf()
+        self._entrance = self.scene.entrance_pose
         attach_car(root, *self._entrance)
         self.model = compile_mjcf(root)
         self.data = mujoco.MjData(self.model)
@@ -151,35 +161,13 @@ class GarageDriveEnv(gym.Env):
         self.camera = Camera(self.model, self.camera_config)
         self._top: Camera | None = None
         self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
-        self.graph = lane_graph(self.garage)
-        self.stalls = stall_layout(self.garage).stalls
+        self.planner = self.scene.planner(self.car_geometry, self.drive_config)
+        self.stalls = self.scene.stalls.stalls
         self.parkable = sorted(parked_car_bodies(self.model))
 
-    def _route_points(self, stall_id: int) -> np.ndarray | None:
-        """Shortest lane route from the entrance to a lane point beside the stall (None: unreachable).
-
-        The stall's road point lies on the near lane of its road; its mirror image on the far lane
-        is a goal too (a driver passes the stall on either lane), so only dead ends need a U-turn.
-        """
-        if stall_id not in self._routes:
-            s = self.stalls[stall_id]
-            cx, cy = cell_center(*s.road_cell, self.garage.shape[0])
-            u = np.array([math.cos(s.yaw), math.sin(s.yaw)])
-            near = np.array([s.road_x, s.road_y])
-            far = near - 2.0 * float((near - (cx, cy)) @ u) * u
-            best = None
-            for goal in (near, far):
-                try:
-                    pts = lane_route(self.graph, self._entrance[:2], goal)
-                except ValueError:
-                    continue
-                if len(pts) < 2 or np.linalg.norm(pts[-1] - goal) > GOAL_SNAP:
-                    continue
-                length = Route(pts).length
-                if length > START_OFFSET + 2.0 and (best is None or length < best[0]):
-                    best = (length, pts)
-            self._routes[stall_id] = None if best is None else best[1]
-        return self._routes[stall_id]
+    def plan(self, stall_id: int) -> TestPlan:
+        """The planned drive to a stall (route, goal, clearances), or why it is infeasible."""
+        return self.planner.plan(stall_id)
 
     # -- gym API -----------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -202,8 +190,15 @@ class GarageDriveEnv(gym.Env):
 
         self.target = target
         self.occupied = occupied
-        self.route = Route(self._route_points(target))
-        self.monitor = OutcomeMonitor(self.route, self.outcome_config)
+        self.test_plan = plan = self.planner.plan(target)
+        if plan.feasible:
+            self.route = Route(plan.centre)
+            self.monitor = OutcomeMonitor(self.route, self.outcome_config, goal=plan.goal)
+        else:  # never driven: the car waits at the start of the entrance lane
+            x0, y0, h0 = self._entrance
+            ahead = [(x0 + k * math.cos(h0), y0 + k * math.sin(h0)) for k in (0.0, START_OFFSET + 5.0)]
+            self.route = Route(ahead)
+            self.monitor = OutcomeMonitor(self.route, self.outcome_config)
         heading = self.route.heading_at(START_OFFSET)
         p = self.route.point_at(START_OFFSET)
         x = float(p[0]) - math.sin(heading) * lateral
@@ -218,6 +213,8 @@ class GarageDriveEnv(gym.Env):
         self.path_length = 0.0  # [m] driven
         self._last_xy = (x, y)
         self.outcome: Outcome | None = None
+        if not plan.feasible:
+            self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, plan.reason)
         return self._observe(), self._info()
 
     def step(self, action):
@@ -232,10 +229,10 @@ class GarageDriveEnv(gym.Env):
             mujoco.mj_step(self.model, self.data)
             if self.data.ncon:
                 contacts += ego_contacts(self.model, self.data, self.car.geoms, self.classes)
-        x, y, _ = self.car.pose(self.data)
+        x, y, yaw = self.car.pose(self.data)
         self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])
         self._last_xy = (x, y)
-        self.outcome = self.monitor.update(self.data.time, (x, y), self.car.speed(self.data), contacts)
+        self.outcome = self.monitor.update(self.data.time, (x, y), self.car.speed(self.data), contacts, yaw=yaw)
         reward = self.monitor.progress - before
         terminated = truncated = False
         if self.outcome is not None:
@@ -253,6 +250,10 @@ class GarageDriveEnv(gym.Env):
         target = self.route.point_at(self.monitor.progress + LOOKAHEAD)
         obs["waypoint"] = to_car_frame(target, x, y, yaw).astype(np.float32)
         obs["speed"] = np.array([self.car.speed(self.data)], dtype=np.float32)
+        obs["goal"] = to_car_frame(self.monitor.goal, x, y, yaw).astype(np.float32)
+        s, _ = self.route.project((x, y), self.monitor.progress - 2.0, self.monitor.progress + 6.0)
+        obs["remaining"] = np.array([max(self.route.length - s, 0.0)], dtype=np.float32)
+        obs["pose"] = np.array([x, y, math.remainder(yaw, math.tau)], dtype=np.float32)
         return obs
 
     def _info(self) -> dict[str, Any]:
@@ -266,6 +267,8 @@ class GarageDriveEnv(gym.Env):
             "progress": self.monitor.progress,
             "pose": (x, y, yaw),
             "parked": len(self.occupied),
+            "goal": tuple(float(v) for v in (*self.monitor.goal, self.monitor.goal_yaw)),
+            "feasible": self.test_plan.feasible,
         }
         if self.outcome is not None:
             info.update(outcome=self.outcome.kind.value, reason=self.outcome.reason,
@@ -273,9 +276,18 @@ class GarageDriveEnv(gym.Env):
         return info
 
     def driver_info(self, seed: int = 0) -> dict[str, Any]:
-        """What a :class:`~garage_mj.drivers.Driver` gets at reset: seed, action type, period."""
+        """What a :class:`~garage_mj.drivers.Driver` gets at reset.
+
+        Seed, action type, control period, the car's geometry, and the test's plan: ``route``
+        (the centre path, (N, 2) m), ``rear_path`` and ``rear_heading`` (the rear-axle path the
+        route was built from) and ``goal`` (x, y, yaw). Privileged drivers (``oracle``) use the
+        plan; camera drivers should not.
+        """
+        plan = self.test_plan
         return {"seed": int(seed), "action_type": self.action_type, "dt": self.dt,
-                "target_stall": self.target, "route_length": self.route.length}
+                "target_stall": self.target, "route_length": self.route.length, "car": self.car_geometry,
+                "route": self.route.points, "goal": tuple(float(v) for v in (*self.monitor.goal, self.monitor.goal_yaw)),
+                "rear_path": plan.rear, "rear_heading": plan.heading, "rear_curvature": plan.curvature}
 
     def render(self) -> np.ndarray | None:
         """The ``ego/top`` camera in colour (``render_mode="rgb_array"``)."""

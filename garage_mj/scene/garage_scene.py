@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     import networkx as nx
     from dm_control import mjcf
 
-    from garage_mj.scene.drivable import DrivePlanner
+    from garage_mj.scene.drivable import DriveConfig, DrivePlanner
     from garage_mj.scene.layout import SceneLayout
     from garage_mj.scene.roadmodel import RoadModel
     from garage_mj.scene.roadnet import RoadNetwork
@@ -86,12 +86,12 @@ class GarageScene:
 
         return build_scene(self.garage, world=self.world, parked=parked, layout=self.layout)
 
-    def planner(self, car: CarGeometry | None = None) -> DrivePlanner:
+    def planner(self, car: CarGeometry | None = None, config: DriveConfig | None = None) -> DrivePlanner:
         """The ego car's route planner and drivability checks for ``car`` (default ``models/car``)."""
-        from garage_mj.scene.drivable import DrivePlanner
+        from garage_mj.scene.drivable import DEFAULT_DRIVE, DrivePlanner
         from garage_mj.vehicle import car_geometry
 
-        car = car or car_geometry()
-        if car not in self._planners:
-            self._planners[car] = DrivePlanner(self, car)
-        return self._planners[car]
+        key = (car or car_geometry(), config or DEFAULT_DRIVE)
+        if key not in self._planners:
+            self._planners[key] = DrivePlanner(self, *key)
+        return self._planners[key]

@@ -1,0 +1,107 @@
+"""``oracle``: the privileged reference driver that proves each feasible test drivable.
+
+It knows the car's exact pose (``obs["pose"]``) and the test's whole feasible route (the
+rear-axle path, headings and curvature from :mod:`garage_mj.scene.drivable`, handed over in
+``info`` at reset) and drives it with continuous control:
+
+- steering: a kinematic path tracker on the rear-axle path: the path's curvature a short preview
+  ahead (the steering lags by its rate limit) plus feedback on lateral and heading error;
+- speed: a profile computed once per test, backwards from the goal (where it is zero): on curves
+  no faster than ``lateral_accel`` allows and than the steering rate can follow, braking at
+  ``stop_decel`` into curves and to the goal.
+
+If the oracle fails a feasible test, the test or the testbed is wrong, not the driver under test.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from garage_mj.drivers.base import BaseDriver
+
+
+@dataclass(frozen=True)
+class OracleConfig:
+    """Speeds and gains of the reference driver."""
+
+    cruise_speed: float = 3.0  # [m/s] on straight road
+    lateral_accel: float = 1.0  # [m/s^2] v <= sqrt(a_lat / |curvature|) on curves
+    steer_ramp: float = 0.6  # [m] a curvature change must be steerable within this distance
+    stop_decel: float = 1.2  # [m/s^2] planned braking into curves and to the goal
+    k_lateral: float = 0.5  # [1/m^2] curvature command per metre of lateral error
+    k_heading: float = 1.2  # [1/m] curvature command per radian of heading error
+    preview: float = 0.3  # [m] curvature preview: half the steering ramp, so the ramp is centred
+    stop_within: float = 0.15  # [m] closer than this to the goal: brake to a stop
+
+
+class OracleDriver(BaseDriver):
+    """Tracks the test's planned route with its exact pose; privileged, continuous control."""
+
+    config_class = OracleConfig
+
+    def reset(self, info: dict[str, Any]) -> None:
+        super().reset(info)
+        rear = info.get("rear_path")
+        if rear is None or info.get("rear_heading") is None:
+            raise ValueError("the oracle driver needs the test's plan (rear_path, rear_heading, rear_curvature) "
+                             "in its reset info: run it in GarageDrive-v0 (env.driver_info)")
+        self.path = np.asarray(rear, dtype=float)
+        self.heading = np.asarray(info["rear_heading"], dtype=float)
+        self.kappa = np.asarray(info["rear_curvature"], dtype=float)
+        seg = np.linalg.norm(np.diff(self.path, axis=0), axis=1)
+        self.s = np.concatenate([[0.0], np.cumsum(seg)])
+        self.index = 0
+        self.v_limit = self._speed_profile()
+
+    def _speed_profile(self) -> np.ndarray:
+        """[m/s] the fastest speed at each path point that still brakes in time for what follows."""
+        cfg, car = self.config, self.car
+        k = np.abs(self.kappa)
+        v = np.full(len(k), min(cfg.cruise_speed, car.max_speed))
+        curved = k > 1e-6
+        v[curved] = np.minimum(v[curved], np.sqrt(cfg.lateral_accel / k[curved]))
+        # where curvature changes, the steering (rate-limited) must turn within steer_ramp metres
+        dk = np.abs(np.diff(self.kappa, prepend=self.kappa[0], append=self.kappa[-1]))
+        jump = np.maximum(dk[:-1], dk[1:])
+        steer_change = np.arctan(car.wheelbase * jump)  # [rad] about the road-wheel change needed
+        rate = car.steer_rate
+        with np.errstate(divide="ignore"):
+            v = np.minimum(v, np.where(steer_change > 1e-3, rate * cfg.steer_ramp / np.maximum(steer_change, 1e-3), np.inf))
+        v[-1] = 0.0  # stop at the goal
+        for i in range(len(v) - 2, -1, -1):  # brake in time for every later limit
+            ds = self.s[i + 1] - self.s[i]
+            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2.0 * cfg.stop_decel * ds))
+        return v
+
+    def _project(self, x: float, y: float) -> int:
+        lo = max(0, self.index - 8)
+        hi = min(len(self.path), self.index + 60)
+        d = np.sum((self.path[lo:hi] - (x, y)) ** 2, axis=1)
+        self.index = lo + int(np.argmin(d))
+        return self.index
+
+    def command(self, obs: dict[str, Any]) -> tuple[float, float]:
+        cfg, car = self.config, self.car
+        x, y, yaw = (float(v) for v in np.asarray(obs["pose"]).reshape(-1)[:3])
+        speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
+        rx, ry = x + car.rear_axle * math.cos(yaw), y + car.rear_axle * math.sin(yaw)
+        i = self._project(rx, ry)
+        h = self.heading[i]
+        px, py = self.path[i]
+        lateral = -math.sin(h) * (rx - px) + math.cos(h) * (ry - py)  # > 0: left of the path
+        along = math.cos(h) * (rx - px) + math.sin(h) * (ry - py)
+        s_now = self.s[i] + along
+        ahead = s_now + cfg.preview
+        j = min(int(np.searchsorted(self.s, ahead)), len(self.s) - 1)
+        heading_err = math.remainder(yaw - h, math.tau)
+        kappa = float(self.kappa[j]) - cfg.k_lateral * lateral - cfg.k_heading * math.sin(heading_err)
+        remaining = self.s[-1] - s_now
+        if remaining <= cfg.stop_within:
+            return -1.0, self.steer_for(kappa)
+        v = float(np.interp(s_now, self.s, self.v_limit))
+        v = max(v, min(0.3, math.sqrt(2.0 * cfg.stop_decel * max(remaining, 0.0))))  # creep to the goal
+        return self.throttle_for(v, speed), self.steer_for(kappa)
