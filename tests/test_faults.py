@@ -204,10 +204,10 @@ def test_map_files_with_odd_tokens_or_bytes_are_one_line(tmp_path, capsys):
 BAD_CONFIGS = ["view_size = 4", "view_size = 0", "view_size = -3", "max_errors = -1", "learning_rate = -0.001",
                "learning_rate = nan", "learning_rate = inf", "net_arch = 256", "buffer_size = 1e14",
                "buffer_size = 100000000000000", "max_grad_norm = -1.0", "gamma = 2.0", "bogus_key = 1",
-               "learning_rate = ", "\xff"]
+               "learning_rate = ", "\xff", "a = " + "[" * 100_000 + "]" * 100_000]
 
 
-@pytest.mark.parametrize("line", BAD_CONFIGS)
+@pytest.mark.parametrize("line", BAD_CONFIGS, ids=lambda line: line[:24])
 def test_train_refuses_a_bad_config_in_one_line(tmp_path, capsys, line):
     cfg = tmp_path / "dqn.toml"
     cfg.write_bytes(line.encode("latin-1"))
