@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -23,6 +24,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from garage_mj.blocks import NUM_CODES, Block  # noqa: E402
 from garage_mj.errors import GarageMJError  # noqa: E402
+from garage_mj.fsutil import atomic_write  # noqa: E402
 from garage_mj.garage import Garage  # noqa: E402
 from garage_mj.geometry import DELTAS  # noqa: E402
 from garage_mj.roadgraph import Tile, analyse  # noqa: E402
@@ -207,8 +209,11 @@ def garage_png(garage: Garage, path: str | Path, title: str | None = None) -> Pa
 def _save(fig, out: str | Path) -> Path:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    fmt = out.suffix.lstrip(".").lower() or "png"
     try:
-        fig.savefig(out, dpi=DPI)
+        buf = io.BytesIO()
+        fig.savefig(buf, dpi=DPI, format=fmt)
+        atomic_write(out, buf.getvalue())
     except OSError as exc:
         raise PlotError(f"cannot write {out}: {exc.strerror}") from None
     except ValueError as exc:  # unknown file extension
