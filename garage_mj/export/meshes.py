@@ -21,6 +21,7 @@ import trimesh
 from trimesh.visual.material import PBRMaterial
 
 from garage_mj.garage import Garage
+from garage_mj.scene.garage_scene import GarageScene, as_scene
 from garage_mj.scene.layout import CLASS_RGBA, SceneLayout, build_layout
 from garage_mj.scene.semantics import PREFIXES, Semantic
 from garage_mj.scene.templates import PARKED_CAR, PILLAR, Template, load_template
@@ -97,11 +98,14 @@ def layout_meshes(layout: SceneLayout, parked: Iterable[int] | None = None) -> t
 
 
 def garage_meshes(
-    garage: Garage, *, world: WorldConfig = DEFAULT_WORLD, parked: Iterable[int] | None = None,
+    garage: Garage | GarageScene, *, world: WorldConfig = DEFAULT_WORLD, parked: Iterable[int] | None = None,
     ceiling: bool = False,
 ) -> trimesh.Scene:
     """The garage as a trimesh scene (see the module docstring); ``parked=None`` fills every stall."""
-    return layout_meshes(build_layout(garage, world, ceiling=ceiling), parked)
+    scene = as_scene(garage, world)
+    layout = build_layout(scene.garage, scene.world, ceiling=True, network=scene.network,
+                          stalls=scene.stalls) if ceiling else scene.layout
+    return layout_meshes(layout, parked)
 
 
 def write_glb(scene: trimesh.Scene, path: str | Path) -> Path:

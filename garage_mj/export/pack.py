@@ -34,6 +34,8 @@ from garage_mj.export.xodr import write_xodr
 from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir, make_temp_dir
 from garage_mj.garage import Garage, MapError, validate_garage
 from garage_mj.metrics import evaluate
+from garage_mj.scene.drivable import drivability
+from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import SCENE_XML, write_scene
 
 MANIFEST = "manifest.json"
@@ -157,17 +159,19 @@ def load_pack(path: str | Path) -> Pack:
     return Pack(path, manifest)
 
 
-def _write_files(garage: Garage, tmp: Path) -> None:
-    (tmp / "garage.json").write_text(garage.to_json())
-    write_xodr(garage, tmp / "garage.xodr")
-    write_scene(garage, tmp)
-    scene = garage_meshes(garage)
-    write_glb(scene, tmp / "garage.glb")
-    write_obj(scene, tmp / "garage.obj")
-    write_preview(garage, tmp / "preview.png")
+def _write_files(scene: GarageScene, tmp: Path) -> None:
+    """Every file of a pack, all drawn from one :class:`GarageScene` (each part derived once)."""
+    (tmp / "garage.json").write_text(scene.garage.to_json())
+    write_xodr(scene, tmp / "garage.xodr")
+    write_scene(scene, tmp)
+    meshes = garage_meshes(scene)
+    write_glb(meshes, tmp / "garage.glb")
+    write_obj(meshes, tmp / "garage.obj")
+    write_preview(scene, tmp / "preview.png")
 
 
-def _manifest(garage: Garage, tmp: Path) -> dict:
+def _manifest(scene: GarageScene, tmp: Path) -> dict:
+    garage = scene.garage
     files = {
         p.relative_to(tmp).as_posix(): _sha256(p) for p in sorted(tmp.rglob("*")) if p.is_file()
     }
@@ -177,6 +181,7 @@ def _manifest(garage: Garage, tmp: Path) -> dict:
         "garage_hash": garage.canonical_hash(),
         "shape": list(garage.shape),
         "metrics": evaluate(garage).to_dict(),
+        "drivability": drivability(scene),  # for models/car: feasible stalls, clearance, curvature
         "files": files,
         "versions": _versions(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -196,8 +201,9 @@ def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False) -> 
         return final
     tmp = make_temp_dir(out_dir, f".{final.name}.", ".tmp")
     try:
-        _write_files(garage, tmp)
-        manifest = _manifest(garage, tmp)
+        scene = GarageScene(garage)
+        _write_files(scene, tmp)
+        manifest = _manifest(scene, tmp)
         atomic_write(tmp / MANIFEST, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
         if final.is_symlink() or final.is_file():
             final.unlink()

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from garage_mj.garage import Garage
+from garage_mj.scene.garage_scene import GarageScene, as_scene
 from garage_mj.scene.layout import CLASS_RGBA, SceneLayout, build_layout
 from garage_mj.scene.roadnet import road_network
 from garage_mj.scene.semantics import Semantic
@@ -24,7 +25,7 @@ PIXELS_PER_METRE = 8.0  # [px/m] a 13x13 garage (117 m) is about 950 px wide
 MARGIN = 1.0  # [m] around the outer walls
 ROAD_RGB = (70, 72, 76)
 BACKGROUND_RGB = (25, 25, 28)
-CAR_LENGTH, CAR_WIDTH = 4.6, 1.9  # [m] models/parked_car footprint
+CAR_LENGTH, CAR_WIDTH = 4.3, 1.9  # [m] models/parked_car footprint (inside a 4.5 m x 2.5 m stall)
 _ORDER = (
     Semantic.FLOOR, Semantic.ENTRANCE, Semantic.EXIT, Semantic.ROAD_MARKING, Semantic.STALL_MARKING,
     Semantic.OBSTACLE, Semantic.WALL,
@@ -56,11 +57,12 @@ class _Canvas:
 
 
 def render_preview(
-    garage: Garage, *, world: WorldConfig = DEFAULT_WORLD, parked: Iterable[int] | None = None,
+    garage: Garage | GarageScene, *, world: WorldConfig = DEFAULT_WORLD, parked: Iterable[int] | None = None,
     pixels_per_metre: float = PIXELS_PER_METRE,
 ) -> np.ndarray:
     """The top-down picture as an (H, W, 3) RGB uint8 array."""
-    layout = build_layout(garage, world)
+    scene = as_scene(garage, world)
+    layout, world = scene.layout, scene.world
     canvas = _Canvas(layout, pixels_per_metre)
     boxes = sorted(layout.boxes, key=lambda b: _ORDER.index(b.cls) if b.cls in _ORDER else len(_ORDER))
     half_road, half = world.road_width / 2, world.block / 2
@@ -68,7 +70,7 @@ def render_preview(
         (cx, cy, _), (hx, hy, _) = box.center, box.half
         canvas.rect(cx - hx, cy - hy, cx + hx, cy + hy, _bgr(box.cls))
         if box.cls == Semantic.FLOOR:  # asphalt of the roads, under the markings
-            for cell in road_network(garage, world).cells.values():
+            for cell in scene.network.cells.values():
                 canvas.rect(cell.x - half_road, cell.y - half_road, cell.x + half_road, cell.y + half_road,
                             ROAD_RGB[::-1])
                 for d in cell.openings:
@@ -88,7 +90,7 @@ def render_preview(
     return canvas.img[..., ::-1].copy()
 
 
-def write_preview(garage: Garage, path: str | Path, **kwargs) -> Path:
+def write_preview(garage: Garage | GarageScene, path: str | Path, **kwargs) -> Path:
     """Write :func:`render_preview` as a PNG."""
     path = Path(path)
     if not cv2.imwrite(str(path), render_preview(garage, **kwargs)[..., ::-1]):

@@ -15,6 +15,7 @@ from lxml import etree
 
 from garage_mj.fsutil import atomic_write
 from garage_mj.garage import Garage
+from garage_mj.scene.garage_scene import GarageScene, as_scene
 from garage_mj.scene.roadmodel import Link, ParkingSpace, Road, RoadModel, build_road_model
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
@@ -177,10 +178,10 @@ def to_string(model: RoadModel) -> str:
 
 
 def write_xodr(
-    garage: Garage, path: str | Path | None = None, world: WorldConfig = DEFAULT_WORLD
+    garage: Garage | GarageScene, path: str | Path | None = None, world: WorldConfig = DEFAULT_WORLD
 ) -> XodrResult:
     """Build ``garage``'s OpenDRIVE map; write it to ``path`` (atomically) when given."""
-    model = build_road_model(garage, world)
+    model = as_scene(garage, world).road_model
     text = to_string(model)
     out = None
     if path is not None:

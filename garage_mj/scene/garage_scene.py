@@ -95,3 +95,8 @@ class GarageScene:
         if key not in self._planners:
             self._planners[key] = DrivePlanner(self, *key)
         return self._planners[key]
+
+
+def as_scene(garage: Garage | GarageScene, world: WorldConfig = DEFAULT_WORLD) -> GarageScene:
+    """``garage`` as a :class:`GarageScene` (itself when it is one; ``world`` applies to a bare garage)."""
+    return garage if isinstance(garage, GarageScene) else GarageScene(garage, world)

@@ -33,6 +33,7 @@ import numpy as np
 from dm_control import mjcf
 
 from garage_mj.garage import Garage
+from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.layout import CLASS_RGBA, Box, SceneLayout, build_layout
 from garage_mj.scene.semantics import Semantic, geom_name
 from garage_mj.scene.templates import PARKED_CAR, PILLAR, install, load_template, stamp
@@ -114,7 +115,7 @@ def _setup(root: mjcf.RootElement, layout: SceneLayout) -> None:
 
 
 def build_scene(
-    garage: Garage,
+    garage: Garage | GarageScene,
     *,
     world: WorldConfig = DEFAULT_WORLD,
     parked: Iterable[int] | None = None,
@@ -130,6 +131,10 @@ def build_scene(
         ceiling: add the ceiling slab (geom group 4, hidden by default in renders).
         layout: the garage's :class:`SceneLayout` when already built (``ceiling`` is then its own).
     """
+    if isinstance(garage, GarageScene):  # its layout, derived once (the ceiling needs its own)
+        if layout is None and not ceiling:
+            layout = garage.layout
+        garage, world = garage.garage, garage.world
     layout = layout or build_layout(garage, world, ceiling=ceiling)
     root = mjcf.RootElement(model=f"garage_{garage.name}" if garage.name else "garage")
     _setup(root, layout)
@@ -190,7 +195,7 @@ def compile_scene(garage: Garage, **kwargs) -> mujoco.MjModel:
     return mujoco.MjModel.from_xml_string(xml, assets)
 
 
-def write_scene(garage: Garage, out_dir: str | Path, **kwargs) -> Path:
+def write_scene(garage: Garage | GarageScene, out_dir: str | Path, **kwargs) -> Path:
     """Write ``scene.xml`` (and any assets it needs) into ``out_dir``; returns the XML path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
