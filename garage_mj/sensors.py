@@ -31,6 +31,7 @@ from dataclasses import dataclass  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from garage_mj.errors import GarageMJError  # noqa: E402
 from garage_mj.scene.semantics import geom_classes  # noqa: E402
 
 GL_FIX = (
@@ -39,7 +40,7 @@ GL_FIX = (
 )
 
 
-class RenderError(RuntimeError):
+class RenderError(GarageMJError, RuntimeError):
     """Offscreen rendering is unavailable (no usable OpenGL); the message names the fix."""
 
 

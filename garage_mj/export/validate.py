@@ -26,6 +26,8 @@ from pathlib import Path
 
 from lxml import etree
 
+from garage_mj.errors import GarageMJError
+
 #: No entity expansion, no DTD or network fetches: the files parsed here may come from anywhere.
 _SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False)
 
@@ -35,7 +37,7 @@ _PROBE = Path(__file__).with_name("carla_probe.py")
 _QC_DRIVER = "import sys\nfrom qc_opendrive import main\nfor c in sys.argv[1:]:\n    sys.argv = ['qc_opendrive', '-c', c]\n    main.main()\n"
 
 
-class ToolMissing(RuntimeError):
+class ToolMissing(GarageMJError, RuntimeError):
     """A validation tool is not installed; the message says how to install it."""
 
 
