@@ -534,3 +534,18 @@ def test_garage_validation_is_shared_by_export_and_cruise(tiny):
         with pytest.raises(MapError):
             validate_garage(g)
     assert validate_garage(copy.deepcopy(tiny)) == tiny
+
+
+def test_demo_with_a_map_path_writes_only_inside_out(tmp_path):
+    from garage_mj.demo import DemoConfig, run_demo
+
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    (maps / "m.txt").write_text(load_map("tiny_7x11").to_text() + "\n")
+    before = snapshot(maps)
+    out = tmp_path / "out"
+    cfg = DemoConfig(map=str((maps / "m.txt").resolve()), timesteps=3000, train_seeds=(0,), garages=1, tests=1,
+                     drivers=("waypoint",), workers=1, out=str(out))
+    report = run_demo(cfg)  # used to say "stored no usable garage": it looked the library up by the path
+    assert report == out / "report.html" and (out / "runs" / "m_s0" / "run.json").is_file()
+    assert sorted(p.name for p in maps.iterdir()) == ["m.txt"] and snapshot(maps) == before
