@@ -133,3 +133,12 @@ def test_config_from_toml(tmp_path):
         load_dqn_config(bad)
     with pytest.raises(ConfigError, match="exploration_fraction"):
         DQNConfig(exploration_fraction=2.0)
+
+
+def test_one_env_config_still_trains(tmp_path):
+    """The pre-vectorisation default (one env, (256, 256), an update every 4 timesteps) still runs."""
+    cfg = DQNConfig(n_envs=1, train_freq=4, gradient_steps=1, net_arch=(256, 256), learning_starts=200,
+                    checkpoint_every=1000)
+    manifest = train("tiny_7x11", 600, 0, tmp_path / "one", cfg, progress=False)
+    assert manifest["timesteps"] == 600 and manifest["config"]["n_envs"] == 1
+    assert len(_monitor_returns(tmp_path / "one")) == manifest["episodes"] > 0
