@@ -209,8 +209,13 @@ class Garage:
         }
 
     @classmethod
-    def from_json(cls, text: str | bytes | dict[str, Any], source: str = "garage JSON") -> Garage:
-        """Inverse of :meth:`to_json`; accepts the JSON text or the decoded dict."""
+    def from_json(cls, text: str | bytes | dict[str, Any], source: str = "garage JSON", *,
+                  usable: bool = False) -> Garage:
+        """Inverse of :meth:`to_json`; accepts the JSON text or the decoded dict.
+
+        Always checks the shape limits, the codes (JSON integers 0-9), gates and fixed cells;
+        ``usable=True`` also applies :func:`validate_garage` (what export and cruise need).
+        """
         if isinstance(text, dict):
             data = text
         else:
@@ -234,9 +239,10 @@ class Garage:
         if not isinstance(axis, str):
             raise MapError(f"{source}: six_stall_axis must be 'NS' or 'EW'")
         try:
-            return cls(grid, initial, six_stall_axis=axis, name=name)  # type: ignore[arg-type]
+            garage = cls(grid, initial, six_stall_axis=axis, name=name)  # type: ignore[arg-type]
         except MapError as exc:
             raise MapError(f"{source}: {exc}") from None
+        return validate_garage(garage, source) if usable else garage
 
     def canonical_hash(self) -> str:
         """SHA-256 of shape, grid and six-stall axis: equal garages hash equal."""

@@ -58,7 +58,7 @@ def _from_library(args: argparse.Namespace) -> list:
 
 def run(args: argparse.Namespace) -> int:
     from garage_mj.export.pack import export_packs
-    from garage_mj.garage import Garage, validate_garage
+    from garage_mj.garage import Garage
 
     if args.garage is not None:
         if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.limit)):
@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
             text = args.garage.read_bytes()
         except OSError as exc:
             raise UserError(f"cannot read {args.garage}: {exc.strerror}") from None
-        garages = [validate_garage(Garage.from_json(text, source=str(args.garage)), str(args.garage))]
+        garages = [Garage.from_json(text, source=str(args.garage), usable=True)]
     else:
         garages = _from_library(args)
     paths = export_packs(garages, args.out, force=args.force, progress=not args.quiet, total=len(garages))
