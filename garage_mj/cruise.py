@@ -30,7 +30,7 @@ import numpy as np
 
 from garage_mj.analysis import PAPER_R, regression, regression_plot
 from garage_mj.errors import GarageMJError
-from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir
+from garage_mj.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir
 from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
 
@@ -386,6 +386,7 @@ def run_cruise(
 def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Path, settings: CruiseSettings,
                 max_tests: int | None, progress: bool) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
+    clean_temp(out)  # temp files of a killed run's atomic writes
     _check_settings(out, settings)
     csv_path = out / "tests.csv"
     rows = read_tests(csv_path)
