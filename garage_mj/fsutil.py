@@ -15,6 +15,8 @@ import errno
 import fcntl
 import json
 import os
+import re
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -115,6 +117,28 @@ def ensure_dir(path: str | Path, what: str = "output folder") -> Path:
     except OSError as exc:
         raise write_error(path, exc) from None
     return path
+
+
+#: Names of the temp files and folders garage-mj makes: ``.<name>.<random>.tmp`` (and ``.old``).
+_TEMP = re.compile(r"^\..+\.(tmp|old)$")
+
+
+def clean_temp(folder: str | Path) -> list[Path]:
+    """Remove the hidden ``.<name>.*.tmp``/``.old`` files and folders a killed writer left; returns them.
+
+    Call it only while holding the folder's :class:`FolderLock`: a live writer's temp looks the
+    same. Symlinks are removed, never followed.
+    """
+    gone = []
+    for p in Path(folder).iterdir():
+        if not _TEMP.match(p.name):
+            continue
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+        gone.append(p)
+    return gone
 
 
 class FolderLock:

@@ -458,6 +458,7 @@ def test_an_empty_tests_csv_is_repaired_not_mangled(tiny, tmp_path):
     out = tmp_path / "c"
     out.mkdir()
     (out / "tests.csv").write_text("")  # what a kill -9 before the first flush used to leave
+    (out / ".summary.csv.k1ll3d.tmp").write_text("half")  # a killed run's atomic-write temp file
     fast = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}
     for _ in range(3):
         run_cruise([tiny], 2, "waypoint", out_dir=out, env=fast, progress=False)
@@ -467,6 +468,7 @@ def test_an_empty_tests_csv_is_repaired_not_mangled(tiny, tmp_path):
     assert list(rows[0]) == list(TEST_COLUMNS)
     with open(out / "summary.csv", newline="") as f:
         assert [r["tests"] for r in csv.DictReader(f)] == ["2"]
+    assert not (out / ".summary.csv.k1ll3d.tmp").exists()
 
 
 def test_two_cruise_runs_into_one_folder(pack_dir, tmp_path):

@@ -31,7 +31,7 @@ from garage_mj.errors import GarageMJError
 from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import write_preview
 from garage_mj.export.xodr import write_xodr
-from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir, make_temp_dir
+from garage_mj.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir, make_temp_dir
 from garage_mj.garage import Garage, MapError, validate_garage
 from garage_mj.metrics import evaluate
 from garage_mj.scene.drivable import drivability
@@ -240,20 +240,6 @@ def export_packs(
     return paths
 
 
-_TEMP = re.compile(r"^\..+\.(tmp|old)$")
-
-
-def clean_temp(out_dir: str | Path) -> list[Path]:
-    """Remove the hidden ``.<pack>.*.tmp``/``.old`` folders a killed export left; returns them.
-
-    Call it only while holding the folder's lock: a live export's temp folder looks the same.
-    """
-    gone = []
-    for p in Path(out_dir).iterdir():
-        if _TEMP.match(p.name) and p.is_dir() and not p.is_symlink():
-            shutil.rmtree(p, ignore_errors=True)
-            gone.append(p)
-    return gone
 
 
 def write_index(out_dir: str | Path) -> Path:
