@@ -44,6 +44,7 @@ START_OFFSET = 3.0  # [m] the car's centre starts this far along the route from 
 MIN_DRIVE = 2.0  # [m] the goal lies at least this far along the route beyond the start
 SAMPLE_STEP = 0.25  # [m] spacing of the route samples (and of the footprint sweep)
 NEAR_OBSTACLE = 6.0  # [m] obstacles farther than this from every path point are not tested
+GOAL_ON_STRAIGHT = 1.0  # [m] a straight goal this much farther from the stall than a curved one still wins
 EXACT_BELOW = 2.0  # [m] clearances above this are reported as the bounding-circle lower bound
 
 Cell = tuple[int, int]
@@ -400,7 +401,6 @@ class DrivePlanner:
         stall = self.scene.stalls.stalls[stall_id]
         q = stall.road_cell
         out = []
-        towards = -np.array([math.cos(stall.yaw), math.sin(stall.yaw)])  # from the road to the stall
         for node, cost in self._dist.items():
             if node[0] != q:
                 continue
@@ -408,10 +408,7 @@ class DrivePlanner:
             # stop on the entering line, or turn within the cell onto a line that leaves it
             finals = {d_in} | {d for d in self._openings(q) if d != OPPOSITE[d_in]}
             for final in sorted(finals):
-                u = np.array(WORLD_DIR[final], dtype=float)
-                right = np.array([u[1], -u[0]])
-                side_dot = float(towards @ right)
-                side = "right" if side_dot > 0.5 else ("left" if side_dot < -0.5 else "ahead")
+                side = _side(stall, math.atan2(WORLD_DIR[final][1], WORLD_DIR[final][0]))
                 rank = {"right": 0, "ahead": 1, "left": 2}[side]
                 out.append(_Candidate(cost, rank, self._path_to(node), final, side))
         out.sort(key=lambda c: (c.side_rank, c.cost, c.final))
@@ -448,24 +445,28 @@ class DrivePlanner:
         if not inside.any():
             return TestPlan(stall.id, False, "the stall lies beside the start: no room to drive to it",
                             stall_side=cand.side)
-        straight = inside & (np.abs(kap) < 1e-9)
-        if straight.any():  # stop on a straight piece of lane where there is one: a car stops there
-            inside = straight
         entry = np.array(stall.entry)
         dist = np.where(inside, np.linalg.norm(centre - entry, axis=1), np.inf)
+        straight = np.where(inside & (np.abs(kap) < 1e-9), dist, np.inf)
         g = int(np.argmin(dist))
+        if straight.min() <= dist[g] + GOAL_ON_STRAIGHT:  # stop on a straight piece of lane if one is near
+            g = int(np.argmin(straight))
+            dist = straight
         # the footprint at the goal must be clear; else move back along the lane
         pull = 0.0
-        clear_g, _ = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id)
+        clear_g, what = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id)
+        first = (clear_g[0], what[0])
         while clear_g[0] < cfg.clearance_margin:
             g -= 1
             pull = float(s[int(np.argmin(dist))] - s[g])
             if g <= 0 or pull > cfg.max_pullback or s[g] < START_OFFSET + MIN_DRIVE:
-                return TestPlan(stall.id, False, f"no clear place to stop beside the stall within {cfg.max_pullback:.0f} m",
+                return TestPlan(stall.id, False, f"no clear place to stop beside the stall within {cfg.max_pullback:.0f} m "
+                                f"(a {first[1]} {first[0]:.2f} m from the car; margin {cfg.clearance_margin:.2f} m)",
                                 stall_side=cand.side)
             clear_g, _ = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id)
         goal = (float(centre[g, 0]), float(centre[g, 1]), float(hdg[g]))
         offset = self.lane_offset(*goal)
+        cand.side = _side(stall, hdg[g])  # where the stall lies seen from the goal pose
         # the drive: from the start pose to the goal
         i0 = int(np.searchsorted(s, START_OFFSET))
         clear, names = self.clearance(rear[i0:g + 1], hdg[i0:g + 1], exclude_stall=stall.id)
@@ -477,13 +478,21 @@ class DrivePlanner:
         if max_k > self.kappa_limit + 1e-6:
             return TestPlan(stall.id, False, f"route curvature {max_k:.3f} 1/m above the car's {self.kappa_limit:.3f}",
                             **common)
-        if offset > cfg.lane_tolerance:
-            return TestPlan(stall.id, False, f"the goal lies {offset:.2f} m off the lane centre", **common)
         if clear[k] < cfg.clearance_margin:
             x, y = rear[i0 + k]
             return TestPlan(stall.id, False, f"the car passes {clear[k]:.2f} m from a {names[k]} at "
                             f"({x:.1f}, {y:.1f}) (margin {cfg.clearance_margin:.2f} m)", **common)
+        if offset > cfg.lane_tolerance:
+            return TestPlan(stall.id, False, f"the goal lies {offset:.2f} m off the lane centre", **common)
         return TestPlan(stall.id, True, "", **common)
+
+
+def _side(stall, heading: float) -> str:
+    """Where ``stall`` lies for a car heading ``heading``: "right", "left" or "ahead" (facing it)."""
+    towards = (-math.cos(stall.yaw), -math.sin(stall.yaw))  # from the road into the stall
+    right = (math.sin(heading), -math.cos(heading))
+    dot = towards[0] * right[0] + towards[1] * right[1]
+    return "right" if dot > 0.5 else ("left" if dot < -0.5 else "ahead")
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> float:
