@@ -61,6 +61,19 @@ CREATE TABLE IF NOT EXISTS garages (
 CREATE INDEX IF NOT EXISTS garages_map_difficulty ON garages (map, difficulty);
 CREATE INDEX IF NOT EXISTS garages_run ON garages (run);
 """
+#: Optional table written by ``garage-mj check --store`` (older readers ignore it: no schema bump).
+_DRIVABILITY_SCHEMA = """
+CREATE TABLE IF NOT EXISTS drivability (
+    garage_id INTEGER PRIMARY KEY REFERENCES garages (id),
+    car TEXT NOT NULL,
+    feasible_share REAL NOT NULL,
+    feasible_stalls INTEGER NOT NULL,
+    stalls INTEGER NOT NULL,
+    min_clearance REAL,
+    max_curvature REAL,
+    checked_at TEXT NOT NULL
+)
+"""
 _COLUMNS = (
     "id, map, run, seed, episode, timestep, hash, grid, initial, six_stall_axis, coverage, "
     "difficulty, stalls, mean_road_length, mean_intersection_degree, created_at"
@@ -338,12 +351,44 @@ class Library:
             raise LibraryError(f"{self.path} has no garage with id {id}; list them with garage-mj library ls")
         return self._record(row)
 
-    @staticmethod
+    # -- drivability (garage-mj check --store) ---------------------------------------------------
+    def has_drivability(self) -> bool:
+        """Whether ``garage-mj check --library FILE --store`` has stored drivability here."""
+        row = self._con.execute("SELECT name FROM sqlite_master WHERE type = 'table' AND name = 'drivability'")
+        return row.fetchone() is not None
+
+    def set_drivability(self, id: int, figures: dict[str, Any], car: str) -> None:
+        """Store garage ``id``'s drivability (:func:`garage_mj.scene.drivable.drivability`) for ``car``."""
+        self._con.execute(_DRIVABILITY_SCHEMA)
+        self._con.execute(
+            "INSERT OR REPLACE INTO drivability VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            (int(id), car, float(figures["feasible_share"]), int(figures["feasible_stalls"]), int(figures["stalls"]),
+             figures["min_clearance"], figures["max_curvature"], datetime.now(timezone.utc).isoformat(timespec="seconds")),
+        )
+
+    def drivability(self, id: int) -> dict[str, Any] | None:
+        """Garage ``id``'s stored drivability, or None."""
+        if not self.has_drivability():
+            return None
+        row = self._con.execute("SELECT car, feasible_share, feasible_stalls, stalls, min_clearance, max_curvature, "
+                                "checked_at FROM drivability WHERE garage_id = ?", (int(id),)).fetchone()
+        keys = ("car", "feasible_share", "feasible_stalls", "stalls", "min_clearance", "max_curvature", "checked_at")
+        return None if row is None else dict(zip(keys, row))
+
     def _where(
-        map: str | None, difficulty: tuple[float, float] | None, coverage: tuple[float, float] | None,
-        run: str | None = None,
+        self, map: str | None, difficulty: tuple[float, float] | None, coverage: tuple[float, float] | None,
+        run: str | None = None, feasible: tuple[float, float] | None = None,
     ) -> tuple[str, list[Any]]:
         clauses, params = [], []
+        if feasible is not None:
+            lo, hi = feasible
+            if lo > hi:
+                raise ValueError(f"feasible range ({lo}, {hi}) is empty; give LO <= HI")
+            if not self.has_drivability():
+                raise LibraryError(f"{self.path} holds no drivability figures; run "
+                                   f"'garage-mj check --library {self.path} --store' first")
+            clauses.append("id IN (SELECT garage_id FROM drivability WHERE feasible_share BETWEEN ? AND ?)")
+            params += [float(lo), float(hi)]
         if map is not None:
             clauses.append("map = ?")
             params.append(map)
@@ -366,9 +411,14 @@ class Library:
         coverage: tuple[float, float] | None = None,
         limit: int | None = None,
         run: str | None = None,
+        feasible: tuple[float, float] | None = None,
     ) -> list[GarageRecord]:
-        """Records matching every given filter (ranges are inclusive), oldest first."""
-        where, params = self._where(map, difficulty, coverage, run)
+        """Records matching every given filter (ranges are inclusive), oldest first.
+
+        ``feasible`` filters on the share of stalls with a feasible cruise test, as stored by
+        ``garage-mj check --library FILE --store``.
+        """
+        where, params = self._where(map, difficulty, coverage, run, feasible)
         sql = f"SELECT {_COLUMNS} FROM garages{where} ORDER BY id"
         if limit is not None:
             if limit < 0:
@@ -398,6 +448,7 @@ class Library:
         map: str | None = None,
         difficulty: tuple[float, float] | None = None,
         coverage: tuple[float, float] | None = None,
+        feasible: tuple[float, float] | None = None,
     ) -> list[GarageRecord]:
         """``n`` distinct records drawn with ``seed`` (all of them when fewer match), sorted by id.
 
@@ -410,7 +461,7 @@ class Library:
         if stratify not in (None, "difficulty"):
             raise ValueError(f"stratify must be 'difficulty' or None, got {stratify!r}")
         self._check_numbers()
-        where, params = self._where(map, difficulty, coverage)
+        where, params = self._where(map, difficulty, coverage, feasible=feasible)
         rows = self._con.execute(f"SELECT id, difficulty FROM garages{where} ORDER BY id", params).fetchall()
         rng = np.random.default_rng(seed)
         if n >= len(rows):

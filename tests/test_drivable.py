@@ -179,3 +179,27 @@ def test_car_geometry_is_read_from_the_model():
     assert car.max_steer == 0.5 and car.wheelbase == pytest.approx(2.7)
     assert (car.front, car.rear, car.half_width) == pytest.approx((2.3, -2.3, 0.95))
     assert dataclasses.replace(car, max_steer=0.7).min_radius == pytest.approx(2.7 / math.tan(0.7))
+
+
+def test_check_cli_prints_stores_and_the_library_filters_on_it(painted_tiny, tmp_path, capsys):
+    from garage_mj.cli import main
+    from garage_mj.library import Library
+
+    lib_path = tmp_path / "library.sqlite"
+    with Library(lib_path) as lib:
+        lib.add(painted_tiny, map="tiny_7x11", run="r", seed=0, episode=0, timestep=0)
+        lib.add(l_garage(), map="tiny_7x11", run="r", seed=0, episode=1, timestep=1)
+    assert main(["library", "ls", str(lib_path), "--feasible", "0.5", "1"]) == 2  # nothing stored yet
+    assert "--store" in capsys.readouterr().err
+    # a car that cannot take the L garage's right turn: that garage drops below full drivability
+    assert main(["check", "--library", str(lib_path), "--store", "--max-steer", "0.25"]) == 0
+    out = capsys.readouterr().out
+    assert "tiny_7x11#1" in out and "tiny_7x11#2" in out and "stored the drivability of 2" in out
+    with Library(lib_path, create=False) as lib:
+        full = [r.id for r in lib.query(feasible=(1.0, 1.0))]
+        some = [r.id for r in lib.query(feasible=(0.0, 0.99))]
+        assert sorted(full + some) == [1, 2] and len(some) >= 1
+        assert lib.drivability(some[0])["car"] == "models/car max_steer=0.25"
+    assert main(["library", "ls", str(lib_path), "--feasible", "0", "0.99"]) == 0
+    listed = capsys.readouterr().out
+    assert f"\n{some[0]:>6}" in "\n" + listed.split("\n", 1)[1]

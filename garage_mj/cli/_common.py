@@ -78,13 +78,17 @@ def add_filters(p: argparse.ArgumentParser) -> None:
                    help="only difficulty in [LO, HI] (0-1)")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"),
                    help="only coverage in [LO, HI] (0-1)")
+    p.add_argument("--feasible", nargs=2, type=unit_range, metavar=("LO", "HI"),
+                   help="only garages whose share of stalls with a feasible cruise test is in [LO, HI] "
+                   "(stored by 'garage-mj check --library FILE --store')")
     p.add_argument("--limit", type=non_negative_int, help="at most N garages")
 
 
 def filters(args: argparse.Namespace) -> dict:
     """The filter keyword arguments of :meth:`Library.query` from parsed ``args``."""
-    out = {"map": args.map, "difficulty": args.difficulty, "coverage": args.coverage}
-    for key in ("difficulty", "coverage"):
+    out = {"map": args.map, "difficulty": args.difficulty, "coverage": args.coverage,
+           "feasible": getattr(args, "feasible", None)}
+    for key in ("difficulty", "coverage", "feasible"):
         rng = out[key]
         if rng is not None:
             if rng[0] > rng[1]:

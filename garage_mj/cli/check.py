@@ -31,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--limit", type=int, help="library filter: at most N garages")
     p.add_argument("--max-steer", type=float, metavar="RAD",
                    help="the car's full-lock road-wheel angle [rad] (default: CarConfig, 0.7)")
+    p.add_argument("--store", action="store_true",
+                   help="with --library: store the figures in the library, so 'library ls/sample --feasible', "
+                   "'export --feasible' and 'cruise --feasible' can filter on them")
     p.add_argument("--stalls", action="store_true", help="also print one line per stall")
     p.add_argument("--json", type=Path, metavar="FILE", help="write every figure to this JSON file")
     p.set_defaults(func=run)
@@ -48,14 +51,14 @@ def _garages(args: argparse.Namespace) -> list[tuple[str, object]]:
             if not records:
                 raise UserError(f"no garage in {args.library} matches the filters; widen them or check --map")
             records = lib.verified(records)
-        return [(f"{r.map}#{r.id}", r.garage) for r in records]
+        return [(f"{r.map}#{r.id}", r.garage, r.id) for r in records]
     if not args.packs:
         raise UserError("name pack folders to check, or --library FILE")
     if any(v is not None for v in (args.map, args.difficulty, args.limit)):
         raise UserError("--map, --difficulty and --limit filter a --library, not pack folders")
     from garage_mj.export.pack import load_pack
 
-    return [(Path(p).name, load_pack(p).garage) for p in args.packs]
+    return [(Path(p).name, load_pack(p).garage, None) for p in args.packs]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,7 +71,16 @@ def run(args: argparse.Namespace) -> int:
     car = car_geometry(CarConfig(max_steer=args.max_steer) if args.max_steer is not None else None)
     report = []
     print(f"{'garage':32s} {'feasible':>12s} {'clearance':>10s} {'curvature/limit':>16s}  commonest reason")
-    for name, garage in _garages(args):
+    if args.store and args.library is None:
+        raise UserError("--store writes into a library: give --library FILE")
+    found = _garages(args)
+    store = None
+    if args.store:
+        from garage_mj.library import Library
+
+        store = Library(args.library, create=False, readonly=False)
+    car_key = f"models/car max_steer={car.max_steer:g}"
+    for name, garage, lib_id in found:
         scene = GarageScene(garage)
         d = drivability(scene, car)
         reasons = sorted(d["infeasible_reasons"].items(), key=lambda kv: -kv[1])
@@ -78,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"{name[:32]:32s} {d['feasible_stalls']:>4d}/{d['stalls']:<4d}{100 * d['feasible_share']:3.0f}% "
               f"{clear:>10s} {curv:>16s}  {why}")
         entry = {"garage": name, **d}
+        if store is not None:
+            store.set_drivability(lib_id, d, car_key)
         if args.stalls or args.json:
             plans = [p.summary() for p in scene.planner(car).plans()]
             entry["stall_plans"] = plans
@@ -87,6 +101,9 @@ def run(args: argparse.Namespace) -> int:
                     print(f"    stall {p['stall']:3d} {p['stall_side'] or '-':6s} route {p['route_length'] or 0:6.1f} m  "
                           f"clearance {p['clearance'] if p['clearance'] is not None else '-'}  {state}")
         report.append(entry)
+    if store is not None:
+        store.close()
+        print(f"stored the drivability of {len(report)} garage(s) in {args.library}")
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n")
         print(f"wrote {args.json}")

@@ -76,7 +76,7 @@ def sources(args: argparse.Namespace) -> list:
             f = filters(args)
             if args.sample is not None:
                 records = lib.sample(args.sample, args.seed, map=f["map"], difficulty=f["difficulty"],
-                                     coverage=f["coverage"])
+                                     coverage=f["coverage"], feasible=f["feasible"])
                 records = records[: args.limit] if args.limit is not None else records
             else:
                 records = lib.query(limit=args.limit, **f)

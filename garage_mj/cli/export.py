@@ -26,6 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--map", help="library filter: map name")
     p.add_argument("--difficulty", type=float, nargs=2, metavar=("LO", "HI"), help="library filter, inclusive")
     p.add_argument("--coverage", type=float, nargs=2, metavar=("LO", "HI"), help="library filter, inclusive")
+    p.add_argument("--feasible", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="library filter: share of stalls with a feasible cruise test (garage-mj check --store)")
     p.add_argument("--limit", type=int, help="library filter: at most N garages")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the packs")
     p.add_argument("--force", action="store_true", help="rebuild packs that are already complete")
@@ -46,6 +48,7 @@ def _from_library(args: argparse.Namespace) -> list:
                 map=args.map,
                 difficulty=tuple(args.difficulty) if args.difficulty else None,
                 coverage=tuple(args.coverage) if args.coverage else None,
+                feasible=tuple(args.feasible) if args.feasible else None,
                 limit=args.limit,
             )
         except ValueError as exc:
@@ -61,8 +64,8 @@ def run(args: argparse.Namespace) -> int:
     from garage_mj.garage import Garage
 
     if args.garage is not None:
-        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.limit)):
-            raise UserError("--map, --difficulty, --coverage and --limit filter a --library, not a --garage")
+        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.feasible, args.limit)):
+            raise UserError("--map, --difficulty, --coverage, --feasible and --limit filter a --library, not a --garage")
         try:
             text = args.garage.read_bytes()
         except OSError as exc:
