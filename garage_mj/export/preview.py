@@ -15,8 +15,7 @@ import numpy as np
 
 from garage_mj.garage import Garage
 from garage_mj.scene.garage_scene import GarageScene, as_scene
-from garage_mj.scene.layout import CLASS_RGBA, SceneLayout, build_layout
-from garage_mj.scene.roadnet import road_network
+from garage_mj.scene.layout import CLASS_RGBA, SceneLayout
 from garage_mj.scene.semantics import Semantic
 from garage_mj.scene.stalls import rectangle
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig

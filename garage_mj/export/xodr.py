@@ -16,7 +16,7 @@ from lxml import etree
 from garage_mj.fsutil import atomic_write
 from garage_mj.garage import Garage
 from garage_mj.scene.garage_scene import GarageScene, as_scene
-from garage_mj.scene.roadmodel import Link, ParkingSpace, Road, RoadModel, build_road_model
+from garage_mj.scene.roadmodel import Link, ParkingSpace, Road, RoadModel
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
 REV_MAJOR, REV_MINOR = 1, 8
