@@ -80,7 +80,8 @@ def record_video(
 
     src = source if isinstance(source, CruiseSource) else CruiseSource.from_garage(source)
     drv = load_driver(driver, **(driver_kwargs or {}))
-    env = GarageDriveEnv(garage=src.garage, action_type=action_type, occupancy=occupancy)
+    env = GarageDriveEnv(garage=src.garage, action_type=action_type, occupancy=occupancy,
+                         infeasible="report")  # as the cruise runner: the same seed, the same test
     width, height = size
     cam = Camera(env.model, CameraConfig(camera=camera, width=width, height=height, rgb=True, depth=False,
                                          segmentation=False))
