@@ -551,3 +551,21 @@ def test_demo_with_a_map_path_writes_only_inside_out(tmp_path):
     report = run_demo(cfg)  # used to say "stored no usable garage": it looked the library up by the path
     assert report == out / "report.html" and (out / "runs" / "m_s0" / "run.json").is_file()
     assert sorted(p.name for p in maps.iterdir()) == ["m.txt"] and snapshot(maps) == before
+
+
+@pytest.mark.parametrize("command", ["cruise", "export", "train", "demo"])
+def test_every_long_job_refuses_a_locked_out_folder(pack_dir, tmp_path, capsys, command):
+    from garage_mj.fsutil import FolderLock
+
+    out = tmp_path / "out"
+    garage = tmp_path / "g.json"
+    garage.write_text(paint_garage("tiny_7x11", seed=1).to_json())
+    argv = {"cruise": ["cruise", "--packs", str(pack_dir), "--tests", "1", "--driver", "waypoint", "--quiet"],
+            "export": ["export", "--garage", str(garage), "--quiet"],
+            "train": ["train", "--map", "tiny_7x11", "--timesteps", "10", "--seed", "0"],
+            "demo": ["demo", "--timesteps", "10"]}[command]
+    with FolderLock(out, "garage-mj test"):
+        before = snapshot(out)
+        line = one_line_error(capsys, [*argv, "--out", str(out)])
+        assert f"{out} is in use by garage-mj test (pid {os.getpid()})" in line
+        assert snapshot(out) == before
