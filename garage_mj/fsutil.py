@@ -26,15 +26,25 @@ from garage_mj.errors import FolderBusy, GarageMJError
 LOCK_NAME = ".garage-mj.lock"
 
 
-def _umask() -> int:
-    mask = os.umask(0)
+def _read_umask() -> int:
+    """The process umask, read without changing it where Linux allows (``os.umask`` sets it)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
     os.umask(mask)
     return mask
 
 
+_UMASK = _read_umask()  # read once: os.umask() would briefly change it for every thread
+
+
 def public_mode(directory: bool = False) -> int:
     """The mode a normal ``open``/``mkdir`` would give under the process umask (e.g. 0644/0755)."""
-    return (0o777 if directory else 0o666) & ~_umask()
+    return (0o777 if directory else 0o666) & ~_UMASK
 
 
 def make_temp_dir(parent: Path, prefix: str, suffix: str) -> Path:
