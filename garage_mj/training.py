@@ -28,6 +28,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from garage_mj.config import ConfigError, load_config
 from garage_mj.envs.gen_env import GarageGenEnv
+from garage_mj.errors import GarageMJError
 from garage_mj.library import Library
 from garage_mj.map_io import load_map
 
@@ -44,7 +45,7 @@ MAX_BUFFER_SIZE = 10_000_000  # [transitions] ~40 GB at ~4 KB each: beyond that 
 MAX_VIEW_SIZE = 31  # [cells] side of the observed window; larger than any supported garage needs
 
 
-class TrainingError(Exception):
+class TrainingError(GarageMJError):
     """A training run cannot start or resume (bad folder, mismatched manifest)."""
 
 
@@ -302,8 +303,8 @@ def read_manifest(out_dir: str | Path) -> dict[str, Any]:
         return json.loads(path.read_text())
     except FileNotFoundError:
         raise TrainingError(f"{out_dir} holds no training run (no {MANIFEST})") from None
-    except json.JSONDecodeError as exc:
-        raise TrainingError(f"{path} is not valid JSON ({exc}); delete the run folder and train again") from None
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        raise TrainingError(f"{path} is not valid JSON ({str(exc)[:120]}); delete the run folder and train again") from None
 
 
 def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
@@ -315,8 +316,8 @@ def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
             continue
         try:
             state = json.loads(state_path.read_text())
-        except json.JSONDecodeError:
-            continue
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError):
+            continue  # a torn or foreign checkpoint record: an older one is used
         if best is None or state["timesteps"] > best[1]["timesteps"]:
             best = (model, state)
     return best

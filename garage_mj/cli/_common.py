@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import sys
 from collections.abc import Callable
 
 from garage_mj.cli import UserError
@@ -12,9 +11,10 @@ from garage_mj.errors import GarageMJError
 
 
 def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    """Re-raise ``TrainingError`` (not a :class:`GarageMJError` yet) as a one-line :class:`UserError`.
+    """Turn a ``ValueError`` raised by a library call on user input into a one-line :class:`UserError`.
 
-    The check looks the class up in ``sys.modules`` so that decorating imports neither torch nor SB3.
+    Every garage-mj error (``TrainingError`` and ``DriverError`` included) is a
+    :class:`GarageMJError` already and passes through unchanged.
     """
 
     @functools.wraps(func)
@@ -23,11 +23,8 @@ def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse
             return func(args)
         except GarageMJError:
             raise
-        except Exception as exc:
-            training = sys.modules.get("garage_mj.training")
-            if training is not None and isinstance(exc, training.TrainingError):
-                raise UserError(str(exc)) from None
-            raise
+        except ValueError as exc:  # e.g. an empty range given to Library.query
+            raise UserError(str(exc)) from None
 
     return wrapper
 

@@ -17,6 +17,7 @@ from garage_mj.drivers.base import (
     DriverNoiseConfig,
     discretize,
 )
+from garage_mj.errors import GarageMJError
 
 #: Built-in drivers: name -> "module:Class".
 DRIVERS: dict[str, str] = {
@@ -39,7 +40,7 @@ __all__ = [
 ]
 
 
-class DriverError(ValueError):
+class DriverError(GarageMJError, ValueError):
     """A driver name or ``module:Class`` spec that cannot be loaded; the message says why."""
 
 
