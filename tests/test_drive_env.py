@@ -153,3 +153,25 @@ def test_bad_arguments_are_one_clear_error(painted_tiny):
         GarageDriveEnv(garage=painted_tiny, action_type="joystick")
     with pytest.raises(ConfigError, match="unknown key"):
         GarageDriveEnv(garage=painted_tiny, car={"max_sped": 3.0})
+
+
+def test_sb3_trains_ppo_on_image_observations_through_make_vec_env(painted_tiny):
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.preprocessing import is_image_space
+    from stable_baselines3.common.torch_layers import NatureCNN
+
+    venv = make_vec_env("garage_mj/GarageDrive-v0", n_envs=2, seed=0,
+                        env_kwargs={"garage": painted_tiny, "action_type": "continuous", "image_obs": True})
+    try:
+        space = venv.observation_space
+        assert is_image_space(space["depth"]) and is_image_space(space["segmentation"])
+        obs = venv.reset()
+        assert obs["depth"].shape == (2, 64, 64, 1) and obs["depth"].dtype == np.uint8
+        model = PPO("MultiInputPolicy", venv, n_steps=64, batch_size=64, n_epochs=1, seed=0, device="cpu")
+        extractors = model.policy.features_extractor.extractors
+        assert isinstance(extractors["depth"], NatureCNN) and isinstance(extractors["segmentation"], NatureCNN)
+        model.learn(256)
+        assert model.num_timesteps >= 256
+    finally:
+        venv.close()

@@ -72,6 +72,10 @@ class GarageDriveEnv(gym.Env):
         infeasible: ``"skip"`` draws targets among feasible stalls only; ``"report"`` draws among
             all stalls and ends an infeasible test at reset (outcome ``infeasible``).
         drive: :class:`~garage_mj.scene.drivable.DriveConfig` (margins of the feasibility checks).
+        image_obs: depth and segmentation as SB3 image spaces, ``(H, W, 1)`` uint8 in [0, 255]
+            (depth scaled from [0, far] metres; segmentation the class ids), so that
+            ``MultiInputPolicy`` hands them to its CNN. The built-in drivers expect the default
+            (depth in metres as ``(H, W)`` float32).
         render_mode: ``"rgb_array"`` renders the ``ego/top`` camera (``render_size`` pixels).
     """
 
@@ -91,6 +95,7 @@ class GarageDriveEnv(gym.Env):
         render_size: tuple[int, int] = (320, 240),
         infeasible: str = "skip",
         drive: DriveConfig | dict[str, Any] | None = None,
+        image_obs: bool = False,
     ) -> None:
         if not isinstance(garage, Garage):
             raise ValueError("GarageDriveEnv needs garage= (a garage_mj.Garage; for a pack: load_pack(folder).garage)")
@@ -104,6 +109,7 @@ class GarageDriveEnv(gym.Env):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.garage = garage
         self.infeasible = infeasible
+        self.image_obs = bool(image_obs)
         self.action_type = action_type
         self.occupancy = float(occupancy)
         self.start_noise = (float(start_noise[0]), float(start_noise[1]))
@@ -131,6 +137,11 @@ class GarageDriveEnv(gym.Env):
         obs = {
             "depth": spaces.Box(0.0, cam.far, (h, w), np.float32),
             "segmentation": spaces.Box(0, max(Semantic), (h, w), np.uint8),
+        } if not self.image_obs else {
+            "depth": spaces.Box(0, 255, (h, w, 1), np.uint8),
+            "segmentation": spaces.Box(0, 255, (h, w, 1), np.uint8),
+        }
+        obs |= {
             "waypoint": spaces.Box(-MAX_EXTENT, MAX_EXTENT, (2,), np.float32),
             "speed": spaces.Box(-MAX_SPEED, MAX_SPEED, (1,), np.float32),
             "goal": spaces.Box(-MAX_EXTENT, MAX_EXTENT, (2,), np.float32),
@@ -247,6 +258,10 @@ class GarageDriveEnv(gym.Env):
     def _observe(self) -> dict[str, np.ndarray]:
         x, y, yaw = self.car.pose(self.data)
         obs = self.camera.render(self.data)
+        if self.image_obs:
+            far = self.camera_config.far
+            obs["depth"] = np.rint(np.clip(obs["depth"], 0.0, far) * (255.0 / far)).astype(np.uint8)[..., None]
+            obs["segmentation"] = obs["segmentation"][..., None]
         target = self.route.point_at(self.monitor.progress + LOOKAHEAD)
         obs["waypoint"] = to_car_frame(target, x, y, yaw).astype(np.float32)
         obs["speed"] = np.array([self.car.speed(self.data)], dtype=np.float32)
