@@ -151,7 +151,10 @@ class OutcomeMonitor:
         if self.progress - self._mark_progress >= cfg.stuck_progress:
             self._mark_time, self._mark_progress = time, self.progress
         elif time - self._mark_time >= cfg.stuck_time:
-            return self._end(OutcomeKind.DEADLOCK, time, f"no progress for {time - self._mark_time:.1f} s")
+            why = f"no progress for {time - self._mark_time:.1f} s"
+            if goal_dist <= 2 * cfg.max_deviation:  # stopped near the goal, but not on its pose
+                why += f", stopped {goal_dist:.2f} m and {yaw_err:.2f} rad from the goal pose"
+            return self._end(OutcomeKind.DEADLOCK, time, why)
         if time >= self.time_limit:
             return self._end(OutcomeKind.TIMEOUT, time, f"time limit {self.time_limit:.1f} s reached")
         return None
