@@ -122,9 +122,10 @@ def main() -> None:
     ap.add_argument("--summary-only", action="store_true")
     args = ap.parse_args()
     if not args.summary_only:
-        for name in args.configs:
-            config = config_named(name, checkpoint_every=max(args.timesteps // 8, 1))
-            for seed in args.seeds:
+        # seed-major order: if the comparison is cut short, the seeds done are done for every config
+        for seed in args.seeds:
+            for name in args.configs:
+                config = config_named(name, checkpoint_every=max(args.timesteps // 8, 1))
                 for map_name in args.maps:
                     run = args.out / name / f"{map_name}_s{seed}"
                     if run_result(run) is not None:

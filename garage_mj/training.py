@@ -60,11 +60,11 @@ class DQNConfig:
     learning_rate: float = 5e-4
     buffer_size: int = 50_000  # [transitions] ~4 KB each with the 7x7 view
     learning_starts: int = 1_000  # [timesteps] of random actions before the first update
-    batch_size: int = 64
+    batch_size: int = 128  # [transitions] per gradient step
     tau: float = 1.0  # 1: hard target-network update
     gamma: float = 0.99
     train_freq: int = 1  # [vector steps] between updates; a vector step is n_envs timesteps
-    gradient_steps: int = 2  # gradient steps per update: with n_envs 8, one per 4 timesteps
+    gradient_steps: int = 1  # gradient steps per update: with n_envs 8, one of 128 per 8 timesteps
     n_steps: int = 1  # n-step returns
     target_update_interval: int = 1_000  # [timesteps]
     exploration_fraction: float = 0.2  # share of the run over which epsilon decays
