@@ -59,8 +59,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"Pearson r(difficulty, success %) = {r}   paper: {PAPER_R}")
     if s["slope"] is not None:
         print(f"regression: success % = {s['slope']:.1f} * difficulty + {s['intercept']:.1f} (n = {s['n']})")
-    print(f"success {s['success_pct']}% over {s['tests']} tests; {res.tests_run} run now in {wall:.0f} s "
-          f"({s['seconds_per_test']} s/test, {s['sim_seconds_per_wall_second']} sim s per wall s per worker)")
+    print(f"success {s['success_pct']}% of {s['feasible']} feasible tests ({s['infeasible']} infeasible, excluded) "
+          f"out of {s['tests']}; failures {s['failures']}, collisions by what was hit {s['hits']}")
+    print(f"{res.tests_run} tests run now in {wall:.0f} s ({s['seconds_per_test']} s/test, "
+          f"{s['sim_seconds_per_wall_second']} sim s per wall s per worker)")
     print(f"wrote {res.out_dir}/tests.csv, summary.csv, summary.json, regression.png")
     return 0
 
