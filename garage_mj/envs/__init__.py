@@ -6,6 +6,7 @@ import gymnasium as gym
 
 ENV_IDS = {
     "garage_mj/GarageGen-v0": "garage_mj.envs.gen_env:GarageGenEnv",
+    "garage_mj/GarageGenCond-v0": "garage_mj.envs.cond_env:GarageGenCondEnv",
     "garage_mj/GarageDrive-v0": "garage_mj.envs.drive_env:GarageDriveEnv",
 }
 

@@ -1,0 +1,452 @@
+"""Controllable generation: train a difficulty-conditioned DQN painter, then ask it for garages.
+
+:func:`train_conditioned` runs SB3 DQN on ``GarageGenCondEnv`` (the painter with a target band in
+its observation), with the hyper-parameters of :class:`garage_mj.training.DQNConfig` and the
+band settings of :class:`~garage_mj.envs.cond_env.ConditionConfig`. The drawn bands cover the
+map's admissible difficulty range as :func:`garage_mj.search.search` estimates it. A run folder
+holds ``run.json``, ``episodes.csv`` (target band and outcome of every episode), checkpoints
+(``resume=True`` continues from the newest), ``generator.zip`` (the Q-network alone, a few hundred
+KB: what ships in ``models/generators/``), saved whenever the share of the last
+:data:`BEST_WINDOW` training episodes that landed in their band is the best of the run (DQN on
+this task can fall back late in a run), and at the end ``generator.json`` (its settings and
+training figures).
+
+:func:`generate` rolls the generator out in a batch of envs conditioned on the band asked for,
+epsilon-greedy with a per-episode epsilon drawn from the seed so that distinct garages appear,
+and stores every distinct, usable garage that lands in the band in the scenario library.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import os
+import time
+from collections import deque
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garage_mj.config import ConfigError, load_config, read_toml
+from garage_mj.envs.cond_env import ConditionConfig, GarageGenCondEnv, band_distance
+from garage_mj.errors import GarageMJError
+from garage_mj.library import Library
+from garage_mj.map_io import list_maps, load_map
+from garage_mj.metrics import evaluate
+from garage_mj.training import DQNConfig, load_dqn_config
+
+GENERATORS = "generators"  # folder of the shipped generators inside the package data garage_mj.models
+RUN_MANIFEST = "run.json"
+EPISODES = "episodes.csv"
+CHECKPOINTS = "checkpoints"
+GENERATOR = "generator.zip"  # the Q-network (policy) alone
+GENERATOR_META = "generator.json"
+SEARCH_EVALUATIONS = 10_000  # mutations of the search that estimates the admissible range
+EPS_RANGE = (0.02, 0.3)  # per-episode exploration of generate, drawn uniformly
+GEN_ENVS = 16  # envs stepped together by generate (one batched Q-network call)
+CURVE_POINTS = 20  # points of the training curve kept in generator.json
+BEST_WINDOW = 200  # [episodes] the shipped policy is the one with the best in-band share over this many
+EPISODE_FIELDS = ("episode", "timestep", "d_lo", "d_hi", "c_lo", "c_hi", "usable", "difficulty", "coverage",
+                  "in_band", "return", "length")
+
+
+class GenerationError(GarageMJError):
+    """``generate`` cannot run (no generator for the map, bad band) or did not fill the band."""
+
+
+# -- config ---------------------------------------------------------------------------------------
+def load_generator_config(path: str | Path | None) -> tuple[DQNConfig, ConditionConfig, dict[str, int]]:
+    """``[dqn]`` (DQNConfig), ``[condition]`` (ConditionConfig) and ``[timesteps]`` (per map) of a TOML file."""
+    if path is None:
+        return DQNConfig(), ConditionConfig(), {}
+    data = read_toml(path)
+    unknown = sorted(set(data) - {"dqn", "condition", "timesteps"})
+    if unknown:
+        raise ConfigError(f"{path}: unknown table(s) {unknown}; known: dqn, condition, timesteps")
+    try:
+        dqn = load_dqn_config(data.get("dqn", {}))
+        cond = load_config(ConditionConfig, data.get("condition", {}))
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    steps = data.get("timesteps", {})
+    if not all(isinstance(v, int) and v > 0 for v in steps.values()):
+        raise ConfigError(f"{path}: [timesteps] maps map names to positive integers")
+    return dqn, cond, dict(steps)
+
+
+# -- training -------------------------------------------------------------------------------------
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def _episode_callback(path: Path, episodes: int, on_episodes):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class EpisodeLog(BaseCallback):
+        """Appends the target band and outcome of every finished episode to ``episodes.csv``."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.episodes = episodes
+            self.in_band = 0
+            self.recent: deque[int] = deque(maxlen=BEST_WINDOW)  # in-band flags of the latest episodes
+            new = not path.exists()
+            self.file = open(path, "a", newline="")
+            self.writer = csv.writer(self.file)
+            if new:
+                self.writer.writerow(EPISODE_FIELDS)
+
+        def _on_step(self) -> bool:
+            ended = False
+            for done, info in zip(self.locals["dones"], self.locals["infos"]):
+                if not done:
+                    continue
+                ended = True
+                self.recent.append(int(info["in_band"]))
+                ep = info.get("episode", {})
+                (d_lo, d_hi), (c_lo, c_hi) = info["target_difficulty"], info["target_coverage"]
+                self.in_band += info["in_band"]
+                self.writer.writerow([self.episodes, self.num_timesteps, f"{d_lo:.4f}", f"{d_hi:.4f}",
+                                      f"{c_lo:.4f}", f"{c_hi:.4f}", int(info["usable"]),
+                                      f"{info['difficulty']:.4f}", f"{info['coverage']:.4f}", int(info["in_band"]),
+                                      f"{ep.get('r', float('nan')):.2f}", ep.get("l", 0)])
+                self.episodes += 1
+            if ended:
+                on_episodes(self)
+            return True
+
+        def flush(self) -> None:
+            if not self.file.closed:
+                self.file.flush()
+
+        def _on_training_end(self) -> None:
+            self.file.close()
+
+    return EpisodeLog()
+
+
+def _bar_callback(total: int, initial: int, name: str, log):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Bar(BaseCallback):
+        """A tqdm bar over the run's timesteps with episodes and in-band episodes."""
+
+        def _on_training_start(self) -> None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, initial=initial, desc=f"{name} conditioned", unit="step", dynamic_ncols=True)
+
+        def _on_step(self) -> bool:
+            if self.n_calls % 64 == 0:
+                self.bar.update(self.num_timesteps - self.bar.n)
+                self.bar.set_postfix(episodes=log.episodes, in_band=log.in_band, refresh=False)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.update(self.num_timesteps - self.bar.n)
+            self.bar.close()
+
+    return Bar()
+
+
+def _truncate_rows(path: Path, rows: int) -> None:
+    """Keep the header and the first ``rows`` rows of a CSV (a resumed run's past)."""
+    if path.exists():
+        lines = path.read_text().splitlines(keepends=True)
+        path.write_text("".join(lines[: 1 + rows]))
+
+
+def admissible_range(map: str, evaluations: int = SEARCH_EVALUATIONS, seed: int = 0) -> tuple[float, float]:
+    """The difficulty range :func:`garage_mj.search.search` reaches on ``map`` (a lower bound of the truth)."""
+    from garage_mj.search import search
+
+    return search(map, evaluations, seed=seed).range
+
+
+def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, dqn: DQNConfig | None = None,
+                      condition: ConditionConfig | None = None, resume: bool = False, progress: bool = True,
+                      search_evaluations: int = SEARCH_EVALUATIONS) -> dict[str, Any]:
+    """Train a conditioned generator for ``map``; returns its ``generator.json`` record.
+
+    Without a fixed range in ``condition`` (the default [0, 1]) the drawn difficulty bands
+    cover the range search reaches on the map, widened by half a band at each end.
+    """
+    import torch
+    from stable_baselines3 import DQN
+    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+    from garage_mj.training import CheckpointEvery, latest_checkpoint
+
+    out = Path(out_dir)
+    garage = load_map(map)
+    if resume:
+        try:
+            manifest = json.loads((out / RUN_MANIFEST).read_text())
+        except (FileNotFoundError, json.JSONDecodeError):
+            raise GenerationError(f"{out} holds no conditioned-generator run to resume") from None
+        if manifest["map"] != garage.name or manifest["seed"] != seed:
+            raise GenerationError(f"{out} is a run of map {manifest['map']} seed {manifest['seed']}; pass the same")
+        dqn = load_dqn_config(manifest["dqn"])
+        condition = load_config(ConditionConfig, manifest["condition"])
+    else:
+        if (out / RUN_MANIFEST).exists():
+            raise GenerationError(f"{out} already holds a run; pass resume or choose a new folder")
+        dqn, condition = dqn or DQNConfig(), condition or ConditionConfig()
+        searched = None
+        if (condition.difficulty_lo, condition.difficulty_hi) == (0.0, 1.0) and search_evaluations > 0:
+            searched = admissible_range(map, search_evaluations)
+            half = condition.band_width / 2
+            condition = dataclasses.replace(condition, difficulty_lo=max(0.0, round(searched[0] - half, 3)),
+                                            difficulty_hi=min(1.0, round(searched[1] + half, 3)))
+        manifest = {"map": garage.name, "map_source": str(map), "seed": seed, "dqn": dqn.to_dict(),
+                    "condition": dataclasses.asdict(condition), "searched_range": searched,
+                    "search_evaluations": search_evaluations, "timesteps": 0, "episodes": 0, "wall_s": 0.0}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / CHECKPOINTS).mkdir(exist_ok=True)
+    checkpoint = latest_checkpoint(out) if resume else None
+    done_steps, done_episodes = (checkpoint[1]["timesteps"], checkpoint[1]["episodes"]) if checkpoint else (0, 0)
+    if checkpoint:
+        _truncate_rows(out / EPISODES, done_episodes)
+    else:
+        (out / EPISODES).unlink(missing_ok=True)
+    manifest.update(target_timesteps=timesteps, status="running")
+
+    torch.set_num_threads(dqn.torch_threads)
+    env_kw = {"map": map, "view_size": dqn.view_size, "max_errors": dqn.max_errors, "condition": condition}
+    venv = VecMonitor(DummyVecEnv([lambda: GarageGenCondEnv(**env_kw) for _ in range(dqn.n_envs)]))
+    if checkpoint:
+        model = DQN.load(checkpoint[0], env=venv, device="cpu")
+        model.set_random_seed(seed + done_steps)
+    else:
+        model = DQN("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **dqn.dqn_kwargs())
+    manifest.setdefault("best", {"in_band": -1.0, "timestep": 0, "episode": 0})
+
+    def keep_best(log) -> None:
+        """Save the policy as the generator when its in-band share of the last BEST_WINDOW episodes is the best yet."""
+        if len(log.recent) < BEST_WINDOW:
+            return
+        rate = sum(log.recent) / len(log.recent)
+        if rate > manifest["best"]["in_band"]:
+            model.policy.save(out / (GENERATOR + ".tmp"))
+            os.replace(out / (GENERATOR + ".tmp"), out / GENERATOR)
+            manifest["best"] = {"in_band": round(rate, 4), "timestep": model.num_timesteps, "episode": log.episodes}
+
+    log = _episode_callback(out / EPISODES, done_episodes, keep_best)
+    wall0 = manifest.get("wall_s", 0.0)
+    t0 = time.perf_counter()
+
+    def save_checkpoint() -> None:
+        log.flush()
+        step = model.num_timesteps
+        stem = out / CHECKPOINTS / f"step_{step:09d}"
+        model.save(stem.with_name(stem.name + ".tmp.zip"))
+        os.replace(stem.with_name(stem.name + ".tmp.zip"), stem.with_suffix(".zip"))
+        _write_json(stem.with_suffix(".json"), {"timesteps": step, "episodes": log.episodes})
+        for old in sorted((out / CHECKPOINTS).glob("step_*.json"))[:-2]:
+            old.unlink(missing_ok=True)
+            old.with_suffix(".zip").unlink(missing_ok=True)
+        manifest.update(timesteps=step, episodes=log.episodes, wall_s=round(wall0 + time.perf_counter() - t0, 1))
+        _write_json(out / RUN_MANIFEST, manifest)
+
+    cbs = [log, CheckpointEvery(dqn.checkpoint_every, save_checkpoint)]
+    if progress:
+        cbs.append(_bar_callback(timesteps, done_steps, garage.name, log))
+    _write_json(out / RUN_MANIFEST, manifest)
+    try:
+        if timesteps > done_steps:
+            model.learn(total_timesteps=timesteps - done_steps, callback=CallbackList(cbs),
+                        reset_num_timesteps=not checkpoint)
+    except KeyboardInterrupt:
+        save_checkpoint()
+        raise
+    finally:
+        venv.close()
+    save_checkpoint()
+    if not (out / GENERATOR).exists():  # too few episodes to choose: the last policy
+        model.policy.save(out / GENERATOR)
+        manifest["best"] = {"in_band": None, "timestep": model.num_timesteps, "episode": log.episodes}
+    manifest["status"] = "finished"
+    _write_json(out / RUN_MANIFEST, manifest)
+    meta = {"map": garage.name, "seed": seed, "timesteps": model.num_timesteps, "episodes": log.episodes,
+            "train_wall_s": manifest["wall_s"], "view_size": dqn.view_size, "max_errors": dqn.max_errors,
+            "net_arch": list(dqn.net_arch), "dqn": dqn.to_dict(), "condition": manifest["condition"],
+            "searched_range": manifest["searched_range"], "chosen": manifest["best"],
+            "curve": training_curve(out / EPISODES)}
+    _write_json(out / GENERATOR_META, meta)
+    return meta
+
+
+def training_curve(episodes_csv: Path, points: int = CURVE_POINTS) -> list[dict[str, float]]:
+    """Per consecutive chunk of episodes: timesteps, usable share, in-band share (of all and of usable)."""
+    with open(episodes_csv, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        return []
+    out = []
+    for chunk in np.array_split(np.arange(len(rows)), min(points, len(rows))):
+        rs = [rows[i] for i in chunk]
+        usable = sum(int(r["usable"]) for r in rs)
+        in_band = sum(int(r["in_band"]) for r in rs)
+        out.append({"timestep": int(rs[-1]["timestep"]), "episodes": len(rs),
+                    "usable": round(usable / len(rs), 3), "in_band": round(in_band / len(rs), 3),
+                    "in_band_of_usable": round(in_band / usable, 3) if usable else 0.0,
+                    "mean_return": round(float(np.mean([float(r["return"]) for r in rs])), 2)})
+    return out
+
+
+# -- generation -----------------------------------------------------------------------------------
+def shipped_generator(map_name: str) -> Path | None:
+    """The shipped generator of a shipped map, if there is one."""
+    path = Path(str(resources.files("garage_mj.models").joinpath(GENERATORS, f"{map_name}.zip")))
+    return path if path.is_file() else None
+
+
+def train_command(map: str) -> str:
+    stem = Path(map).stem
+    return (f".venv/bin/python generation/train_conditioned.py --map {map} --out runs/generator_{stem} "
+            f"(about 1 minute per 10,000 timesteps on one core; 50,000 recommended), then pass "
+            f"--model runs/generator_{stem}/{GENERATOR}")
+
+
+@dataclass
+class GenerateResult:
+    """What :func:`generate` did."""
+
+    found: int  # distinct garages in the band found by this call
+    stored: int  # of them, new to the library
+    ids: list[int]  # library ids of the garages this call stored (new ones)
+    episodes: int
+    seconds: float
+    difficulties: list[float]
+
+
+def _load_policy(path: Path):
+    from stable_baselines3.dqn.policies import DQNPolicy
+
+    try:
+        return DQNPolicy.load(str(path), device="cpu")
+    except Exception as exc:  # a foreign or corrupt file: torch and pickle raise many kinds
+        raise GenerationError(f"{path} is not a generator saved by garage-mj ({type(exc).__name__}); "
+                              "pass a generator.zip from generation/train_conditioned.py") from None
+
+
+def generate(map: str, difficulty: tuple[float, float], count: int, library: str | Path, *,
+             coverage: tuple[float, float] | None = None, model: str | Path | None = None, seed: int = 0,
+             max_episodes: int | None = None, progress: bool = True, n_envs: int = GEN_ENVS) -> GenerateResult:
+    """Store ``count`` distinct usable garages of ``map`` with difficulty (and coverage) in the bands.
+
+    Raises :class:`GenerationError` (after storing what it found) when ``max_episodes`` episodes
+    (default ``2,000 + 200 * count``) do not find ``count``.
+    """
+    import torch
+
+    for name, band in (("difficulty", difficulty), ("coverage", coverage)):
+        if band is not None and not 0.0 <= band[0] <= band[1] <= 1.0:
+            raise GenerationError(f"--{name} {band[0]} {band[1]}: need 0 <= LO <= HI <= 1")
+    if count < 1:
+        raise GenerationError(f"--count must be >= 1, got {count}")
+    garage0 = load_map(map)
+    shipped_name = isinstance(map, str) and "/" not in map and garage0.name in {m.name for m in list_maps()}
+    if model is None:
+        path = shipped_generator(garage0.name) if shipped_name else None
+        if path is None:
+            raise GenerationError(f"no trained generator for map {map!r}; train one with: {train_command(map)}")
+    else:
+        path = Path(model)
+        if not path.is_file():
+            raise GenerationError(f"--model {path} does not exist")
+    meta_path = path.with_suffix(".json") if path.with_suffix(".json").is_file() else path.with_name(GENERATOR_META)
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    max_episodes = max_episodes if max_episodes is not None else 2_000 + 200 * count
+    torch.set_num_threads(1)
+    policy = _load_policy(path)
+    policy.set_training_mode(False)
+    envs = [GarageGenCondEnv(map=garage0, view_size=meta.get("view_size", 7), max_errors=meta.get("max_errors", 10))
+            for _ in range(n_envs)]
+    if policy.observation_space.shape != envs[0].observation_space.shape:
+        raise GenerationError(f"{path} was trained with observations of shape {policy.observation_space.shape}, "
+                              f"this map's env gives {envs[0].observation_space.shape}")
+    cov = coverage or (0.0, 1.0)
+    band_opts = {"difficulty": tuple(difficulty), "coverage": cov}
+    rng = np.random.default_rng(seed)
+    run = f"generate:{path.stem if path.name != GENERATOR else path.parent.name}"
+    seen: set[str] = set()
+    result = GenerateResult(0, 0, [], 0, 0.0, [])
+    t0 = time.perf_counter()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=count, desc=f"{garage0.name} difficulty {difficulty[0]:.2f}-{difficulty[1]:.2f}",
+                   unit="garage", dynamic_ncols=True)
+    started = 0
+    eps = np.zeros(n_envs)
+    episode_of = [0] * n_envs
+    obs = np.zeros((n_envs,) + envs[0].observation_space.shape, dtype=np.float32)
+    active = np.zeros(n_envs, dtype=bool)
+
+    def start(i: int) -> None:
+        nonlocal started
+        obs[i] = envs[i].reset(seed=int(rng.integers(2**31)), options=band_opts)[0]
+        eps[i] = rng.uniform(*EPS_RANGE)
+        episode_of[i] = started
+        active[i] = True
+        started += 1
+
+    steps = 0
+    with Library(library) as lib:
+        for i in range(min(n_envs, max_episodes)):
+            start(i)
+        while active.any() and result.found < count:
+            with torch.no_grad():
+                greedy = policy.q_net(torch.as_tensor(obs)).argmax(dim=1).numpy()
+            explore = rng.random(n_envs) < eps
+            random_a = rng.integers(4, size=n_envs)
+            for i in np.flatnonzero(active):
+                a = int(random_a[i] if explore[i] else greedy[i])
+                obs[i], _, term, trunc, info = envs[i].step(a)
+                steps += 1
+                if not (term or trunc):
+                    continue
+                result.episodes += 1
+                active[i] = False
+                if info["usable"] and info["in_band"] and result.found < count:
+                    g = envs[i].garage()
+                    key = g.canonical_hash()
+                    m = evaluate(g)
+                    if key not in seen and m.usable and band_distance(m.difficulty, difficulty) == 0.0 \
+                            and band_distance(m.coverage, cov) == 0.0:
+                        seen.add(key)
+                        new = lib.add(g, map=garage0.name, run=run, seed=seed, episode=episode_of[i], timestep=steps)
+                        result.found += 1
+                        result.stored += new is not None
+                        if new is not None:
+                            result.ids.append(new)
+                        result.difficulties.append(m.difficulty)
+                        if bar is not None:
+                            bar.update(1)
+                            bar.set_postfix(episodes=result.episodes, refresh=False)
+                if started < max_episodes and result.found < count:
+                    start(i)
+    result.seconds = time.perf_counter() - t0
+    if bar is not None:
+        bar.close()
+    if result.found < count:
+        what = f"difficulty in [{difficulty[0]}, {difficulty[1]}]" + (
+            f" and coverage in [{cov[0]}, {cov[1]}]" if coverage is not None else "")
+        raise GenerationError(
+            f"found {result.found} of {count} distinct usable garages of {garage0.name} with {what} in "
+            f"{result.episodes} episodes ({result.seconds:.0f} s; {result.stored} new stored in {library}); "
+            "widen the band, raise --max-episodes, or see what the map admits (eval/admissible.py)")
+    return result
+
+
+__all__ = ["GenerateResult", "GenerationError", "generate", "load_generator_config", "shipped_generator",
+           "train_conditioned", "training_curve"]
