@@ -34,7 +34,7 @@ from garage_mj.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir
 from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
 
-TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "outcome", "hit",
+TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",
                 "hit_geom", "reason", "time", "path_length", "route_length", "difficulty", "mean_road_length",
                 "mean_intersection_degree", "wall_s")
 #: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
@@ -176,7 +176,8 @@ def run_test(source: CruiseSource, index: int, settings: CruiseSettings) -> dict
                           f"{type(exc).__name__}: {exc}") from exc
     return {
         "garage": source.name, "garage_hash": source.hash, "test": index, "seed": seed,
-        "driver": settings.driver, "target_stall": info["target_stall"], "outcome": info["outcome"],
+        "driver": settings.driver, "target_stall": info["target_stall"],
+        "feasible": int(info["outcome"] != "infeasible"), "outcome": info["outcome"],
         "hit": info["hit"] or "", "hit_geom": info["hit_geom"] or "", "reason": info["reason"],
         "time": round(info["time"], 3),
         "path_length": round(info["path_length"], 3), "route_length": round(info["route_length"], 3),

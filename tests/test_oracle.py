@@ -65,7 +65,8 @@ def test_infeasible_tests_are_reported_not_driven(painted_tiny, tmp_path):
     res = run_cruise([painted_tiny], 6, driver="oracle", action_type="continuous", out_dir=tmp_path,
                      env={"car": {"max_steer": 0.15}}, progress=False)
     infeasible = [r for r in res.rows if r["outcome"] == "infeasible"]
-    assert infeasible and all(r["reason"] and float(r["time"]) == 0.0 for r in infeasible)
+    assert infeasible and all(r["reason"] and float(r["time"]) == 0.0 and r["feasible"] == "0" for r in infeasible)
+    assert all(r["feasible"] == "1" for r in res.rows if r["outcome"] != "infeasible")
     summary = res.summary[0]
     assert summary["infeasible"] == len(infeasible) and summary["feasible"] == 6 - len(infeasible)
     assert res.stats["infeasible"] == len(infeasible)
