@@ -55,7 +55,12 @@ EPISODE_FIELDS = ("episode", "timestep", "d_lo", "d_hi", "c_lo", "c_hi", "usable
 
 
 class GenerationError(GarageMJError):
-    """``generate`` cannot run (no generator for the map, bad band) or did not fill the band."""
+    """``generate`` cannot run (no generator for the map, bad band) or did not fill the band.
+
+    When the band was not filled, ``result`` holds the :class:`GenerateResult` of what was found.
+    """
+
+    result: GenerateResult | None = None
 
 
 # -- config ---------------------------------------------------------------------------------------
@@ -323,8 +328,9 @@ class GenerateResult:
     stored: int  # of them, new to the library
     ids: list[int]  # library ids of the garages this call stored (new ones)
     episodes: int
-    seconds: float
+    seconds: float  # wall-clock time of the rollouts
     difficulties: list[float]
+    cpu_seconds: float = 0.0  # CPU time of this process during the rollouts
 
 
 def _load_policy(path: Path):
@@ -339,11 +345,13 @@ def _load_policy(path: Path):
 
 def generate(map: str, difficulty: tuple[float, float], count: int, library: str | Path, *,
              coverage: tuple[float, float] | None = None, model: str | Path | None = None, seed: int = 0,
-             max_episodes: int | None = None, progress: bool = True, n_envs: int = GEN_ENVS) -> GenerateResult:
+             max_episodes: int | None = None, max_seconds: float | None = None, progress: bool = True,
+             n_envs: int = GEN_ENVS, clock=time.perf_counter) -> GenerateResult:
     """Store ``count`` distinct usable garages of ``map`` with difficulty (and coverage) in the bands.
 
     Raises :class:`GenerationError` (after storing what it found) when ``max_episodes`` episodes
-    (default ``2,000 + 200 * count``) do not find ``count``.
+    (default ``2,000 + 200 * count``), or ``max_seconds`` of rollouts measured by ``clock`` (wall
+    time; ``time.process_time`` for CPU time on a shared machine), do not find ``count``.
     """
     import torch
 
@@ -379,7 +387,7 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     run = f"generate:{path.stem if path.name != GENERATOR else path.parent.name}"
     seen: set[str] = set()
     result = GenerateResult(0, 0, [], 0, 0.0, [])
-    t0 = time.perf_counter()
+    t0, cpu0, c0 = time.perf_counter(), time.process_time(), clock()
     bar = None
     if progress:
         from tqdm import tqdm
@@ -405,6 +413,8 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
         for i in range(min(n_envs, max_episodes)):
             start(i)
         while active.any() and result.found < count:
+            if max_seconds is not None and clock() - c0 >= max_seconds:
+                break
             with torch.no_grad():
                 greedy = policy.q_net(torch.as_tensor(obs)).argmax(dim=1).numpy()
             explore = rng.random(n_envs) < eps
@@ -436,15 +446,19 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
                 if started < max_episodes and result.found < count:
                     start(i)
     result.seconds = time.perf_counter() - t0
+    result.cpu_seconds = time.process_time() - cpu0
     if bar is not None:
         bar.close()
     if result.found < count:
         what = f"difficulty in [{difficulty[0]}, {difficulty[1]}]" + (
             f" and coverage in [{cov[0]}, {cov[1]}]" if coverage is not None else "")
-        raise GenerationError(
+        exc = GenerationError(
             f"found {result.found} of {count} distinct usable garages of {garage0.name} with {what} in "
             f"{result.episodes} episodes ({result.seconds:.0f} s; {result.stored} new stored in {library}); "
+            f"{'' if max_seconds is None else f'--max-seconds {max_seconds:g}; '}"
             "widen the band, raise --max-episodes, or see what the map admits (eval/admissible.py)")
+        exc.result = result
+        raise exc
     return result
 
 

@@ -36,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--max-episodes", type=positive_int, metavar="E",
                    help="episode budget (default 2,000 + 200 x COUNT)")
+    p.add_argument("--max-seconds", type=float, metavar="S", help="stop after S seconds of rollouts (wall clock)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -50,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--{name} {band[0]} {band[1]}: LO is above HI")
     r = generate(args.map, tuple(args.difficulty), args.count, args.library,
                  coverage=tuple(args.coverage) if args.coverage else None, model=args.model, seed=args.seed,
-                 max_episodes=args.max_episodes, progress=not args.no_progress)
+                 max_episodes=args.max_episodes, max_seconds=args.max_seconds, progress=not args.no_progress)
     lo, hi = min(r.difficulties), max(r.difficulties)
     print(f"{r.found} distinct garages with difficulty {lo:.3f}-{hi:.3f} in {r.episodes} episodes "
           f"({r.seconds:.1f} s); {r.stored} new in {args.library}")

@@ -1,0 +1,84 @@
+"""How many distinct garages ``garage-mj generate`` finds per 0.1-wide difficulty bin, and how fast.
+
+    .venv/bin/python eval/bench_generate.py [--maps m4_13x13_offset ...] [--count 20] [--seconds 60]
+        [--seed 0] [--search-evaluations 10000] [--csv docs/bench_generate.csv]
+
+Per map (default: the shipped 13x13 maps) and bin [b/10, (b+1)/10]: ``garage_mj.generator.generate``
+with the shipped generator, asking for ``--count`` garages with at most ``--seconds`` of CPU time
+of rollouts (one process, torch on one thread; CPU time, since the machine is shared and wall
+time depends on the other jobs) into a throw-away library; the row records garages found,
+episodes, CPU seconds and wall seconds. ``garage_mj.search.search`` tells which bins the map admits (search reached
+a garage there; a lower bound, so an "unreached" bin may still be admissible). Prints a Markdown
+table per map and a summary line, and writes the CSV.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import tempfile
+import time
+from pathlib import Path
+
+from garage_mj.generator import GenerationError, generate
+from garage_mj.search import search
+
+MAPS = ["m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u"]
+N_BINS = 10
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--maps", nargs="+", default=MAPS)
+    ap.add_argument("--count", type=int, default=20)
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--search-evaluations", type=int, default=10_000)
+    ap.add_argument("--csv", type=Path, default=Path("docs/bench_generate.csv"))
+    args = ap.parse_args()
+    rows = []
+    summary = []
+    for name in args.maps:
+        admitted = set(search(name, args.search_evaluations, seed=0).bins_reached())
+        filled = 0
+        with tempfile.TemporaryDirectory() as tmp:
+            for b in range(N_BINS):
+                lo, hi = b / N_BINS, (b + 1) / N_BINS
+                t0 = time.perf_counter()
+                try:
+                    r = generate(name, (lo, hi), args.count, Path(tmp) / f"bin{b}.sqlite", seed=args.seed,
+                                 max_episodes=10**9, max_seconds=args.seconds, clock=time.process_time,
+                                 progress=False)
+                except GenerationError as exc:
+                    r = exc.result
+                    if r is None:
+                        raise
+                wall = time.perf_counter() - t0
+                filled += r.found >= args.count
+                row = {"map": name, "bin": f"{lo:.1f}-{hi:.1f}", "admissible": b in admitted, "found": r.found,
+                       "episodes": r.episodes, "cpu_s": round(r.cpu_seconds, 1), "wall_s": round(wall, 1),
+                       "filled": r.found >= args.count}
+                rows.append(row)
+                print(f"{name} {row['bin']}: {r.found} garages, {r.episodes} episodes, {r.cpu_seconds:.1f} CPU s"
+                      f"{'' if b in admitted else ' (search reached no garage here)'}", flush=True)
+        summary.append((name, filled, sum(b in admitted for b in range(N_BINS)),
+                        sum(r["filled"] and r["admissible"] for r in rows if r["map"] == name)))
+    args.csv.parent.mkdir(parents=True, exist_ok=True)
+    with open(args.csv, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"\n| map | bin | search reached | garages found (of {args.count}) | episodes | CPU s |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['map']} | {r['bin']} | {'yes' if r['admissible'] else 'no'} | {r['found']} | {r['episodes']} "
+              f"| {r['cpu_s']} |")
+    print("\n| map | admissible bins (search) | of them filled | bins filled in all |")
+    print("|---|---|---|---|")
+    for name, filled, admitted, ok in summary:
+        print(f"| {name} | {admitted} | {ok} | {filled} |")
+    print(f"wrote {args.csv}")
+
+
+if __name__ == "__main__":
+    main()
