@@ -7,7 +7,8 @@ map's admissible difficulty range as :func:`garage_mj.search.search` estimates i
 holds ``run.json``, ``episodes.csv`` (target band and outcome of every episode), checkpoints
 (``resume=True`` continues from the newest), ``generator.zip`` (the Q-network alone, a few hundred
 KB: what ships in ``models/generators/``), saved whenever the share of the last
-:data:`BEST_WINDOW` training episodes that landed in their band is the best of the run (DQN on
+:data:`BEST_WINDOW` training episodes that landed in their band (plus a quarter of the share that
+reached the exit) is the best of the run (DQN on
 this task can fall back late in a run), and at the end ``generator.json`` (its settings and
 training figures).
 
@@ -49,7 +50,8 @@ SEARCH_EVALUATIONS = 10_000  # mutations of the search that estimates the admiss
 EPS_RANGE = (0.02, 0.3)  # per-episode exploration of generate, drawn uniformly
 GEN_ENVS = 16  # envs stepped together by generate (one batched Q-network call)
 CURVE_POINTS = 20  # points of the training curve kept in generator.json
-BEST_WINDOW = 200  # [episodes] the shipped policy is the one with the best in-band share over this many
+BEST_WINDOW = 200  # [episodes] the shipped policy is the one with the best score over this many
+USABLE_WEIGHT = 0.25  # score = in-band share + USABLE_WEIGHT * usable share (reaching the exit counts too)
 EPISODE_FIELDS = ("episode", "timestep", "d_lo", "d_hi", "c_lo", "c_hi", "usable", "difficulty", "coverage",
                   "in_band", "return", "length")
 
@@ -100,7 +102,7 @@ def _episode_callback(path: Path, episodes: int, on_episodes):
             super().__init__()
             self.episodes = episodes
             self.in_band = 0
-            self.recent: deque[int] = deque(maxlen=BEST_WINDOW)  # in-band flags of the latest episodes
+            self.recent: deque[tuple[int, int]] = deque(maxlen=BEST_WINDOW)  # (in band, usable) of the latest
             new = not path.exists()
             self.file = open(path, "a", newline="")
             self.writer = csv.writer(self.file)
@@ -113,7 +115,7 @@ def _episode_callback(path: Path, episodes: int, on_episodes):
                 if not done:
                     continue
                 ended = True
-                self.recent.append(int(info["in_band"]))
+                self.recent.append((int(info["in_band"]), int(info["usable"])))
                 ep = info.get("episode", {})
                 (d_lo, d_hi), (c_lo, c_hi) = info["target_difficulty"], info["target_coverage"]
                 self.in_band += info["in_band"]
@@ -231,17 +233,20 @@ def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, 
         model.set_random_seed(seed + done_steps)
     else:
         model = DQN("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **dqn.dqn_kwargs())
-    manifest.setdefault("best", {"in_band": -1.0, "timestep": 0, "episode": 0})
+    manifest.setdefault("best", {"score": -1.0, "timestep": 0, "episode": 0})
 
     def keep_best(log) -> None:
-        """Save the policy as the generator when its in-band share of the last BEST_WINDOW episodes is the best yet."""
+        """Save the policy as the generator when its score over the last BEST_WINDOW episodes is the best yet."""
         if len(log.recent) < BEST_WINDOW:
             return
-        rate = sum(log.recent) / len(log.recent)
-        if rate > manifest["best"]["in_band"]:
+        in_band = sum(b for b, _ in log.recent) / len(log.recent)
+        usable = sum(u for _, u in log.recent) / len(log.recent)
+        score = in_band + USABLE_WEIGHT * usable
+        if score > manifest["best"].get("score", -1.0):
             model.policy.save(out / (GENERATOR + ".tmp"))
             os.replace(out / (GENERATOR + ".tmp"), out / GENERATOR)
-            manifest["best"] = {"in_band": round(rate, 4), "timestep": model.num_timesteps, "episode": log.episodes}
+            manifest["best"] = {"score": round(score, 4), "in_band": round(in_band, 4), "usable": round(usable, 4),
+                                "timestep": model.num_timesteps, "episode": log.episodes}
 
     log = _episode_callback(out / EPISODES, done_episodes, keep_best)
     wall0 = manifest.get("wall_s", 0.0)
@@ -315,9 +320,11 @@ def shipped_generator(map_name: str) -> Path | None:
 
 def train_command(map: str) -> str:
     stem = Path(map).stem
-    return (f".venv/bin/python generation/train_conditioned.py --map {map} --out runs/generator_{stem} "
-            f"(about 1 minute per 10,000 timesteps on one core; 50,000 recommended), then pass "
-            f"--model runs/generator_{stem}/{GENERATOR}")
+    return (f".venv/bin/python generation/train_conditioned.py --map {map} --timesteps 80000 --out "
+            f"runs/generator_{stem} (about 20-30 s per 10,000 timesteps on one core, plus ~10 s to search the "
+            f"map's difficulty range), then pass --model runs/generator_{stem}/{GENERATOR}; or try a shipped "
+            f"generator on it (a generator sees only a window around the car, so it runs on any map), e.g. "
+            f"--model m4_13x13_offset")
 
 
 @dataclass
@@ -368,8 +375,10 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
             raise GenerationError(f"no trained generator for map {map!r}; train one with: {train_command(map)}")
     else:
         path = Path(model)
+        if not path.is_file() and "/" not in str(model) and shipped_generator(str(model)) is not None:
+            path = shipped_generator(str(model))  # a shipped generator by its map's name
         if not path.is_file():
-            raise GenerationError(f"--model {path} does not exist")
+            raise GenerationError(f"--model {model} does not exist (a generator file, or a shipped map's name)")
     meta_path = path.with_suffix(".json") if path.with_suffix(".json").is_file() else path.with_name(GENERATOR_META)
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
     max_episodes = max_episodes if max_episodes is not None else 2_000 + 200 * count

@@ -42,7 +42,7 @@ class ConditionConfig:
     coverage_lo: float = 0.3  # drawn coverage bands lie inside [coverage_lo, coverage_hi]
     coverage_hi: float = 1.0
     band_bonus: float = 100.0  # a usable garage inside every band
-    distance_penalty: float = 200.0  # per unit of distance to the bands, for a usable garage outside
+    distance_penalty: float = 100.0  # per unit of distance to the bands, for a usable garage outside (<= exit bonus)
     shaping: float = 20.0  # per unit of distance closed during the episode
 
     def __post_init__(self) -> None:
