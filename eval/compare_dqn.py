@@ -1,11 +1,12 @@
 """Learning-quality check of DQN configs: seeds x maps x timesteps, resumable, one run at a time.
 
-    taskset -c 1 .venv/bin/python eval/compare_dqn.py --configs baseline default \\
+    taskset -c 1 .venv/bin/python eval/compare_dqn.py --configs baseline fast \\
         [--maps tiny_7x11 m5_13x13_aligned] [--seeds 0 1 2] [--timesteps 200000] [--out runs/compare_dqn]
     .venv/bin/python eval/compare_dqn.py --summary-only      # the table from what has finished
 
 ``baseline`` is the DQNConfig that was the default before the throughput work (written out here, so
-it does not move when the default changes); ``default`` is today's ``DQNConfig()``. Each run is a normal
+it does not move when the default changes); ``default`` is today's ``DQNConfig()``; ``fast`` is
+``generation/dqn_fast.toml`` (8 envs, (64, 64), one step of 128 per 8 timesteps). Each run is a normal
 training run folder ``OUT/<config>/<map>_s<seed>``; a finished one is skipped, an interrupted one
 resumes from its newest checkpoint. Per run: mean return of the last 100 episodes (``monitor.csv``),
 distinct usable garages stored in the run's library, and timesteps/s. The summary (per config and map:
@@ -22,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from garage_mj.training import DQNConfig, read_manifest, train
+from garage_mj.training import DQNConfig, load_dqn_config, read_manifest, train
 
 # the default DQNConfig before the throughput work (commit 1efa9fa), the reference configuration
 BASELINE = dict(
@@ -31,6 +32,7 @@ BASELINE = dict(
     exploration_initial_eps=1.0, exploration_final_eps=0.05, max_grad_norm=10.0, net_arch=(256, 256),
     torch_threads=1, view_size=7, max_errors=10,
 )
+FAST_TOML = Path(__file__).resolve().parent.parent / "generation" / "dqn_fast.toml"
 LAST_EPISODES = 100  # episodes averaged for the final return
 # two-sided 95% Student t quantiles by degrees of freedom
 T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
@@ -41,7 +43,9 @@ def config_named(name: str, checkpoint_every: int) -> DQNConfig:
         return DQNConfig(**BASELINE, checkpoint_every=checkpoint_every)
     if name == "default":
         return DQNConfig(checkpoint_every=checkpoint_every)
-    raise SystemExit(f"unknown config {name!r}: use baseline or default")
+    if name == "fast":
+        return load_dqn_config(FAST_TOML, checkpoint_every=checkpoint_every)
+    raise SystemExit(f"unknown config {name!r}: use baseline, default or fast")
 
 
 def run_result(run: Path) -> dict | None:
@@ -113,7 +117,7 @@ def summarise(out: Path, csv_path: Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--configs", nargs="+", default=["baseline", "default"])
+    ap.add_argument("--configs", nargs="+", default=["baseline", "fast"])
     ap.add_argument("--maps", nargs="+", default=["tiny_7x11", "m5_13x13_aligned"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--timesteps", type=int, default=200_000)

@@ -55,27 +55,29 @@ class DQNConfig:
 
     The defaults are tuned so that a few thousand steps on ``tiny_7x11`` already learn to avoid
     walls and reach the exit sometimes; the paper's 2,000,000-step runs use them unchanged.
+    ``generation/dqn_fast.toml`` is about 2.5-3.5 times faster (8 envs, (64, 64), one step of 128
+    per 8 timesteps) but not yet shown to learn as well (README, "Throughput and learning quality").
     """
 
     learning_rate: float = 5e-4
     buffer_size: int = 50_000  # [transitions] ~4 KB each with the 7x7 view
     learning_starts: int = 1_000  # [timesteps] of random actions before the first update
-    batch_size: int = 128  # [transitions] per gradient step
+    batch_size: int = 64  # [transitions] per gradient step
     tau: float = 1.0  # 1: hard target-network update
     gamma: float = 0.99
-    train_freq: int = 1  # [vector steps] between updates; a vector step is n_envs timesteps
-    gradient_steps: int = 1  # gradient steps per update: with n_envs 8, one of 128 per 8 timesteps
+    train_freq: int = 4  # [vector steps] between updates; a vector step is n_envs timesteps
+    gradient_steps: int = 1  # gradient steps per update
     n_steps: int = 1  # n-step returns
     target_update_interval: int = 1_000  # [timesteps]
     exploration_fraction: float = 0.2  # share of the run over which epsilon decays
     exploration_initial_eps: float = 1.0
     exploration_final_eps: float = 0.05
     max_grad_norm: float = 10.0
-    net_arch: tuple[int, ...] = (64, 64)  # hidden layer widths of the Q-network
+    net_arch: tuple[int, ...] = (256, 256)  # hidden layer widths of the Q-network
     checkpoint_every: int = 25_000  # [timesteps] between checkpoints
     save_replay_buffer: bool = False  # also checkpoint the replay buffer (large: buffer_size x 4 KB)
     torch_threads: int = 1  # CPU threads for torch; 1 is fastest for this small MLP
-    n_envs: int = 8  # envs stepped together (DummyVecEnv, one process): one batched action choice
+    n_envs: int = 1  # envs stepped together (DummyVecEnv, one process): one batched action choice
     view_size: int = 7  # env: side of the observed window (odd)
     max_errors: int = 10  # env: errors allowed per episode
 

@@ -135,10 +135,14 @@ def test_config_from_toml(tmp_path):
         DQNConfig(exploration_fraction=2.0)
 
 
-def test_one_env_config_still_trains(tmp_path):
-    """The pre-vectorisation default (one env, (256, 256), an update every 4 timesteps) still runs."""
-    cfg = DQNConfig(n_envs=1, train_freq=4, gradient_steps=1, net_arch=(256, 256), learning_starts=200,
-                    checkpoint_every=1000)
-    manifest = train("tiny_7x11", 600, 0, tmp_path / "one", cfg, progress=False)
-    assert manifest["timesteps"] == 600 and manifest["config"]["n_envs"] == 1
-    assert len(_monitor_returns(tmp_path / "one")) == manifest["episodes"] > 0
+def test_fast_vectorised_config_trains_and_checkpoints(tmp_path):
+    """generation/dqn_fast.toml (8 envs in one process): every episode logged, checkpoints on crossing."""
+    from pathlib import Path
+
+    toml = Path(__file__).resolve().parent.parent / "generation" / "dqn_fast.toml"
+    cfg = load_dqn_config(toml, learning_starts=200, checkpoint_every=300)
+    manifest = train("tiny_7x11", 900, 0, tmp_path / "fast", cfg, progress=False)
+    assert 900 <= manifest["timesteps"] < 908 and manifest["config"]["n_envs"] == 8
+    assert len(_monitor_returns(tmp_path / "fast")) == manifest["episodes"] > 0
+    ckpt = latest_checkpoint(tmp_path / "fast")
+    assert ckpt is not None and ckpt[1]["timesteps"] >= 900
