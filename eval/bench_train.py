@@ -8,7 +8,8 @@ the wall time spent inside env.step/reset (GarageGenEnv with its Monitor and Fin
 wrappers, timed by training.StepTimer) over the whole ``learn`` call. ``--profile`` also prints
 the top functions by cumulative time under cProfile (which slows everything down a little) and the
 share of the time in SB3's gradient updates (``DQN.train``), action choice (``predict``) and the
-env. ``--set`` overrides DQNConfig fields (``--set net_arch=[256,256] n_envs=1`` is the old default).
+env. ``--set`` overrides DQNConfig fields (``--set n_envs=8 net_arch=[64,64] batch_size=128 train_freq=1
+gradient_steps=1`` is generation/dqn_fast.toml).
 """
 
 from __future__ import annotations
