@@ -83,20 +83,47 @@ class Outcome:
 
 
 def ego_contacts(model, data, ego_geoms: Iterable[int], geom_classes: np.ndarray) -> list[Contact]:
-    """Contacts between an ego geom and a non-ego geom in ``data``, with the other geom's class."""
+    """Contacts between an ego geom and a non-ego geom of a collidable class in ``data``, with its class.
+
+    Vectorised over ``data.contact``: the car's wheels touch the floor at every physics step, so
+    only contacts with something collidable are named (name lookups cost more than the test).
+    """
     import mujoco
 
-    ego = ego_geoms if isinstance(ego_geoms, (set, frozenset)) else set(ego_geoms)
+    n = data.ncon
+    if not n:
+        return []
+    ego = _ego_mask(model, ego_geoms)
+    g1 = data.contact.geom1[:n]
+    g2 = data.contact.geom2[:n]
+    e1, e2 = ego[g1], ego[g2]
+    other = np.where(e1, g2, g1)
+    keep = (e1 != e2) & _COLLIDABLE_TABLE[geom_classes[other]]
     out = []
-    for i in range(data.ncon):
-        c = data.contact[i]
-        g1, g2 = int(c.geom1), int(c.geom2)
-        if (g1 in ego) == (g2 in ego):
-            continue
-        other = g2 if g1 in ego else g1
-        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, other) or f"#{other}"
-        out.append(Contact(Semantic(int(geom_classes[other])), name))
+    for o in other[keep]:
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, int(o)) or f"#{int(o)}"
+        out.append(Contact(Semantic(int(geom_classes[o])), name))
     return out
+
+
+#: Whether each semantic class id is collidable (a touch ends the test).
+_COLLIDABLE_TABLE = np.zeros(max(Semantic) + 1, dtype=bool)
+_COLLIDABLE_TABLE[[int(c) for c in COLLIDABLE]] = True
+_EGO_MASKS: dict[tuple[int, int], np.ndarray] = {}
+
+
+def _ego_mask(model, ego_geoms: Iterable[int]) -> np.ndarray:
+    """A boolean mask over the model's geoms of the ego car's geoms (cached per model and set)."""
+    ids = ego_geoms if isinstance(ego_geoms, (set, frozenset)) else frozenset(ego_geoms)
+    key = (id(model), hash(frozenset(ids)))
+    mask = _EGO_MASKS.get(key)
+    if mask is None or len(mask) != model.ngeom:
+        mask = np.zeros(model.ngeom, dtype=bool)
+        mask[list(ids)] = True
+        if len(_EGO_MASKS) > 64:
+            _EGO_MASKS.clear()
+        _EGO_MASKS[key] = mask
+    return mask
 
 
 class OutcomeMonitor:

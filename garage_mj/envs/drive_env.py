@@ -266,8 +266,7 @@ class GarageDriveEnv(gym.Env):
         obs["waypoint"] = to_car_frame(target, x, y, yaw).astype(np.float32)
         obs["speed"] = np.array([self.car.speed(self.data)], dtype=np.float32)
         obs["goal"] = to_car_frame(self.monitor.goal, x, y, yaw).astype(np.float32)
-        s, _ = self.route.project((x, y), self.monitor.progress - 2.0, self.monitor.progress + 6.0)
-        obs["remaining"] = np.array([max(self.route.length - s, 0.0)], dtype=np.float32)
+        obs["remaining"] = np.array([max(self.route.length - self.monitor.progress, 0.0)], dtype=np.float32)
         obs["pose"] = np.array([x, y, math.remainder(yaw, math.tau)], dtype=np.float32)
         return obs
 
