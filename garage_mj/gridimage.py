@@ -14,7 +14,8 @@ from garage_mj.blocks import NUM_CODES, Block
 from garage_mj.geometry import DELTAS
 
 CELL_PX = 16  # [pixels] side of one grid cell
-_HEX = {  # the colours of garage_mj.plots.BLOCK_COLOURS (tests keep them equal)
+#: Colour of each block code, shared with :mod:`garage_mj.plots` (one table for every picture of a grid).
+BLOCK_COLOURS = {
     Block.FREE: "#f2f2f2",
     Block.ROAD: "#5b5b5b",
     Block.OBSTACLE: "#1e1e1e",
@@ -27,7 +28,7 @@ _HEX = {  # the colours of garage_mj.plots.BLOCK_COLOURS (tests keep them equal)
     Block.OBST_STALL4: "#d6604d",
 }
 #: (NUM_CODES, 3) uint8 colour per block code.
-BLOCK_RGB = np.array([[int(_HEX[Block(i)][k : k + 2], 16) for k in (1, 3, 5)] for i in range(NUM_CODES)],
+BLOCK_RGB = np.array([[int(BLOCK_COLOURS[Block(i)][k : k + 2], 16) for k in (1, 3, 5)] for i in range(NUM_CODES)],
                      dtype=np.uint8)
 CAR_RGB = np.array([255, 215, 0], dtype=np.uint8)
 NOSE_RGB = np.array([0, 0, 0], dtype=np.uint8)

@@ -27,6 +27,7 @@ from garage_mj.errors import GarageMJError  # noqa: E402
 from garage_mj.fsutil import atomic_write  # noqa: E402
 from garage_mj.garage import Garage  # noqa: E402
 from garage_mj.geometry import DELTAS  # noqa: E402
+from garage_mj.gridimage import BLOCK_COLOURS as _BLOCK_COLOURS
 from garage_mj.roadgraph import Tile, analyse  # noqa: E402
 
 BIN = 0.1  # heatmap cell width in difficulty and coverage
@@ -34,19 +35,8 @@ CONFIDENCE = 0.95
 DPI = 120
 MAX_PANEL_COLUMNS = 3  # convergence panels per row
 
-#: Colour of each block code in :func:`garage_png`.
-BLOCK_COLOURS = {
-    Block.FREE: "#f2f2f2",
-    Block.ROAD: "#5b5b5b",
-    Block.OBSTACLE: "#1e1e1e",
-    Block.OBST_STALL3: "#f4a582",
-    Block.STALL3: "#92c5de",
-    Block.STALL4: "#4393c3",
-    Block.STALL6: "#2166ac",
-    Block.ENTRANCE: "#1a9850",
-    Block.EXIT: "#d73027",
-    Block.OBST_STALL4: "#d6604d",
-}
+#: Colour of each block code in :func:`garage_png` (the table of :mod:`garage_mj.gridimage`).
+BLOCK_COLOURS = _BLOCK_COLOURS
 TILE_MARKERS = {Tile.DEAD_END: "s", Tile.CURVE: "o", Tile.T: "^", Tile.CROSS: "P", Tile.ISOLATED: "x"}
 
 
