@@ -174,11 +174,6 @@ class DrivePlanner:
                     heapq.heappush(heap, (nd, nxt))
         return dist, prev
 
-    def reachable(self, stall_id: int) -> bool:
-        """Whether a forward route reaches the stall's road cell at all (cheap; no geometry checks)."""
-        cell = self.scene.stalls.stalls[stall_id].road_cell
-        return any(node[0] == cell for node in self._dist)
-
     def _path_to(self, node: Node) -> list[Node]:
         out = []
         cur: Node | None = node
@@ -466,14 +461,14 @@ class DrivePlanner:
             clear_g, _ = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id)
         goal = (float(centre[g, 0]), float(centre[g, 1]), float(hdg[g]))
         offset = self.lane_offset(*goal)
-        cand.side = _side(stall, hdg[g])  # where the stall lies seen from the goal pose
+        side = _side(stall, hdg[g])  # where the stall lies seen from the goal pose
         # the drive: from the start pose to the goal
         i0 = int(np.searchsorted(s, START_OFFSET))
         clear, names = self.clearance(rear[i0:g + 1], hdg[i0:g + 1], exclude_stall=stall.id)
         k = int(np.argmin(clear))
         max_k = float(np.abs(kap[: g + 1]).max())
         common = dict(centre=centre[: g + 1], rear=rear[: g + 1], heading=hdg[: g + 1], curvature=kap[: g + 1],
-                      goal=goal, stall_side=cand.side, clearance=float(clear[k]), clearance_to=names[k],
+                      goal=goal, stall_side=side, clearance=float(clear[k]), clearance_to=names[k],
                       max_curvature=max_k, lane_offset=offset, pullback=pull)
         if max_k > self.kappa_limit + 1e-6:
             return TestPlan(stall.id, False, f"route curvature {max_k:.3f} 1/m above the car's {self.kappa_limit:.3f}",
