@@ -82,18 +82,23 @@ class Outcome:
         return d
 
 
-def ego_contacts(model, data, ego_geoms: Iterable[int], geom_classes: np.ndarray) -> list[Contact]:
+def ego_contacts(model, data, ego_geoms, geom_classes: np.ndarray) -> list[Contact]:
     """Contacts between an ego geom and a non-ego geom of a collidable class in ``data``, with its class.
 
-    Vectorised over ``data.contact``: the car's wheels touch the floor at every physics step, so
-    only contacts with something collidable are named (name lookups cost more than the test).
+    ``ego_geoms``: a boolean mask over the model's geoms (:attr:`garage_mj.vehicle.Car.geom_mask`,
+    the fast path) or the ego geom ids. Vectorised over ``data.contact``: the car's wheels touch
+    the floor at every physics step, so only contacts with something collidable are named (name
+    lookups cost more than the test).
     """
     import mujoco
 
     n = data.ncon
     if not n:
         return []
-    ego = _ego_mask(model, ego_geoms)
+    ego = ego_geoms
+    if not (isinstance(ego, np.ndarray) and ego.dtype == bool):
+        ego = np.zeros(model.ngeom, dtype=bool)
+        ego[list(ego_geoms)] = True
     g1 = data.contact.geom1[:n]
     g2 = data.contact.geom2[:n]
     e1, e2 = ego[g1], ego[g2]
@@ -109,21 +114,6 @@ def ego_contacts(model, data, ego_geoms: Iterable[int], geom_classes: np.ndarray
 #: Whether each semantic class id is collidable (a touch ends the test).
 _COLLIDABLE_TABLE = np.zeros(max(Semantic) + 1, dtype=bool)
 _COLLIDABLE_TABLE[[int(c) for c in COLLIDABLE]] = True
-_EGO_MASKS: dict[tuple[int, int], np.ndarray] = {}
-
-
-def _ego_mask(model, ego_geoms: Iterable[int]) -> np.ndarray:
-    """A boolean mask over the model's geoms of the ego car's geoms (cached per model and set)."""
-    ids = ego_geoms if isinstance(ego_geoms, (set, frozenset)) else frozenset(ego_geoms)
-    key = (id(model), hash(frozenset(ids)))
-    mask = _EGO_MASKS.get(key)
-    if mask is None or len(mask) != model.ngeom:
-        mask = np.zeros(model.ngeom, dtype=bool)
-        mask[list(ids)] = True
-        if len(_EGO_MASKS) > 64:
-            _EGO_MASKS.clear()
-        _EGO_MASKS[key] = mask
-    return mask
 
 
 class OutcomeMonitor:
@@ -137,6 +127,11 @@ class OutcomeMonitor:
         self.goal = g[:2]
         self.goal_yaw = float(g[2]) if len(g) > 2 else route.heading_at(route.length)
         self.reset()
+
+    @property
+    def goal_pose(self) -> tuple[float, float, float]:
+        """(x [m], y [m], yaw [rad]) of the goal."""
+        return float(self.goal[0]), float(self.goal[1]), self.goal_yaw
 
     @property
     def time_limit(self) -> float:

@@ -203,6 +203,7 @@ class Car:
                 subtree.add(b)
         self.bodies = frozenset(subtree)
         self.geoms = frozenset(int(g) for g in np.flatnonzero(np.isin(model.geom_bodyid, list(subtree))))
+        self.geom_mask = np.isin(model.geom_bodyid, list(subtree))  # (ngeom,) bool: the car's geoms
         self.cruise_speed = 0.0  # [m/s]
         self.steer_angle = 0.0  # [rad] bicycle-model angle
 

@@ -64,7 +64,7 @@ def run_test(boxes, route_points, driver, seed: int = 0, action_type: str = "con
             contacts = []
             for _ in range(n_sub):
                 mujoco.mj_step(model, data)
-                contacts += ego_contacts(model, data, car.geoms, classes)
+                contacts += ego_contacts(model, data, car.geom_mask, classes)
             x, y, yaw = car.pose(data)
             traj.append((x, y))
             out = monitor.update(data.time, (x, y), car.speed(data), contacts, yaw=yaw)

@@ -239,7 +239,7 @@ class GarageDriveEnv(gym.Env):
         for _ in range(self.n_substeps):
             mujoco.mj_step(self.model, self.data)
             if self.data.ncon:
-                contacts += ego_contacts(self.model, self.data, self.car.geoms, self.classes)
+                contacts += ego_contacts(self.model, self.data, self.car.geom_mask, self.classes)
         x, y, yaw = self.car.pose(self.data)
         self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])
         self._last_xy = (x, y)
@@ -281,7 +281,7 @@ class GarageDriveEnv(gym.Env):
             "progress": self.monitor.progress,
             "pose": (x, y, yaw),
             "parked": len(self.occupied),
-            "goal": tuple(float(v) for v in (*self.monitor.goal, self.monitor.goal_yaw)),
+            "goal": self.monitor.goal_pose,
             "feasible": self.test_plan.feasible,
         }
         if self.outcome is not None:
@@ -300,7 +300,7 @@ class GarageDriveEnv(gym.Env):
         plan = self.test_plan
         return {"seed": int(seed), "action_type": self.action_type, "dt": self.dt,
                 "target_stall": self.target, "route_length": self.route.length, "car": self.car_geometry,
-                "route": self.route.points, "goal": tuple(float(v) for v in (*self.monitor.goal, self.monitor.goal_yaw)),
+                "route": self.route.points, "goal": self.monitor.goal_pose,
                 "rear_path": plan.rear, "rear_heading": plan.heading, "rear_curvature": plan.curvature}
 
     def render(self) -> np.ndarray | None:

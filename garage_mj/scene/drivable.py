@@ -356,9 +356,9 @@ class DrivePlanner:
         n_i, m_i = np.nonzero(bound < EXACT_BELOW)
         if len(n_i):
             cars, bx = car[n_i], boxes[m_i]  # (K, 4, 2), (K, 4)
-            bc = np.stack([bx[:, [0, 1]], bx[:, [2, 1]], bx[:, [2, 3]], bx[:, [0, 3]]], axis=1)
+            bc = _box_corners(bx)
             exact = np.minimum(_points_to_edges(cars, bc), _points_to_edges(bc, cars))
-            exact[_overlap_pairs(cars, bx)] = 0.0
+            exact[_overlap_pairs(cars, bx, bc)] = 0.0
             dist[n_i, m_i] = exact
         j = np.argmin(dist, axis=1)
         names = [obs.classes[idx[k]] for k in j]
@@ -509,11 +509,15 @@ def _points_to_edges(points: np.ndarray, polys: np.ndarray) -> np.ndarray:
     return d.min(axis=(-1, -2))
 
 
-def _overlap_pairs(car: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """(K,) whether each car rectangle (K, 4, 2) overlaps its axis-aligned box (K, 4) [separating axes]."""
+def _box_corners(boxes: np.ndarray) -> np.ndarray:
+    """(K, 4, 2) corners, counter-clockwise, of axis-aligned boxes (K, 4) [xmin, ymin, xmax, ymax]."""
+    return np.stack([boxes[:, [0, 1]], boxes[:, [2, 1]], boxes[:, [2, 3]], boxes[:, [0, 3]]], axis=1)
+
+
+def _overlap_pairs(car: np.ndarray, boxes: np.ndarray, bc: np.ndarray) -> np.ndarray:
+    """(K,) whether each car rectangle (K, 4, 2) overlaps its axis-aligned box (K, 4), corners ``bc``."""
     sep = ((car[..., 0].max(-1) < boxes[:, 0]) | (car[..., 0].min(-1) > boxes[:, 2])
            | (car[..., 1].max(-1) < boxes[:, 1]) | (car[..., 1].min(-1) > boxes[:, 3]))
-    bc = np.stack([boxes[:, [0, 1]], boxes[:, [2, 1]], boxes[:, [2, 3]], boxes[:, [0, 3]]], axis=1)
     for e in (0, 1):  # the car's two axes
         axis = car[:, e + 1] - car[:, e]
         axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
