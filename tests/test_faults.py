@@ -346,13 +346,19 @@ def test_a_damaged_library_row_is_refused_with_its_id(tmp_path, capsys, how):
 
 
 def _unprivileged(argv: list[str], home: Path) -> subprocess.CompletedProcess:
-    """Run the CLI as a user that file permissions apply to (``nobody`` via setpriv when we are root)."""
+    """Run the CLI as a user that write permissions apply to (``nobody`` via setpriv when we are root).
+
+    ``nobody`` keeps CAP_DAC_READ_SEARCH (read and search only), so it can reach the checkout's
+    virtualenv wherever the clone lies (``mktemp -d`` folders are 0700); every write is still
+    checked against the permissions, which is what these tests are about.
+    """
     env = {**os.environ, "HOME": str(home), "MPLCONFIGDIR": str(home)}
     prefix: list[str] = []
     if os.geteuid() == 0:
         if not shutil.which("setpriv"):
             pytest.skip("running as root without setpriv: permissions cannot be tested")
-        prefix = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+        prefix = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups",
+                  "--inh-caps=+dac_read_search", "--ambient-caps=+dac_read_search"]
     return subprocess.run([*prefix, CLI, *argv], capture_output=True, text=True, env=env, timeout=300)
 
 
