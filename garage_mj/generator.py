@@ -12,9 +12,16 @@ reached the exit) is the best of the run (DQN on
 this task can fall back late in a run), and at the end ``generator.json`` (its settings and
 training figures).
 
-:func:`generate` rolls the generator out in a batch of envs conditioned on the band asked for,
-epsilon-greedy with a per-episode epsilon drawn from the seed so that distinct garages appear,
-and stores every distinct, usable garage that lands in the band in the scenario library.
+:func:`generate` works in two stages. First it rolls the generator out in a batch of envs
+conditioned on the band asked for, epsilon-greedy with a per-episode epsilon drawn from the seed
+so that distinct garages appear, and stores every distinct, usable garage that lands in the band
+in the scenario library. When that does not fill the band within :data:`POLICY_PATIENCE`
+episodes, a band-directed local search takes over (:class:`garage_mj.search.BandClimber`): it
+starts from the usable garages the policy painted, nearest to the band first, mutates their road
+sets under the painter's rules toward the band and then inside it, and re-paints every new road
+set that lands in the band through ``GarageGenEnv`` (:func:`garage_mj.search.replay`), so what
+is stored is what the painter makes. :func:`train_for_map` trains a generator for a map that has
+none (``garage-mj generate --map FILE``).
 """
 
 from __future__ import annotations
@@ -49,6 +56,15 @@ GENERATOR_META = "generator.json"
 SEARCH_EVALUATIONS = 10_000  # mutations of the search that estimates the admissible range
 EPS_RANGE = (0.02, 0.3)  # per-episode exploration of generate, drawn uniformly
 GEN_ENVS = 16  # envs stepped together by generate (one batched Q-network call)
+POLICY_PATIENCE = (100, 10)  # generate's policy stage gets a + b * count episodes before the search joins in
+POLICY_TIME_SHARE = 0.5  # ... and at most this share of --max-seconds
+SEARCH_STEPS_PER_EPISODE = 20  # search mutations that count as one episode of the budget (~0.1-0.3 ms each
+#                                against ~5-10 ms for a rollout episode on a 13x13 map; a replay counts as one)
+SEARCH_SEEDS = 8  # painter garages per six-stall axis that seed the search when the policy made no usable one
+TRAIN_TIMESTEPS = 80_000  # default training budget of generate --map FILE
+# the settings the shipped generators were trained with (generation/conditioned.toml's [dqn])
+USER_MAP_DQN = {"net_arch": [64, 64], "n_envs": 8, "learning_starts": 1000, "exploration_fraction": 0.3,
+                "checkpoint_every": 10000}
 CURVE_POINTS = 20  # points of the training curve kept in generator.json
 BEST_WINDOW = 200  # [episodes] the shipped policy is the one with the best score over this many
 USABLE_WEIGHT = 0.25  # score = in-band share + USABLE_WEIGHT * usable share (reaching the exit counts too)
@@ -318,9 +334,49 @@ def shipped_generator(map_name: str) -> Path | None:
     return path if path.is_file() else None
 
 
+def default_model_out(library: str | Path, map_name: str) -> Path:
+    """Where ``generate --map FILE`` keeps the generator it trains: next to the library."""
+    lib = Path(library)
+    return lib.with_name(f"{lib.stem}.{map_name}.generator.zip")
+
+
+def train_for_map(map: str, model_out: str | Path, timesteps: int = TRAIN_TIMESTEPS, seed: int = 0,
+                  progress: bool = True, search_evaluations: int = SEARCH_EVALUATIONS,
+                  dqn: DQNConfig | None = None) -> tuple[Path, float | None]:
+    """A generator for ``map`` at ``model_out``: reused when the file exists, else trained.
+
+    Trains with :func:`train_conditioned` (the shipped generators' DQN settings unless ``dqn``)
+    in a run folder next to ``model_out`` (``<model_out>.run``, resumed if a run was cut off,
+    removed once the generator is saved), then writes ``model_out`` and its ``.json``. Returns
+    the path and the training wall time in seconds (None when reused).
+    """
+    import shutil
+
+    out = Path(model_out)
+    if out.is_file():
+        return out, None
+    if out.suffix != ".zip":
+        raise GenerationError(f"--model-out {out}: a generator file name ends in .zip")
+    run_dir = out.with_name(out.name + ".run")
+    resume = (run_dir / RUN_MANIFEST).exists()
+    t0 = time.perf_counter()
+    try:
+        train_conditioned(map, timesteps, seed, run_dir, dqn=dqn or load_dqn_config(USER_MAP_DQN), resume=resume,
+                          progress=progress, search_evaluations=search_evaluations)
+    except GenerationError as exc:
+        raise GenerationError(f"{exc} (remove {run_dir} to start over)") from None
+    out.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(run_dir / GENERATOR_META, out.with_suffix(".json"))
+    shutil.copyfile(run_dir / GENERATOR, out.with_name(out.name + ".tmp"))
+    os.replace(out.with_name(out.name + ".tmp"), out)
+    shutil.rmtree(run_dir, ignore_errors=True)
+    return out, time.perf_counter() - t0
+
+
 def train_command(map: str) -> str:
     stem = Path(map).stem
-    return (f".venv/bin/python generation/train_conditioned.py --map {map} --timesteps 80000 --out "
+    return (f"garage-mj generate --map {map} ... (trains one first, {TRAIN_TIMESTEPS} timesteps), or train_for_map; "
+            f"or .venv/bin/python generation/train_conditioned.py --map {map} --timesteps 80000 --out "
             f"runs/generator_{stem} (about 20-30 s per 10,000 timesteps on one core, plus ~10 s to search the "
             f"map's difficulty range), then pass --model runs/generator_{stem}/{GENERATOR}; or try a shipped "
             f"generator on it (a generator sees only a window around the car, so it runs on any map), e.g. "
@@ -337,7 +393,12 @@ class GenerateResult:
     episodes: int
     seconds: float  # wall-clock time of the rollouts
     difficulties: list[float]
-    cpu_seconds: float = 0.0  # CPU time of this process during the rollouts
+    cpu_seconds: float = 0.0  # CPU time of this process during the rollouts and the search
+    found_policy: int = 0  # of ``found``, painted by the policy's rollouts (library run ``generate:<model>``)
+    found_search: int = 0  # of ``found``, from the search stage (run ``generate:<model>+search``)
+    search_steps: int = 0  # mutations the search stage evaluated
+    replays: int = 0  # road sets the search stage re-painted through GarageGenEnv
+    search_seeds: int = 0  # garages the search started from (usable garages of the policy, or painter garages)
 
 
 def _load_policy(path: Path):
@@ -353,14 +414,22 @@ def _load_policy(path: Path):
 def generate(map: str, difficulty: tuple[float, float], count: int, library: str | Path, *,
              coverage: tuple[float, float] | None = None, model: str | Path | None = None, seed: int = 0,
              max_episodes: int | None = None, max_seconds: float | None = None, progress: bool = True,
-             n_envs: int = GEN_ENVS, clock=time.perf_counter) -> GenerateResult:
+             n_envs: int = GEN_ENVS, clock=time.perf_counter, search: bool = True) -> GenerateResult:
     """Store ``count`` distinct usable garages of ``map`` with difficulty (and coverage) in the bands.
 
-    Raises :class:`GenerationError` (after storing what it found) when ``max_episodes`` episodes
-    (default ``2,000 + 200 * count``), or ``max_seconds`` of rollouts measured by ``clock`` (wall
-    time; ``time.process_time`` for CPU time on a shared machine), do not find ``count``.
+    Stage 1 rolls out the generator; if it has not filled the band after ``POLICY_PATIENCE``
+    episodes (``a + b * count``) or :data:`POLICY_TIME_SHARE` of ``max_seconds``, stage 2 (unless
+    ``search=False``) climbs from the usable garages it painted toward the band (module docstring).
+    The budget is shared: a rollout episode or a replay counts one episode,
+    :data:`SEARCH_STEPS_PER_EPISODE` search mutations count one. Raises :class:`GenerationError`
+    (after storing what it found) when ``max_episodes`` (default ``2,000 + 200 * count``) or
+    ``max_seconds`` measured by ``clock`` (wall time; ``time.process_time`` for CPU time on a
+    shared machine) do not find ``count``. The same seed gives the same garages (unless
+    ``max_seconds`` cuts a run short).
     """
     import torch
+
+    from garage_mj.search import BandClimber, replay
 
     for name, band in (("difficulty", difficulty), ("coverage", coverage)):
         if band is not None and not 0.0 <= band[0] <= band[1] <= 1.0:
@@ -382,10 +451,11 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     meta_path = path.with_suffix(".json") if path.with_suffix(".json").is_file() else path.with_name(GENERATOR_META)
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
     max_episodes = max_episodes if max_episodes is not None else 2_000 + 200 * count
+    max_errors = meta.get("max_errors", 10)
     torch.set_num_threads(1)
     policy = _load_policy(path)
     policy.set_training_mode(False)
-    envs = [GarageGenCondEnv(map=garage0, view_size=meta.get("view_size", 7), max_errors=meta.get("max_errors", 10))
+    envs = [GarageGenCondEnv(map=garage0, view_size=meta.get("view_size", 7), max_errors=max_errors)
             for _ in range(n_envs)]
     if policy.observation_space.shape != envs[0].observation_space.shape:
         raise GenerationError(f"{path} was trained with observations of shape {policy.observation_space.shape}, "
@@ -395,14 +465,42 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     rng = np.random.default_rng(seed)
     run = f"generate:{path.stem if path.name != GENERATOR else path.parent.name}"
     seen: set[str] = set()
+    usable_pool: list[tuple[float, int, Any]] = []  # (distance to the bands, episode, garage) of usable rollouts
     result = GenerateResult(0, 0, [], 0, 0.0, [])
     t0, cpu0, c0 = time.perf_counter(), time.process_time(), clock()
+    patience = POLICY_PATIENCE[0] + POLICY_PATIENCE[1] * count if search else max_episodes
+    policy_seconds = None if max_seconds is None else (max_seconds * POLICY_TIME_SHARE if search else max_seconds)
+    policy_episodes = min(max_episodes, patience)
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=count, desc=f"{garage0.name} difficulty {difficulty[0]:.2f}-{difficulty[1]:.2f}",
                    unit="garage", dynamic_ncols=True)
+
+    def keep(lib: Library, g, m, stage: str, episode: int, timestep: int) -> bool:
+        """Store ``g`` (metrics ``m``) if it is usable, new to this call and in the bands."""
+        key = g.canonical_hash()
+        if key in seen or not m.usable or band_distance(m.difficulty, difficulty) > 0.0 \
+                or band_distance(m.coverage, cov) > 0.0:
+            return False
+        seen.add(key)
+        new = lib.add(g, map=garage0.name, run=run + ("+search" if stage == "search" else ""), seed=seed,
+                      episode=episode, timestep=timestep)
+        result.found += 1
+        if stage == "search":
+            result.found_search += 1
+        else:
+            result.found_policy += 1
+        result.stored += new is not None
+        if new is not None:
+            result.ids.append(new)
+        result.difficulties.append(m.difficulty)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(stage=stage, episodes=result.episodes, search_steps=result.search_steps, refresh=False)
+        return True
+
     started = 0
     eps = np.zeros(n_envs)
     episode_of = [0] * n_envs
@@ -419,10 +517,11 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
 
     steps = 0
     with Library(library) as lib:
-        for i in range(min(n_envs, max_episodes)):
+        # -- stage 1: policy rollouts ---------------------------------------------------------------
+        for i in range(min(n_envs, policy_episodes)):
             start(i)
         while active.any() and result.found < count:
-            if max_seconds is not None and clock() - c0 >= max_seconds:
+            if policy_seconds is not None and clock() - c0 >= policy_seconds:
                 break
             with torch.no_grad():
                 greedy = policy.q_net(torch.as_tensor(obs)).argmax(dim=1).numpy()
@@ -436,24 +535,44 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
                     continue
                 result.episodes += 1
                 active[i] = False
-                if info["usable"] and info["in_band"] and result.found < count:
+                if info["usable"]:
                     g = envs[i].garage()
-                    key = g.canonical_hash()
-                    m = evaluate(g)
-                    if key not in seen and m.usable and band_distance(m.difficulty, difficulty) == 0.0 \
-                            and band_distance(m.coverage, cov) == 0.0:
-                        seen.add(key)
-                        new = lib.add(g, map=garage0.name, run=run, seed=seed, episode=episode_of[i], timestep=steps)
-                        result.found += 1
-                        result.stored += new is not None
-                        if new is not None:
-                            result.ids.append(new)
-                        result.difficulties.append(m.difficulty)
-                        if bar is not None:
-                            bar.update(1)
-                            bar.set_postfix(episodes=result.episodes, refresh=False)
-                if started < max_episodes and result.found < count:
+                    if search:
+                        dist = band_distance(info["difficulty"], difficulty) + band_distance(info["coverage"], cov)
+                        usable_pool.append((dist, episode_of[i], g))
+                    if info["in_band"] and result.found < count:
+                        keep(lib, g, evaluate(g), "policy", episode_of[i], steps)
+                if started < policy_episodes and result.found < count:
                     start(i)
+        # -- stage 2: band-directed local search from the policy's usable garages -------------------
+        if search and result.found < count:
+            climber = BandClimber(garage0, difficulty, coverage, rng=np.random.default_rng([seed, 1]))
+            usable_pool.sort(key=lambda e: (e[0], e[1]))  # nearest to the band first, then oldest
+            for _, _, g in usable_pool:
+                result.search_seeds += climber.add(g) is not None
+            if not climber.climbers and not climber.inside:  # the policy painted nothing usable: start from the painter
+                from garage_mj.painter import paint_garage
+                from garage_mj.garage import AXES
+
+                for k in range(SEARCH_SEEDS):
+                    for axis in AXES:
+                        result.search_seeds += climber.add(
+                            paint_garage(garage0, seed=seed * 1000 + k, six_stall_axis=axis)) is not None
+            if bar is not None:
+                bar.set_postfix(stage="search", episodes=result.episodes, refresh=True)
+            while result.found < count and (climber.climbers or climber.inside):
+                if result.episodes + result.replays + result.search_steps / SEARCH_STEPS_PER_EPISODE >= max_episodes:
+                    break
+                if max_seconds is not None and result.search_steps % 16 == 0 and clock() - c0 >= max_seconds:
+                    break
+                found = climber.step()
+                result.search_steps += 1
+                if found is None:
+                    continue
+                painted, info = replay(found[0], max_errors=max_errors)
+                result.replays += 1
+                if info.get("usable") and np.array_equal(painted.grid, found[0].grid):
+                    keep(lib, painted, evaluate(painted), "search", result.search_steps, steps)
     result.seconds = time.perf_counter() - t0
     result.cpu_seconds = time.process_time() - cpu0
     if bar is not None:
@@ -461,9 +580,10 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     if result.found < count:
         what = f"difficulty in [{difficulty[0]}, {difficulty[1]}]" + (
             f" and coverage in [{cov[0]}, {cov[1]}]" if coverage is not None else "")
+        searched = f" and {result.search_steps} search steps" if search and result.search_steps else ""
         exc = GenerationError(
             f"found {result.found} of {count} distinct usable garages of {garage0.name} with {what} in "
-            f"{result.episodes} episodes ({result.seconds:.0f} s; {result.stored} new stored in {library}); "
+            f"{result.episodes} episodes{searched} ({result.seconds:.0f} s; {result.stored} new stored in {library}); "
             f"{'' if max_seconds is None else f'--max-seconds {max_seconds:g}; '}"
             "widen the band, raise --max-episodes, or see what the map admits (eval/admissible.py)")
         exc.result = result
@@ -471,5 +591,5 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     return result
 
 
-__all__ = ["GenerateResult", "GenerationError", "generate", "load_generator_config", "shipped_generator",
-           "train_conditioned", "training_curve"]
+__all__ = ["GenerateResult", "GenerationError", "default_model_out", "generate", "load_generator_config",
+           "shipped_generator", "train_conditioned", "train_for_map", "training_curve"]

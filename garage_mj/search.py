@@ -14,6 +14,10 @@ Every such R is painted error-free by a depth-first walk (:func:`painter_actions
 staircase from a road cell, or cut one and keep what stays joined to the entrance), and keep the first garage of
 each bin plus the lowest and highest difficulty seen. The range it returns is what search reached:
 a lower bound on the map's true range, with each end replayed through the env.
+
+:class:`BandClimber` uses the same mutation (:func:`mutate`) the other way round: from given
+garages it hill-climbs road sets toward a difficulty (and coverage) band, then walks inside the
+band, and hands out every new road set that lands there (``garage-mj generate``'s second stage).
 """
 
 from __future__ import annotations
@@ -120,6 +124,7 @@ def _gate_neighbour(initial: np.ndarray, gate: tuple[int, int]) -> tuple[int, in
 
 
 def _mutate(m: _Map, roads: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
+    """One random mutation of ``roads`` (see :func:`mutate`)."""
     new = roads.copy()
     cells = np.argwhere(roads)
     r, c = (int(x) for x in cells[rng.integers(len(cells))])
@@ -143,6 +148,154 @@ def _mutate(m: _Map, roads: np.ndarray, rng: np.random.Generator) -> np.ndarray 
             new[r, c] = False
             r, c = r + dr, c + dc
     return m.repair(new)
+
+
+def road_set(garage: Garage) -> np.ndarray | None:
+    """``garage``'s ROAD cells as a road set the painter can make, or None (not joined to both gates, or a square)."""
+    return _Map(garage).repair(garage.grid == Block.ROAD)
+
+
+def mutate(garage: Garage, rng: np.random.Generator) -> Garage | None:
+    """One random mutation of ``garage``'s road set under the painter's rules, or None if it broke them.
+
+    Grows a straight road or a staircase of up to :data:`MAX_GROW` steps from a road cell, or cuts
+    up to that many cells of a straight and keeps what stays joined to the entrance; the result must
+    still reach the exit and hold no 2x2 square. The six-stall axis is kept.
+    """
+    m = _Map(garage)
+    roads = m.repair(garage.grid == Block.ROAD)
+    child = None if roads is None else _mutate(m, roads, rng)
+    return None if child is None else m.garage_of(child, garage.six_stall_axis)
+
+
+def _free_left(m: _Map, roads: np.ndarray) -> int:
+    """FREE cells left once ``roads`` are painted: FREE cells with no ROAD 4-neighbour (the stall rule)."""
+    near = roads.copy()
+    near[1:, :] |= roads[:-1, :]
+    near[:-1, :] |= roads[1:, :]
+    near[:, 1:] |= roads[:, :-1]
+    near[:, :-1] |= roads[:, 1:]
+    return int(np.count_nonzero(m.free & ~near))
+
+
+def _outside(x: float, band: tuple[float, float]) -> float:
+    return max(band[0] - x, 0.0, x - band[1])
+
+
+CLIMBERS = 8  # road sets the climb keeps outside the band (the nearest to it)
+MAX_CHAIN = 3  # mutations chained into one step of the climb (a wider neighbourhood than one)
+STALL_STEPS = 2_000  # steps without progress (a new road set in the band, or a climber nearer than ever) before a restart
+WALK_SHARE = 0.5  # share of mutations spent walking inside the band once it holds a road set
+
+
+class BandClimber:
+    """Hill-climb road sets of a map toward a difficulty (and coverage) band and walk inside it.
+
+    Seed it with garages (:meth:`add`); each :meth:`step` mutates one road set (:func:`mutate`'s
+    operators): with probability :data:`WALK_SHARE`, once the band holds road sets, a random one of
+    them, kept only if the child stays in the band (a walk that spreads inside the band); otherwise
+    one of the :data:`CLIMBERS` road sets nearest to the band (the nearest half of the time),
+    replaced by its child when the child is no farther (neutral moves let it cross plateaus).
+    A step chains one to :data:`MAX_CHAIN` mutations. After :data:`STALL_STEPS` steps without
+    progress the climbers restart from the next seeds (all seeds outside the band, nearest first,
+    cycling). Distance = how far difficulty lies outside its band plus how far coverage lies outside its.
+    :meth:`step` returns ``(garage, difficulty, coverage)`` when the child is a road set in the
+    band not seen before (the garage built by the stall rule, not yet replayed through the env),
+    else None. Deterministic for the ``rng`` given.
+    """
+
+    def __init__(self, base: Garage, difficulty: tuple[float, float], coverage: tuple[float, float] | None = None,
+                 rng: np.random.Generator | None = None) -> None:
+        self.m = _Map(base)
+        self.band = (float(difficulty[0]), float(difficulty[1]))
+        self.cov_band = (0.0, 1.0) if coverage is None else (float(coverage[0]), float(coverage[1]))
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.free0 = int(np.count_nonzero(self.m.free))
+        self.climbers: list[tuple[float, np.ndarray, Axis]] = []  # (distance, roads, axis), nearest first
+        self.reserve: list[tuple[float, np.ndarray, Axis]] = []  # every seed outside the band, in the order added
+        self.next_seed = 0
+        self.best = float("inf")
+        self.stalled = 0
+        self.restarts = 0
+        self.inside: list[tuple[np.ndarray, Axis]] = []
+        self.seen: set[bytes] = set()
+        self.evaluations = 0
+
+    def _key(self, roads: np.ndarray, axis: Axis) -> bytes:
+        return axis.encode() + np.packbits(roads).tobytes()
+
+    def measure(self, roads: np.ndarray) -> tuple[float, float, float]:
+        """(difficulty, coverage, distance to the bands) of a road set."""
+        d = self.m.difficulty(roads)
+        cov = 1.0 - _free_left(self.m, roads) / self.free0 if self.free0 else 0.0
+        return d, cov, _outside(d, self.band) + _outside(cov, self.cov_band)
+
+    def add(self, garage: Garage) -> float | None:
+        """Seed with ``garage``'s road set; returns its distance to the bands (None if the painter can't make it).
+
+        A seed inside the bands counts as seen (the caller has it already) and seeds the walk.
+        """
+        roads = self.m.repair(garage.grid == Block.ROAD)
+        if roads is None:
+            return None
+        _, _, dist = self.measure(roads)
+        key = self._key(roads, garage.six_stall_axis)
+        if dist == 0.0:
+            if key not in self.seen:
+                self.seen.add(key)
+                self.inside.append((roads, garage.six_stall_axis))
+        else:
+            self.reserve.append((dist, roads, garage.six_stall_axis))
+            self.climbers.append((dist, roads, garage.six_stall_axis))
+            self.climbers.sort(key=lambda e: e[0])  # stable: ties keep the order they came in
+            del self.climbers[CLIMBERS:]
+            self.best = min(self.best, dist)
+        return dist
+
+    def _restart(self) -> None:
+        order = sorted(range(len(self.reserve)), key=lambda k: self.reserve[k][0])
+        picked = [self.reserve[order[(self.next_seed + k) % len(order)]] for k in range(min(CLIMBERS, len(order)))]
+        self.next_seed += len(picked)
+        self.climbers = sorted(picked, key=lambda e: e[0])
+        self.best = self.climbers[0][0]
+        self.restarts += 1
+
+    def step(self) -> tuple[Garage, float, float] | None:
+        if not self.climbers and not self.inside:
+            raise ValueError("BandClimber: add a garage first")
+        self.evaluations += 1
+        self.stalled += 1
+        if self.stalled >= STALL_STEPS and self.reserve:
+            self._restart()
+            self.stalled = 0
+        rng = self.rng
+        walk = bool(self.inside) and (not self.climbers or rng.random() < WALK_SHARE)
+        if walk:
+            roads, axis = self.inside[int(rng.integers(len(self.inside)))]
+            i = -1
+        else:
+            i = 0 if rng.random() < 0.5 else int(rng.integers(len(self.climbers)))
+            dist0, roads, axis = self.climbers[i]
+        child = roads
+        for _ in range(1 + int(rng.integers(MAX_CHAIN))):  # a chain of one to MAX_CHAIN mutations
+            child = _mutate(self.m, child, rng)
+            if child is None:
+                return None
+        d, cov, dist = self.measure(child)
+        if i >= 0 and 0.0 < dist <= dist0 and not any(np.array_equal(child, r) for _, r, _ in self.climbers):
+            self.climbers[i] = (dist, child, axis)  # (no two climbers alike: they would climb the same way)
+            self.climbers.sort(key=lambda e: e[0])
+            if dist < self.best:
+                self.best, self.stalled = dist, 0
+        if dist > 0.0:
+            return None
+        key = self._key(child, axis)
+        if key in self.seen:
+            return None
+        self.seen.add(key)
+        self.inside.append((child, axis))
+        self.stalled = 0
+        return self.m.garage_of(child, axis), d, cov
 
 
 def painter_actions(garage: Garage) -> list[int]:
@@ -265,4 +418,4 @@ def search(map: str | Garage, evaluations: int = 5_000, seed: int = 0, bin_width
     )
 
 
-__all__ = ["SearchResult", "painter_actions", "replay", "search"]
+__all__ = ["BandClimber", "SearchResult", "mutate", "painter_actions", "replay", "road_set", "search"]

@@ -13,6 +13,7 @@ from garage_mj.envs.gen_env import GarageGenEnv
 from garage_mj.generator import GenerationError, generate, shipped_generator, train_conditioned
 from garage_mj.library import Library
 from garage_mj.painter import paint_garage
+from garage_mj.metrics import evaluate
 from garage_mj.search import painter_actions
 
 ENV_ID = "garage_mj/GarageGenCond-v0"
@@ -122,7 +123,7 @@ def test_generate_cli_and_unreachable_band(tmp_path, capsys):
     [
         (["--map", "tiny_7x11", "--difficulty", "0.9", "0.1"], "LO is above HI"),
         (["--map", "no_such_map", "--difficulty", "0.1", "0.9"], "no map named"),
-        (["--map", "{usermap}", "--difficulty", "0.1", "0.9"], "train_conditioned.py --map"),
+        (["--map", "{usermap}", "--difficulty", "0.1", "0.9", "--model-out", "{tmp}/g.pt"], "ends in .zip"),
         (["--map", "tiny_7x11", "--difficulty", "0.1", "0.9", "--model", "{tmp}/none.zip"], "does not exist"),
         (["--map", "tiny_7x11", "--difficulty", "0.1", "0.9", "--model", "{junk}"], "not a generator"),
     ],
@@ -155,3 +156,80 @@ def test_train_a_tiny_generator_and_use_it(tmp_path):
         assert r.found == 1
     except GenerationError as exc:  # an 1,200-step generator may not reach the exit yet
         assert "found 0 of 1" in str(exc)
+
+
+def _replays_in_band(record, band) -> bool:
+    """The stored garage, re-painted by GarageGenEnv, is usable and the same, with the stored difficulty in band."""
+    g = record.garage
+    env = GarageGenEnv(map=g, six_stall_axis=g.six_stall_axis)
+    env.reset(seed=0)
+    info = {}
+    for a in painter_actions(g):
+        _, _, term, trunc, info = env.step(a)
+        if term or trunc:
+            break
+    return (info.get("usable") and np.array_equal(env.garage().grid, g.grid)
+            and abs(info["difficulty"] - record.difficulty) < 1e-9 and band[0] <= record.difficulty <= band[1])
+
+
+def test_search_stage_fills_a_low_band_the_rollouts_never_reach(tmp_path):
+    # m5's generator paints 0.33-0.9; 0.2-0.3 is admissible (garage_mj.search) but no rollout lands there
+    band, hashes = (0.2, 0.3), []
+    for name in ("a", "b"):
+        lib = tmp_path / f"{name}.sqlite"
+        r = generate("m5_13x13_aligned", band, 5, lib, seed=0, progress=False)
+        assert r.found == r.stored == 5 and r.found_policy == 0 and r.found_search == 5
+        assert r.replays >= 5 and r.search_steps > 0 and r.search_seeds > 0
+        with Library(lib, create=False) as store:
+            rows = store.query()
+        assert len({x.hash for x in rows}) == 5
+        assert all(x.run == "generate:m5_13x13_aligned+search" and x.seed == 0 for x in rows)
+        assert all(_replays_in_band(x, band) for x in rows)
+        hashes.append([x.hash for x in rows])
+    assert hashes[0] == hashes[1]  # same seed, same garages in the same order
+
+
+def test_coverage_band_is_kept_by_the_search(tmp_path):
+    lib = tmp_path / "c.sqlite"
+    r = generate("m5_13x13_aligned", (0.4, 0.5), 3, lib, coverage=(0.9, 1.0), seed=1, progress=False)
+    assert r.found == 3
+    with Library(lib, create=False) as store:
+        rows = store.query()
+    assert all(0.9 <= x.coverage <= 1.0 and evaluate(x.garage).usable and _replays_in_band(x, (0.4, 0.5))
+               for x in rows)
+
+
+def test_no_search_is_rejection_sampling_only(tmp_path, capsys):
+    with pytest.raises(GenerationError, match="found 0 of 2") as info:
+        generate("m5_13x13_aligned", (0.2, 0.3), 2, tmp_path / "n.sqlite", seed=0, max_episodes=200,
+                 progress=False, search=False)
+    r = info.value.result
+    assert r.episodes == 200 and r.search_steps == 0 and r.found_search == 0 and "search steps" not in str(info.value)
+    assert main(["generate", "--map", "m5_13x13_aligned", "--difficulty", "0.2", "0.3", "--count", "2",
+                 "--library", str(tmp_path / "n.sqlite"), "--max-episodes", "50", "--no-search", "--no-progress"]) == 2
+    assert "found 0 of 2" in _err_line(capsys)
+
+
+def test_unreachable_band_with_search_is_one_line(tmp_path, capsys):
+    # tiny_7x11 admits nothing below ~0.45: the policy and 3,000 search steps find nothing
+    assert main(["generate", "--map", "tiny_7x11", "--difficulty", "0.0", "0.05", "--count", "5", "--library",
+                 str(tmp_path / "u.sqlite"), "--max-episodes", "300", "--no-progress"]) == 2
+    err = _err_line(capsys)
+    assert "found 0 of 5" in err and "search steps" in err
+
+
+def test_generate_trains_a_generator_for_a_map_file(tmp_path, capsys):
+    lib = tmp_path / "mine.sqlite"
+    argv = ["generate", "--map", "tests/data/maps/small_5x9.txt", "--difficulty", "0.0", "1.0", "--count", "3",
+            "--library", str(lib), "--train-timesteps", "2000", "--no-progress"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    model = tmp_path / "mine.small_5x9.generator.zip"
+    assert "trained the generator in" in out and "3 distinct garages" in out
+    assert model.is_file() and model.with_suffix(".json").is_file()
+    assert not (tmp_path / "mine.small_5x9.generator.zip.run").exists()
+    with Library(lib, create=False) as store:
+        assert store.count() == 3
+    assert main(argv) == 0  # reused, not trained again; the same seed finds the same garages
+    out = capsys.readouterr().out
+    assert "using the generator trained earlier" in out and "0 new" in out

@@ -18,12 +18,18 @@ def register(sub: argparse._SubParsersAction) -> None:
             "every shipped map, or --model) with the band in its observation, epsilon-greedy with a "
             "seeded epsilon per episode so that distinct garages appear, and store every distinct "
             "usable garage whose difficulty (and coverage) lies in the band in the library, until "
-            "--count are found. The same --seed gives the same garages. If --max-episodes episodes "
-            "do not find --count, the ones found are kept and the command says how many (exit status 2). "
-            "For your own map file, train a generator first with generation/train_conditioned.py "
-            "(about 20-30 s per 10,000 timesteps on one core; 80,000 for a 13x13 map) and pass --model, "
-            "or pass a shipped generator (--model m4_13x13_offset): generators see only a window "
-            "around the car, so they run on any map."
+            "--count are found. If the rollouts do not fill the band within 100 + 10 x COUNT episodes, "
+            "a local search takes over (unless --no-search): it mutates the road sets of the usable "
+            "garages the policy painted, nearest to the band first, toward the band and inside it, and "
+            "re-paints each one that lands there through the painter env before storing it (library run "
+            "generate:<model>+search). The same --seed gives the same garages. If the budget "
+            "(--max-episodes, --max-seconds) does not find --count, the ones found are kept and the "
+            "command says how many (exit status 2). For your own map file without --model, a "
+            "generator is trained first (--train-timesteps, default 80,000: about 1-2 min for a 13x13 "
+            "map on one core), saved to --model-out (default: next to the library, "
+            "<library stem>.<map name>.generator.zip) and reused by later calls; or pass a shipped "
+            "generator (--model m4_13x13_offset): generators see only a window around the car, so "
+            "they run on any map."
         ),
         epilog="example: garage-mj generate --map m5_13x13_aligned --difficulty 0.3 0.4 --count 20 "
                "--library garages.sqlite",
@@ -39,23 +45,49 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--max-episodes", type=positive_int, metavar="E",
                    help="episode budget (default 2,000 + 200 x COUNT)")
-    p.add_argument("--max-seconds", type=float, metavar="S", help="stop after S seconds of rollouts (wall clock)")
+    p.add_argument("--max-seconds", type=float, metavar="S",
+                   help="stop after S seconds of rollouts and search (wall clock)")
+    p.add_argument("--no-search", action="store_true",
+                   help="policy rollouts only (rejection sampling), no search stage")
+    p.add_argument("--train-timesteps", type=positive_int, default=80_000, metavar="T",
+                   help="map file without a generator: timesteps to train one (default 80,000)")
+    p.add_argument("--model-out", type=Path, metavar="PATH",
+                   help="map file without --model: where the trained generator goes (reused when it exists; "
+                   "default <library stem>.<map name>.generator.zip next to the library)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
 @user_errors
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.generator import generate
+    from garage_mj.generator import default_model_out, generate, shipped_generator, train_for_map
+    from garage_mj.map_io import list_maps, load_map
 
     for name in ("difficulty", "coverage"):
         band = getattr(args, name)
         if band is not None and band[0] > band[1]:
             raise UserError(f"--{name} {band[0]} {band[1]}: LO is above HI")
+    model = args.model
+    if model is None:
+        garage = load_map(args.map)
+        shipped = "/" not in args.map and garage.name in {m.name for m in list_maps()}
+        if not (shipped and shipped_generator(garage.name) is not None):  # a map of your own: train a generator
+            out = args.model_out or default_model_out(args.library, garage.name)
+            if not out.is_file():
+                print(f"{garage.name} has no generator: training one ({args.train_timesteps} timesteps) -> {out}",
+                      flush=True)
+            model, secs = train_for_map(args.map, out, args.train_timesteps, seed=args.seed,
+                                        progress=not args.no_progress)
+            print(f"trained the generator in {secs:.0f} s: {model}" if secs is not None
+                  else f"using the generator trained earlier: {model}", flush=True)
     r = generate(args.map, tuple(args.difficulty), args.count, args.library,
-                 coverage=tuple(args.coverage) if args.coverage else None, model=args.model, seed=args.seed,
-                 max_episodes=args.max_episodes, max_seconds=args.max_seconds, progress=not args.no_progress)
+                 coverage=tuple(args.coverage) if args.coverage else None, model=model, seed=args.seed,
+                 max_episodes=args.max_episodes, max_seconds=args.max_seconds, progress=not args.no_progress,
+                 search=not args.no_search)
     lo, hi = min(r.difficulties), max(r.difficulties)
-    print(f"{r.found} distinct garages with difficulty {lo:.3f}-{hi:.3f} in {r.episodes} episodes "
-          f"({r.seconds:.1f} s); {r.stored} new in {args.library}")
+    stages = f"{r.found_policy} from the policy's {r.episodes} episodes"
+    if r.found_search or r.search_steps:
+        stages += f", {r.found_search} from {r.search_steps} search steps"
+    print(f"{r.found} distinct garages with difficulty {lo:.3f}-{hi:.3f} ({stages}; {r.seconds:.1f} s); "
+          f"{r.stored} new in {args.library}")
     return 0
