@@ -4,10 +4,12 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TORCH := torch==2.13.0
-# The ASAM OpenDRIVE checker pins numpy < 2, so it gets its own virtualenv (garage_mj/export/validate.py).
+# The ASAM OpenDRIVE checker pins numpy < 2, so it gets its own virtualenv (garage_mj/export/validate.py),
+# shared with the ASAM OpenSCENARIO XML checker (the .xosc tests).
 QC_VENV := .venv-qc
 QC_STAMP := $(QC_VENV)/.installed
 QC_OPENDRIVE := asam-qc-opendrive==1.0.0
+QC_OPENSCENARIO := asam-qc-openscenarioxml==1.0.0
 export MUJOCO_GL ?= egl
 
 .PHONY: install browser test demo bench lint clean
@@ -24,9 +26,10 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[carla]' || echo "warning: no carla wheel for this Python/platform; the XODR CARLA test will fail with a hint"
 	touch $(STAMP)
 
-$(QC_STAMP):
+# Depends on the Makefile so a new checker pin reaches an existing .venv-qc (pip skips what is installed).
+$(QC_STAMP): Makefile
 	test -x $(QC_VENV)/bin/python || $(PYTHON) -m venv $(QC_VENV)
-	$(QC_VENV)/bin/python -m pip install -q $(QC_OPENDRIVE)
+	$(QC_VENV)/bin/python -m pip install -q $(QC_OPENDRIVE) $(QC_OPENSCENARIO)
 	touch $(QC_STAMP)
 
 # Headless Chromium + ChromeDriver (Debian packages) for the report test; installed once when missing.

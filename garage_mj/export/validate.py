@@ -6,9 +6,12 @@
 - :func:`check_asam` runs the ASAM Quality Checker (``asam-qc-opendrive``, command
   ``qc_opendrive``) from its own virtualenv ``.venv-qc`` (it pins numpy < 2) and counts the
   issues in its XQAR result.
+- :func:`check_xosc` runs the ASAM OpenSCENARIO XML checker bundle (``asam-qc-openscenarioxml``,
+  command ``qc_openscenario``, same virtualenv) on a ``.xosc`` (schema of its version,
+  references, parameters, data types) and counts the issues the same way.
 
-Both take batches (one child process per batch) because starting the tools costs more than
-checking a garage. ``make install`` installs both.
+All take batches (one child process per batch) because starting the tools costs more than
+checking a file. ``make install`` installs the tools.
 """
 
 from __future__ import annotations
@@ -32,9 +35,11 @@ from garage_mj.errors import GarageMJError
 _SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False)
 
 QC_ENV = "GARAGE_MJ_QC_OPENDRIVE"  # optional path to a qc_opendrive executable
+QC_XOSC_ENV = "GARAGE_MJ_QC_OPENSCENARIO"  # optional path to a qc_openscenario executable
 _REPO = Path(__file__).resolve().parents[2]
 _PROBE = Path(__file__).with_name("carla_probe.py")
 _QC_DRIVER = "import sys\nfrom qc_opendrive import main\nfor c in sys.argv[1:]:\n    sys.argv = ['qc_opendrive', '-c', c]\n    main.main()\n"
+_QC_XOSC_DRIVER = _QC_DRIVER.replace("qc_opendrive", "qc_openscenario")
 
 
 class ToolMissing(GarageMJError, RuntimeError):
@@ -69,6 +74,7 @@ class QcIssue:
     level: int  # 1 error, 2 warning, 3 information
     description: str
     xpath: str
+    location: str = ""  # the checker's own words on where (e.g. the schema error), "(row N)" when given
 
 
 @dataclass(frozen=True)
@@ -159,10 +165,10 @@ def qc_executable() -> Path:
     )
 
 
-def _config(xodr: Path, result: Path) -> str:
+def _config(xodr: Path, result: Path, bundle_name: str = "xodrBundle") -> str:
     root = etree.Element("Config")
     etree.SubElement(root, "Param", name="InputFile", value=str(xodr))
-    bundle = etree.SubElement(root, "CheckerBundle", application="xodrBundle")
+    bundle = etree.SubElement(root, "CheckerBundle", application=bundle_name)
     etree.SubElement(bundle, "Param", name="resultFile", value=str(result))
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8").decode()
 
@@ -176,12 +182,15 @@ def parse_xqar(path: Path, xodr: Path) -> QcReport:
         status[st] = status.get(st, 0) + 1
         for issue in checker.iter("Issue"):
             loc = issue.find(".//XMLLocation")
+            where = [w for w in (issue.xpath("string(Locations/@description)"),) if w]
+            where += [f"(row {r})" for r in issue.xpath("Locations/FileLocation/@row")[:1]]
             issues.append(
                 QcIssue(
                     checker.get("checkerId", ""),
                     int(issue.get("level", "1")),
                     issue.get("description", ""),
                     "" if loc is None else loc.get("xpath", ""),
+                    " ".join(where),
                 )
             )
     return QcReport(xodr, issues, status["completed"], status["skipped"], status["error"])
@@ -218,3 +227,52 @@ def check_asam_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> lis
 def check_asam(xodr_path: str | Path) -> QcReport:
     """Run the ASAM OpenDRIVE Quality Checker on one file; its issues (zero for a good file)."""
     return check_asam_batch([xodr_path])[0]
+
+
+# -- ASAM OpenSCENARIO XML checker ---------------------------------------------------------------
+def qc_xosc_executable() -> Path:
+    """The ``qc_openscenario`` command: $GARAGE_MJ_QC_OPENSCENARIO, the repo's ``.venv-qc``, or PATH."""
+    for cand in (
+        os.environ.get(QC_XOSC_ENV),
+        _REPO / ".venv-qc" / "bin" / "qc_openscenario",
+        shutil.which("qc_openscenario"),
+    ):
+        if cand and Path(cand).is_file():
+            return Path(cand)
+    raise ToolMissing(
+        "the ASAM OpenSCENARIO XML checker (qc_openscenario) is not installed; run `make install` "
+        f"(it adds asam-qc-openscenarioxml to .venv-qc), or set {QC_XOSC_ENV} to its path"
+    )
+
+
+def check_xosc_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> list[QcReport]:
+    """:func:`check_xosc` for many files in one child process (the checker's start-up dominates)."""
+    exe = qc_xosc_executable()
+    python = exe.parent / "python"
+    with tempfile.TemporaryDirectory(prefix="garage_qc_xosc_") as tmp:
+        configs, results = [], []
+        for i, p in enumerate(paths):
+            res = Path(tmp) / f"result_{i}.xqar"
+            cfg = Path(tmp) / f"config_{i}.xml"
+            cfg.write_text(_config(Path(p).resolve(), res, "xoscBundle"))
+            configs.append(str(cfg))
+            results.append(res)
+        if python.is_file():  # one interpreter for the batch, through qc_openscenario's own main()
+            cmds = [[str(python), "-c", _QC_XOSC_DRIVER, *configs]]
+        else:
+            cmds = [[str(exe), "-c", c] for c in configs]
+        for cmd in cmds:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+            if proc.returncode != 0:
+                raise ToolFailed(
+                    f"qc_openscenario failed (exit code {proc.returncode}): {proc.stderr.strip()[-600:]}"
+                )
+        missing = [str(p) for p, r in zip(paths, results) if not r.is_file()]
+        if missing:
+            raise ToolFailed(f"qc_openscenario wrote no result for {missing}")
+        return [parse_xqar(r, Path(p)) for p, r in zip(paths, results)]
+
+
+def check_xosc(xosc_path: str | Path) -> QcReport:
+    """Run the ASAM OpenSCENARIO XML checker bundle on one ``.xosc``; its issues (zero for a good file)."""
+    return check_xosc_batch([xosc_path])[0]

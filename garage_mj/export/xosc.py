@@ -1,0 +1,642 @@
+"""Cruise tests as OpenSCENARIO XML 1.2 files (written with ``scenariogeneration``, read with lxml).
+
+One ``.xosc`` holds one cruise test, exactly enough to replay it in garage-mj. The world frame
+is the pack's OpenDRIVE frame (x east, y north, origin at the grid's south-west corner: the
+same as :mod:`garage_mj.scene.world`), so poses are written as they are, with z = 0.
+
+=================================================  ==============================================
+OpenSCENARIO element                               carries
+=================================================  ==============================================
+``RoadNetwork/LogicFile@filepath``                 the pack's ``garage.xodr`` (relative to the
+                                                   ``.xosc`` when possible); its folder is the pack
+``ParameterDeclarations`` (``gmj_*``)              replay data: ``gmj_format``, ``gmj_garage_hash``,
+                                                   ``gmj_target_stall``, ``gmj_occupied`` (stall
+                                                   ids, comma separated), ``gmj_seed``,
+                                                   ``gmj_driver``, ``gmj_action_type``, ``gmj_actors``
+                                                   (actor names in order), per actor
+                                                   ``gmj_actor_<name>_kind`` / ``_behaviour`` /
+                                                   ``_stall``; every other ``meta`` entry as
+                                                   ``gmj_<key>`` (typed; ``gmj_json_<key>`` for
+                                                   lists, dicts and None)
+``Entities/ScenarioObject[ego]``                   the ego: Vehicle, category car, 4.6 x 1.9 x 1.5 m
+                                                   box centred on its reference point (the car's
+                                                   centre, the point the poses and routes give)
+``Entities/ScenarioObject[parkedcar_<stall>]``     a parked car in stall ``<stall>`` (Vehicle)
+``Entities/ScenarioObject[<actor name>]``          an actor: pedestrian -> Pedestrian, moving_car ->
+                                                   Vehicle, clutter -> MiscObject (obstacle); box
+                                                   from :data:`garage_mj.actors.SHAPE_SIZE`
+``Init`` ``TeleportAction/WorldPosition``          start pose of every entity (x, y, z=0, h=yaw);
+                                                   an actor's is its first waypoint
+``Init`` ego ``FollowTrajectoryAction``            the planned route: ``Polyline`` of the centre
+                                                   path, no timing (``TimeReference/None``)
+``StopTrigger`` ``ReachPositionCondition``         the goal pose (x, y, h=yaw), tolerance 1.0 m,
+                                                   triggering entity ``ego``
+``Story/Act/ManeuverGroup[<name>_group]``          a moving actor: one Event whose
+                                                   ``FollowTrajectoryAction`` has a timed
+                                                   ``Polyline`` (vertex time = waypoint t, relative
+                                                   to the action start, scale 1, offset 0; h = yaw),
+                                                   started by a ``ReachPositionCondition`` on the
+                                                   ego at the trigger point, tolerance =
+                                                   ``trigger_radius``
+=================================================  ==============================================
+
+A static actor (one waypoint, no trigger) has no event and reads back with ``trigger_radius``
+0. :func:`read_xosc` rebuilds everything from the file alone and raises :class:`XoscError`
+(one line naming the file and the problem) on anything malformed or inconsistent.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lxml import etree
+
+from garage_mj.actors import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
+from garage_mj.errors import GarageMJError
+from garage_mj.fsutil import atomic_write
+
+OSC_MINOR = 2  # OpenSCENARIO 1.2
+FORMAT = 1  # gmj_format: bumped when the mapping above changes
+EGO = "ego"
+EGO_SIZE = (4.6, 1.9, 1.5)  # length, width, height [m]
+PARKED_PREFIX = "parkedcar_"
+GOAL_TOLERANCE = 1.0  # [m]
+#: meta keys promoted to :class:`XoscTest` fields
+KNOWN_META = ("garage_hash", "seed", "driver", "action_type")
+_RESERVED = {"format", "target_stall", "occupied", "actors", *KNOWN_META}
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+_KEY = re.compile(r"[a-z][a-z0-9_]*\Z")
+_ENTITY_TAG = {"pedestrian": "Pedestrian", "moving_car": "Vehicle", "clutter": "MiscObject"}
+_SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False,
+                               remove_comments=True)
+
+
+class XoscError(GarageMJError, ValueError):
+    """A ``.xosc`` file cannot be written or read back as a garage-mj cruise test."""
+
+
+@dataclass
+class XoscTest:
+    """One cruise test read from a ``.xosc`` (see the module table for where each field comes from)."""
+
+    path: Path
+    pack_dir: Path
+    xodr_path: Path
+    garage_hash: str | None
+    target_stall: int
+    occupied: list[int]
+    start: tuple[float, float, float]  # x, y, yaw of the ego's centre
+    goal: tuple[float, float, float]
+    route: np.ndarray  # (N, 2) centre path [m]
+    actors: list[ActorSpec]
+    parked: dict[int, tuple[float, float, float]]  # stall -> pose of its parked car
+    seed: int | None = None
+    driver: str | None = None
+    action_type: str | None = None
+    meta: dict[str, Any] = field(default_factory=dict)  # every other gmj_ parameter
+
+    def pack(self):
+        """The verified pack (:func:`garage_mj.export.pack.load_pack`), checked against ``gmj_garage_hash``."""
+        from garage_mj.export.pack import load_pack
+
+        pack = load_pack(self.pack_dir)
+        if self.garage_hash is not None and pack.manifest["garage_hash"] != self.garage_hash:
+            raise XoscError(f"{self.path}: gmj_garage_hash {self.garage_hash[:12]} is not the garage of pack "
+                            f"{self.pack_dir} ({pack.manifest['garage_hash'][:12]})")
+        return pack
+
+
+# -- writing --------------------------------------------------------------------------------------------
+def _f(v: Any, what: str) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise XoscError(f"{what} must be a number, got {v!r}") from None
+    if not math.isfinite(x):
+        raise XoscError(f"{what} must be finite, got {v!r}")
+    return x
+
+
+def _pose(p: Sequence[float], what: str) -> tuple[float, float, float]:
+    try:
+        x, y, yaw = p
+    except (TypeError, ValueError):
+        raise XoscError(f"{what} must be (x, y, yaw), got {p!r}") from None
+    return _f(x, f"{what} x"), _f(y, f"{what} y"), _f(yaw, f"{what} yaw")
+
+
+def _parked_table(parked_poses: Any) -> dict[int, tuple[float, float, float]]:
+    """stall -> pose from a mapping stall -> (x, y, yaw) or from layout placements (x, y, yaw, stall_id)."""
+    out: dict[int, tuple[float, float, float]] = {}
+    if isinstance(parked_poses, Mapping):
+        for k, v in parked_poses.items():
+            out[int(k)] = _pose(v, f"parked car {k}")
+        return out
+    for p in parked_poses or ():
+        sid = getattr(p, "stall_id", None)
+        if sid is None:
+            continue
+        out[int(sid)] = _pose((p.x, p.y, p.yaw), f"parked car {sid}")
+    return out
+
+
+def _meta_params(meta: Mapping[str, Any]) -> list[tuple[str, str, str]]:
+    """(name, OpenSCENARIO parameter type, value) of each meta entry."""
+    out = []
+    for key, v in meta.items():
+        if not isinstance(key, str) or not _KEY.match(key) or key in ("format", "target_stall", "occupied", "actors") \
+                or key.startswith(("actor_", "json_")):
+            raise XoscError(f"meta key {key!r} is not allowed (lower-case identifier, not a reserved name)")
+        if isinstance(v, bool):
+            out.append((f"gmj_{key}", "boolean", "true" if v else "false"))
+        elif isinstance(v, (int, np.integer)):
+            out.append((f"gmj_{key}", "integer", str(int(v))))
+        elif isinstance(v, (float, np.floating)):
+            out.append((f"gmj_{key}", "double", repr(_f(v, f"meta {key}"))))
+        elif isinstance(v, str):
+            out.append((f"gmj_{key}", "string", v))
+        else:
+            try:
+                text = json.dumps(v, sort_keys=True, allow_nan=False)
+            except (TypeError, ValueError) as exc:
+                raise XoscError(f"meta {key!r} cannot be stored: {exc}") from None
+            out.append((f"gmj_json_{key}", "string", text))
+    return out
+
+
+def _check_actor(a: ActorSpec) -> None:
+    if not isinstance(a.name, str) or not _NAME.match(a.name) or a.name == EGO or a.name.startswith(PARKED_PREFIX):
+        raise XoscError(f"actor name {a.name!r} must be an identifier other than {EGO!r} and {PARKED_PREFIX}*")
+    if a.kind not in KINDS or a.behaviour not in BEHAVIOURS[a.kind]:
+        raise XoscError(f"actor {a.name}: unknown kind/behaviour {a.kind!r}/{a.behaviour!r}")
+    w = np.asarray(a.waypoints, dtype=float)
+    if w.ndim != 2 or w.shape[1] != 4 or not len(w) or not np.isfinite(w).all() or (np.diff(w[:, 0]) < 0).any():
+        raise XoscError(f"actor {a.name}: waypoints must be finite (K, 4) rows (t, x, y, yaw) with non-decreasing t")
+    if a.trigger is None and len(w) > 1:
+        raise XoscError(f"actor {a.name}: {len(w)} waypoints but no trigger; a moving actor needs one")
+    if a.trigger is not None and len(w) < 2:
+        raise XoscError(f"actor {a.name}: a trigger but one waypoint; a static actor has no trigger")
+    if a.trigger is not None:
+        _pose((*a.trigger, 0.0), f"actor {a.name} trigger")
+        if _f(a.trigger_radius, f"actor {a.name} trigger_radius") < 0:
+            raise XoscError(f"actor {a.name}: trigger_radius must be >= 0")
+
+
+def _wpos(xosc, x: float, y: float, yaw: float):
+    return xosc.WorldPosition(float(x), float(y), 0.0, float(yaw))
+
+
+def _box(xosc, length: float, width: float, height: float):
+    return xosc.BoundingBox(width, length, height, 0.0, 0.0, height / 2)
+
+
+def _car(xosc, name: str, length: float, width: float, height: float):
+    from garage_mj.vehicle import car_geometry
+
+    g = car_geometry()
+    front = xosc.Axle(g.max_steer, 0.65, 1.6, g.rear_axle + g.wheelbase, 0.325)
+    rear = xosc.Axle(0.0, 0.65, 1.6, g.rear_axle, 0.325)
+    return xosc.Vehicle(name, xosc.VehicleCategory.car, _box(xosc, length, width, height), front, rear,
+                        g.max_speed, g.max_accel, g.max_decel, mass=1500.0)
+
+
+def _actor_entity(xosc, a: ActorSpec):
+    hx, hy, hz = SHAPE_SIZE[a.shape]
+    if a.kind == "pedestrian":
+        return xosc.Pedestrian(a.name, 80.0, xosc.PedestrianCategory.pedestrian, _box(xosc, 2 * hx, 2 * hy, 2 * hz),
+                               model=a.shape)
+    if a.kind == "moving_car":
+        return _car(xosc, a.name, 2 * hx, 2 * hy, 2 * hz)
+    return xosc.MiscObject(a.name, 10.0, xosc.MiscObjectCategory.obstacle, _box(xosc, 2 * hx, 2 * hy, 2 * hz))
+
+
+def _near(xosc, minor: int, position, radius: float):
+    """"The ego's reference point within ``radius`` of ``position``": ReachPositionCondition up to
+    OpenSCENARIO 1.1, its 1.2 replacement (a euclidean DistanceCondition between reference points) after."""
+    if minor < 2:
+        return xosc.ReachPositionCondition(position, radius)
+    return xosc.DistanceCondition(radius, xosc.Rule.lessOrEqual, position, freespace=False,
+                                  distance_type=xosc.RelativeDistanceType.euclidianDistance,
+                                  coordinate_system=xosc.CoordinateSystem.entity)
+
+
+def _logic_path(xosc_path: Path, xodr: Path) -> str:
+    try:
+        return Path(os.path.relpath(xodr.resolve(), xosc_path.resolve().parent)).as_posix()
+    except ValueError:  # another drive (Windows)
+        return xodr.resolve().as_posix()
+
+
+def write_xosc(
+    path: str | Path,
+    *,
+    pack_dir: str | Path,
+    xodr_path: str | Path | None = None,
+    target_stall: int,
+    occupied: Iterable[int],
+    start: Sequence[float],
+    route: Any,
+    goal: Sequence[float],
+    actors: Sequence[ActorSpec] = (),
+    parked_poses: Any = None,
+    meta: Mapping[str, Any] | None = None,
+    osc_minor: int = OSC_MINOR,
+) -> Path:
+    """Write one cruise test as OpenSCENARIO 1.2 to ``path`` (atomically); returns the path.
+
+    ``xodr_path`` defaults to ``pack_dir/garage.xodr``. ``parked_poses``: stall -> (x, y, yaw), or
+    the scene layout's ``parked_cars`` placements; a parked car is written for every stall of
+    ``occupied``. ``meta``: ``garage_hash`` (else read from the pack's manifest), ``seed``,
+    ``driver``, ``action_type`` and any other scalar / JSON-able entries, all kept as ``gmj_``
+    parameters.
+    """
+    from scenariogeneration import xosc
+
+    minor = int(osc_minor)
+    if minor not in (0, 1, 2):
+        raise XoscError(f"OpenSCENARIO 1.{minor} is not written here; use 1.0, 1.1 or 1.2")
+    path = Path(path)
+    pack_dir = Path(pack_dir)
+    xodr = Path(xodr_path) if xodr_path is not None else pack_dir / "garage.xodr"
+    meta = dict(meta or {})
+    if "garage_hash" not in meta:
+        try:
+            meta["garage_hash"] = json.loads((pack_dir / "manifest.json").read_text())["garage_hash"]
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    occ = sorted({int(s) for s in occupied})
+    target = int(target_stall)
+    start_p, goal_p = _pose(start, "start"), _pose(goal, "goal")
+    pts = np.asarray(route, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] < 2 or len(pts) < 2 or not np.isfinite(pts[:, :2]).all():
+        raise XoscError(f"route must be (N, 2) finite points with N >= 2, got shape {pts.shape}")
+    pts = pts[:, :2]
+    parked = _parked_table(parked_poses)
+    missing = [s for s in occ if s not in parked]
+    if missing:
+        raise XoscError(f"no parked-car pose for occupied stall(s) {missing}")
+    actors = list(actors)
+    names = [a.name for a in actors]
+    for a in actors:
+        _check_actor(a)
+    if len(set(names)) != len(names):
+        raise XoscError(f"actor names must be unique, got {names}")
+
+    # parameters
+    params = xosc.ParameterDeclarations()
+    plist = [("gmj_format", "integer", str(FORMAT)), ("gmj_target_stall", "integer", str(target)),
+             ("gmj_occupied", "string", ",".join(map(str, occ))), ("gmj_actors", "string", ",".join(names))]
+    for a in actors:
+        plist += [(f"gmj_actor_{a.name}_kind", "string", a.kind),
+                  (f"gmj_actor_{a.name}_behaviour", "string", a.behaviour),
+                  (f"gmj_actor_{a.name}_stall", "integer", str(int(a.stall)))]
+    plist += _meta_params(meta)
+    for name, typ, value in plist:
+        if typ == "integer" and minor >= 2:
+            typ = "int"  # renamed in OpenSCENARIO 1.2
+        params.add_parameter(xosc.Parameter(name, getattr(xosc.ParameterType, typ), value))
+
+    # entities and their start poses
+    entities = xosc.Entities()
+    init = xosc.Init()
+    entities.add_scenario_object(EGO, _car(xosc, EGO, *EGO_SIZE))
+    init.add_init_action(EGO, xosc.TeleportAction(_wpos(xosc, *start_p)))
+    ego_traj = xosc.Trajectory("ego_route", False)
+    d = np.diff(pts, axis=0)
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    heading = np.append(heading, heading[-1])  # the route's direction at each point (informative)
+    ego_traj.add_shape(xosc.Polyline([], [_wpos(xosc, x, y, h) for (x, y), h in zip(pts, heading)]))
+    init.add_init_action(EGO, xosc.FollowTrajectoryAction(ego_traj, xosc.FollowingMode.position))
+    for s in occ:
+        name = f"{PARKED_PREFIX}{s}"
+        hx, hy, hz = SHAPE_SIZE["car"]
+        entities.add_scenario_object(name, _car(xosc, name, 2 * hx, 2 * hy, 2 * hz))
+        init.add_init_action(name, xosc.TeleportAction(_wpos(xosc, *parked[s])))
+    act = xosc.Act("gmj_actors", xosc.ValueTrigger(
+        "gmj_start", 0, xosc.ConditionEdge.none,
+        xosc.SimulationTimeCondition(0, xosc.Rule.greaterOrEqual if minor >= 2 else xosc.Rule.greaterThan)))
+    for a in actors:
+        w = np.asarray(a.waypoints, dtype=float)
+        entities.add_scenario_object(a.name, _actor_entity(xosc, a))
+        init.add_init_action(a.name, xosc.TeleportAction(_wpos(xosc, *w[0, 1:])))
+        if a.trigger is None:
+            continue
+        traj = xosc.Trajectory(f"{a.name}_trajectory", False)
+        traj.add_shape(xosc.Polyline([float(t) for t in w[:, 0]], [_wpos(xosc, *row[1:]) for row in w]))
+        follow = xosc.FollowTrajectoryAction(traj, xosc.FollowingMode.position, xosc.ReferenceContext.relative,
+                                             1.0, 0.0)
+        trig = xosc.EntityTrigger(
+            f"{a.name}_trigger", 0, xosc.ConditionEdge.rising,
+            _near(xosc, minor, _wpos(xosc, float(a.trigger[0]), float(a.trigger[1]), 0.0), float(a.trigger_radius)),
+            EGO)
+        event = xosc.Event(f"{a.name}_event", xosc.Priority.parallel)  # the only event of its maneuver
+        event.add_action(f"{a.name}_follow", follow)
+        event.add_trigger(trig)
+        man = xosc.Maneuver(f"{a.name}_maneuver")
+        man.add_event(event)
+        group = xosc.ManeuverGroup(f"{a.name}_group")
+        group.add_actor(a.name)
+        group.add_maneuver(man)
+        act.add_maneuver_group(group)
+    stop = xosc.EntityTrigger("gmj_goal", 0, xosc.ConditionEdge.rising,
+                              _near(xosc, minor, _wpos(xosc, *goal_p), GOAL_TOLERANCE), EGO, triggeringpoint="stop")
+    board = xosc.StoryBoard(init, stop)
+    if act.maneuvergroup:
+        story = xosc.Story("gmj_test", xosc.ParameterDeclarations())
+        story.add_act(act)
+        board.add_story(story)
+    road = xosc.RoadNetwork(roadfile=_logic_path(path, xodr))
+    sce = xosc.Scenario(f"garage-mj cruise test: stall {target}", "garage-mj", params, entities, board, road,
+                        xosc.Catalog(), osc_minor_version=minor)
+    el = sce.get_element()
+    ET.indent(el)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return atomic_write(path, ET.tostring(el, encoding="utf-8", xml_declaration=True))
+
+
+# -- reading --------------------------------------------------------------------------------------------
+class _Bad(Exception):
+    """What is wrong, without the file name (added once by :func:`read_xosc`)."""
+
+
+def _attr_f(el, name: str, where: str) -> float:
+    v = el.get(name)
+    if v is None:
+        raise _Bad(f"{where} has no {name} attribute")
+    try:
+        x = float(v)
+    except ValueError:
+        raise _Bad(f"{where} {name}={v[:40]!r} is not a number") from None
+    if not math.isfinite(x):
+        raise _Bad(f"{where} {name}={v[:40]!r} is not finite")
+    return x
+
+
+def _world(el, where: str) -> tuple[float, float, float]:
+    wp = el.find("Position/WorldPosition") if el.tag != "Position" else el.find("WorldPosition")
+    if wp is None:
+        raise _Bad(f"{where} has no Position/WorldPosition")
+    h = wp.get("h")
+    return _attr_f(wp, "x", where), _attr_f(wp, "y", where), 0.0 if h is None else _attr_f(wp, "h", where)
+
+
+def _polyline(ft, where: str, timed: bool) -> np.ndarray:
+    poly = ft.findall(".//Shape/Polyline")
+    if len(poly) != 1:
+        raise _Bad(f"{where} needs one Trajectory/Shape/Polyline, found {len(poly)}")
+    rows = []
+    for i, v in enumerate(poly[0].findall("Vertex")):
+        x, y, h = _world(v, f"{where} vertex {i}")
+        if timed:
+            rows.append((_attr_f(v, "time", f"{where} vertex {i}"), x, y, h))
+        else:
+            rows.append((x, y))
+    if len(rows) < 2:
+        raise _Bad(f"{where}: its Polyline has {len(rows)} vertices (2 or more needed)")
+    return np.asarray(rows, dtype=float)
+
+
+def _reach(cond_parent, where: str) -> tuple[tuple[float, float, float], float, str]:
+    """(position, radius, triggering entity) of the one "entity near a point" condition under ``cond_parent``:
+    a ReachPositionCondition (tolerance) or a euclidean DistanceCondition between reference points
+    (rule lessThan / lessOrEqual, value)."""
+    conds = cond_parent.findall(".//EntityCondition/*")
+    if len(conds) != 1 or conds[0].tag not in ("ReachPositionCondition", "DistanceCondition"):
+        raise _Bad(f"{where} needs one ReachPositionCondition or DistanceCondition, found "
+                   f"{[c.tag for c in conds] or 'none'}")
+    c = conds[0]
+    if c.tag == "ReachPositionCondition":
+        tol = _attr_f(c, "tolerance", f"{where} ReachPositionCondition")
+    else:
+        if (c.get("freespace"), c.get("relativeDistanceType", "euclidianDistance")) != ("false", "euclidianDistance") \
+                or c.get("rule") not in ("lessThan", "lessOrEqual"):
+            raise _Bad(f"{where} DistanceCondition must be euclidean between reference points (freespace false, "
+                       f"relativeDistanceType euclidianDistance, rule lessThan or lessOrEqual)")
+        tol = _attr_f(c, "value", f"{where} DistanceCondition")
+    if tol < 0:
+        raise _Bad(f"{where} {c.tag}: distance {tol} is negative")
+    refs = [e.get("entityRef") for e in cond_parent.findall(".//ByEntityCondition/TriggeringEntities/EntityRef")]
+    return _world(c, f"{where} {c.tag}"), tol, refs[0] if len(refs) == 1 else ""
+
+
+def _params(root) -> dict[str, tuple[str, str]]:
+    out = {}
+    for p in root.findall("ParameterDeclarations/ParameterDeclaration"):
+        name = p.get("name")
+        if name is None or p.get("value") is None:
+            raise _Bad("a ParameterDeclaration lacks its name or value")
+        if name.startswith("gmj_"):
+            out[name] = (p.get("parameterType", "string"), p.get("value"))
+    return out
+
+
+def _typed(name: str, typ: str, value: str) -> Any:
+    try:
+        if typ in ("int", "integer", "unsignedInt", "unsignedShort"):
+            return int(value)
+        if typ == "double":
+            return float(value)
+        if typ == "boolean":
+            if value not in ("true", "false"):
+                raise ValueError(value)
+            return value == "true"
+        if name.startswith("gmj_json_"):
+            return json.loads(value)
+        return value
+    except ValueError:
+        raise _Bad(f"parameter {name}: {value[:40]!r} is not a valid {typ}") from None
+
+
+def _int_list(name: str, text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.split(",")] if text.strip() else []
+    except ValueError:
+        raise _Bad(f"parameter {name}: {text[:40]!r} is not a comma-separated list of stall ids") from None
+
+
+def _read(path: Path) -> XoscTest:
+    try:
+        root = etree.parse(str(path), _SAFE_PARSER).getroot()
+    except etree.XMLSyntaxError as exc:
+        raise _Bad(f"not well-formed XML ({exc.msg}, line {exc.lineno})") from None
+    if root.tag != "OpenSCENARIO":
+        raise _Bad(f"the root element is <{root.tag}>, not <OpenSCENARIO>")
+    hdr = root.find("FileHeader")
+    if hdr is None or hdr.get("revMajor") != "1":
+        raise _Bad("no FileHeader of OpenSCENARIO 1.x")
+    raw = _params(root)
+    meta = {}
+    for name, (typ, value) in raw.items():
+        meta[name] = _typed(name, typ, value)
+
+    def need(name: str, kind: type):
+        if name not in meta:
+            raise _Bad(f"parameter {name} is missing; not a garage-mj cruise test")
+        v = meta.pop(name)
+        if kind is int and (not isinstance(v, int) or isinstance(v, bool)):
+            raise _Bad(f"parameter {name} must be an integer")
+        if kind is str and not isinstance(v, str):
+            raise _Bad(f"parameter {name} must be a string")
+        return v
+
+    fmt = need("gmj_format", int)
+    if fmt != FORMAT:
+        raise _Bad(f"gmj_format {fmt} is not the supported {FORMAT}")
+    target = need("gmj_target_stall", int)
+    occupied = _int_list("gmj_occupied", need("gmj_occupied", str))
+    actor_names = [n for n in need("gmj_actors", str).split(",") if n]
+
+    # road network -> pack
+    lf = root.find("RoadNetwork/LogicFile")
+    if lf is None or not lf.get("filepath"):
+        raise _Bad("RoadNetwork/LogicFile@filepath is missing")
+    fp = Path(lf.get("filepath"))
+    xodr = (fp if fp.is_absolute() else path.resolve().parent / fp).resolve()
+    if not xodr.is_file():
+        raise _Bad(f"its road network {lf.get('filepath')} ({xodr}) does not exist")
+
+    # entities
+    ents: dict[str, str] = {}
+    for so in root.findall("Entities/ScenarioObject"):
+        name = so.get("name")
+        kids = [c.tag for c in so if isinstance(c.tag, str)]
+        tag = next((t for t in kids if t in ("Vehicle", "Pedestrian", "MiscObject")), None)
+        if name is None or tag is None:
+            raise _Bad(f"ScenarioObject {name!r} is not a Vehicle, Pedestrian or MiscObject")
+        if name in ents:
+            raise _Bad(f"entity {name!r} is declared twice")
+        ents[name] = tag
+    if ents.get(EGO) != "Vehicle":
+        raise _Bad("no Vehicle entity named 'ego'")
+
+    # init: poses and the ego's route
+    poses: dict[str, tuple[float, float, float]] = {}
+    route = None
+    for priv in root.findall("Storyboard/Init/Actions/Private"):
+        ref = priv.get("entityRef")
+        if ref not in ents:
+            raise _Bad(f"Init acts on unknown entity {ref!r}")
+        for tp in priv.findall("PrivateAction/TeleportAction"):
+            poses[ref] = _world(tp, f"the TeleportAction of {ref}")
+        for ft in priv.findall("PrivateAction/RoutingAction/FollowTrajectoryAction"):
+            if ref != EGO:
+                raise _Bad(f"Init gives {ref!r} a FollowTrajectoryAction; only the ego's route goes there")
+            route = _polyline(ft, "the ego's route", timed=False)
+    missing = [n for n in ents if n not in poses]
+    if missing:
+        raise _Bad(f"no Init TeleportAction for {missing[:5]}")
+    if route is None:
+        raise _Bad("the ego has no FollowTrajectoryAction (its route) in Init")
+
+    # the goal
+    stop = root.find("Storyboard/StopTrigger")
+    if stop is None:
+        raise _Bad("the Storyboard has no StopTrigger (the goal)")
+    goal, tol, who = _reach(stop, "the StopTrigger")
+    if who != EGO:
+        raise _Bad(f"the goal condition is on {who or 'no single entity'}, not on the ego")
+
+    # parked cars
+    parked: dict[int, tuple[float, float, float]] = {}
+    for name in ents:
+        if name.startswith(PARKED_PREFIX):
+            try:
+                sid = int(name[len(PARKED_PREFIX):])
+            except ValueError:
+                raise _Bad(f"entity {name!r} does not name a stall id") from None
+            parked[sid] = poses[name]
+    if sorted(parked) != occupied:
+        raise _Bad(f"gmj_occupied {occupied} does not match the parked cars {sorted(parked)}")
+
+    # actors
+    events: dict[str, Any] = {}
+    for group in root.findall("Storyboard/Story/Act/ManeuverGroup"):
+        refs = [e.get("entityRef") for e in group.findall("Actors/EntityRef")]
+        if len(refs) != 1 or refs[0] not in actor_names:
+            raise _Bad(f"ManeuverGroup {group.get('name')!r} does not move exactly one declared actor")
+        evs = group.findall("Maneuver/Event")
+        if len(evs) != 1 or refs[0] in events:
+            raise _Bad(f"actor {refs[0]} needs exactly one Event")
+        events[refs[0]] = evs[0]
+    known = {EGO, *(n for n in ents if n.startswith(PARKED_PREFIX))}
+    extra = [n for n in ents if n not in known and n not in actor_names]
+    if extra:
+        raise _Bad(f"entities {extra[:5]} are neither the ego, parked cars nor listed in gmj_actors")
+    actors = []
+    for name in actor_names:
+        if name not in ents:
+            raise _Bad(f"actor {name!r} of gmj_actors has no entity")
+        kind = need(f"gmj_actor_{name}_kind", str)
+        behaviour = need(f"gmj_actor_{name}_behaviour", str)
+        stall = need(f"gmj_actor_{name}_stall", int)
+        if kind not in KINDS or behaviour not in BEHAVIOURS[kind]:
+            raise _Bad(f"actor {name}: unknown kind/behaviour {kind!r}/{behaviour!r}")
+        if ents[name] != _ENTITY_TAG[kind]:
+            raise _Bad(f"actor {name} ({kind}) is a {ents[name]}, expected a {_ENTITY_TAG[kind]}")
+        ev = events.get(name)
+        if ev is None:
+            w = np.array([[0.0, *poses[name]]])
+            actors.append(ActorSpec(name, kind, behaviour, w, None, 0.0, stall))
+            continue
+        fts = ev.findall("Action/PrivateAction/RoutingAction/FollowTrajectoryAction")
+        if len(fts) != 1:
+            raise _Bad(f"actor {name}: its Event needs one FollowTrajectoryAction")
+        tr = fts[0].find("TimeReference/Timing")
+        if tr is None or tr.get("domainAbsoluteRelative") != "relative" \
+                or _attr_f(tr, "scale", f"actor {name} Timing") != 1.0 \
+                or _attr_f(tr, "offset", f"actor {name} Timing") != 0.0:
+            raise _Bad(f"actor {name}: its trajectory timing must be relative, scale 1, offset 0")
+        w = _polyline(fts[0], f"actor {name}'s trajectory", timed=True)
+        if (np.diff(w[:, 0]) < 0).any():
+            raise _Bad(f"actor {name}: vertex times decrease")
+        if not np.allclose(w[0, 1:], poses[name], atol=1e-9):
+            raise _Bad(f"actor {name}: its TeleportAction is not its first waypoint")
+        st = ev.find("StartTrigger")
+        if st is None:
+            raise _Bad(f"actor {name}: its Event has no StartTrigger")
+        (tx, ty, _), radius, who = _reach(st, f"actor {name}'s StartTrigger")
+        if who != EGO:
+            raise _Bad(f"actor {name}: its trigger watches {who or 'no single entity'}, not the ego")
+        actors.append(ActorSpec(name, kind, behaviour, w, (tx, ty), radius, stall))
+    garage_hash = meta.pop("gmj_garage_hash", None)
+    seed = meta.pop("gmj_seed", None)
+    driver = meta.pop("gmj_driver", None)
+    action_type = meta.pop("gmj_action_type", None)
+    if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool)):
+        raise _Bad("parameter gmj_seed must be an integer")
+    for n, v in (("gmj_garage_hash", garage_hash), ("gmj_driver", driver), ("gmj_action_type", action_type)):
+        if v is not None and not isinstance(v, str):
+            raise _Bad(f"parameter {n} must be a string")
+    leftover = [n for n in meta if n.startswith("gmj_actor_")]
+    if leftover:
+        raise _Bad(f"parameters {leftover[:3]} name no actor of gmj_actors")
+    rest = {(n[len("gmj_json_"):] if n.startswith("gmj_json_") else n[len("gmj_"):]): v for n, v in meta.items()}
+    return XoscTest(path=path, pack_dir=xodr.parent, xodr_path=xodr, garage_hash=garage_hash, target_stall=target,
+                    occupied=occupied, start=poses[EGO], goal=goal, route=route, actors=actors, parked=parked,
+                    seed=seed, driver=driver, action_type=action_type, meta=rest)
+
+
+def read_xosc(path: str | Path) -> XoscTest:
+    """The cruise test of a ``.xosc`` written by :func:`write_xosc`; :class:`XoscError` if it is not one."""
+    path = Path(path)
+    try:
+        if not path.is_file():
+            raise _Bad("no such file")
+        return _read(path)
+    except _Bad as exc:
+        msg = " ".join(str(exc).split())
+        raise XoscError(f"scenario file {path}: {msg}") from None
+    except OSError as exc:
+        raise XoscError(f"scenario file {path}: cannot read it ({exc.strerror or exc})") from None
+
+
+__all__ = ["XoscError", "XoscTest", "read_xosc", "write_xosc", "EGO", "PARKED_PREFIX"]
