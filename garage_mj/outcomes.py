@@ -119,10 +119,15 @@ _COLLIDABLE_TABLE[[int(c) for c in COLLIDABLE]] = True
 class OutcomeMonitor:
     """Watches one test on ``route`` and says when and how it ended."""
 
-    def __init__(self, route: Route, config: OutcomeConfig | None = None, goal=None) -> None:
-        """``goal``: (x, y) or (x, y, yaw) [m, rad]; default the route's last point and heading."""
+    def __init__(self, route: Route, config: OutcomeConfig | None = None, goal=None, extra_time: float = 0.0) -> None:
+        """``goal``: (x, y) or (x, y, yaw) [m, rad]; default the route's last point and heading.
+
+        ``extra_time`` [s] is added to the time limit: how long the test's moving actors may
+        keep the car waiting (:attr:`garage_mj.actors.Scenario.duration`).
+        """
         self.route = route
         self.config = config or OutcomeConfig()
+        self.extra_time = float(extra_time)
         g = np.asarray(route.goal if goal is None else goal, dtype=float).reshape(-1)
         self.goal = g[:2]
         self.goal_yaw = float(g[2]) if len(g) > 2 else route.heading_at(route.length)
@@ -136,7 +141,7 @@ class OutcomeMonitor:
     @property
     def time_limit(self) -> float:
         """[s] from the route length and the minimum mean speed."""
-        return self.route.length / self.config.min_mean_speed + self.config.time_slack
+        return self.route.length / self.config.min_mean_speed + self.config.time_slack + self.extra_time
 
     def reset(self) -> None:
         self.progress = 0.0  # [m] furthest arc length reached
@@ -146,8 +151,11 @@ class OutcomeMonitor:
         self._mark_progress = 0.0
 
     def update(self, time: float, position, speed: float, contacts: Iterable[Contact] = (),
-               yaw: float | None = None) -> Outcome | None:
-        """Feed one step; returns the outcome when the test ends (and keeps returning it)."""
+               yaw: float | None = None, hold: bool = False) -> Outcome | None:
+        """Feed one step; returns the outcome when the test ends (and keeps returning it).
+
+        ``hold``: an actor is moving, so the car may wait: the no-progress clock restarts.
+        """
         if self.outcome is not None:
             return self.outcome
         cfg = self.config
@@ -170,7 +178,9 @@ class OutcomeMonitor:
         if dist > cfg.max_deviation:
             return self._end(OutcomeKind.DEADLOCK, time, f"{dist:.1f} m off the route")
         self.progress = max(self.progress, s)
-        if self.progress - self._mark_progress >= cfg.stuck_progress:
+        if hold:
+            self._mark_time, self._mark_progress = time, self.progress
+        elif self.progress - self._mark_progress >= cfg.stuck_progress:
             self._mark_time, self._mark_progress = time, self.progress
         elif time - self._mark_time >= cfg.stuck_time:
             why = f"no progress for {time - self._mark_time:.1f} s"

@@ -10,6 +10,13 @@ rear-axle path, headings and curvature from :mod:`garage_mj.scene.drivable`, han
   no faster than ``lateral_accel`` allows and than the steering rate can follow, braking at
   ``stop_decel`` into curves and to the goal.
 
+With actors (:mod:`garage_mj.actors`) it is privileged too: it gets every actor's trajectory
+(``info["actors"]``) and each actor's time since its trigger (``obs["actors"]``), and yields: at
+reset it finds, per moving actor and per moment of its trajectory, which poses of its own path the
+actor's body comes near (``actor_margin``); while any not-yet-run part of an actor's trajectory
+still reaches the path ahead, it brakes to stop ``actor_gap`` before the first such pose, and
+drives on when the actor has passed.
+
 If the oracle fails a feasible test, the test or the testbed is wrong, not the driver under test.
 """
 
@@ -36,6 +43,9 @@ class OracleConfig:
     k_heading: float = 1.2  # [1/m] curvature command per radian of heading error
     preview: float = 0.3  # [m] curvature preview: half the steering ramp, so the ramp is centred
     stop_within: float = 0.15  # [m] closer than this to the goal: brake to a stop
+    actor_margin: float = 0.4  # [m] an actor this close to the car body at a path pose blocks that pose
+    actor_gap: float = 0.5  # [m] stop this far before the first blocked pose
+    actor_decel: float = 2.0  # [m/s^2] braking for actors
 
 
 class OracleDriver(BaseDriver):
@@ -56,6 +66,46 @@ class OracleDriver(BaseDriver):
         self.s = np.concatenate([[0.0], np.cumsum(seg)])
         self.index = 0
         self.v_limit = self._speed_profile()
+        self._actor_blocks(info.get("actors") or [])
+
+    def _actor_blocks(self, actors: list) -> None:
+        """Per moving actor: sample times and, per time, the first path index its body blocks (or -1 if none)."""
+        from garage_mj.actors import ActorSpec, Corridor, actor_poses, sample_times
+        from garage_mj.scene.drivable import TestPlan
+
+        self.blocks: list[tuple[int, np.ndarray, np.ndarray]] = []  # (actor index, times, blocked (T, N) bool)
+        if not actors:
+            return
+        centre = self.path + (-self.car.rear_axle) * np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
+        plan = TestPlan(0, True, "", centre=centre, rear=self.path, heading=self.heading, curvature=self.kappa)
+
+        class _Planner:  # what Corridor needs: the car
+            car = self.car
+
+        corr = Corridor(plan, _Planner)
+        for k, d in enumerate(actors):
+            a = d if isinstance(d, ActorSpec) else ActorSpec.from_dict(d)
+            if a.static:
+                continue
+            times = sample_times(a)
+            hit = corr.conflicts(a.shape, actor_poses(a, times), self.config.actor_margin)
+            if hit.any():
+                self.blocks.append((k, times, hit))
+
+    def _actor_stop(self, obs: dict[str, Any], i: int) -> float:
+        """[m] path station to stop at for the actors (inf when none blocks the path ahead)."""
+        if not self.blocks or "actors" not in obs:
+            return math.inf
+        state = np.asarray(obs["actors"], dtype=float)
+        stop = math.inf
+        for k, times, hit in self.blocks:
+            tau = float(state[k, 3]) if k < len(state) else -1.0
+            rest = hit[times >= tau - 0.2] if tau >= 0 else hit
+            cols = np.flatnonzero(rest.any(axis=0))
+            cols = cols[cols >= i]
+            if len(cols):
+                stop = min(stop, self.s[cols[0]] - self.config.actor_gap)
+        return stop
 
     def _speed_profile(self) -> np.ndarray:
         """[m/s] the fastest speed at each path point that still brakes in time for what follows."""
@@ -104,4 +154,10 @@ class OracleDriver(BaseDriver):
             return -1.0, self.steer_for(kappa)
         v = float(np.interp(s_now, self.s, self.v_limit))
         v = max(v, min(0.3, math.sqrt(2.0 * cfg.stop_decel * max(remaining, 0.0))))  # creep to the goal
+        stop = self._actor_stop(obs, i)
+        if stop < math.inf:
+            room = stop - s_now
+            if room <= 0.05:
+                return -1.0, self.steer_for(kappa)
+            v = min(v, math.sqrt(2.0 * cfg.actor_decel * room))
         return self.throttle_for(v, speed), self.steer_for(kappa)

@@ -31,9 +31,11 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
+from garage_mj.actors import NO_ACTORS, ActorSpec, Scenario, ScenarioConfig, draw_scenario, judge, load_scenario_config
 from garage_mj.config import load_config
 from garage_mj.garage import Garage
 from garage_mj.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import parked_car_bodies, set_parked
@@ -77,6 +79,12 @@ class GarageDriveEnv(gym.Env):
             ``MultiInputPolicy`` hands them to its CNN. The built-in drivers expect the default
             (depth in metres as ``(H, W)`` float32).
         render_mode: ``"rgb_array"`` renders the ``ego/top`` camera (``render_size`` pixels).
+        scenario: :class:`~garage_mj.actors.ScenarioConfig` (or a dict of its fields, or a TOML
+            file): pedestrians, moving cars and clutter drawn per test from the test seed (after
+            the draws above, so the same seed gives the same target, parked cars and start with
+            or without actors). A test whose events no driver could avoid is ``infeasible``.
+            With actors the observation gains ``actors`` (privileged, like ``pose``): per actor
+            (x, y, yaw, seconds since its trigger or -1), in the order of ``driver_info()["actors"]``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -96,6 +104,7 @@ class GarageDriveEnv(gym.Env):
         infeasible: str = "skip",
         drive: DriveConfig | dict[str, Any] | None = None,
         image_obs: bool = False,
+        scenario: ScenarioConfig | dict[str, Any] | str | None = None,
     ) -> None:
         if not isinstance(garage, Garage):
             raise ValueError("GarageDriveEnv needs garage= (a garage_mj.Garage; for a pack: load_pack(folder).garage)")
@@ -121,6 +130,7 @@ class GarageDriveEnv(gym.Env):
         self.car_geometry = car_geometry(self.car_config)
         self.drive_config = _as(DriveConfig, drive)
         self.outcome_config = _as(OutcomeConfig, outcome)
+        self.scenario_config = scenario if isinstance(scenario, ScenarioConfig) else load_scenario_config(scenario)
         self.render_mode = render_mode
         self.render_size = render_size
         self.dt = cam.period  # [s] control period
@@ -151,6 +161,11 @@ class GarageDriveEnv(gym.Env):
         }
         if cam.rgb:
             obs["rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
+        if self.scenario_config.count:
+            n = self.scenario_config.count
+            obs["actors"] = spaces.Box(np.tile(np.array([-MAX_EXTENT, -MAX_EXTENT, -np.pi, -1.0], np.float32), (n, 1)),
+                                       np.tile(np.array([MAX_EXTENT, MAX_EXTENT, np.pi, np.inf], np.float32), (n, 1)),
+                                       dtype=np.float32)
         self.observation_space = spaces.Dict(obs)
         if action_type == "discrete":
             self.action_space: spaces.Space = spaces.Discrete(len(DiscreteAction))
@@ -165,8 +180,11 @@ class GarageDriveEnv(gym.Env):
         root = self.scene.mjcf()
         self._entrance = self.scene.entrance_pose
         attach_car(root, *self._entrance)
+        if self.scenario_config.count:
+            add_actor_bodies(root, self.scenario_config)
         self.model = compile_mjcf(root)
         self.data = mujoco.MjData(self.model)
+        self.actor_bodies = ActorBodies(self.model, self.scenario_config) if self.scenario_config.count else None
         self.car = Car(self.model, self.car_config)
         self.classes = geom_classes(self.model)
         self.camera = Camera(self.model, self.camera_config)
@@ -184,7 +202,9 @@ class GarageDriveEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Draw target stall, parked cars and start pose from ``seed``.
 
-        ``options`` may fix ``target`` (stall id), ``occupied`` (stall ids) or ``start`` ((x, y, yaw)).
+        ``options`` may fix ``target`` (stall id), ``occupied`` (stall ids), ``start`` ((x, y, yaw))
+        or ``actors`` (a list of :class:`~garage_mj.actors.ActorSpec` or their dicts, replacing the
+        drawn ones; a replayed ``.xosc`` does this); their avoidability is judged the same way.
         """
         super().reset(seed=seed)
         rng = self.np_random
@@ -200,11 +220,14 @@ class GarageDriveEnv(gym.Env):
         dyaw = rng.uniform(-1.0, 1.0) * self.start_noise[1]
 
         self.target = target
-        self.occupied = occupied
         self.test_plan = plan = self.planner.plan(target)
+        self.scenario = self._scenario(plan, occupied, rng, options.get("actors"))
+        occupied = [s for s in occupied if s not in self.scenario.free_stalls]
+        self.occupied = occupied
         if plan.feasible:
             self.route = Route(plan.centre)
-            self.monitor = OutcomeMonitor(self.route, self.outcome_config, goal=plan.goal)
+            self.monitor = OutcomeMonitor(self.route, self.outcome_config, goal=plan.goal,
+                                          extra_time=self.scenario.duration)
         else:  # never driven: the car waits at the start of the entrance lane
             x0, y0, h0 = self._entrance
             ahead = [(x0 + k * math.cos(h0), y0 + k * math.sin(h0)) for k in (0.0, START_OFFSET + 5.0)]
@@ -219,6 +242,7 @@ class GarageDriveEnv(gym.Env):
             x, y, yaw = (float(v) for v in options["start"])
         mujoco.mj_resetData(self.model, self.data)
         set_parked(self.model, None, occupied)
+        self._place_actors()
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward
         self.monitor.progress = START_OFFSET  # [m] the car starts this far along the route
         self.path_length = 0.0  # [m] driven
@@ -226,7 +250,47 @@ class GarageDriveEnv(gym.Env):
         self.outcome: Outcome | None = None
         if not plan.feasible:
             self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, plan.reason)
+        elif not self.scenario.feasible:
+            self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, self.scenario.reason)
         return self._observe(), self._info()
+
+    def _scenario(self, plan: TestPlan, occupied: list[int], rng, given) -> Scenario:
+        """The test's actors: drawn from ``rng`` per the scenario config, or ``given`` (a replay)."""
+        cfg = self.scenario_config
+        if given is None:
+            return draw_scenario(cfg, plan, self.planner, occupied, rng)
+        actors = [a if isinstance(a, ActorSpec) else ActorSpec.from_dict(a) for a in given]
+        if actors and self.actor_bodies is None:
+            raise ValueError("this env has no actor bodies: build it with scenario= room for the replayed actors")
+        ok, why = judge(actors, plan, self.planner, cfg if cfg.count else NO_ACTORS)
+        return Scenario(actors, ok, why, {}, {a.stall for a in actors if a.stall >= 0})
+
+    def _place_actors(self) -> None:
+        """Put every actor at its first waypoint (untriggered), hide the unused slots."""
+        self._actor_tau: list[float | None] = [None if not a.static else 0.0 for a in self.scenario.actors]
+        self._actor_t0: list[float | None] = [None] * len(self.scenario.actors)
+        if self.actor_bodies is None:
+            return
+        self._actor_ids = self.actor_bodies.place(self.data, self.scenario.actors)
+        for a in self.scenario.actors:
+            ActorBodies.set_pose(self.data, self._actor_ids[a.name], a.pose_at(None))
+
+    def _move_actors(self, x: float, y: float) -> bool:
+        """Fire the triggers the car reached, move the triggered actors to this time; True while one moves."""
+        moving = False
+        t = float(self.data.time)
+        for k, a in enumerate(self.scenario.actors):
+            if a.static:
+                continue
+            if self._actor_t0[k] is None and math.hypot(x - a.trigger[0], y - a.trigger[1]) <= a.trigger_radius:
+                self._actor_t0[k] = t
+            if self._actor_t0[k] is None:
+                continue
+            tau = t - self._actor_t0[k]
+            self._actor_tau[k] = tau
+            moving |= tau < a.duration
+            ActorBodies.set_pose(self.data, self._actor_ids[a.name], a.pose_at(tau))
+        return moving
 
     def step(self, action):
         if self.monitor is None:
@@ -234,6 +298,10 @@ class GarageDriveEnv(gym.Env):
         if self.outcome is not None:
             raise RuntimeError("the episode is over; call reset()")
         before = self.monitor.progress
+        moving = False
+        if self.scenario.actors:
+            x0, y0, _ = self.car.pose(self.data)
+            moving = self._move_actors(x0, y0)
         self.car.act(self.data, action, self.dt)
         contacts = []
         for _ in range(self.n_substeps):
@@ -243,7 +311,8 @@ class GarageDriveEnv(gym.Env):
         x, y, yaw = self.car.pose(self.data)
         self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])
         self._last_xy = (x, y)
-        self.outcome = self.monitor.update(self.data.time, (x, y), self.car.speed(self.data), contacts, yaw=yaw)
+        self.outcome = self.monitor.update(self.data.time, (x, y), self.car.speed(self.data), contacts, yaw=yaw,
+                                           hold=moving)
         reward = self.monitor.progress - before
         terminated = truncated = False
         if self.outcome is not None:
@@ -268,6 +337,13 @@ class GarageDriveEnv(gym.Env):
         obs["goal"] = to_car_frame(self.monitor.goal, x, y, yaw).astype(np.float32)
         obs["remaining"] = np.array([max(self.route.length - self.monitor.progress, 0.0)], dtype=np.float32)
         obs["pose"] = np.array([x, y, math.remainder(yaw, math.tau)], dtype=np.float32)
+        if self.scenario_config.count:
+            rows = np.zeros((self.scenario_config.count, 4), dtype=np.float32)
+            rows[:, 3] = -1.0
+            rows[:, :2] = MAX_EXTENT  # slots without an actor: far away
+            if self.scenario.actors:
+                rows[: len(self.scenario.actors)] = states(self.scenario.actors, self._actor_tau)
+            obs["actors"] = rows
         return obs
 
     def _info(self) -> dict[str, Any]:
@@ -282,8 +358,11 @@ class GarageDriveEnv(gym.Env):
             "pose": (x, y, yaw),
             "parked": len(self.occupied),
             "goal": self.monitor.goal_pose,
-            "feasible": self.test_plan.feasible,
+            "feasible": self.test_plan.feasible and self.scenario.feasible,
+            "actors": {k: self.scenario.count(k) for k in ("pedestrian", "moving_car", "clutter")},
         }
+        if self.scenario.missing:
+            info["actors_missing"] = dict(self.scenario.missing)
         if self.outcome is not None:
             info.update(outcome=self.outcome.kind.value, reason=self.outcome.reason,
                         hit=self.outcome.hit_class, hit_geom=self.outcome.hit_geom)
@@ -301,7 +380,8 @@ class GarageDriveEnv(gym.Env):
         return {"seed": int(seed), "action_type": self.action_type, "dt": self.dt,
                 "target_stall": self.target, "route_length": self.route.length, "car": self.car_geometry,
                 "route": self.route.points, "goal": self.monitor.goal_pose,
-                "rear_path": plan.rear, "rear_heading": plan.heading, "rear_curvature": plan.curvature}
+                "rear_path": plan.rear, "rear_heading": plan.heading, "rear_curvature": plan.curvature,
+                "actors": [a.as_dict() for a in self.scenario.actors]}
 
     def render(self) -> np.ndarray | None:
         """The ``ego/top`` camera in colour (``render_mode="rgb_array"``)."""

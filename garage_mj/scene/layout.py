@@ -45,6 +45,9 @@ CLASS_RGBA: dict[Semantic, tuple[float, float, float, float]] = {
     Semantic.PARKED_CAR: (0.15, 0.45, 0.70, 1.0),
     Semantic.ENTRANCE: (0.10, 0.70, 0.85, 1.0),
     Semantic.EXIT: (0.95, 0.55, 0.10, 1.0),
+    Semantic.PEDESTRIAN: (0.85, 0.25, 0.55, 1.0),
+    Semantic.MOVING_CAR: (0.55, 0.20, 0.85, 1.0),
+    Semantic.CLUTTER: (0.98, 0.45, 0.10, 1.0),
 }
 
 

@@ -29,6 +29,9 @@ parked car     ``parkedcar``         a parked car in a stall
 ego car        ``ego``               the car under test
 entrance       ``entrance``          entrance gate marker / floor
 exit           ``exit``              exit gate marker / floor
+pedestrian     ``pedestrian``        a walking person (kinematic actor, :mod:`garage_mj.actors`)
+moving car     ``movingcar``         a car that drives during the test (kinematic actor)
+clutter        ``clutter``           cones, trolleys, a badly parked car (static actors)
 =============  ====================  ============================================
 """
 
@@ -54,6 +57,9 @@ class Semantic(enum.IntEnum):
     EGO_CAR = 8
     ENTRANCE = 9
     EXIT = 10
+    PEDESTRIAN = 11
+    MOVING_CAR = 12
+    CLUTTER = 13
 
 
 NUM_CLASSES = len(Semantic)
@@ -71,6 +77,9 @@ PREFIXES: dict[str, Semantic] = {
     "ego": Semantic.EGO_CAR,
     "entrance": Semantic.ENTRANCE,
     "exit": Semantic.EXIT,
+    "pedestrian": Semantic.PEDESTRIAN,
+    "movingcar": Semantic.MOVING_CAR,
+    "clutter": Semantic.CLUTTER,
 }
 
 #: Classes a car may drive on (the vision driver's drivable area).
@@ -78,7 +87,8 @@ DRIVABLE = frozenset(
     {Semantic.FLOOR, Semantic.ROAD_MARKING, Semantic.STALL_MARKING, Semantic.ENTRANCE, Semantic.EXIT}
 )
 #: Classes whose contact with the ego car is a collision (SPEC section 7).
-COLLIDABLE = frozenset({Semantic.WALL, Semantic.PILLAR, Semantic.OBSTACLE, Semantic.PARKED_CAR})
+COLLIDABLE = frozenset({Semantic.WALL, Semantic.PILLAR, Semantic.OBSTACLE, Semantic.PARKED_CAR,
+                        Semantic.PEDESTRIAN, Semantic.MOVING_CAR, Semantic.CLUTTER})
 
 #: Display colours (RGB, 0-255) per class, for previews and videos.
 PALETTE = np.array(
@@ -94,6 +104,9 @@ PALETTE = np.array(
         (255, 0, 255),  # ego car
         (0, 220, 255),  # entrance
         (255, 140, 0),  # exit
+        (255, 60, 160),  # pedestrian
+        (0, 90, 255),  # moving car
+        (255, 120, 40),  # clutter
     ],
     dtype=np.uint8,
 )
