@@ -13,6 +13,7 @@ import shutil
 import numpy as np
 import pytest
 from lxml import etree
+from scenariogeneration.xosc import ParseOpenScenario
 
 from garage_mj.actors import ActorSpec, ScenarioConfig, draw_scenario
 from garage_mj.errors import GarageMJError
@@ -158,6 +159,8 @@ def test_round_trip(case, files, name):
     assert kinds["pedestrian_0"] == "Pedestrian" and kinds["movingcar_0"] == "Vehicle"
     assert kinds["clutter_0"] == "MiscObject" and root.find(".//MiscObject").get("miscObjectCategory") == "obstacle"
     assert {n for n in kinds if n.startswith("parkedcar_")} == {f"parkedcar_{s}" for s in kw["occupied"]}
+    parsed = ParseOpenScenario(str(files[name]))  # scenariogeneration's own reader accepts the file too
+    assert len(parsed.entities.scenario_objects) == len(kinds)
 
 
 def test_round_trip_of_drawn_actors(case, files):

@@ -29,16 +29,23 @@ OpenSCENARIO element                               carries
                                                    an actor's is its first waypoint
 ``Init`` ego ``FollowTrajectoryAction``            the planned route: ``Polyline`` of the centre
                                                    path, no timing (``TimeReference/None``)
-``StopTrigger`` ``ReachPositionCondition``         the goal pose (x, y, h=yaw), tolerance 1.0 m,
+``StopTrigger`` (*near* condition, below)          the goal pose (x, y, h=yaw), within 1.0 m,
                                                    triggering entity ``ego``
 ``Story/Act/ManeuverGroup[<name>_group]``          a moving actor: one Event whose
                                                    ``FollowTrajectoryAction`` has a timed
                                                    ``Polyline`` (vertex time = waypoint t, relative
                                                    to the action start, scale 1, offset 0; h = yaw),
-                                                   started by a ``ReachPositionCondition`` on the
-                                                   ego at the trigger point, tolerance =
-                                                   ``trigger_radius``
+                                                   started by a *near* condition on the ego at the
+                                                   trigger point, distance = ``trigger_radius``
 =================================================  ==============================================
+
+The *near* condition ("the ego's reference point within r of a point") is, in OpenSCENARIO 1.2
+(the default, ``osc_minor=2``), a ``DistanceCondition`` (``value`` r, ``rule`` lessOrEqual,
+``freespace`` false, ``relativeDistanceType`` euclidianDistance): 1.2 deprecates
+``ReachPositionCondition`` and scenariogeneration refuses to write it there. With ``osc_minor=1``
+(or 0) it is a ``ReachPositionCondition`` (``tolerance`` r); :func:`read_xosc` reads both. The
+ASAM checker runs all of its 17 checks on 1.2 files; on 1.1 only the XML and schema checks
+apply (its rule checks are defined from 1.2 on).
 
 A static actor (one waypoint, no trigger) has no event and reads back with ``trigger_radius``
 0. :func:`read_xosc` rebuilds everything from the file alone and raises :class:`XoscError`
@@ -72,7 +79,7 @@ PARKED_PREFIX = "parkedcar_"
 GOAL_TOLERANCE = 1.0  # [m]
 #: meta keys promoted to :class:`XoscTest` fields
 KNOWN_META = ("garage_hash", "seed", "driver", "action_type")
-_RESERVED = {"format", "target_stall", "occupied", "actors", *KNOWN_META}
+_RESERVED = ("format", "target_stall", "occupied", "actors")  # gmj_ names the writer sets itself
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 _KEY = re.compile(r"[a-z][a-z0-9_]*\Z")
 _ENTITY_TAG = {"pedestrian": "Pedestrian", "moving_car": "Vehicle", "clutter": "MiscObject"}
@@ -110,7 +117,7 @@ class XoscTest:
 
         pack = load_pack(self.pack_dir)
         if self.garage_hash is not None and pack.manifest["garage_hash"] != self.garage_hash:
-            raise XoscError(f"{self.path}: gmj_garage_hash {self.garage_hash[:12]} is not the garage of pack "
+            raise XoscError(f"scenario file {self.path}: gmj_garage_hash {self.garage_hash[:12]} is not the garage of pack "
                             f"{self.pack_dir} ({pack.manifest['garage_hash'][:12]})")
         return pack
 
@@ -153,9 +160,12 @@ def _meta_params(meta: Mapping[str, Any]) -> list[tuple[str, str, str]]:
     """(name, OpenSCENARIO parameter type, value) of each meta entry."""
     out = []
     for key, v in meta.items():
-        if not isinstance(key, str) or not _KEY.match(key) or key in ("format", "target_stall", "occupied", "actors") \
-                or key.startswith(("actor_", "json_")):
+        if not isinstance(key, str) or not _KEY.match(key) or key in _RESERVED or key.startswith(("actor_", "json_")):
             raise XoscError(f"meta key {key!r} is not allowed (lower-case identifier, not a reserved name)")
+        if key == "seed" and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
+            raise XoscError(f"meta seed must be an integer, got {v!r}")
+        if key in ("garage_hash", "driver", "action_type") and not isinstance(v, str):
+            raise XoscError(f"meta {key} must be a string, got {v!r}")
         if isinstance(v, bool):
             out.append((f"gmj_{key}", "boolean", "true" if v else "false"))
         elif isinstance(v, (int, np.integer)):
@@ -220,8 +230,8 @@ def _actor_entity(xosc, a: ActorSpec):
 
 
 def _near(xosc, minor: int, position, radius: float):
-    """"The ego's reference point within ``radius`` of ``position``": ReachPositionCondition up to
-    OpenSCENARIO 1.1, its 1.2 replacement (a euclidean DistanceCondition between reference points) after."""
+    """The condition "the ego's reference point within ``radius`` of ``position``": a ReachPositionCondition
+    up to OpenSCENARIO 1.1, its 1.2 replacement (a euclidean DistanceCondition between reference points) after."""
     if minor < 2:
         return xosc.ReachPositionCondition(position, radius)
     return xosc.DistanceCondition(radius, xosc.Rule.lessOrEqual, position, freespace=False,
@@ -251,7 +261,7 @@ def write_xosc(
     meta: Mapping[str, Any] | None = None,
     osc_minor: int = OSC_MINOR,
 ) -> Path:
-    """Write one cruise test as OpenSCENARIO 1.2 to ``path`` (atomically); returns the path.
+    """Write one cruise test as OpenSCENARIO 1.``osc_minor`` (default 1.2) to ``path`` (atomically); returns it.
 
     ``xodr_path`` defaults to ``pack_dir/garage.xodr``. ``parked_poses``: stall -> (x, y, yaw), or
     the scene layout's ``parked_cars`` placements; a parked car is written for every stall of
@@ -275,6 +285,8 @@ def write_xosc(
             pass
     occ = sorted({int(s) for s in occupied})
     target = int(target_stall)
+    if target in occ:
+        raise XoscError(f"the target stall {target} is among the occupied stalls")
     start_p, goal_p = _pose(start, "start"), _pose(goal, "goal")
     pts = np.asarray(route, dtype=float)
     if pts.ndim != 2 or pts.shape[1] < 2 or len(pts) < 2 or not np.isfinite(pts[:, :2]).all():
@@ -635,6 +647,9 @@ def read_xosc(path: str | Path) -> XoscTest:
     except _Bad as exc:
         msg = " ".join(str(exc).split())
         raise XoscError(f"scenario file {path}: {msg}") from None
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError) as exc:  # a structure not foreseen above
+        msg = " ".join(str(exc).split())[:200]
+        raise XoscError(f"scenario file {path}: not a garage-mj cruise test ({type(exc).__name__}: {msg})") from None
     except OSError as exc:
         raise XoscError(f"scenario file {path}: cannot read it ({exc.strerror or exc})") from None
 
