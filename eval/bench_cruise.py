@@ -1,6 +1,7 @@
 """Benchmark: cruise tests with the camera on, and the projected wall time of the paper experiment.
 
     python eval/bench_cruise.py [--map m5_13x13_aligned] [--tests 10] [--workers 2] [--driver vision]
+        [--pedestrians 2 --moving-cars 1 --clutter 2]     # with actors (issue 12)
 
 Runs ``--tests`` seeded tests of ``garage_mj/GarageDrive-v0`` (built-in ``--driver``, depth +
 segmentation 64x64 at 10 Hz) in ``--workers`` processes, one env per worker, and prints seconds
@@ -27,19 +28,19 @@ TARGET_MIN = 30.0  # [min] issue 5 target on 2 cores
 _ENV = {}  # per worker process: the env, built once
 
 
-def _env(map_name: str, seed: int):
+def _env(map_name: str, seed: int, scenario: dict | None = None):
     if "env" not in _ENV:
         t0 = time.perf_counter()
         _ENV["env"] = gym.make("garage_mj/GarageDrive-v0", garage=paint_garage(map_name, seed=seed),
-                               action_type="continuous")
+                               action_type="continuous", scenario=scenario)
         _ENV["build_s"] = time.perf_counter() - t0
     return _ENV["env"]
 
 
 def run_one(job: tuple[str, int, str, int]) -> dict:
     """One cruise test; wall time, simulated time and camera time."""
-    map_name, garage_seed, driver_name, seed = job
-    env = _env(map_name, garage_seed)
+    map_name, garage_seed, driver_name, seed, scenario = job
+    env = _env(map_name, garage_seed, scenario)
     base = env.unwrapped
     camera = base.camera
     render, spent = camera.render, [0.0, 0]
@@ -75,8 +76,12 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--driver", default="vision")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--pedestrians", type=int, default=0)
+    ap.add_argument("--moving-cars", type=int, default=0)
+    ap.add_argument("--clutter", type=int, default=0)
     args = ap.parse_args()
-    jobs = [(args.map, args.garage_seed, args.driver, args.seed + i) for i in range(args.tests)]
+    scenario = {"pedestrians": args.pedestrians, "moving_cars": args.moving_cars, "clutter": args.clutter}
+    jobs = [(args.map, args.garage_seed, args.driver, args.seed + i, scenario) for i in range(args.tests)]
     t0 = time.perf_counter()
     if args.workers > 1:
         with mp.get_context("spawn").Pool(args.workers) as pool:
@@ -92,7 +97,7 @@ def main() -> None:
     outcomes = {o: sum(r["outcome"] == o for r in rows) for o in sorted({r["outcome"] for r in rows})}
     per_test = (total - max(builds, default=0.0)) / len(rows) * args.workers  # [s] one worker's wall per test
     projected = PAPER_TESTS * per_test / args.workers / 60  # [min]
-    print(f"{args.map} (garage seed {args.garage_seed}), driver {args.driver}, {len(rows)} tests, "
+    print(f"{args.map} (garage seed {args.garage_seed}), driver {args.driver}, actors {scenario}, {len(rows)} tests, "
           f"{args.workers} workers; outcomes {outcomes}")
     print(f"{'env build (per worker)':38s} {sum(builds) / max(len(builds), 1):9.2f} s")
     print(f"{'seconds per test (one worker)':38s} {per_test:9.2f} s   (in-test mean {wall / len(rows):.2f} s)")

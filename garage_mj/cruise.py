@@ -15,6 +15,7 @@ with other settings is refused).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import hashlib
 import io
 import json
@@ -36,10 +37,12 @@ from garage_mj.metrics import evaluate
 
 TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",
                 "hit_geom", "reason", "time", "path_length", "route_length", "difficulty", "mean_road_length",
-                "mean_intersection_degree", "wall_s")
+                "mean_intersection_degree", "pedestrians", "moving_cars", "clutter", "wall_s")
+#: What a collision can hit (``hit`` column): the summary counts collisions per class.
+HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
 #: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
 SUMMARY_COLUMNS = ("garage", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
-                   "collisions", "timeouts", "deadlocks", "success_pct")
+                   "collisions", "timeouts", "deadlocks", "success_pct", *(f"hit_{c}" for c in HIT_CLASSES))
 
 
 class CruiseError(GarageMJError):
@@ -55,6 +58,7 @@ class CruiseSource:
     difficulty: float
     mean_road_length: float  # E[X]
     mean_intersection_degree: float  # E[Y]
+    pack: str = ""  # its asset pack folder, when it came from one (the .xosc export refers to it)
 
     @property
     def hash(self) -> str:
@@ -72,7 +76,8 @@ class CruiseSource:
         from garage_mj.export.pack import load_pack
 
         pack = load_pack(path)
-        return cls.from_garage(pack.garage, Path(pack.path).name)
+        src = cls.from_garage(pack.garage, Path(pack.path).name)
+        return dataclasses.replace(src, pack=str(Path(pack.path).resolve()))
 
     @classmethod
     def from_record(cls, record: Any) -> CruiseSource:
@@ -139,12 +144,13 @@ def _env_for(source: CruiseSource, settings: CruiseSettings):
     """The worker's env for ``source`` (built once; the previous garage's env is closed)."""
     from garage_mj.envs.drive_env import GarageDriveEnv
 
-    if _CACHE.get("hash") != source.hash:
+    key = (source.hash, json.dumps(settings.env, sort_keys=True))
+    if _CACHE.get("hash") != key:
         if "env" in _CACHE:
             _CACHE.pop("env").close()
         _CACHE["env"] = GarageDriveEnv(garage=source.garage, action_type=settings.action_type,
                                        occupancy=settings.occupancy, infeasible="report", **settings.env)
-        _CACHE["hash"] = source.hash
+        _CACHE["hash"] = key
     return _CACHE["env"]
 
 
@@ -158,12 +164,25 @@ def _driver_for(settings: CruiseSettings):
     return _CACHE["driver"]
 
 
-def run_test(source: CruiseSource, index: int, settings: CruiseSettings) -> dict[str, Any]:
-    """Run test ``index`` on ``source``; returns its CSV row."""
-    env, driver = _env_for(source, settings), _driver_for(settings)
+def run_test(source: CruiseSource, index: int, settings: CruiseSettings, xosc_dir: str | None = None,
+             export_only: bool = False) -> dict[str, Any] | None:
+    """Run test ``index`` on ``source``; returns its CSV row. With ``xosc_dir``, also write the test as a .xosc
+    (``export_only``: only that, for a test driven before; returns None)."""
+    env = _env_for(source, settings)
     seed = cruise_seed(settings.seed, source.hash, index)
     start = time.perf_counter()
     obs, info = env.reset(seed=seed)
+    if xosc_dir is not None:
+        write_test_xosc(env, info, Path(xosc_dir) / xosc_name(source, index), source, index, seed, settings)
+    if export_only:
+        return None
+    return _drive(env, obs, info, seed, settings, source, index, start)
+
+
+def _drive(env, obs, info, seed: int, settings: CruiseSettings, source: CruiseSource, index: int,
+           start: float) -> dict[str, Any]:
+    """Drive the reset ``env`` to the end of its test; the CSV row."""
+    driver = _driver_for(settings)
     try:
         if info.get("outcome") != "infeasible":  # decided from the scene: never driven
             driver.reset(env.driver_info(seed))
@@ -183,12 +202,81 @@ def run_test(source: CruiseSource, index: int, settings: CruiseSettings) -> dict
         "path_length": round(info["path_length"], 3), "route_length": round(info["route_length"], 3),
         "difficulty": source.difficulty, "mean_road_length": source.mean_road_length,
         "mean_intersection_degree": source.mean_intersection_degree,
+        "pedestrians": info["actors"]["pedestrian"], "moving_cars": info["actors"]["moving_car"],
+        "clutter": info["actors"]["clutter"],
         "wall_s": round(time.perf_counter() - start, 3),
     }
 
 
-def _task(job: tuple[CruiseSource, int, CruiseSettings]) -> dict[str, Any]:
+def _task(job: tuple[CruiseSource, int, CruiseSettings, str | None, bool]) -> dict[str, Any] | None:
     return run_test(*job)
+
+
+# -- OpenSCENARIO: export and replay --------------------------------------------------------------------
+def xosc_name(source: CruiseSource, index: int) -> str:
+    """File name of test ``index`` on ``source`` (``<garage hash 12>_<test>.xosc``)."""
+    return f"{source.hash[:12]}_{index:05d}.xosc"
+
+
+def write_test_xosc(env, info: dict[str, Any], path: Path, source: CruiseSource, index: int, seed: int,
+                    settings: CruiseSettings) -> Path:
+    """The test ``env`` was just reset to, as OpenSCENARIO (:func:`garage_mj.export.xosc.write_xosc`)."""
+    from garage_mj.export.xosc import write_xosc
+
+    if not source.pack:
+        raise CruiseError(f"{source.name}: no asset pack to refer to; run_cruise exports one with xosc=True")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return write_xosc(
+        path, pack_dir=source.pack, target_stall=env.target, occupied=env.occupied, start=info["pose"],
+        route=env.route.points, goal=env.monitor.goal_pose, actors=env.scenario.actors,
+        parked_poses=env.scene.layout.parked_cars,
+        meta={"garage_hash": source.hash, "garage": source.name, "test": index, "seed": seed,
+              "driver": settings.driver, "action_type": settings.action_type, "occupancy": settings.occupancy,
+              "env": settings.env, "driver_kwargs": settings.driver_kwargs})
+
+
+def replay_xosc(path: str | Path, driver: str | None = None, driver_kwargs: dict[str, Any] | None = None
+                ) -> dict[str, Any]:
+    """Replay the cruise test of a ``.xosc`` written by :func:`write_test_xosc`; returns its tests.csv row.
+
+    Everything comes from the file: the pack (checked against its hash), target stall, parked
+    cars, start pose and actors; the env settings and the driver are the ones recorded, unless
+    ``driver`` names another (a test engineer's own stack on a found scenario).
+    """
+    from garage_mj.actors import load_scenario_config
+    from garage_mj.export.xosc import read_xosc
+
+    test = read_xosc(path)
+    pack = test.pack()
+    meta = test.meta
+    env_kwargs = dict(meta.get("env") or {})
+    scenario = load_scenario_config(env_kwargs.get("scenario"))
+    need = {}
+    for a in test.actors:  # room for every replayed actor (names are kind_index)
+        k = int(a.name.rsplit("_", 1)[1]) + 1
+        need[a.kind] = max(need.get(a.kind, 0), k)
+    scenario = dataclasses.replace(scenario, pedestrians=max(scenario.pedestrians, need.get("pedestrian", 0)),
+                                   moving_cars=max(scenario.moving_cars, need.get("moving_car", 0)),
+                                   clutter=max(scenario.clutter, need.get("clutter", 0)))
+    env_kwargs["scenario"] = scenario
+    settings = CruiseSettings(driver or test.driver or "vision", int(test.seed or 0), test.action_type or "discrete",
+                              float(meta.get("occupancy", 0.5)), {},
+                              dict(driver_kwargs if driver_kwargs is not None else meta.get("driver_kwargs") or {}))
+    source = dataclasses.replace(CruiseSource.from_garage(pack.garage, str(meta.get("garage") or Path(pack.path).name)),
+                                 pack=str(pack.path))
+    from garage_mj.envs.drive_env import GarageDriveEnv
+
+    env = GarageDriveEnv(garage=pack.garage, action_type=settings.action_type, occupancy=settings.occupancy,
+                         infeasible="report", **env_kwargs)
+    try:
+        start = time.perf_counter()
+        seed = int(test.seed or 0)
+        obs, info = env.reset(seed=seed, options={"target": test.target_stall, "occupied": test.occupied,
+                                                  "start": test.start, "actors": test.actors})
+        row = _drive(env, obs, info, seed, settings, source, int(meta.get("test", 0)), start)
+    finally:
+        env.close()
+    return row
 
 
 # -- files ------------------------------------------------------------------------------------------
@@ -282,6 +370,7 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -
             continue
         kinds = [r["outcome"] for r in mine]
         feasible = len(mine) - kinds.count("infeasible")
+        hits = _hits(mine)
         out.append({
             "garage": s.name, "difficulty": round(s.difficulty, 4), "E[X]": round(s.mean_road_length, 3),
             "E[Y]": round(s.mean_intersection_degree, 3), "tests": len(mine),
@@ -289,6 +378,7 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -
             "successes": kinds.count("success"), "collisions": kinds.count("collision"),
             "timeouts": kinds.count("timeout"), "deadlocks": kinds.count("deadlock"),
             "success_pct": round(100.0 * kinds.count("success") / feasible, 2) if feasible else None,
+            **{f"hit_{c}": hits.get(c, 0) for c in HIT_CLASSES},
         })
     return out
 
@@ -328,9 +418,17 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
 
 
 # -- the run ----------------------------------------------------------------------------------------
-def _jobs(sources: Sequence[CruiseSource], tests: int, done: set[tuple[str, int]],
-          settings: CruiseSettings) -> list[tuple[CruiseSource, int, CruiseSettings]]:
-    return [(s, i, settings) for s in sources for i in range(tests) if (s.hash, i) not in done]
+def _jobs(sources: Sequence[CruiseSource], tests: int, done: set[tuple[str, int]], settings: CruiseSettings,
+          xosc_dir: str | None = None, exported: set[tuple[str, int]] | None = None) -> list[tuple]:
+    """Tests not in ``done``; with ``xosc_dir``, also export-only jobs for done tests not in ``exported``."""
+    out = []
+    for s in sources:
+        for i in range(tests):
+            if (s.hash, i) not in done:
+                out.append((s, i, settings, xosc_dir, False))
+            elif xosc_dir is not None and exported is not None and (s.hash, i) not in exported:
+                out.append((s, i, settings, xosc_dir, True))
+    return out
 
 
 def _results(jobs: list, workers: int) -> Iterator[dict[str, Any]]:
@@ -362,11 +460,15 @@ def run_cruise(
     driver_kwargs: dict[str, Any] | None = None,
     max_tests: int | None = None,
     progress: bool = True,
+    xosc: bool = False,
 ) -> CruiseResult:
     """Run ``tests`` tests on every source with ``driver``; resumable (see the module docstring).
 
     ``max_tests`` stops after that many new tests (a deliberate partial run); ``progress``
-    shows a tqdm bar. Raises :class:`CruiseError`, ``DriverError`` (bad driver) before any test.
+    shows a tqdm bar. ``xosc`` also writes every test as OpenSCENARIO into ``out_dir/xosc/``
+    (``<garage hash 12>_<test>.xosc``, see :func:`replay_xosc`); garages without an asset pack get
+    one in ``out_dir/packs/`` for it to refer to. Raises :class:`CruiseError`, ``DriverError``
+    (bad driver) before any test.
     """
     from garage_mj.drivers import resolve_driver
 
@@ -381,18 +483,32 @@ def run_cruise(
                               dict(driver_kwargs or {}))
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise"):  # a second run into `out` is refused, naming this one
-        return _run_locked(srcs, tests, workers, out, settings, max_tests, progress)
+        return _run_locked(srcs, tests, workers, out, settings, max_tests, progress, xosc)
+
+
+def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
+    """Every source with an asset pack: those without one get it in ``out/packs``."""
+    from garage_mj.export.pack import export_pack
+
+    return [s if s.pack else dataclasses.replace(s, pack=str(export_pack(s.garage, out / "packs").resolve()))
+            for s in srcs]
 
 
 def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Path, settings: CruiseSettings,
-                max_tests: int | None, progress: bool) -> CruiseResult:
+                max_tests: int | None, progress: bool, xosc: bool = False) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
     clean_temp(out)  # temp files of a killed run's atomic writes
     _check_settings(out, settings)
     csv_path = out / "tests.csv"
     rows = read_tests(csv_path)
     done = {(r["garage_hash"], int(r["test"])) for r in rows}
-    jobs = _jobs(srcs, tests, done, settings)
+    xosc_dir, exported = None, None
+    if xosc:
+        srcs = _with_packs(srcs, out)
+        xosc_dir = str(out / "xosc")
+        have = {p.name for p in (out / "xosc").glob("*.xosc")} if (out / "xosc").is_dir() else set()
+        exported = {(s.hash, i) for s in srcs for i in range(tests) if xosc_name(s, i) in have}
+    jobs = _jobs(srcs, tests, done, settings, xosc_dir, exported)
     if max_tests is not None:
         jobs = jobs[:max_tests]
     new = 0
@@ -405,6 +521,9 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Pat
                                                        desc="cruise", unit="test") as bar:
             writer = csv.DictWriter(f, fieldnames=TEST_COLUMNS)
             for row in _results(jobs, workers):
+                if row is None:  # an export-only job
+                    bar.update()
+                    continue
                 writer.writerow(row)
                 f.flush()
                 os.fsync(f.fileno())  # a kill -9 or power cut after this line keeps the row

@@ -70,6 +70,7 @@ def record_video(
     action_type: str = "discrete",
     occupancy: float = 0.5,
     driver_kwargs: dict[str, Any] | None = None,
+    env: dict[str, Any] | None = None,
 ) -> Path:
     """Drive test ``test`` of a :class:`~garage_mj.cruise.CruiseSource` (same seed as the batch) into an MP4."""
     import cv2
@@ -80,8 +81,9 @@ def record_video(
 
     src = source if isinstance(source, CruiseSource) else CruiseSource.from_garage(source)
     drv = load_driver(driver, **(driver_kwargs or {}))
+    env_kwargs = env
     env = GarageDriveEnv(garage=src.garage, action_type=action_type, occupancy=occupancy,
-                         infeasible="report")  # as the cruise runner: the same seed, the same test
+                         infeasible="report", **(env_kwargs or {}))  # as the cruise runner: same seed, same test
     width, height = size
     cam = Camera(env.model, CameraConfig(camera=camera, width=width, height=height, rgb=True, depth=False,
                                          segmentation=False))

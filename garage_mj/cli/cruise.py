@@ -20,6 +20,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--packs", type=Path, metavar="DIR", help="a folder of asset packs (garage-mj export)")
     src.add_argument("--library", type=Path, metavar="FILE", help="a garage library (garage-mj train)")
+    src.add_argument("--scenario-file", type=Path, nargs="+", metavar="FILE.xosc",
+                     help="replay tests written with --xosc (OpenSCENARIO): same garage, parked cars, start, "
+                          "actors; prints each outcome and writes replay.csv into --out")
     add_filters(p)
     p.add_argument("--sample", type=positive_int, metavar="N",
                    help="with --library: N garages stratified by difficulty (seeded by --seed)")
@@ -34,6 +37,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--video", type=Path, metavar="PATH.mp4",
                    help="instead of the batch, write an MP4 of one test (the first garage, --video-test)")
     p.add_argument("--video-test", type=non_negative_int, default=0, help="test index for --video (default 0)")
+    act = p.add_argument_group("adverse events (garage_mj.actors; drawn per test from its seed)")
+    act.add_argument("--pedestrians", type=non_negative_int, metavar="N",
+                     help="pedestrians per test: crossing, stepping out between parked cars, walking along")
+    act.add_argument("--moving-cars", type=non_negative_int, metavar="M",
+                     help="moving cars per test: reversing out of a stall, oncoming, waiting at a junction")
+    act.add_argument("--clutter", type=non_negative_int, metavar="K",
+                     help="static clutter per test: cones, trolleys, a badly parked car")
+    act.add_argument("--scenario", type=Path, metavar="FILE.toml",
+                     help="every ScenarioConfig field ([scenario] table: behaviours, speeds, trigger lead, "
+                          "reaction time, braking); the three flags above override its counts")
+    p.add_argument("--xosc", action="store_true",
+                   help="also write every test as OpenSCENARIO 1.2 into OUT/xosc/ (garages without an asset "
+                        "pack get one in OUT/packs/); replay one with --scenario-file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_errors(run))
 
@@ -45,10 +61,12 @@ def _errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Nam
         from garage_mj.drivers import DriverError
         from garage_mj.export.pack import PackError
         from garage_mj.library import LibraryError
+        from garage_mj.config import ConfigError
+        from garage_mj.errors import GarageMJError
 
         try:
             return func(args)
-        except (CruiseError, DriverError, PackError, LibraryError) as exc:
+        except (CruiseError, DriverError, PackError, LibraryError, ConfigError, GarageMJError) as exc:
             raise UserError(str(exc)) from None
 
     return wrapper
@@ -87,19 +105,74 @@ def sources(args: argparse.Namespace) -> list:
     return found
 
 
+def scenario(args: argparse.Namespace) -> dict | None:
+    """The ScenarioConfig fields of --scenario and the count flags (None: no actors asked for)."""
+    counts = {"pedestrians": args.pedestrians, "moving_cars": args.moving_cars, "clutter": args.clutter}
+    if args.scenario is None and all(v is None for v in counts.values()):
+        return None
+    from garage_mj.actors import load_scenario_config
+
+    if args.scenario is not None and not args.scenario.is_file():
+        raise UserError(f"--scenario {args.scenario}: no such file; give a TOML file with a [scenario] table")
+    cfg = load_scenario_config(args.scenario, **counts)
+    data = {f: getattr(cfg, f) for f in cfg.__dataclass_fields__}
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
+
+
+def replay(args: argparse.Namespace) -> int:
+    import csv
+
+    from garage_mj.cruise import TEST_COLUMNS, replay_xosc
+    from garage_mj.fsutil import atomic_write, ensure_dir
+
+    driver = args.driver if args.driver != "vision" or "--driver" in _argv() else None
+    rows = []
+    for path in args.scenario_file:
+        if not path.is_file():
+            raise UserError(f"--scenario-file {path}: no such file; write tests with garage-mj cruise --xosc")
+        row = replay_xosc(path, driver=driver)
+        rows.append(row)
+        extra = f" ({row['hit']})" if row["hit"] else ""
+        print(f"{path}: {row['outcome']}{extra} after {row['time']} s, driver {row['driver']}: {row['reason']}")
+    out = ensure_dir(args.out, "--out")
+    import io
+
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=("file", *TEST_COLUMNS), extrasaction="ignore")
+    w.writeheader()
+    for path, row in zip(args.scenario_file, rows, strict=True):
+        w.writerow({"file": str(path), **row})
+    atomic_write(out / "replay.csv", buf.getvalue())
+    print(f"{len(rows)} replayed; rows in {out / 'replay.csv'}")
+    return 0
+
+
+def _argv() -> list[str]:
+    import sys
+
+    return sys.argv
+
+
 def run(args: argparse.Namespace) -> int:
     from garage_mj.cruise import run_cruise
 
+    if args.scenario_file is not None:
+        return replay(args)
     srcs = sources(args)
+    env = {}
+    scen = scenario(args)
+    if scen is not None:
+        env["scenario"] = scen
     if args.video is not None:
         from garage_mj.video import record_video
 
         path = record_video(srcs[0], args.video, driver=args.driver, seed=args.seed, test=args.video_test,
-                            action_type=args.action_type, occupancy=args.occupancy)
+                            action_type=args.action_type, occupancy=args.occupancy, env=env)
         print(f"wrote {path} ({srcs[0].name}, test {args.video_test}, driver {args.driver})")
         return 0
     res = run_cruise(srcs, args.tests, args.driver, args.workers, args.seed, args.out,
-                     action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet)
+                     action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet, env=env,
+                     xosc=args.xosc)
     s = res.stats
     r = "n/a" if s["r"] is None else f"{s['r']:.3f}"
     print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "

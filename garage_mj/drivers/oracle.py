@@ -73,7 +73,7 @@ class OracleDriver(BaseDriver):
         from garage_mj.actors import ActorSpec, Corridor, actor_poses, sample_times
         from garage_mj.scene.drivable import TestPlan
 
-        self.blocks: list[tuple[int, np.ndarray, np.ndarray]] = []  # (actor index, times, blocked (T, N) bool)
+        self.blocks: list[tuple[int, np.ndarray, np.ndarray, int]] = []  # (actor, times, blocked (T, N), trigger index)
         if not actors:
             return
         centre = self.path + (-self.car.rear_axle) * np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
@@ -89,8 +89,9 @@ class OracleDriver(BaseDriver):
                 continue
             times = sample_times(a)
             hit = corr.conflicts(a.shape, actor_poses(a, times), self.config.actor_margin)
+            trig = int(np.argmin(np.linalg.norm(centre - np.asarray(a.trigger), axis=1)))
             if hit.any():
-                self.blocks.append((k, times, hit))
+                self.blocks.append((k, times, hit, trig))
 
     def _actor_stop(self, obs: dict[str, Any], i: int) -> float:
         """[m] path station to stop at for the actors (inf when none blocks the path ahead)."""
@@ -98,11 +99,12 @@ class OracleDriver(BaseDriver):
             return math.inf
         state = np.asarray(obs["actors"], dtype=float)
         stop = math.inf
-        for k, times, hit in self.blocks:
+        for k, times, hit, trig in self.blocks:
             tau = float(state[k, 3]) if k < len(state) else -1.0
             rest = hit[times >= tau - 0.2] if tau >= 0 else hit
             cols = np.flatnonzero(rest.any(axis=0))
-            cols = cols[cols >= i]
+            # not started yet: it moves once the car reaches its trigger, so only the path beyond counts
+            cols = cols[cols >= (i if tau >= 0 else max(i, trig))]
             if len(cols):
                 stop = min(stop, self.s[cols[0]] - self.config.actor_gap)
         return stop

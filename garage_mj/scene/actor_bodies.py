@@ -9,7 +9,9 @@ segmentation camera and the outcome monitor classify them like every other geom.
 
 Actor geoms have ``contype=2, conaffinity=0``: they touch only geoms whose ``conaffinity`` has
 bit 2, i.e. the ego car's collision geoms (``models/car``), never walls, floor or parked cars.
-:class:`ActorBodies` moves them in a compiled model: unused slots wait far below the floor.
+:class:`ActorBodies` moves them in a compiled model: unused slots wait far below the floor with
+their geoms made transparent (alpha 0), which MuJoCo's scene update skips: a camera frame costs
+what the placed actors cost, not what the slots do.
 """
 
 from __future__ import annotations
@@ -86,12 +88,16 @@ class ActorBodies:
     """Moves the actor slots of a compiled model (``data.mocap_pos`` / ``mocap_quat``)."""
 
     def __init__(self, model: mujoco.MjModel, config: ScenarioConfig) -> None:
+        self.model = model
         self.mocap: dict[str, int] = {}
+        self.geoms: dict[str, np.ndarray] = {}
         for name, _ in slot_names(config):
             b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
             if b < 0 or model.body_mocapid[b] < 0:
                 raise ValueError(f"the model has no mocap body {name!r}; build it with add_actor_bodies")
             self.mocap[name] = int(model.body_mocapid[b])
+            adr, num = int(model.body_geomadr[b]), int(model.body_geomnum[b])
+            self.geoms[name] = np.arange(adr, adr + num)
 
     def capacity(self, kind: str) -> int:
         prefix = {"pedestrian": "pedestrian_", "moving_car": "movingcar_", "clutter": "clutter_"}[kind]
@@ -100,9 +106,10 @@ class ActorBodies:
 
     def place(self, data: mujoco.MjData, actors: Iterable[ActorSpec]) -> dict[str, int]:
         """Hide every slot, then map each actor to its slot; returns actor name -> mocap id."""
-        for m in self.mocap.values():
+        for name, m in self.mocap.items():
             data.mocap_pos[m] = HIDDEN
             data.mocap_quat[m] = (1.0, 0.0, 0.0, 0.0)
+            self.model.geom_rgba[self.geoms[name], 3] = 0.0
         out = {}
         for a in actors:
             slot = slot_of(a)
@@ -110,6 +117,7 @@ class ActorBodies:
                 raise ValueError(f"actor {a.name} ({a.behaviour}) has no body in this env: build the env with a "
                                  f"scenario that has room for it")
             out[a.name] = self.mocap[slot]
+            self.model.geom_rgba[self.geoms[slot], 3] = 1.0
         return out
 
     @staticmethod
