@@ -30,6 +30,9 @@ class DemoConfig:
     garages: int = 8  # garages sampled from the library, stratified by difficulty
     tests: int = 5  # cruise tests per garage and driver
     drivers: tuple[str, ...] = ("oracle", "waypoint", "vision")
+    # adverse events (garage_mj.actors): these drivers run once more with these actors per test
+    actor_drivers: tuple[str, ...] = ("oracle", "vision")
+    actors: dict = field(default_factory=lambda: {"pedestrians": 1, "moving_cars": 1, "clutter": 1})
     workers: int = 2
     seed: int = 0
     out: str = "out/demo"
@@ -152,26 +155,38 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path):
     from garage_mj.cruise import CruiseSource, run_cruise
 
     sources = [CruiseSource.from_pack(p) for p in packs]
-    columns = ["garage", "driver", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions", "timeouts",
-               "deadlocks", "success % of feasible"]
+    from garage_mj.cruise import HIT_CLASSES
+
+    columns = ["garage", "driver", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions",
+               "what was hit", "timeouts", "deadlocks", "success % of feasible"]
     rows: list[list[object]] = []
     fits: dict[str, dict] = {}
     kpis: dict[str, str] = {}
-    for driver in cfg.drivers:
-        _say(f"cruise tests: driver {driver}, {cfg.tests} tests x {len(sources)} garages, {cfg.workers} workers")
+    actors = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in cfg.actors.items() if v)
+    runs = [(d, d, {}) for d in cfg.drivers]
+    runs += [(d, f"{d} + actors", {"scenario": dict(cfg.actors)}) for d in cfg.actor_drivers if any(cfg.actors.values())]
+    for driver, label, env in runs:
+        _say(f"cruise tests: driver {label}, {cfg.tests} tests x {len(sources)} garages, {cfg.workers} workers")
         # the reference drivers steer continuously; vision drives the paper's discrete actions
         action = DEMO_ACTIONS.get(driver, "discrete")
+        folder = driver if not env else f"{driver}_actors"
         result = run_cruise(sources, cfg.tests, driver=driver, workers=cfg.workers, seed=cfg.seed,
-                            out_dir=out / "cruise" / driver, action_type=action)
-        fits[driver] = result.stats
+                            out_dir=out / "cruise" / folder, action_type=action, env=env)
+        fits[label] = result.stats
         pct = result.stats["success_pct"]
-        kpis[f"{driver} ({action}) success"] = (f"{pct:.1f}% of {result.stats['feasible']} feasible" if pct is not None
-                                     else "no feasible test")
-        kpis["infeasible tests"] = str(result.stats["infeasible"])  # the same for every driver: scene only
+        kpis[f"{label} ({action}) success"] = (f"{pct:.1f}% of {result.stats['feasible']} feasible" if pct is not None
+                                    else "no feasible test")
+        hits = result.stats["hits"]
+        kpis[f"{label}: collisions by what was hit"] = ", ".join(f"{k} {v}" for k, v in hits.items()) or "none"
+        if not env:
+            kpis["infeasible tests"] = str(result.stats["infeasible"])  # the same for every driver: scene only
+        else:
+            kpis[f"infeasible tests with actors ({actors})"] = str(result.stats["infeasible"])
         for r in result.summary:
-            rows.append([r["garage"], driver, float(r["difficulty"]),
+            hit = ", ".join(f"{c} {r[f'hit_{c}']}" for c in HIT_CLASSES if int(r[f"hit_{c}"]))
+            rows.append([r["garage"], label, float(r["difficulty"]),
                          float(r["E[X]"]), float(r["E[Y]"]), int(r["tests"]), int(r["infeasible"]),
-                         int(r["collisions"]), int(r["timeouts"]), int(r["deadlocks"]),
+                         int(r["collisions"]), hit or "-", int(r["timeouts"]), int(r["deadlocks"]),
                          "n/a" if r["success_pct"] is None else float(r["success_pct"])])
     main = "vision" if "vision" in fits else cfg.drivers[0]
     regression_png = figs / "regression.png"

@@ -19,7 +19,10 @@ def test_demo_end_to_end_report_in_chromium(tmp_path):
     assert garages >= 1
     assert len(facts["imgs"]) == 2 + 2 * garages + 1
     (table,) = facts["tables"]
-    assert table["rows"] == garages * len(cfg.drivers) and table["empty_cells"] == 0
+    # every driver, then the actor drivers again with adverse events (pedestrians, moving cars, clutter)
+    assert table["rows"] == garages * (len(cfg.drivers) + len(cfg.actor_drivers)) and table["empty_cells"] == 0
+    text = report.read_text()
+    assert "vision + actors" in text and "collisions by what was hit" in text
     for link in facts["links"]:
         assert (report.parent / link / "manifest.json").is_file()
     index = json.loads((tmp_path / "demo" / "packs" / "index.json").read_text())
