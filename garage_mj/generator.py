@@ -60,7 +60,7 @@ POLICY_PATIENCE = (100, 10)  # generate's policy stage gets a + b * count episod
 POLICY_TIME_SHARE = 0.5  # ... and at most this share of --max-seconds
 SEARCH_STEPS_PER_EPISODE = 20  # search mutations that count as one episode of the budget (~0.1-0.3 ms each
 #                                against ~5-10 ms for a rollout episode on a 13x13 map; a replay counts as one)
-SEARCH_SEEDS = 8  # painter garages per six-stall axis that seed the search when the policy made no usable one
+SEARCH_SEEDS = 8  # garages of the scripted painter per six-stall axis that seed the search next to the policy's
 TRAIN_TIMESTEPS = 80_000  # default training budget of generate --map FILE
 # the settings the shipped generators were trained with (generation/conditioned.toml's [dqn])
 USER_MAP_DQN = {"net_arch": [64, 64], "n_envs": 8, "learning_starts": 1000, "exploration_fraction": 0.3,
@@ -550,14 +550,16 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
             usable_pool.sort(key=lambda e: (e[0], e[1]))  # nearest to the band first, then oldest
             for _, _, g in usable_pool:
                 result.search_seeds += climber.add(g) is not None
-            if not climber.climbers and not climber.inside:  # the policy painted nothing usable: start from the painter
-                from garage_mj.painter import paint_garage
-                from garage_mj.garage import AXES
+            # and the scripted painter's garages, as the search baseline starts from: the policy's garages are
+            # often one family, and the climb restarts from these too when it stalls (they alone seed it when
+            # the policy painted nothing usable)
+            from garage_mj.garage import AXES
+            from garage_mj.painter import paint_garage
 
-                for k in range(SEARCH_SEEDS):
-                    for axis in AXES:
-                        result.search_seeds += climber.add(
-                            paint_garage(garage0, seed=seed * 1000 + k, six_stall_axis=axis)) is not None
+            for k in range(SEARCH_SEEDS):
+                for axis in AXES:
+                    result.search_seeds += climber.add(
+                        paint_garage(garage0, seed=seed * 1000 + k, six_stall_axis=axis)) is not None
             if bar is not None:
                 bar.set_postfix(stage="search", episodes=result.episodes, refresh=True)
             while result.found < count and (climber.climbers or climber.inside):
