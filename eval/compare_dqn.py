@@ -16,6 +16,7 @@ mean and 95% t-interval over seeds) goes to ``docs/compare_dqn.csv`` and is prin
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import csv
 import json
 import math
@@ -79,9 +80,20 @@ def summarise(out: Path, csv_path: Path) -> None:
     rows = []
     for cfg_dir in sorted(p for p in out.iterdir() if p.is_dir()):
         by_map: dict[tuple[str, int], list[tuple[int, dict]]] = {}
+        try:
+            want = dataclasses.asdict(config_named(cfg_dir.name, checkpoint_every=1))
+        except SystemExit:
+            want = None
         for run in sorted(cfg_dir.iterdir()):
             res = run_result(run)
             if res is None:
+                continue
+            # keys a run predates (n_envs, fused Adam...) had their defaults then
+            got = {**{k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(DQNConfig()).items()},
+                   **res["config"]}
+            if want is not None and any(got.get(k) != (list(v) if isinstance(v, tuple) else v)
+                                        for k, v in want.items() if k != "checkpoint_every"):
+                print(f"skipping {run}: trained under another config than {cfg_dir.name!r}")
                 continue
             map_name, seed = run.name.rsplit("_s", 1)
             by_map.setdefault((map_name, res["timesteps"]), []).append((int(seed), res))
