@@ -431,10 +431,15 @@ class _Placer:
         lo, hi = self._earliest(), self.corr.s[-1] - 1.0
         if behaviour == "step_out":
             return self._step_out(name, v, lo, hi)
-        i = self._station(lo + (0.0 if behaviour == "cross" else 6.0), hi)
+        length = float(self.rng.uniform(6.0, 12.0))  # [m] of an "along" walk
+        i = self._station(lo + (0.0 if behaviour == "cross" else length), hi)
         if i is None:
             return None
         p, u, right, h = self._frame(i)
+        if behaviour == "along":  # the whole walk beside a straight stretch, beyond the earliest conflict
+            back = self.corr.index_at(self.corr.s[i] - length)
+            if not self.straight[back:i + 1].all():
+                return None
         if behaviour == "cross":
             side = 1.0 if self.rng.random() < 0.5 else -1.0
             near, far = lane / 2 + 1.4, 1.5 * lane + 1.0  # [m] right edge + 1.4; left edge + 1.0
@@ -443,7 +448,6 @@ class _Placer:
             pts = [a, b]
         else:  # along: the right edge of the car's lane, walking toward the car
             off = lane / 2 + 0.25
-            length = float(self.rng.uniform(6.0, 12.0))
             a = p + right * off
             b = a - u * length
             pts = [a, b]
