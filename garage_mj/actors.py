@@ -70,6 +70,7 @@ SHAPE_SIZE = {"pedestrian": (0.25, 0.25, 0.85), "car": (2.15, 0.95, 0.7), "cone"
 PLACEMENT_TRIES = 20  # draws per actor before it is left out
 SAMPLE_DT = 0.1  # [s] trajectories are checked against the swept path at this time step
 MIN_SPACING = 2.0  # [m] between the start poses of two actors
+CONTROL_LAG = 0.1  # [s] a trigger is checked once per control step: it may fire this late
 _EPS = 1e-6
 
 
@@ -420,8 +421,10 @@ class _Placer:
         else:  # passes beside the path: start it as the car comes near its first waypoint
             near = int(np.argmin(np.linalg.norm(corr.centre - w[0, 1:3], axis=1)))
             s_trig = corr.s[near] - self.d_stop - lead
+        s_trig -= self.v_max * CONTROL_LAG  # judge() lets the trigger fire one control step late
         s_trig = max(s_trig, corr.s[corr.i0])
-        p = corr.centre[corr.index_at(s_trig)]
+        k = max(int(np.searchsorted(corr.s, s_trig, side="right")) - 1, 0)  # the path point at or before it
+        p = corr.centre[k]
         return ActorSpec(name, kind, behaviour, w, (float(p[0]), float(p[1])), cfg.trigger_radius, stall)
 
     # pedestrians
@@ -704,7 +707,7 @@ def judge(actors: list[ActorSpec], plan: TestPlan, planner: DrivePlanner, config
             fire = corr.s[corr.i0]  # the car starts within reach of the trigger
         else:
             fire = corr.s[int(np.argmin(d))]
-        fire = max(fire, corr.s[corr.i0]) + v * 0.1  # one control step late
+        fire = max(fire, corr.s[corr.i0]) + v * CONTROL_LAG  # one control step late
         cols = np.flatnonzero(hit.any(axis=0))
         body = planner.car.front - planner.car.rear + a.trigger_radius
         bad = cols[(corr.s[cols] >= fire - body) & (corr.s[cols] < fire + d_stop)]
