@@ -305,6 +305,11 @@ class Library:
         return int(cur.lastrowid) if cur.rowcount == 1 and cur.lastrowid is not None else None
 
     # -- reading ----------------------------------------------------------------------------------
+    def id_of(self, garage_hash: str) -> int | None:
+        """The id of the stored garage with this :meth:`~garage_mj.garage.Garage.canonical_hash`, or None."""
+        row = self._con.execute("SELECT id FROM garages WHERE hash = ?", (garage_hash,)).fetchone()
+        return None if row is None else int(row[0])
+
     def _record(self, row: tuple) -> GarageRecord:
         """A row as a record; a damaged row (bad JSON, text in a numeric column) is a one-line error."""
         values = list(row)

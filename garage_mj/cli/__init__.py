@@ -19,7 +19,7 @@ import sys
 from garage_mj.errors import GarageMJError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ["maps", "demo", "export", "check", "train", "generate", "library", "plot", "show", "cruise"]
+COMMANDS = ["maps", "demo", "export", "check", "train", "generate", "library", "plot", "show", "cruise", "hunt"]
 
 
 class UserError(GarageMJError):

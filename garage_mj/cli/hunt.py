@@ -1,0 +1,80 @@
+"""``garage-mj hunt``: spend a budget of cruise tests to find the garages where a driver fails."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from garage_mj.cli import UserError
+from garage_mj.cli._common import positive_int, seed, unit_range
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "hunt", help="search for the garages where a driver fails, with files to reproduce each failure",
+        description="An elitist evolution over garages: start from a library's garages (or painted ones of a "
+                    "map), test each, re-test the best and mutate them under the painter's rules, until --budget "
+                    "cruise tests are spent. Writes OUT/failures.csv (garages ranked by failure rate, with what was "
+                    "hit and where), OUT/hunt.sqlite, asset packs, .xosc files and MP4s of the worst garages, and "
+                    "OUT/report.html. Resumable: run the same command again.",
+        epilog="example: garage-mj hunt --driver vision --map m5_13x13_aligned --budget 1000 --out hunt_vision")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--map", help="start from garages painted on this shipped map (name) or map file")
+    src.add_argument("--library", type=Path, metavar="FILE", help="start from garages drawn from this library")
+    p.add_argument("--library-map", metavar="NAME", help="with --library: only garages of this map")
+    p.add_argument("--driver", default="vision", help="built-in driver (oracle, waypoint, vision) or module:Class")
+    p.add_argument("--budget", type=positive_int, default=1000, help="cruise tests to spend in all (default 1000)")
+    p.add_argument("--tests", type=positive_int, default=5, help="tests per garage per evaluation (default 5)")
+    p.add_argument("--population", type=positive_int, default=20, help="garages per generation (default 20)")
+    p.add_argument("--elites", type=positive_int, default=5, help="best garages kept and mutated (default 5)")
+    p.add_argument("--worst", type=positive_int, default=5,
+                   help="garages exported with pack, .xosc and MP4 (default 5)")
+    p.add_argument("--no-videos", action="store_true", help="skip the MP4s")
+    p.add_argument("--seed", type=seed, default=0, help="hunt seed: start garages, mutations, test seeds")
+    p.add_argument("--action-type", choices=("discrete", "continuous"), default="continuous")
+    p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
+    p.add_argument("--pedestrians", type=int, metavar="N", help="actors per test, as garage-mj cruise")
+    p.add_argument("--moving-cars", type=int, metavar="M")
+    p.add_argument("--clutter", type=int, metavar="K")
+    p.add_argument("--scenario", type=Path, metavar="FILE.toml", help="ScenarioConfig fields, as garage-mj cruise")
+    p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
+    p.add_argument("--out", type=Path, default=Path("hunt"), help="output folder (default ./hunt)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from garage_mj.cli.cruise import scenario
+    from garage_mj.config import ConfigError
+    from garage_mj.drivers import DriverError
+    from garage_mj.errors import GarageMJError
+    from garage_mj.hunt import HuntConfig, hunt
+
+    if args.library is not None and not args.library.is_file():
+        raise UserError(f"--library {args.library}: no such file; build one with garage-mj train or generate")
+    if args.map is not None and args.library_map is not None:
+        raise UserError("--library-map filters a --library; with --map give the map itself")
+    env = {}
+    try:
+        scen = scenario(args)
+        if scen is not None:
+            env["scenario"] = scen
+        cfg = HuntConfig(budget=args.budget, tests=args.tests, population=args.population, elites=args.elites,
+                         worst=args.worst)
+        res = hunt(args.driver, args.out, map=args.map if args.library is None else args.library_map,
+                   library=args.library, config=cfg, seed=args.seed, action_type=args.action_type,
+                   occupancy=args.occupancy, env=env, workers=args.workers, progress=not args.quiet,
+                   videos=not args.no_videos)
+    except (ConfigError, DriverError) as exc:
+        raise UserError(str(exc)) from None
+    except GarageMJError:
+        raise
+    failing = [s for s in res.ranked if s.failures]
+    print(f"{res.tests} tests on {len(res.ranked)} garages in {res.generations} generations; "
+          f"{len(failing)} garages with a failure")
+    for s in res.ranked[:5]:
+        if s.feasible:
+            print(f"  {s.source.name}: {len(s.failures)} of {len(s.feasible)} feasible tests failed "
+                  f"({100 * s.rate:.0f}%)")
+    print(f"ranking: {res.files['failures']}; report: {res.files['report']}")
+    return 0

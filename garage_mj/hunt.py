@@ -1,0 +1,393 @@
+"""Hunt: spend a budget of cruise tests to find the garages where a driver fails (issue 13).
+
+The search is an elitist evolution over garages, with the driver's failure rate as fitness:
+
+1. **Start**: ``population`` garages, drawn uniformly from a library (``--library``) or painted
+   by the scripted painter on a map (``--map``), each tested ``tests`` times.
+2. **Each generation**: rank every garage tested so far by its failure rate on feasible tests,
+   Laplace-smoothed (``(failures + 1) / (feasible + 2)``, so one lucky failure does not beat a
+   garage that failed 4 of 5); the ``elites`` best are *re-tested* with ``tests`` more test seeds
+   (a garage's rate then rests on more tests, so noise does not keep a false elite), and
+   ``population - elites`` children are made from them (tournament of two) by a mutation of
+   the road set under the painter's rules (:func:`garage_mj.search.mutate`: grow or cut a road,
+   the stall rule re-applied, connectivity and the 2x2 rule kept), each re-painted through the
+   painter env (:func:`garage_mj.search.replay`) so only garages the generator could make
+   are tested, each new garage tested ``tests`` times.
+3. **Stop** when the budget of tests is spent.
+
+Everything is a resumable cruise run (``OUT/cruise``, :func:`garage_mj.cruise.run_cruise`): a
+generation's garages and mutations are drawn from ``(seed, generation)`` and the results so far,
+which a re-run reads back from ``tests.csv``, so an interrupted hunt continues where it stopped
+and the same seed gives the same hunt. Outputs in ``OUT``: ``hunt.sqlite`` (every garage tested,
+run ``hunt:<driver>``), ``failures.csv`` (garages ranked by failure rate: tests, failures and
+their classes, what was hit, where on the route the failures happened, the failing test seeds),
+``packs/`` (asset pack of the worst ``--worst`` garages), ``xosc/`` (each of their failing tests
+as OpenSCENARIO: ``garage-mj cruise --scenario-file`` replays it), ``videos/`` (an MP4 of the
+first failing test of each) and ``report.html``.
+"""
+
+from __future__ import annotations
+
+import csv
+import html
+import io
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garage_mj.cruise import CruiseSource, CruiseSettings, cruise_seed, read_tests, run_cruise
+from garage_mj.errors import GarageMJError
+from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir
+from garage_mj.garage import Garage
+
+FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
+                   "failure_pct", "collisions", "deadlocks", "timeouts", "hit", "failure_progress", "failing_tests",
+                   "failing_seeds", "parent")
+
+
+class HuntError(GarageMJError):
+    """A hunt cannot run (no garages to start from, a budget too small, settings of another hunt)."""
+
+
+@dataclass(frozen=True)
+class HuntConfig:
+    """How the budget is spent."""
+
+    budget: int = 1000  # cruise tests in all
+    tests: int = 5  # tests per garage per evaluation (an elite gets this many more each generation)
+    population: int = 20  # garages per generation
+    elites: int = 5  # best garages kept, re-tested and mutated
+    worst: int = 5  # garages exported with packs, .xosc files, videos
+    max_tries: int = 50  # mutation draws per child before giving up on a parent
+
+    def __post_init__(self) -> None:
+        for name in ("budget", "tests", "population", "elites", "max_tries"):
+            if int(getattr(self, name)) < 1:
+                raise HuntError(f"hunt: {name} must be >= 1, got {getattr(self, name)}")
+        if self.elites >= self.population:
+            raise HuntError(f"hunt: elites ({self.elites}) must be fewer than the population ({self.population})")
+        if self.budget < self.population * self.tests:
+            raise HuntError(f"hunt: a budget of {self.budget} tests does not cover the first generation "
+                            f"({self.population} garages x {self.tests} tests); raise --budget or lower --population")
+
+
+@dataclass
+class Scored:
+    """A garage and what the tests so far say of it."""
+
+    source: CruiseSource
+    parent: str = ""  # hash of the garage it was mutated from ("" for a starting garage)
+    rows: list[dict[str, str]] = field(default_factory=list)
+
+    @property
+    def feasible(self) -> list[dict[str, str]]:
+        return [r for r in self.rows if r["outcome"] != "infeasible"]
+
+    @property
+    def failures(self) -> list[dict[str, str]]:
+        return [r for r in self.feasible if r["outcome"] != "success"]
+
+    @property
+    def score(self) -> float:
+        """Laplace-smoothed failure rate on feasible tests."""
+        return (len(self.failures) + 1) / (len(self.feasible) + 2)
+
+    @property
+    def rate(self) -> float:
+        f = len(self.feasible)
+        return len(self.failures) / f if f else math.nan
+
+
+@dataclass
+class HuntResult:
+    out_dir: Path
+    tests: int  # tests in tests.csv for this hunt
+    generations: int
+    ranked: list[Scored]
+    files: dict[str, Any]
+
+
+def _starting(map_name: str | None, library: str | Path | None, n: int, seed: int) -> list[CruiseSource]:
+    if library is not None:
+        from garage_mj.library import Library, LibraryError
+
+        if not Path(library).is_file():
+            raise LibraryError(f"{library}: no such library file; build one with garage-mj train or generate")
+        with Library(library, create=False) as lib:
+            records = lib.sample(n, seed, stratify=None, map=map_name)
+            records = lib.verified(records)
+        if not records:
+            raise HuntError(f"{library}: no garages{' of ' + map_name if map_name else ''} to start the hunt from")
+        return [CruiseSource.from_record(r) for r in records]
+    from garage_mj.painter import paint_garage
+
+    found: dict[str, CruiseSource] = {}
+    for k in range(20 * n):
+        if len(found) >= n:
+            break
+        g = paint_garage(map_name, seed=seed * 100_003 + k)
+        found.setdefault(g.canonical_hash(), CruiseSource.from_garage(g, f"{map_name}-hunt{len(found)}"))
+    return list(found.values())
+
+
+def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], tries: int) -> tuple[Garage, str] | None:
+    """A new garage mutated from a tournament-picked parent, re-painted by the painter env; None if none found."""
+    from garage_mj.search import mutate, replay
+
+    for _ in range(tries):
+        a, b = rng.choice(len(parents), size=2, replace=len(parents) < 2)
+        parent = parents[a] if parents[a].score >= parents[b].score else parents[b]
+        g = mutate(parent.source.garage, rng)
+        if g is None:
+            continue
+        h = g.canonical_hash()
+        if h in seen:
+            continue
+        painted, info = replay(g)
+        if not info.get("usable") or painted.canonical_hash() != h:
+            continue
+        return painted, parent.source.hash
+    return None
+
+
+def _state_file(out: Path) -> Path:
+    return out / "hunt.json"
+
+
+def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: str | Path | None = None,
+         config: HuntConfig | None = None, seed: int = 0, action_type: str = "continuous",
+         occupancy: float = 0.5, env: dict[str, Any] | None = None, workers: int = 1,
+         progress: bool = True, videos: bool = True, **cruise_kwargs: Any) -> HuntResult:
+    """Hunt the garages where ``driver`` fails (module docstring); resumable in ``out_dir``."""
+    from garage_mj.drivers import resolve_driver
+
+    cfg = config or HuntConfig()
+    if (map is None) == (library is None) and library is None:
+        raise HuntError("hunt: give a map (--map) or a library (--library)")
+    resolve_driver(driver)
+    out = ensure_dir(out_dir, "--out")
+    settings = {"driver": driver, "map": map, "library": str(Path(library).resolve()) if library else None,
+                "seed": int(seed), "action_type": action_type, "occupancy": float(occupancy), "env": env or {},
+                "config": asdict(cfg)}
+    with FolderLock(out, "garage-mj hunt"):
+        state_path = _state_file(out)
+        if state_path.is_file():
+            old = json.loads(state_path.read_text())
+            if old.get("settings") != json.loads(json.dumps(settings)):
+                raise HuntError(f"{out} holds a hunt with other settings; use another --out or the same settings")
+        else:
+            atomic_write(state_path, json.dumps({"settings": settings}, indent=2) + "\n")
+        return _hunt(driver, out, map, library, cfg, seed, action_type, occupancy, env or {}, workers,
+                     progress, videos, settings, cruise_kwargs)
+
+
+def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, action_type, occupancy, env, workers,
+          progress, videos, settings, cruise_kwargs) -> HuntResult:
+    from tqdm import tqdm
+
+    cruise_dir = out / "cruise"
+    scored: dict[str, Scored] = {}
+    spent = 0  # tests asked for so far (finished or read back)
+
+    def run(batch: list[tuple[Scored, int]]) -> None:
+        """Test each (garage, first index) pair ``cfg.tests`` times from that index; rows into ``scored``."""
+        nonlocal spent
+        by_count: dict[int, list[Scored]] = {}
+        for s, first in batch:
+            by_count.setdefault(first + cfg.tests, []).append(s)
+        for count, group in sorted(by_count.items()):
+            res = run_cruise([s.source for s in group], count, driver, workers, seed, cruise_dir,
+                             action_type=action_type, occupancy=occupancy, env=env, progress=False, **cruise_kwargs)
+            for s in group:
+                s.rows = [r for r in res.rows if r["garage_hash"] == s.source.hash]
+        spent += cfg.tests * len(batch)
+        bar.update(cfg.tests * len(batch))
+
+    bar = tqdm(total=cfg.budget, disable=not progress, desc="hunt", unit="test")
+    start = _starting(map_name, library, cfg.population, seed)
+    for s in start:
+        scored[s.hash] = Scored(s)
+    run([(scored[s.hash], 0) for s in start])
+    generation = 0
+    while spent + cfg.tests <= cfg.budget:
+        generation += 1
+        rng = np.random.default_rng([seed, generation])
+        ranked = sorted(scored.values(), key=lambda s: (-s.score, s.source.hash))
+        elites = ranked[: cfg.elites]
+        batch = [(e, len(e.rows)) for e in elites]
+        room = (cfg.budget - spent) // cfg.tests - len(batch)
+        if room < 0:
+            batch = batch[: (cfg.budget - spent) // cfg.tests]
+            room = 0
+        children = []
+        for _ in range(min(cfg.population - cfg.elites, room)):
+            got = _child(elites, rng, set(scored) | {c.source.hash for c in children}, cfg.max_tries)
+            if got is None:
+                break
+            g, parent = got
+            src = CruiseSource.from_garage(g, f"{g.name or 'garage'}-g{generation}-{g.canonical_hash()[:8]}")
+            children.append(Scored(src, parent))
+        for c in children:
+            scored[c.source.hash] = c
+        if not batch and not children:
+            break
+        run(batch + [(c, 0) for c in children])
+    bar.close()
+    ranked = sorted(scored.values(), key=lambda s: (-(s.rate if s.feasible else -1.0), -len(s.feasible),
+                                                      s.source.hash))
+    files = _write_outputs(out, ranked, cfg, driver, seed, action_type, occupancy, env, videos)
+    state = json.loads(_state_file(out).read_text())
+    state.update({"generations": generation, "tests": sum(len(s.rows) for s in scored.values()),
+                  "garages": len(scored), "files": {k: str(v) for k, v in files.items() if not isinstance(v, list)}})
+    atomic_write(_state_file(out), json.dumps(state, indent=2) + "\n")
+    return HuntResult(out, state["tests"], generation, ranked, files)
+
+
+def _where(rows: list[dict[str, str]]) -> str:
+    """Where on the route the failures happened: progress as % of the route length, e.g. '35 80 100'."""
+    out = []
+    for r in rows:
+        try:
+            out.append(f"{100.0 * float(r['path_length']) / max(float(r['route_length']), 1e-9):.0f}")
+        except (ValueError, KeyError):
+            pass
+    return " ".join(out)
+
+
+def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str, seed: int, action_type: str,
+                   occupancy: float, env: dict, videos: bool) -> dict[str, Any]:
+    from garage_mj.library import Library
+
+    lib_path = out / "hunt.sqlite"
+    ids: dict[str, int] = {}
+    with Library(lib_path) as lib:
+        for s in ranked:
+            gid = lib.add(s.source.garage, map=s.source.garage.name or "garage", run=f"hunt:{driver}", seed=seed,
+                          episode=0, timestep=0)
+            ids[s.source.hash] = gid if gid is not None else (lib.id_of(s.source.hash) or -1)
+    rows = []
+    for k, s in enumerate(ranked, 1):
+        fails = s.failures
+        hits: dict[str, int] = {}
+        for r in fails:
+            if r["hit"]:
+                hits[r["hit"]] = hits.get(r["hit"], 0) + 1
+        rows.append({
+            "rank": k, "garage": s.source.name, "garage_hash": s.source.hash, "library_id": ids.get(s.source.hash, -1),
+            "difficulty": round(s.source.difficulty, 4), "tests": len(s.rows), "feasible": len(s.feasible),
+            "failures": len(fails),
+            "failure_pct": round(100.0 * s.rate, 2) if s.feasible else "",
+            "collisions": sum(r["outcome"] == "collision" for r in fails),
+            "deadlocks": sum(r["outcome"] == "deadlock" for r in fails),
+            "timeouts": sum(r["outcome"] == "timeout" for r in fails),
+            "hit": " ".join(f"{c}:{n}" for c, n in sorted(hits.items())), "failure_progress": _where(fails),
+            "failing_tests": " ".join(r["test"] for r in fails), "failing_seeds": " ".join(r["seed"] for r in fails),
+            "parent": s.parent[:12],
+        })
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=FAILURE_COLUMNS)
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write(out / "failures.csv", buf.getvalue())
+    worst = [s for s in ranked if s.failures][: cfg.worst]
+    packs, xoscs, mp4s = _export_worst(out, worst, driver, seed, action_type, occupancy, env, videos)
+    report = _report(out, rows, worst, packs, xoscs, mp4s, driver)
+    return {"library": lib_path, "failures": out / "failures.csv", "report": report, "packs": packs,
+            "xosc": xoscs, "videos": mp4s}
+
+
+def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action_type: str, occupancy: float,
+                  env: dict, videos: bool) -> tuple[list[Path], list[Path], list[Path]]:
+    """Pack, .xosc of every failing test and an MP4 of the first, for each of the worst garages."""
+    import dataclasses
+
+    from garage_mj.cruise import _env_for, write_test_xosc, xosc_name
+    from garage_mj.export.pack import export_pack
+
+    settings = CruiseSettings(driver, int(seed), action_type, float(occupancy), dict(env), {})
+    packs, xoscs, mp4s = [], [], []
+    for s in worst:
+        pack = export_pack(s.source.garage, out / "packs")
+        packs.append(pack)
+        src = dataclasses.replace(s.source, pack=str(pack.resolve()))
+        e = _env_for(src, settings)
+        for r in s.failures:
+            i = int(r["test"])
+            path = out / "xosc" / xosc_name(src, i)
+            if not path.is_file():
+                test_seed = cruise_seed(seed, src.hash, i)
+                _, info = e.reset(seed=test_seed)
+                write_test_xosc(e, info, path, src, i, test_seed, settings)
+            xoscs.append(path)
+        if videos and s.failures:
+            from garage_mj.video import record_video
+
+            i = int(s.failures[0]["test"])
+            mp4 = out / "videos" / f"{src.hash[:12]}_{i:05d}.mp4"
+            if not mp4.is_file():
+                record_video(src, mp4, driver=driver, seed=seed, test=i, action_type=action_type,
+                             occupancy=occupancy, env=env)
+            mp4s.append(mp4)
+    return packs, xoscs, mp4s
+
+
+def _report(out: Path, rows: list[dict], worst: list[Scored], packs: list[Path], xoscs: list[Path],
+            mp4s: list[Path], driver: str) -> Path:
+    """``report.html``: the ranking, then per worst garage its preview, failures and files."""
+    e = html.escape
+    head = ["rank", "garage", "difficulty", "tests", "feasible", "failures", "failure_pct", "hit",
+            "failure_progress"]
+    table = "".join("<tr>" + "".join(f"<td>{e(str(r[c]))}</td>" for c in head) + "</tr>" for r in rows[:50])
+    cards = []
+    for s, pack in zip(worst, packs, strict=True):
+        rel = pack.relative_to(out)
+        mine = [p for p in xoscs if p.name.startswith(s.source.hash[:12])]
+        vid = [p for p in mp4s if p.name.startswith(s.source.hash[:12])]
+        fails = "".join(f"<li>test {e(r['test'])} (seed {e(r['seed'])}): {e(r['outcome'])}"
+                        f"{' (' + e(r['hit']) + ')' if r['hit'] else ''}: {e(r['reason'])}</li>" for r in s.failures)
+        files = " ".join(f'<a href="{e(str(p.relative_to(out)))}">{e(p.name)}</a>' for p in mine)
+        video = "".join(f'<p><video src="{e(str(p.relative_to(out)))}" controls width="480"></video></p>' for p in vid)
+        preview = rel / "preview.png"
+        cards.append(f'<section><h3>{e(s.source.name)}: {len(s.failures)} of {len(s.feasible)} feasible tests '
+                     f'failed</h3><p><a href="{e(str(rel))}">asset pack</a></p>'
+                     f'<img src="{e(str(preview))}" alt="preview of {e(s.source.name)}" width="360">'
+                     f'<ul>{fails}</ul><p>OpenSCENARIO: {files}</p>{video}</section>')
+    page = (f"<!doctype html><html><head><meta charset='utf-8'><title>hunt: {e(driver)}</title>"
+            "<style>body{font-family:sans-serif;margin:2em}td,th{border:1px solid #ccc;padding:2px 6px}"
+            "table{border-collapse:collapse}</style></head><body>"
+            f"<h1>Hunt: where {e(driver)} fails</h1><p>{len(rows)} garages tested; ranked by failure rate on "
+            "feasible tests (failures.csv has them all).</p><table><tr>"
+            + "".join(f"<th>{e(c)}</th>" for c in head) + f"</tr>{table}</table><h2>The worst garages</h2>"
+            + "".join(cards) + "</body></html>")
+    path = out / "report.html"
+    atomic_write(path, page)
+    return path
+
+
+def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:
+    """Re-run one listed (garage, test) of a hunt in ``out_dir``: the cruise row (same seed, same outcome)."""
+    from garage_mj.cruise import _CACHE, run_test
+    from garage_mj.library import Library
+
+    out = Path(out_dir)
+    state = json.loads(_state_file(out).read_text())["settings"]
+    rows = [r for r in read_tests(out / "cruise" / "tests.csv") if r["garage_hash"].startswith(garage_hash)]
+    if not rows:
+        raise HuntError(f"{out}: no hunted garage with hash {garage_hash}")
+    with Library(out / "hunt.sqlite", create=False) as lib:
+        gid = lib.id_of(rows[0]["garage_hash"])
+        if gid is None:
+            raise HuntError(f"{out}/hunt.sqlite: garage {garage_hash} is not stored; run the hunt again to finish it")
+        garage = lib.get(gid).garage
+    src = CruiseSource.from_garage(garage, rows[0]["garage"])
+    settings = CruiseSettings(state["driver"], state["seed"], state["action_type"], state["occupancy"], state["env"], {})
+    try:
+        return run_test(src, int(test), settings)
+    finally:
+        if "env" in _CACHE:
+            _CACHE.pop("env").close()
+            _CACHE.pop("hash", None)
