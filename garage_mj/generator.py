@@ -17,7 +17,8 @@ conditioned on the band asked for, epsilon-greedy with a per-episode epsilon dra
 so that distinct garages appear, and stores every distinct, usable garage that lands in the band
 in the scenario library. When that does not fill the band within :data:`POLICY_PATIENCE`
 episodes, a band-directed local search takes over (:class:`garage_mj.search.BandClimber`): it
-starts from the usable garages the policy painted, nearest to the band first, mutates their road
+starts from the usable garages the policy painted, nearest to the band first (and a few of the
+scripted painter's, for variety), mutates their road
 sets under the painter's rules toward the band and then inside it, and re-paints every new road
 set that lands in the band through ``GarageGenEnv`` (:func:`garage_mj.search.replay`), so what
 is stored is what the painter makes. :func:`train_for_map` trains a generator for a map that has
