@@ -113,6 +113,8 @@ class OracleDriver(BaseDriver):
                 k = j
                 while k > i and abs(self.kappa[k]) > 1e-6:
                     k -= 1
+                if tau < 0 and k < trig:  # it only starts once the car reaches its trigger: go there
+                    k = min(j, trig)
                 stop = min(stop, self.s[k] - self.config.actor_gap)
         return stop
 
