@@ -17,12 +17,13 @@ export MUJOCO_GL ?= egl
 install: $(STAMP) $(QC_STAMP)
 
 # torch first, pinned to the CPU build, so nothing later pulls the multi-GB CUDA wheels.
+# Then the package with its test tools and Ray core (--backend ray; tests/test_ray_backend.py).
 # Then CARLA's OpenDRIVE parser for the XODR tests (34 MB wheel, CPython 3.10-3.12, Linux/Windows).
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q $(TORCH)
-	$(PY) -m pip install -q -e '.[dev]'
+	$(PY) -m pip install -q -e '.[dev,ray]'
 	$(PY) -m pip install -q -e '.[carla]' || echo "warning: no carla wheel for this Python/platform; the XODR CARLA test will fail with a hint"
 	touch $(STAMP)
 

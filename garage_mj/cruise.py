@@ -19,7 +19,6 @@ import dataclasses
 import hashlib
 import io
 import json
-import multiprocessing as mp
 import os
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -431,19 +430,20 @@ def _jobs(sources: Sequence[CruiseSource], tests: int, done: set[tuple[str, int]
     return out
 
 
-def _results(jobs: list, workers: int) -> Iterator[dict[str, Any]]:
-    if workers <= 1 or len(jobs) <= 1:
-        try:
-            for job in jobs:
-                yield _task(job)
-        finally:
-            if "env" in _CACHE:
-                _CACHE.pop("env").close()
-                _CACHE.pop("hash", None)
-        return
-    # spawn: each worker opens its own GL context; tests in garage order, one at a time
-    with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
-        yield from pool.imap_unordered(_task, jobs, chunksize=1)
+def _results(jobs: list, workers: int, backend: str = "local", address: str | None = None
+             ) -> Iterator[dict[str, Any] | None]:
+    """Rows as tests end (:func:`garage_mj.backends.map_unordered`: this process, a spawn pool or Ray actors);
+    jobs come in garage order, so each worker builds each scene at most once."""
+    from garage_mj.backends import map_unordered
+
+    if backend == "ray":  # paths as this machine sees them (a cluster needs them on a shared filesystem)
+        jobs = [(s, i, st, os.path.abspath(x) if x is not None else None, e) for s, i, st, x, e in jobs]
+    try:
+        yield from map_unordered(_task, jobs, workers, backend, address)
+    finally:
+        if "env" in _CACHE:  # the in-process loop's scene
+            _CACHE.pop("env").close()
+            _CACHE.pop("hash", None)
 
 
 def run_cruise(
@@ -461,20 +461,27 @@ def run_cruise(
     max_tests: int | None = None,
     progress: bool = True,
     xosc: bool = False,
+    backend: str = "local",
+    address: str | None = None,
 ) -> CruiseResult:
     """Run ``tests`` tests on every source with ``driver``; resumable (see the module docstring).
 
     ``max_tests`` stops after that many new tests (a deliberate partial run); ``progress``
     shows a tqdm bar. ``xosc`` also writes every test as OpenSCENARIO into ``out_dir/xosc/``
     (``<garage hash 12>_<test>.xosc``, see :func:`replay_xosc`); garages without an asset pack get
-    one in ``out_dir/packs/`` for it to refer to. Raises :class:`CruiseError`, ``DriverError``
-    (bad driver) before any test.
+    one in ``out_dir/packs/`` for it to refer to. ``backend`` runs the tests in this process or a
+    spawn pool of ``workers`` (``"local"``) or on ``workers`` Ray actors (``"ray"``; ``address``: a
+    running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.backends`;
+    tests.csv gets the same rows either way. Raises :class:`CruiseError`, ``DriverError`` (bad
+    driver), ``BackendError`` (bad backend, Ray missing) before any test.
     """
+    from garage_mj.backends import check_backend
     from garage_mj.drivers import resolve_driver
 
     if tests < 1:
         raise ValueError(f"tests must be >= 1, got {tests}")
     resolve_driver(driver)  # fail fast, in this process, with the loader's one-line message
+    check_backend(backend, address)
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     hashes = [s.hash for s in srcs]
     if len(set(hashes)) != len(hashes):
@@ -483,7 +490,7 @@ def run_cruise(
                               dict(driver_kwargs or {}))
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise"):  # a second run into `out` is refused, naming this one
-        return _run_locked(srcs, tests, workers, out, settings, max_tests, progress, xosc)
+        return _run_locked(srcs, tests, workers, out, settings, max_tests, progress, xosc, backend, address)
 
 
 def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
@@ -495,7 +502,8 @@ def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
 
 
 def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Path, settings: CruiseSettings,
-                max_tests: int | None, progress: bool, xosc: bool = False) -> CruiseResult:
+                max_tests: int | None, progress: bool, xosc: bool = False, backend: str = "local",
+                address: str | None = None) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
     clean_temp(out)  # temp files of a killed run's atomic writes
     _check_settings(out, settings)
@@ -520,7 +528,7 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Pat
         with csv_path.open("a", newline="") as f, tqdm(total=len(jobs), disable=not progress,
                                                        desc="cruise", unit="test") as bar:
             writer = csv.DictWriter(f, fieldnames=TEST_COLUMNS)
-            for row in _results(jobs, workers):
+            for row in _results(jobs, workers, backend, address):
                 if row is None:  # an export-only job
                     bar.update()
                     continue

@@ -2,18 +2,21 @@
 
 A protocol TOML (``generation/paper.toml``) names the maps, the seeds, the timesteps per run
 and optionally a ``[dqn]`` table of hyper-parameters. :func:`run_experiment` trains the runs in
-a process pool, each in ``out/runs/<map>/seed_<s>/``; a finished run is skipped and an
-interrupted one resumed, so the command can simply be started again after a crash.
+a process pool or on a Ray cluster (:mod:`garage_mj.backends`), each in
+``out/runs/<map>/seed_<s>/``; a finished run is skipped and an interrupted one resumed, so the
+command can simply be started again after a crash.
 
 All runs write to one ``out/library.sqlite``: SQLite in WAL mode lets several processes insert
 at once (each insert is a tiny transaction; writers wait on a busy timeout), and the UNIQUE hash
-keeps a garage two runs both found once. Figures go to ``out/figures/``.
+keeps a garage two runs both found once. Figures go to ``out/figures/``. The runs write into
+``out`` themselves, so with Ray they must all run on machines that share it; SQLite's WAL mode
+works only between processes on one host, so train on one Ray node (the local instance, or a
+cluster of one machine) until the library writes move to this process.
 """
 
 from __future__ import annotations
 
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -96,18 +99,30 @@ def _one_run(map: str, seed: int, timesteps: int, folder: str, library: str, con
                  resume=resume, library_path=library, progress=progress)
 
 
-def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progress: bool = True) -> dict[str, Any]:
+def _job(args: tuple) -> dict[str, Any]:
+    return _one_run(*args)
+
+
+def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progress: bool = True,
+                   backend: str = "local", address: str | None = None) -> dict[str, Any]:
     """Train every (map, seed) of ``protocol`` not yet finished, then draw the figures.
 
+    ``backend``: ``"local"`` (this process, or a spawn pool of ``workers``) or ``"ray"``
+    (``workers`` Ray actors; ``address``: a running cluster, else a private local Ray), see
+    :mod:`garage_mj.backends`; a run's result does not depend on where it trains.
     Returns a summary: runs trained and skipped, garages per map, figure paths.
     """
     from tqdm import tqdm
 
+    from garage_mj.backends import check_backend, map_unordered
     from garage_mj.map_io import load_map
 
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
+    check_backend(backend, address)
     out = Path(out)
+    if backend == "ray":
+        out = out.absolute()  # Ray workers start elsewhere: give them absolute paths
     for m in protocol.maps:
         load_map(m)  # fail on a bad map before any run starts
     out.mkdir(parents=True, exist_ok=True)
@@ -121,18 +136,11 @@ def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progre
     done: list[dict[str, Any]] = []
     if jobs:
         bar = tqdm(total=len(jobs), desc=f"{protocol.name}: runs", unit="run", disable=not progress)
-        args = [(m, s, protocol.timesteps, str(f), str(library), protocol.dqn.to_dict(), progress and workers == 1)
-                for m, s, f in jobs]
-        if workers == 1:
-            for a in args:
-                done.append(_one_run(*a))
-                bar.update()
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = [pool.submit(_one_run, *a) for a in args]
-                for fut in as_completed(futures):
-                    done.append(fut.result())
-                    bar.update()
+        bars = progress and workers == 1 and backend == "local"  # a run's own bar, in this process only
+        args = [(m, s, protocol.timesteps, str(f), str(library), protocol.dqn.to_dict(), bars) for m, s, f in jobs]
+        for result in map_unordered(_job, args, workers, backend, address):
+            done.append(result)
+            bar.update()
         bar.close()
     figures = draw_figures(protocol, out)
     with Library(library) as lib:

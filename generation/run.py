@@ -2,6 +2,7 @@
 
     .venv/bin/python generation/run.py generation/smoke.toml --out runs/smoke
     .venv/bin/python generation/run.py generation/paper.toml --scale 0.01 --workers 2 --out runs/paper_1pct
+    .venv/bin/python generation/run.py generation/smoke.toml --workers 2 --backend ray --out runs/smoke_ray
 
 Finished runs are skipped and interrupted ones resumed, so after a crash start the same command
 again. Logic lives in :mod:`garage_mj.experiment`.
@@ -14,6 +15,7 @@ import json
 import sys
 from pathlib import Path
 
+from garage_mj.backends import BackendError
 from garage_mj.config import ConfigError
 from garage_mj.experiment import load_protocol, run_experiment
 from garage_mj.garage import MapError
@@ -27,6 +29,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("config", type=Path, help="protocol TOML (generation/paper.toml, generation/smoke.toml)")
     ap.add_argument("--scale", type=float, default=1.0, help="multiply the timesteps per run (0 < SCALE <= 1)")
     ap.add_argument("--workers", type=int, default=1, help="runs trained in parallel (processes)")
+    ap.add_argument("--backend", choices=("local", "ray"), default="local",
+                    help="local: this process or a process pool (default); ray: --workers Ray actors, on a "
+                         "private local Ray or the cluster at --address (pip install 'garage-mj[ray]')")
+    ap.add_argument("--address", metavar="HOST:PORT", help="with --backend ray: a running Ray cluster, e.g. HOST:6379")
     ap.add_argument("--out", type=Path, help="output folder (default: runs/<protocol name>)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bars")
     args = ap.parse_args(argv)
@@ -37,8 +43,9 @@ def main(argv: list[str] | None = None) -> int:
         out = args.out or Path("runs") / protocol.name
         print(f"{protocol.name}: {len(protocol.maps)} map(s) x {len(protocol.seeds)} seed(s) x "
               f"{protocol.timesteps} timesteps -> {out}")
-        summary = run_experiment(protocol, out, workers=args.workers, progress=not args.no_progress)
-    except (ConfigError, MapError, LibraryError, TrainingError, PlotError) as exc:
+        summary = run_experiment(protocol, out, workers=args.workers, progress=not args.no_progress,
+                                 backend=args.backend, address=args.address)
+    except (ConfigError, MapError, LibraryError, TrainingError, PlotError, BackendError) as exc:
         print(f"run.py: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

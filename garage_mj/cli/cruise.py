@@ -29,6 +29,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tests", type=positive_int, default=50, help="tests per garage (default 50)")
     p.add_argument("--driver", default="vision", help="built-in driver (waypoint, vision) or module:Class")
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="local: this process or a process pool (default); ray: --workers Ray actors, on a private "
+                        "local Ray or the cluster at --address (pip install 'garage-mj[ray]')")
+    p.add_argument("--address", metavar="HOST:PORT",
+                   help="with --backend ray: a running Ray cluster (ray start --head), e.g. HOST:6379")
     p.add_argument("--seed", type=seed, default=0, help="run seed; test seeds derive from it (default 0)")
     p.add_argument("--out", type=Path, default=Path("cruise"), help="output folder (default ./cruise)")
     p.add_argument("--action-type", choices=("discrete", "continuous"), default="discrete",
@@ -172,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     res = run_cruise(srcs, args.tests, args.driver, args.workers, args.seed, args.out,
                      action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet, env=env,
-                     xosc=args.xosc)
+                     xosc=args.xosc, backend=args.backend, address=args.address)
     s = res.stats
     r = "n/a" if s["r"] is None else f"{s['r']:.3f}"
     print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "

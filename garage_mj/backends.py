@@ -1,0 +1,212 @@
+"""Where the long jobs run: :func:`map_unordered` over a local process pool or a Ray cluster.
+
+Used by ``garage-mj cruise`` (one job per test), ``generation/run.py`` (one job per DQN run)
+and meant for any batch of independent jobs (``garage-mj hunt``). Results come back as jobs
+end, in no fixed order; the caller writes each one down as it arrives, so an interrupted batch
+loses nothing that ended and a re-run resumes. Job results never depend on the backend: every
+job carries its own seed.
+
+Backends:
+
+``local`` (default)
+    ``workers <= 1``: the jobs run one after another in this process. Otherwise a ``spawn``
+    process pool (each worker imports the package afresh, so it opens its own GL context),
+    one job at a time per worker, jobs handed out in the given order.
+``ray``
+    One Ray actor per worker slot (a long-lived process, ``num_cpus=1``), so per-process caches
+    (cruise keeps one compiled MuJoCo scene per garage) survive from job to job as in a pool
+    worker; jobs are handed out in the given order to whichever actor is free, so jobs sorted
+    by garage build each scene at most once per actor. Without ``address`` a private local Ray
+    is started (node address 127.0.0.1, ``num_cpus=workers``, no dashboard, warnings only; its
+    gRPC ports still listen on every interface, behind Ray's token auth) and shut down at the
+    end; with ``address`` (``HOST:6379``) the batch joins a running cluster (``ray start
+    --head``). A Ray already initialised in this process (:func:`ray_session`) is used as it is.
+    Workers get the parent's :data:`WORKER_ENV` variables (``MUJOCO_GL`` ...) through the
+    runtime env, as spawned pool workers inherit them. A job whose worker process or node dies
+    is retried on a restarted actor up to ``max_retries`` times (Ray's actor restarts), then the
+    batch stops with one :class:`BackendError` line; an exception the job itself raises is
+    re-raised here as it is, without retry.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing as mp
+import os
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+from garage_mj.errors import GarageMJError
+
+BACKENDS = ("local", "ray")
+#: Environment variables a Ray worker gets from the parent (when set there), as a spawned pool worker would.
+WORKER_ENV = ("MUJOCO_GL", "PYOPENGL_PLATFORM", "MUJOCO_EGL_DEVICE_ID", "EGL_DEVICE_ID", "OMP_NUM_THREADS",
+              "MKL_NUM_THREADS")
+#: ... and every variable with this prefix (``GARAGE_MJ_QC_OPENDRIVE`` ...).
+WORKER_ENV_PREFIX = "GARAGE_MJ_"
+#: The private local Ray: workers at the parent's priority (Ray's default niceness 15 starves them on a machine
+#: busy with other jobs, where pool workers would compete as equals), and no idle workers started ahead (the
+#: actors need their own, with the runtime env).
+_LOCAL_CONFIG = {"worker_niceness": 0, "prestart_worker_first_driver": False, "enable_worker_prestart": False}
+
+
+class BackendError(GarageMJError):
+    """The backend cannot run the batch (unknown backend, Ray missing or unreachable, a worker lost for good)."""
+
+
+def check_backend(backend: str, address: str | None = None) -> None:
+    """Fail fast, before any job, on an unknown backend, ``address`` without Ray, or Ray not installed."""
+    if backend not in BACKENDS:
+        raise BackendError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+    if address is not None and backend != "ray":
+        raise BackendError("--address names a Ray cluster; use it with --backend ray")
+    if backend == "ray":
+        _ray()
+
+
+def worker_env() -> dict[str, str]:
+    """The variables Ray workers get from this process (see :data:`WORKER_ENV`)."""
+    import garage_mj  # noqa: F401  (sets the MUJOCO_GL default, as in any process that imports the package)
+
+    return {k: v for k, v in os.environ.items() if k in WORKER_ENV or k.startswith(WORKER_ENV_PREFIX)}
+
+
+def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 1, backend: str = "local",
+                  address: str | None = None, *, max_retries: int = 3) -> Iterator[Any]:
+    """``func(job)`` for every job, yielded as each ends (in no fixed order).
+
+    ``func`` must be a module-level function (pickled by reference: a Ray node needs the same
+    package installed) and ``workers`` the number of processes (local pool size or Ray actors).
+    Closing the iterator early (an exception, Ctrl-C) stops the workers; what was yielded stays done.
+    """
+    check_backend(backend, address)
+    jobs = list(jobs)
+    if workers < 1:
+        raise BackendError(f"workers must be >= 1, got {workers}")
+    if not jobs:
+        return iter(())
+    if backend == "ray":
+        return _ray_map(func, jobs, workers, address, max_retries)
+    return _local_map(func, jobs, workers)
+
+
+# -- local --------------------------------------------------------------------------------------------
+def _local_map(func: Callable[[Any], Any], jobs: list, workers: int) -> Iterator[Any]:
+    if workers <= 1 or len(jobs) <= 1:
+        for job in jobs:
+            yield func(job)
+        return
+    # spawn: each worker opens its own GL context; jobs in the given order, one at a time
+    with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
+        yield from pool.imap_unordered(func, jobs, chunksize=1)
+
+
+# -- ray ----------------------------------------------------------------------------------------------
+def _ray():
+    try:
+        import ray
+    except ImportError:
+        raise BackendError("--backend ray needs Ray: pip install 'garage-mj[ray]' (or make install)") from None
+    return ray
+
+
+def _start(ray, workers: int, address: str | None, env: dict[str, str]) -> bool:
+    """Connect to ``address`` or start a private local Ray; True when this call started it (shut it down)."""
+    if ray.is_initialized():
+        return False
+    os.environ.setdefault("RAY_ACCEL_ENV_VAR_OVERRIDE_ON_ZERO", "0")  # no FutureWarning about GPU env vars
+    # a new local instance turns Ray's token auth on (a token in ~/.ray/auth_token) and says so: keep it, quietly
+    logging.getLogger("ray._private.authentication.authentication_token_setup").setLevel(logging.ERROR)
+    quiet = {"logging_level": logging.WARNING, "log_to_driver": True, "runtime_env": {"env_vars": env}}
+    try:
+        if address is not None:
+            ray.init(address=address, **quiet)
+        else:  # "local": a fresh instance, never a cluster found through RAY_ADDRESS or /tmp/ray
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, _node_ip_address="127.0.0.1",
+                     object_store_memory=128 * 1024**2, _system_config=_LOCAL_CONFIG, **quiet)
+    except Exception as exc:  # ConnectionError, TimeoutError, RuntimeError ... from Ray's start-up
+        where = f"the Ray cluster at {address}" if address else "a local Ray instance"
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise BackendError(f"cannot start or reach {where}: {type(exc).__name__}: {first}") from None
+    return True
+
+
+class _Slot:
+    """One worker slot: a long-lived process that runs jobs (its module-level caches survive between jobs)."""
+
+    def run(self, func: Callable[[Any], Any], job: Any) -> Any:
+        return func(job)
+
+
+@contextlib.contextmanager
+def ray_session(workers: int = 1, address: str | None = None) -> Iterator[Any]:
+    """Ray for a block of batches (yields the ``ray`` module): the cluster at ``address``, else a private
+    local instance of ``workers`` CPUs; shut down at the end if this call started it. Batches inside
+    (:func:`map_unordered` with ``backend="ray"``) reuse it instead of starting their own."""
+    ray = _ray()
+    auth_mode = os.environ.get("RAY_AUTH_MODE")  # ray.init of a local instance sets it in this process
+    started = _start(ray, workers, address, worker_env())
+    try:
+        yield ray
+    finally:
+        if started:
+            ray.shutdown()
+            if auth_mode is None:
+                os.environ.pop("RAY_AUTH_MODE", None)
+            else:
+                os.environ["RAY_AUTH_MODE"] = auth_mode
+
+
+def _ray_map(func: Callable[[Any], Any], jobs: list, workers: int, address: str | None,
+             max_retries: int) -> Iterator[Any]:
+    with ray_session(workers, address) as ray:
+        yield from _ray_actors(ray, func, jobs, workers, max_retries)
+
+
+def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_retries: int) -> Iterator[Any]:
+    from ray.exceptions import RayActorError, RayTaskError
+
+    env = worker_env()
+    actors: list = []
+    try:
+        # one job at a time per actor (a job queued behind a dying one would spend a retry too); a dead actor is
+        # restarted (on another node when its own is gone) and its job retried, up to max_retries times per job
+        slot = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=max_retries)(_Slot)
+        actors = [slot.options(runtime_env={"env_vars": env}).remote() for _ in range(min(workers, len(jobs)))]
+        fn = ray.put(func)
+        todo = iter(enumerate(jobs))
+        pending: dict[Any, tuple[int, int]] = {}  # ref -> (job index, actor index)
+
+        def submit(a: int) -> bool:
+            nxt = next(todo, None)
+            if nxt is None:
+                return False
+            pending[actors[a].run.remote(fn, nxt[1])] = (nxt[0], a)
+            return True
+
+        for a in range(len(actors)):
+            submit(a)
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            ref = ready[0]
+            index, a = pending.pop(ref)
+            try:
+                result = ray.get(ref)
+            except RayTaskError as exc:  # the job raised: its own exception, one line, no retry
+                cause = getattr(exc, "cause", None)
+                if isinstance(cause, BaseException):
+                    raise cause from None
+                raise
+            except RayActorError as exc:  # its process or node died, more than max_retries times
+                first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                raise BackendError(f"ray: job {index} lost its worker {max_retries + 1} times (node or process "
+                                   f"died: {first}); finished jobs are saved, run again to resume") from None
+            submit(a)
+            yield result
+    finally:
+        for actor in actors:
+            try:
+                ray.kill(actor)
+            except Exception:  # noqa: BLE001  (already gone)
+                pass

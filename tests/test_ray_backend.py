@@ -1,0 +1,111 @@
+"""The Ray backend (garage_mj.backends): same rows as the local backend, resume, retries, experiments.
+
+One private Ray (127.0.0.1, 2 CPUs) serves the whole module: its start-up costs seconds.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+
+import pytest
+
+from garage_mj.backends import BackendError, check_backend, map_unordered, ray_session
+from garage_mj.cruise import run_cruise
+from garage_mj.experiment import load_protocol, run_experiment
+from garage_mj.library import Library
+from garage_mj.painter import paint_garage
+
+pytest.importorskip("ray", reason="pip install 'garage-mj[ray]' (make install does)")
+
+FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def ray2():
+    with ray_session(2) as ray:
+        yield ray
+
+
+@pytest.fixture(scope="module")
+def garages():
+    return [paint_garage("tiny_7x11", seed=s) for s in (1, 2)]
+
+
+def rows_of(path: Path) -> list[tuple]:
+    """tests.csv rows without the wall time, sorted."""
+    with open(path, newline="") as f:
+        return sorted(tuple((k, v) for k, v in r.items() if k != "wall_s") for r in csv.DictReader(f))
+
+
+def _cruise(garages, out, **kw):
+    return run_cruise(garages, 2, "waypoint", 2, 3, out, action_type="continuous", env=FAST, progress=False, **kw)
+
+
+def test_cruise_rows_equal_local_and_a_rerun_resumes(ray2, garages, tmp_path):
+    local = _cruise(garages, tmp_path / "local")
+    first = _cruise(garages, tmp_path / "ray", backend="ray", max_tests=1)  # "interrupted" after one test
+    second = _cruise(garages, tmp_path / "ray", backend="ray")
+    assert local.tests_run == 4 and (first.tests_run, second.tests_run) == (1, 3)
+    assert rows_of(tmp_path / "ray" / "tests.csv") == rows_of(tmp_path / "local" / "tests.csv")
+    assert ray2.is_initialized()  # the batches used the module's Ray and left it running
+    again = _cruise(garages, tmp_path / "ray", backend="ray")
+    assert again.tests_run == 0 and len(again.rows) == 4
+
+
+def _die_once(job):
+    """A ``*die`` job kills its worker process the first time (a lost node, in small); returns env and pid."""
+    mark = Path(job)
+    if mark.name.endswith("die") and not mark.exists():
+        mark.write_text("died")
+        os._exit(1)
+    return mark.name, os.environ.get("MUJOCO_GL"), os.environ.get("GARAGE_MJ_TEST_MARK"), os.getpid()
+
+
+def _always_die(_job):
+    os._exit(1)
+
+
+def _raise(job):
+    raise ValueError(f"bad job {job}")
+
+
+def test_workers_get_the_env_and_a_lost_worker_is_retried_then_named(ray2, tmp_path, monkeypatch):
+    monkeypatch.setenv("GARAGE_MJ_TEST_MARK", "seen")
+    jobs = [str(tmp_path / n) for n in ("0die", "1", "2", "3", "4", "5")]
+    got = sorted(map_unordered(_die_once, jobs, 2, "ray", max_retries=1))
+    assert [g[0] for g in got] == ["0die", "1", "2", "3", "4", "5"]  # the lost job retried, once
+    assert {g[1:3] for g in got} == {(os.environ["MUJOCO_GL"], "seen")}  # as in a spawned pool worker
+    assert len({g[3] for g in got}) <= 3  # one process per worker slot (+1 restarted), not one per job
+    with pytest.raises(BackendError, match="lost its worker 1 times.*run again to resume"):
+        list(map_unordered(_always_die, [0], 1, "ray", max_retries=0))
+    with pytest.raises(ValueError, match="bad job 7"):  # the job's own error: as it is, no retry
+        list(map_unordered(_raise, [7], 1, "ray"))
+
+
+def test_bad_backend_fails_before_any_job():
+    with pytest.raises(BackendError, match="unknown backend"):
+        check_backend("dask")
+    with pytest.raises(BackendError, match="--backend ray"):
+        check_backend("local", "10.0.0.1:6379")
+
+
+def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 200\n"
+                    "[dqn]\ncheckpoint_every = 100\nlearning_starts = 100\n")
+    protocol = load_protocol(path)
+    local = run_experiment(protocol, tmp_path / "local", progress=False)
+    remote = run_experiment(protocol, tmp_path / "ray", workers=2, progress=False, backend="ray")
+    assert sorted(remote["trained"]) == sorted(local["trained"]) == [("tiny_7x11", 0), ("tiny_7x11", 1)]
+    assert remote["garages"] == local["garages"]
+
+    def found(out):  # (run without its start time, garage hash): the same garages from the same runs
+        with Library(out / "library.sqlite") as lib:
+            return sorted((r.run.rsplit("_", 2)[0], r.hash) for r in lib.query())
+
+    assert found(tmp_path / "ray") == found(tmp_path / "local")
+    again = run_experiment(protocol, tmp_path / "ray", workers=2, progress=False, backend="ray")
+    assert again["trained"] == [] and len(again["skipped"]) == 2
