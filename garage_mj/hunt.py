@@ -161,19 +161,30 @@ def _state_file(out: Path) -> Path:
 def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: str | Path | None = None,
          config: HuntConfig | None = None, seed: int = 0, action_type: str = "continuous",
          occupancy: float = 0.5, env: dict[str, Any] | None = None, workers: int = 1,
-         progress: bool = True, videos: bool = True, **cruise_kwargs: Any) -> HuntResult:
-    """Hunt the garages where ``driver`` fails (module docstring); resumable in ``out_dir``."""
+         progress: bool = True, videos: bool = True, backend: str = "local", address: str | None = None,
+         **cruise_kwargs: Any) -> HuntResult:
+    """Hunt the garages where ``driver`` fails (module docstring); resumable in ``out_dir``.
+
+    ``backend``/``address``: where the tests run (:mod:`garage_mj.backends`; one Ray session for
+    the whole hunt). The results do not depend on it.
+    """
+    import contextlib
+
+    from garage_mj.backends import check_backend, ray_session
     from garage_mj.drivers import resolve_driver
 
     cfg = config or HuntConfig()
     if (map is None) == (library is None) and library is None:
         raise HuntError("hunt: give a map (--map) or a library (--library)")
     resolve_driver(driver)
+    check_backend(backend, address)
+    cruise_kwargs = {**cruise_kwargs, "backend": backend, "address": address}
     out = ensure_dir(out_dir, "--out")
     settings = {"driver": driver, "map": map, "library": str(Path(library).resolve()) if library else None,
                 "seed": int(seed), "action_type": action_type, "occupancy": float(occupancy), "env": env or {},
                 "config": asdict(cfg)}
-    with FolderLock(out, "garage-mj hunt"):
+    session = ray_session(workers, address) if backend == "ray" else contextlib.nullcontext()
+    with FolderLock(out, "garage-mj hunt"), session:
         state_path = _state_file(out)
         if state_path.is_file():
             old = json.loads(state_path.read_text())

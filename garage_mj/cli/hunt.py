@@ -38,6 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clutter", type=int, metavar="K")
     p.add_argument("--scenario", type=Path, metavar="FILE.toml", help="ScenarioConfig fields, as garage-mj cruise")
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="where the tests run: local processes (default) or Ray (a private local Ray, or the "
+                        "cluster at --address); results are the same")
+    p.add_argument("--address", metavar="HOST:PORT", help="with --backend ray: a running Ray cluster")
     p.add_argument("--out", type=Path, default=Path("hunt"), help="output folder (default ./hunt)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -64,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         res = hunt(args.driver, args.out, map=args.map if args.library is None else args.library_map,
                    library=args.library, config=cfg, seed=args.seed, action_type=args.action_type,
                    occupancy=args.occupancy, env=env, workers=args.workers, progress=not args.quiet,
-                   videos=not args.no_videos)
+                   videos=not args.no_videos, backend=args.backend, address=args.address)
     except (ConfigError, DriverError) as exc:
         raise UserError(str(exc)) from None
     except GarageMJError:
