@@ -113,6 +113,8 @@ def _ray():
 
 def _start(ray, workers: int, address: str | None, env: dict[str, str]) -> bool:
     """Connect to ``address`` or start a private local Ray; True when this call started it (shut it down)."""
+    if address is not None:
+        _reachable(address)
     if ray.is_initialized():
         return False
     os.environ.setdefault("RAY_ACCEL_ENV_VAR_OVERRIDE_ON_ZERO", "0")  # no FutureWarning about GPU env vars
@@ -130,6 +132,20 @@ def _start(ray, workers: int, address: str | None, env: dict[str, str]) -> bool:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         raise BackendError(f"cannot start or reach {where}: {type(exc).__name__}: {first}") from None
     return True
+
+
+def _reachable(address: str, timeout: float = 10.0) -> None:
+    """A ``HOST:PORT`` that accepts no TCP connection is one line now, not Ray's minutes of retries."""
+    import socket
+
+    host, sep, port = address.rpartition(":")
+    if "://" in address or not sep or not port.isdigit():  # ray://..., "auto": let Ray resolve it
+        return
+    try:
+        socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise BackendError(f"cannot reach the Ray cluster at {address}: {exc.strerror or exc}; start it with "
+                           "ray start --head --port=PORT on that host") from None
 
 
 class _Slot:

@@ -90,6 +90,8 @@ def test_bad_backend_fails_before_any_job():
         check_backend("dask")
     with pytest.raises(BackendError, match="--backend ray"):
         check_backend("local", "10.0.0.1:6379")
+    with pytest.raises(BackendError, match="cannot reach the Ray cluster at 127.0.0.1:1"):  # not minutes of retries
+        list(map_unordered(_raise, [0], 1, "ray", "127.0.0.1:1"))
 
 
 def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
