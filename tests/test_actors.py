@@ -178,6 +178,10 @@ def test_cruise_actors_xosc_replay_and_workers(tmp_path):
     assert sum(int(r["pedestrians"]) + int(r["moving_cars"]) + int(r["clutter"]) for r in rows) > 0
     files = sorted((tmp_path / "w1" / "xosc").glob("*.xosc"))
     assert len(files) == 3 and (tmp_path / "w1" / "packs").is_dir()
+    from garage_mj.export.validate import check_xosc_batch
+
+    for rep in check_xosc_batch(files):  # ASAM's OpenSCENARIO XML checker: every written file clean
+        assert rep.ok and rep.completed >= 17 and not rep.skipped, (rep.path, rep.issues)
     for f, r in zip(files, rows, strict=True):
         again = replay_xosc(f)
         assert (again["outcome"], again["time"], again["hit"], again["path_length"]) == (
