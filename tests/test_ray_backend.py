@@ -111,3 +111,16 @@ def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
     assert found(tmp_path / "ray") == found(tmp_path / "local")
     again = run_experiment(protocol, tmp_path / "ray", workers=2, progress=False, backend="ray")
     assert again["trained"] == [] and len(again["skipped"]) == 2
+
+
+def test_hunt_on_ray_gives_the_local_hunt(ray2, tmp_path):
+    from garage_mj.hunt import HuntConfig, hunt
+
+    cfg = HuntConfig(budget=10, tests=2, population=4, elites=1, worst=1)
+    kw = dict(map="tiny_7x11", config=cfg, seed=1, action_type="discrete", env=FAST, workers=2, progress=False,
+              videos=False)
+    local = hunt("waypoint", tmp_path / "local", **kw)
+    remote = hunt("waypoint", tmp_path / "ray", backend="ray", **kw)
+    assert [(s.source.hash, len(s.rows), s.rate) for s in remote.ranked] == [
+        (s.source.hash, len(s.rows), s.rate) for s in local.ranked]
+    assert rows_of(tmp_path / "ray" / "cruise" / "tests.csv") == rows_of(tmp_path / "local" / "cruise" / "tests.csv")
