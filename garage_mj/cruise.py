@@ -226,7 +226,7 @@ def write_test_xosc(env, info: dict[str, Any], path: Path, source: CruiseSource,
         raise CruiseError(f"{source.name}: no asset pack to refer to; run_cruise exports one with xosc=True")
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_xosc(
-        path, pack_dir=source.pack, target_stall=env.target, occupied=env.occupied, start=info["pose"],
+        path, pack_dir=source.pack, target_stall=env.target, occupied=env.occupied, start=env.start_pose,
         route=env.route.points, goal=env.monitor.goal_pose, actors=env.scenario.actors,
         parked_poses=env.scene.layout.parked_cars,
         meta={"garage_hash": source.hash, "garage": source.name, "test": index, "seed": seed,

@@ -119,7 +119,7 @@ def test_hunt_on_ray_gives_the_local_hunt(ray2, tmp_path):
     cfg = HuntConfig(budget=10, tests=2, population=4, elites=1, worst=1)
     kw = dict(map="tiny_7x11", config=cfg, seed=1, action_type="discrete", env=FAST, workers=2, progress=False,
               videos=False)
-    local = hunt("waypoint", tmp_path / "local", **kw)
+    local = hunt("waypoint", tmp_path / "local", **{**kw, "workers": 1})  # in-process: no pool to start
     remote = hunt("waypoint", tmp_path / "ray", backend="ray", **kw)
     assert [(s.source.hash, len(s.rows), s.rate) for s in remote.ranked] == [
         (s.source.hash, len(s.rows), s.rate) for s in local.ranked]

@@ -240,6 +240,7 @@ class GarageDriveEnv(gym.Env):
         yaw = heading + dyaw
         if "start" in options:  # an explicit (x, y, yaw) start pose, for forced scenarios
             x, y, yaw = (float(v) for v in options["start"])
+        self.start_pose = (x, y, yaw)  # exactly as set (the measured pose after mj_forward differs in the last bits)
         mujoco.mj_resetData(self.model, self.data)
         set_parked(self.model, None, occupied)
         self._place_actors()
