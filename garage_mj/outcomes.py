@@ -161,7 +161,9 @@ class OutcomeMonitor:
         cfg = self.config
         for c in contacts:
             if c.semantic in COLLIDABLE:
-                return self._end(OutcomeKind.COLLISION, time, f"hit {c.semantic.name.lower()} {c.geom}",
+                # the car's speed tells a ram from being walked into while stopped (actors do not yield)
+                return self._end(OutcomeKind.COLLISION, time,
+                                 f"hit {c.semantic.name.lower()} {c.geom} at {abs(speed):.1f} m/s",
                                  c.semantic.name.lower(), c.geom)
         p = np.asarray(position, dtype=float)[:2]
         goal_dist = float(np.linalg.norm(p - self.goal))
