@@ -196,32 +196,36 @@ def parse_xqar(path: Path, xodr: Path) -> QcReport:
     return QcReport(xodr, issues, status["completed"], status["skipped"], status["error"])
 
 
-def check_asam_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> list[QcReport]:
-    """:func:`check_asam` for many files in one child process (the checker's start-up dominates)."""
-    exe = qc_executable()
+def _qc_batch(paths: Sequence[str | Path], exe: Path, bundle: str, driver: str, timeout: float) -> list[QcReport]:
+    """Run one ASAM checker bundle on many files in one child process (the checker's start-up dominates)."""
     python = exe.parent / "python"
-    with tempfile.TemporaryDirectory(prefix="garage_qc_") as tmp:
+    with tempfile.TemporaryDirectory(prefix=f"garage_qc_{bundle}_") as tmp:
         configs, results = [], []
         for i, p in enumerate(paths):
             res = Path(tmp) / f"result_{i}.xqar"
             cfg = Path(tmp) / f"config_{i}.xml"
-            cfg.write_text(_config(Path(p).resolve(), res))
+            cfg.write_text(_config(Path(p).resolve(), res, bundle))
             configs.append(str(cfg))
             results.append(res)
-        if python.is_file():  # one interpreter for the batch, through qc_opendrive's own main()
-            cmds = [[str(python), "-c", _QC_DRIVER, *configs]]
+        if python.is_file():  # one interpreter for the batch, through the checker's own main()
+            cmds = [[str(python), "-c", driver, *configs]]
         else:
             cmds = [[str(exe), "-c", c] for c in configs]
         for cmd in cmds:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
             if proc.returncode != 0:
                 raise ToolFailed(
-                    f"qc_opendrive failed (exit code {proc.returncode}): {proc.stderr.strip()[-600:]}"
+                    f"{exe.name} failed (exit code {proc.returncode}): {proc.stderr.strip()[-600:]}"
                 )
         missing = [str(p) for p, r in zip(paths, results) if not r.is_file()]
         if missing:
-            raise ToolFailed(f"qc_opendrive wrote no result for {missing}")
+            raise ToolFailed(f"{exe.name} wrote no result for {missing}")
         return [parse_xqar(r, Path(p)) for p, r in zip(paths, results)]
+
+
+def check_asam_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> list[QcReport]:
+    """:func:`check_asam` for many files in one child process (the checker's start-up dominates)."""
+    return _qc_batch(paths, qc_executable(), "xodrBundle", _QC_DRIVER, timeout)
 
 
 def check_asam(xodr_path: str | Path) -> QcReport:
@@ -247,30 +251,7 @@ def qc_xosc_executable() -> Path:
 
 def check_xosc_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> list[QcReport]:
     """:func:`check_xosc` for many files in one child process (the checker's start-up dominates)."""
-    exe = qc_xosc_executable()
-    python = exe.parent / "python"
-    with tempfile.TemporaryDirectory(prefix="garage_qc_xosc_") as tmp:
-        configs, results = [], []
-        for i, p in enumerate(paths):
-            res = Path(tmp) / f"result_{i}.xqar"
-            cfg = Path(tmp) / f"config_{i}.xml"
-            cfg.write_text(_config(Path(p).resolve(), res, "xoscBundle"))
-            configs.append(str(cfg))
-            results.append(res)
-        if python.is_file():  # one interpreter for the batch, through qc_openscenario's own main()
-            cmds = [[str(python), "-c", _QC_XOSC_DRIVER, *configs]]
-        else:
-            cmds = [[str(exe), "-c", c] for c in configs]
-        for cmd in cmds:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-            if proc.returncode != 0:
-                raise ToolFailed(
-                    f"qc_openscenario failed (exit code {proc.returncode}): {proc.stderr.strip()[-600:]}"
-                )
-        missing = [str(p) for p, r in zip(paths, results) if not r.is_file()]
-        if missing:
-            raise ToolFailed(f"qc_openscenario wrote no result for {missing}")
-        return [parse_xqar(r, Path(p)) for p, r in zip(paths, results)]
+    return _qc_batch(paths, qc_xosc_executable(), "xoscBundle", _QC_XOSC_DRIVER, timeout)
 
 
 def check_xosc(xosc_path: str | Path) -> QcReport:
