@@ -150,19 +150,18 @@ def check_carla(xodr_text: str, name: str = "garage") -> CarlaReport:
 
 
 # -- ASAM Quality Checker ------------------------------------------------------------------------
-def qc_executable() -> Path:
-    """The ``qc_opendrive`` command: $GARAGE_MJ_QC_OPENDRIVE, the repo's ``.venv-qc``, or PATH."""
-    for cand in (
-        os.environ.get(QC_ENV),
-        _REPO / ".venv-qc" / "bin" / "qc_opendrive",
-        shutil.which("qc_opendrive"),
-    ):
+def _find_checker(env: str, command: str, package: str, what: str) -> Path:
+    """A checker command: $``env``, the repo's ``.venv-qc``, or PATH; else one line naming the fix."""
+    for cand in (os.environ.get(env), _REPO / ".venv-qc" / "bin" / command, shutil.which(command)):
         if cand and Path(cand).is_file():
             return Path(cand)
-    raise ToolMissing(
-        "the ASAM OpenDRIVE checker (qc_opendrive) is not installed; run `make install` "
-        f"(it makes .venv-qc with asam-qc-opendrive), or set {QC_ENV} to its path"
-    )
+    raise ToolMissing(f"the ASAM {what} checker ({command}) is not installed; run `make install` "
+                      f"(it puts {package} in .venv-qc), or set {env} to its path")
+
+
+def qc_executable() -> Path:
+    """The ``qc_opendrive`` command: $GARAGE_MJ_QC_OPENDRIVE, the repo's ``.venv-qc``, or PATH."""
+    return _find_checker(QC_ENV, "qc_opendrive", "asam-qc-opendrive", "OpenDRIVE")
 
 
 def _config(xodr: Path, result: Path, bundle_name: str = "xodrBundle") -> str:
@@ -236,17 +235,7 @@ def check_asam(xodr_path: str | Path) -> QcReport:
 # -- ASAM OpenSCENARIO XML checker ---------------------------------------------------------------
 def qc_xosc_executable() -> Path:
     """The ``qc_openscenario`` command: $GARAGE_MJ_QC_OPENSCENARIO, the repo's ``.venv-qc``, or PATH."""
-    for cand in (
-        os.environ.get(QC_XOSC_ENV),
-        _REPO / ".venv-qc" / "bin" / "qc_openscenario",
-        shutil.which("qc_openscenario"),
-    ):
-        if cand and Path(cand).is_file():
-            return Path(cand)
-    raise ToolMissing(
-        "the ASAM OpenSCENARIO XML checker (qc_openscenario) is not installed; run `make install` "
-        f"(it adds asam-qc-openscenarioxml to .venv-qc), or set {QC_XOSC_ENV} to its path"
-    )
+    return _find_checker(QC_XOSC_ENV, "qc_openscenario", "asam-qc-openscenarioxml", "OpenSCENARIO XML")
 
 
 def check_xosc_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> list[QcReport]:
