@@ -2,14 +2,16 @@
 
     .venv/bin/python eval/bench_hunt.py --library runs/paper_5pct/library.sqlite [--map m5_13x13_aligned]
         [--driver vision] [--action-type continuous] [--budget 1000] [--tests 5] [--top 10]
-        [--holdout-tests 10] [--workers 2] [--out runs/bench_hunt] [--json docs/bench_hunt.json]
+        [--holdout-tests 10] [--holdout-uniform 10] [--workers 2] [--out runs/bench_hunt]
+        [--json docs/bench_hunt.json]
 
 1. ``hunt`` spends ``--budget`` tests starting from the library's garages of ``--map``.
 2. The uniform baseline spends the same budget on ``budget / tests`` garages drawn uniformly from
    the same library, ``--tests`` tests each (the hunt's tests per evaluation).
-3. Held out: the hunt's ``--top`` garages and ``--top`` of the uniform garages (the first drawn)
-   are re-tested with ``--holdout-tests`` fresh test seeds each (test indices the hunt never
-   used), so the hunted rate is not inflated by selecting on the same tests' luck.
+3. Held out: the hunt's ``--top`` garages and ``--holdout-uniform`` of the uniform garages (the
+   first drawn; default as many as ``--top``) are re-tested with ``--holdout-tests`` fresh test
+   seeds each (a run seed the hunt never used), so the hunted rate is not inflated by selecting
+   on the same tests' luck.
 
 Reports failure rates on feasible tests (in-search and held out) and their ratio; every stage is a
 resumable run folder under ``--out``.
@@ -59,6 +61,7 @@ def main() -> None:
     ap.add_argument("--elites", type=int, default=5)
     ap.add_argument("--top", type=int, default=10)
     ap.add_argument("--holdout-tests", type=int, default=10)
+    ap.add_argument("--holdout-uniform", type=int, default=None, help="uniform garages re-tested (default --top)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("runs/bench_hunt"))
@@ -91,7 +94,9 @@ def main() -> None:
         "uniform": {**_rate(uni.rows), "garages": len(uniform), "wall_s": round(uniform_s, 1)},
         "holdout": {"tests_per_garage": args.holdout_tests,
                     "hunt_top": _holdout(top, args, args.out / "holdout_hunt"),
-                    "uniform": _holdout(uniform[: args.top], args, args.out / "holdout_uniform")},
+                    "uniform_garages": args.holdout_uniform or args.top,
+                    "uniform": _holdout(uniform[: args.holdout_uniform or args.top], args,
+                                        args.out / "holdout_uniform")},
     }
     h, u = result["holdout"]["hunt_top"]["failure_pct"], result["holdout"]["uniform"]["failure_pct"]
     result["holdout"]["ratio"] = round(h / u, 2) if h is not None and u else None
