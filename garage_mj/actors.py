@@ -47,13 +47,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from garage_mj.config import ConfigError, load_config, read_toml
+from garage_mj.geometry import DELTAS
 from garage_mj.scene.drivable import START_OFFSET, DrivePlanner, TestPlan
-from garage_mj.scene.world import cell_center, world_to_cell
+from garage_mj.scene.world import WORLD_DIR, cell_center, world_to_cell
+
+if TYPE_CHECKING:
+    from garage_mj.vehicle import CarGeometry
 
 KINDS = ("pedestrian", "moving_car", "clutter")
 BEHAVIOURS = {
@@ -67,6 +71,7 @@ SHAPES = {"cross": "pedestrian", "step_out": "pedestrian", "along": "pedestrian"
 #: Half extents (length/2 along the actor's yaw, width/2, height/2) [m] of each shape's body.
 SHAPE_SIZE = {"pedestrian": (0.25, 0.25, 0.85), "car": (2.15, 0.95, 0.7), "cone": (0.18, 0.18, 0.35),
               "trolley": (0.45, 0.3, 0.5)}
+ROUND = frozenset({"pedestrian", "cone"})  # shapes whose body is a vertical cylinder (capsule) of radius hx
 PLACEMENT_TRIES = 20  # draws per actor before it is left out
 SAMPLE_DT = 0.1  # [s] trajectories are checked against the swept path at this time step
 MIN_SPACING = 2.0  # [m] between the start poses of two actors
@@ -247,8 +252,8 @@ class Scenario:
 def _circles(shape: str) -> tuple[np.ndarray, float]:
     """Circle centres along the body's length (local x) and their radius, covering the body's outline."""
     hx, hy, _ = SHAPE_SIZE[shape]
-    if hx <= hy * 1.2:
-        return np.array([0.0]), math.hypot(hx, hy) if shape != "pedestrian" and shape != "cone" else hx
+    if shape in ROUND:
+        return np.array([0.0]), hx
     n = max(2, int(math.ceil(hx / hy)))
     step = 2 * hx / n
     xs = -hx + step / 2 + step * np.arange(n)
@@ -265,16 +270,14 @@ def _circle_points(shape: str, poses: np.ndarray) -> tuple[np.ndarray, float]:
 class Corridor:
     """The ego car's swept path of a feasible test: body footprints along the planned route."""
 
-    def __init__(self, plan: TestPlan, planner: DrivePlanner) -> None:
-        self.plan = plan
-        self.car = planner.car
+    def __init__(self, plan: TestPlan, car: CarGeometry) -> None:
+        self.car = car
         self.rear = np.asarray(plan.rear, dtype=float)
         self.heading = np.asarray(plan.heading, dtype=float)
         self.centre = np.asarray(plan.centre, dtype=float)
         seg = np.linalg.norm(np.diff(self.centre, axis=0), axis=1)
         self.s = np.concatenate([[0.0], np.cumsum(seg)])  # [m] centre-path stations
         self.i0 = int(min(np.searchsorted(self.s, START_OFFSET), len(self.s) - 1))  # where the car starts
-        self.length = float(self.s[-1])
         self._cos, self._sin = np.cos(self.heading), np.sin(self.heading)
 
     def distance(self, points: np.ndarray, first: int = 0) -> np.ndarray:
@@ -328,13 +331,11 @@ def actor_poses(actor: ActorSpec, times: np.ndarray) -> np.ndarray:
 class _Placer:
     """Draws actor trajectories around one test's route."""
 
-    def __init__(self, config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner, occupied: set[int],
-                 rng: np.random.Generator, margin: float) -> None:
+    def __init__(self, config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner, rng: np.random.Generator,
+                 margin: float) -> None:
         self.cfg = config
-        self.plan = plan
         self.planner = planner
-        self.corr = Corridor(plan, planner)
-        self.occupied = occupied
+        self.corr = Corridor(plan, planner.car)
         self.rng = rng
         self.margin = margin
         self.world = planner.world
@@ -345,7 +346,6 @@ class _Placer:
         hard = np.array([c in ("wall", "obstacle", "pillar") for c in obs.classes], dtype=bool)
         self.hard_boxes = obs.boxes[hard]
         self.stall_boxes = obs.boxes[~hard]
-        self.stall_ids = obs.stall[~hard]
         self.taken: set[int] = {plan.stall}
         self.starts: list[np.ndarray] = []
         curved = np.abs(np.asarray(plan.curvature, dtype=float)) > 1e-9
@@ -402,6 +402,17 @@ class _Placer:
             rows.append([t, float(p[0]), float(p[1]), th])
         return rows
 
+    def _moving(self, name: str, kind: str, behaviour: str, rows: list[list[float]], stall: int = -1,
+                from_stall: bool = False) -> ActorSpec | None:
+        """A moving actor along ``rows``, if its way is free of walls, obstacles and pillars and it starts
+        apart from the others, with its trigger; else None. ``from_stall``: it starts parked in a
+        stall, so its first pose is not checked."""
+        poses = np.asarray(rows)[:, 1:]
+        if (not self._free(SHAPES[behaviour], self._densify(poses[1:] if from_stall else poses))
+                or not self._spaced(poses[0, :2])):
+            return None
+        return self._with_trigger(name, kind, behaviour, rows, stall)
+
     def _with_trigger(self, name: str, kind: str, behaviour: str, rows: list[list[float]], stall: int = -1
                       ) -> ActorSpec | None:
         """Attach the trigger: ``stopping distance + lead`` before the first conflict (or a fixed lead)."""
@@ -454,11 +465,7 @@ class _Placer:
             a = p + right * off
             b = a - u * length
             pts = [a, b]
-        rows = self._path(pts, v)
-        poses = np.asarray(rows)[:, 1:]
-        if not self._free("pedestrian", self._densify(poses)) or not self._spaced(poses[0, :2]):
-            return None
-        return self._with_trigger(name, "pedestrian", behaviour, rows)
+        return self._moving(name, "pedestrian", behaviour, self._path(pts, v))
 
     def _densify(self, poses: np.ndarray, step: float = 0.5) -> np.ndarray:
         out = [poses[0]]
@@ -501,11 +508,7 @@ class _Placer:
         p, _, _, _ = self._frame(i)
         across = float((p - e) @ o)  # entry to the route's lane centre
         pts = [e - o * st.length * 0.6, e, e + o * (across + self.lane * 1.5 + 0.8)]
-        rows = self._path(pts, v)
-        poses = np.asarray(rows)[:, 1:]
-        if not self._free("pedestrian", self._densify(poses)) or not self._spaced(poses[0, :2]):
-            return None
-        return self._with_trigger(name, "pedestrian", "step_out", rows)
+        return self._moving(name, "pedestrian", "step_out", self._path(pts, v))
 
     # moving cars
     def moving_car(self, name: str, behaviour: str) -> ActorSpec | None:
@@ -531,10 +534,7 @@ class _Placer:
                     [t1, lane_pt[0] + u[0] * back, lane_pt[1] + u[1] * back, away],
                     [t1 + dwell, lane_pt[0] + u[0] * back, lane_pt[1] + u[1] * back, away]]
             rows.append([rows[-1][0] + float(np.linalg.norm(far - lane_pt)) / v, far[0], far[1], away])
-            poses = np.asarray(rows)[:, 1:]
-            if not self._free("car", self._densify(poses[1:])) or not self._spaced(poses[0, :2]):
-                return None
-            spec = self._with_trigger(name, "moving_car", "reverse_out", rows, stall=st.id)
+            spec = self._moving(name, "moving_car", "reverse_out", rows, stall=st.id, from_stall=True)
             if spec is not None:
                 self.taken.add(st.id)
             return spec
@@ -551,11 +551,7 @@ class _Placer:
             q = self.corr.centre[end]
             a = q - right * self.lane  # opposite lane, far end
             b = p - right * self.lane  # near end
-            rows = self._path([a, b], v, yaw=h + math.pi)
-            poses = np.asarray(rows)[:, 1:]
-            if not self._free("car", self._densify(poses)) or not self._spaced(poses[0, :2]):
-                return None
-            return self._with_trigger(name, "moving_car", "oncoming", rows)
+            return self._moving(name, "moving_car", "oncoming", self._path([a, b], v, yaw=h + math.pi))
         return self._junction_wait(name, v, lo, hi)
 
     def _junction_wait(self, name: str, v: float, lo: float, hi: float) -> ActorSpec | None:
@@ -579,13 +575,11 @@ class _Placer:
         on_route = {world_to_cell(float(x), float(y), rows_n, world) for x, y in corr.centre}
         branches = []
         for d in sorted(net.cells[cell].openings):
-            from garage_mj.geometry import DELTAS
             q = (cell[0] + DELTAS[d][0], cell[1] + DELTAS[d][1])
             if q in net.cells and q not in on_route:
                 branches.append(d)
         if not branches:
             return None
-        from garage_mj.scene.world import WORLD_DIR
         d = branches[int(self.rng.integers(len(branches)))]
         u = np.array(WORLD_DIR[d], dtype=float)  # from the junction into the branch
         h = -u  # the waiting car faces the junction
@@ -595,10 +589,7 @@ class _Placer:
         start = stop + u * creep
         yaw = math.atan2(h[1], h[0])
         rows = [[0.0, start[0], start[1], yaw], [creep / min(v, 1.0), stop[0], stop[1], yaw]]
-        poses = np.asarray(rows)[:, 1:]
-        if not self._free("car", self._densify(poses)) or not self._spaced(poses[0, :2]):
-            return None
-        return self._with_trigger(name, "moving_car", "junction_wait", rows)
+        return self._moving(name, "moving_car", "junction_wait", rows)
 
     # clutter
     def clutter(self, name: str, behaviour: str) -> ActorSpec | None:
@@ -623,7 +614,7 @@ class _Placer:
         if i is None:
             return None
         p, u, right, h = self._frame(i)
-        xs, r = _circles(shape)
+        _, r = _circles(shape)
         need = self.planner.car.half_width + self.margin + r + 0.05
         if self.rng.random() < 0.5:  # right edge of the car's lane (toward the stall row)
             off = float(self.rng.uniform(need, max(need, self.lane / 2 + 0.5)))
@@ -637,18 +628,19 @@ class _Placer:
         return ActorSpec(name, "clutter", behaviour, np.array([[0.0, *pose[0]]]))
 
 
-def draw_scenario(config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner, occupied, rng: np.random.Generator,
+def draw_scenario(config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner, rng: np.random.Generator,
                   margin: float | None = None) -> Scenario:
     """Place ``config``'s actors around a feasible test ``plan`` with ``rng``, and judge avoidability.
 
-    ``occupied``: the stalls holding a parked car (the actors may take some of them: see
-    :attr:`Scenario.free_stalls`). The draws use ``rng`` only, so the same seed gives the same actors.
+    Actors that take a stall (a car reversing out, a car parked badly) list it in
+    :attr:`Scenario.free_stalls`: no parked car stands there. The draws use ``rng`` only, so the
+    same seed gives the same actors.
     """
     out = Scenario()
     if config.count == 0 or not plan.feasible:
         return out
     margin = planner.config.clearance_margin if margin is None else float(margin)
-    placer = _Placer(config, plan, planner, set(occupied), rng, margin)
+    placer = _Placer(config, plan, planner, rng, margin)
     todo = ([("pedestrian", config.pedestrian_behaviours)] * config.pedestrians
             + [("moving_car", config.moving_car_behaviours)] * config.moving_cars
             + [("clutter", config.clutter_behaviours)] * config.clutter)
@@ -682,7 +674,7 @@ def judge(actors: list[ActorSpec], plan: TestPlan, planner: DrivePlanner, config
     if not actors or not plan.feasible:
         return True, ""
     margin = planner.config.clearance_margin if margin is None else float(margin)
-    corr = Corridor(plan, planner)
+    corr = Corridor(plan, planner.car)
     v = planner.car.max_speed
     d_stop = config.stopping_distance(v)
     for a in actors:

@@ -153,6 +153,13 @@ def _env_for(source: CruiseSource, settings: CruiseSettings):
     return _CACHE["env"]
 
 
+def close_cached_env() -> None:
+    """Close the scene this process keeps for :func:`run_test` (tests run in-process, then done)."""
+    if "env" in _CACHE:
+        _CACHE.pop("env").close()
+        _CACHE.pop("hash", None)
+
+
 def _driver_for(settings: CruiseSettings):
     from garage_mj.drivers import load_driver
 
@@ -441,9 +448,7 @@ def _results(jobs: list, workers: int, backend: str = "local", address: str | No
     try:
         yield from map_unordered(_task, jobs, workers, backend, address)
     finally:
-        if "env" in _CACHE:  # the in-process loop's scene
-            _CACHE.pop("env").close()
-            _CACHE.pop("hash", None)
+        close_cached_env()  # the in-process loop's scene
 
 
 def run_cruise(

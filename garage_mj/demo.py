@@ -152,11 +152,9 @@ def run_demo(cfg: DemoConfig) -> Path:
 
 def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path):
     """Cruise tests with every driver; returns the report's table, regression figure and KPIs."""
-    from garage_mj.cruise import CruiseSource, run_cruise
+    from garage_mj.cruise import HIT_CLASSES, CruiseSource, run_cruise
 
     sources = [CruiseSource.from_pack(p) for p in packs]
-    from garage_mj.cruise import HIT_CLASSES
-
     columns = ["garage", "driver", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions",
                "what was hit", "timeouts", "deadlocks", "success % of feasible"]
     rows: list[list[object]] = []

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.cruise import CruiseSource, CruiseSettings, cruise_seed, read_tests, run_cruise
+from garage_mj.cruise import CruiseSettings, CruiseSource, close_cached_env, read_tests, run_cruise, run_test
 from garage_mj.errors import GarageMJError
 from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir
 from garage_mj.garage import Garage
@@ -174,7 +174,7 @@ def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: s
     from garage_mj.drivers import resolve_driver
 
     cfg = config or HuntConfig()
-    if (map is None) == (library is None) and library is None:
+    if map is None and library is None:
         raise HuntError("hunt: give a map (--map) or a library (--library)")
     resolve_driver(driver)
     check_backend(backend, address)
@@ -316,33 +316,33 @@ def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action
     """Pack, .xosc of every failing test and an MP4 of the first, for each of the worst garages."""
     import dataclasses
 
-    from garage_mj.cruise import _env_for, write_test_xosc, xosc_name
+    from garage_mj.cruise import xosc_name
     from garage_mj.export.pack import export_pack
 
     settings = CruiseSettings(driver, int(seed), action_type, float(occupancy), dict(env), {})
     packs, xoscs, mp4s = [], [], []
-    for s in worst:
-        pack = export_pack(s.source.garage, out / "packs")
-        packs.append(pack)
-        src = dataclasses.replace(s.source, pack=str(pack.resolve()))
-        e = _env_for(src, settings)
-        for r in s.failures:
-            i = int(r["test"])
-            path = out / "xosc" / xosc_name(src, i)
-            if not path.is_file():
-                test_seed = cruise_seed(seed, src.hash, i)
-                _, info = e.reset(seed=test_seed)
-                write_test_xosc(e, info, path, src, i, test_seed, settings)
-            xoscs.append(path)
-        if videos and s.failures:
-            from garage_mj.video import record_video
+    try:
+        for s in worst:
+            pack = export_pack(s.source.garage, out / "packs")
+            packs.append(pack)
+            src = dataclasses.replace(s.source, pack=str(pack.resolve()))
+            for r in s.failures:
+                i = int(r["test"])
+                path = out / "xosc" / xosc_name(src, i)
+                if not path.is_file():
+                    run_test(src, i, settings, str(out / "xosc"), export_only=True)
+                xoscs.append(path)
+            if videos and s.failures:
+                from garage_mj.video import record_video
 
-            i = int(s.failures[0]["test"])
-            mp4 = out / "videos" / f"{src.hash[:12]}_{i:05d}.mp4"
-            if not mp4.is_file():
-                record_video(src, mp4, driver=driver, seed=seed, test=i, action_type=action_type,
-                             occupancy=occupancy, env=env)
-            mp4s.append(mp4)
+                i = int(s.failures[0]["test"])
+                mp4 = out / "videos" / f"{src.hash[:12]}_{i:05d}.mp4"
+                if not mp4.is_file():
+                    record_video(src, mp4, driver=driver, seed=seed, test=i, action_type=action_type,
+                                 occupancy=occupancy, env=env)
+                mp4s.append(mp4)
+    finally:
+        close_cached_env()  # the scene run_test kept for the exports
     return packs, xoscs, mp4s
 
 
@@ -381,7 +381,6 @@ def _report(out: Path, rows: list[dict], worst: list[Scored], packs: list[Path],
 
 def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:
     """Re-run one listed (garage, test) of a hunt in ``out_dir``: the cruise row (same seed, same outcome)."""
-    from garage_mj.cruise import _CACHE, run_test
     from garage_mj.library import Library
 
     out = Path(out_dir)
@@ -399,6 +398,4 @@ def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:
     try:
         return run_test(src, int(test), settings)
     finally:
-        if "env" in _CACHE:
-            _CACHE.pop("env").close()
-            _CACHE.pop("hash", None)
+        close_cached_env()

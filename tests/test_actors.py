@@ -8,11 +8,19 @@ import math
 import numpy as np
 import pytest
 
-from garage_mj.actors import (ActorSpec, Corridor, ScenarioConfig, actor_poses, draw_scenario, judge,
-                              load_scenario_config, sample_times)
+from garage_mj.actors import (
+    ActorSpec,
+    Corridor,
+    ScenarioConfig,
+    actor_poses,
+    draw_scenario,
+    judge,
+    load_scenario_config,
+    sample_times,
+)
 from garage_mj.cli import main
 from garage_mj.config import ConfigError
-from garage_mj.cruise import CruiseSource, read_tests, replay_xosc, run_cruise
+from garage_mj.cruise import read_tests, replay_xosc, run_cruise
 from garage_mj.drivers import load_driver
 from garage_mj.envs.drive_env import GarageDriveEnv
 from garage_mj.painter import paint_garage
@@ -54,11 +62,11 @@ def test_config_validates_and_loads_toml(tmp_path):
 def test_draws_are_seeded_and_every_event_avoidable(long_plan):
     planner, plan = long_plan
     cfg = ScenarioConfig(**BUSY)
-    draws = [draw_scenario(cfg, plan, planner, [], np.random.default_rng(s)) for s in range(12)]
-    again = draw_scenario(cfg, plan, planner, [], np.random.default_rng(3))
+    draws = [draw_scenario(cfg, plan, planner, np.random.default_rng(s)) for s in range(12)]
+    again = draw_scenario(cfg, plan, planner, np.random.default_rng(3))
     assert [a.as_dict() for a in again.actors] == [a.as_dict() for a in draws[3].actors]
     assert len({tuple(a.behaviour for a in d.actors) for d in draws}) > 1
-    corr = Corridor(plan, planner)
+    corr = Corridor(plan, planner.car)
     kinds = set()
     for d in draws:
         assert d.feasible, d.reason
@@ -74,7 +82,7 @@ def test_draws_are_seeded_and_every_event_avoidable(long_plan):
 
 def test_an_unavoidable_event_is_infeasible_with_a_reason(long_plan):
     planner, plan = long_plan
-    corr = Corridor(plan, planner)
+    corr = Corridor(plan, planner.car)
     i = corr.index_at(corr.s[corr.i0] + 20.0)
     p, h = corr.pose(i)
     right = np.array([math.sin(h), -math.cos(h)])
@@ -104,7 +112,7 @@ def test_actors_are_seen_hit_and_counted(m5, long_plan):
     env = GarageDriveEnv(m5, action_type="continuous", infeasible="report", scenario={"pedestrians": 1})
     try:
         assert {Semantic.PEDESTRIAN, Semantic.MOVING_CAR, Semantic.CLUTTER} <= COLLIDABLE
-        corr = Corridor(plan, env.planner)
+        corr = Corridor(plan, env.car_geometry)
         p, h = corr.pose(corr.i0 + 4)
         ahead = p + 6.0 * np.array([math.cos(h), math.sin(h)])
         # a pedestrian standing in the lane 6 m ahead: given (as a replay would), so judged too

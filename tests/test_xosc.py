@@ -79,7 +79,7 @@ def files(case):
     drawn = None
     for seed in range(20):
         sc = draw_scenario(ScenarioConfig(pedestrians=1, moving_cars=1, clutter=1), plan, scene.planner(),
-                           kw["occupied"], np.random.default_rng(seed))
+                           np.random.default_rng(seed))
         if len({a.kind for a in sc.actors}) >= 2:
             drawn = sc
             break

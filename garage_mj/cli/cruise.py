@@ -27,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sample", type=positive_int, metavar="N",
                    help="with --library: N garages stratified by difficulty (seeded by --seed)")
     p.add_argument("--tests", type=positive_int, default=50, help="tests per garage (default 50)")
-    p.add_argument("--driver", default="vision", help="built-in driver (waypoint, vision) or module:Class")
+    p.add_argument("--driver", help="built-in driver (oracle, waypoint, vision) or module:Class (default vision; "
+                                    "with --scenario-file: the one the file records)")
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local: this process or a process pool (default); ray: --workers Ray actors, on a private "
@@ -66,12 +67,10 @@ def _errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Nam
         from garage_mj.drivers import DriverError
         from garage_mj.export.pack import PackError
         from garage_mj.library import LibraryError
-        from garage_mj.config import ConfigError
-        from garage_mj.errors import GarageMJError
 
         try:
             return func(args)
-        except (CruiseError, DriverError, PackError, LibraryError, ConfigError, GarageMJError) as exc:
+        except (CruiseError, DriverError, PackError, LibraryError) as exc:
             raise UserError(str(exc)) from None
 
     return wrapper
@@ -130,12 +129,11 @@ def replay(args: argparse.Namespace) -> int:
     from garage_mj.cruise import TEST_COLUMNS, replay_xosc
     from garage_mj.fsutil import atomic_write, ensure_dir
 
-    driver = args.driver if args.driver != "vision" or "--driver" in _argv() else None
     rows = []
     for path in args.scenario_file:
         if not path.is_file():
             raise UserError(f"--scenario-file {path}: no such file; write tests with garage-mj cruise --xosc")
-        row = replay_xosc(path, driver=driver)
+        row = replay_xosc(path, driver=args.driver)
         rows.append(row)
         extra = f" ({row['hit']})" if row["hit"] else ""
         print(f"{path}: {row['outcome']}{extra} after {row['time']} s, driver {row['driver']}: {row['reason']}")
@@ -152,17 +150,12 @@ def replay(args: argparse.Namespace) -> int:
     return 0
 
 
-def _argv() -> list[str]:
-    import sys
-
-    return sys.argv
-
-
 def run(args: argparse.Namespace) -> int:
     from garage_mj.cruise import run_cruise
 
     if args.scenario_file is not None:
         return replay(args)
+    args.driver = args.driver or "vision"
     srcs = sources(args)
     env = {}
     scen = scenario(args)

@@ -49,30 +49,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from garage_mj.cli.cruise import scenario
-    from garage_mj.config import ConfigError
-    from garage_mj.drivers import DriverError
-    from garage_mj.errors import GarageMJError
     from garage_mj.hunt import HuntConfig, hunt
 
     if args.library is not None and not args.library.is_file():
         raise UserError(f"--library {args.library}: no such file; build one with garage-mj train or generate")
     if args.map is not None and args.library_map is not None:
         raise UserError("--library-map filters a --library; with --map give the map itself")
-    env = {}
-    try:
-        scen = scenario(args)
-        if scen is not None:
-            env["scenario"] = scen
-        cfg = HuntConfig(budget=args.budget, tests=args.tests, population=args.population, elites=args.elites,
-                         worst=args.worst)
-        res = hunt(args.driver, args.out, map=args.map if args.library is None else args.library_map,
-                   library=args.library, config=cfg, seed=args.seed, action_type=args.action_type,
-                   occupancy=args.occupancy, env=env, workers=args.workers, progress=not args.quiet,
-                   videos=not args.no_videos, backend=args.backend, address=args.address)
-    except (ConfigError, DriverError) as exc:
-        raise UserError(str(exc)) from None
-    except GarageMJError:
-        raise
+    # every garage-mj error (config, driver, hunt, backend) is printed as one line by garage_mj.cli.main
+    scen = scenario(args)
+    env = {} if scen is None else {"scenario": scen}
+    cfg = HuntConfig(budget=args.budget, tests=args.tests, population=args.population, elites=args.elites,
+                     worst=args.worst)
+    res = hunt(args.driver, args.out, map=args.map if args.library is None else args.library_map,
+               library=args.library, config=cfg, seed=args.seed, action_type=args.action_type,
+               occupancy=args.occupancy, env=env, workers=args.workers, progress=not args.quiet,
+               videos=not args.no_videos, backend=args.backend, address=args.address)
     failing = [s for s in res.ranked if s.failures]
     print(f"{res.tests} tests on {len(res.ranked)} garages in {res.generations} generations; "
           f"{len(failing)} garages with a failure")

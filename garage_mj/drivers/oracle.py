@@ -70,7 +70,8 @@ class OracleDriver(BaseDriver):
         self._actor_blocks(info.get("actors") or [])
 
     def _actor_blocks(self, actors: list) -> None:
-        """Per moving actor: sample times and, per time, the first path index its body blocks (or -1 if none)."""
+        """Per moving actor that comes near the path: its sample times and, per time, which path poses
+        the rest of its trajectory from then on blocks (computed once here, read each step)."""
         from garage_mj.actors import ActorSpec, Corridor, actor_poses, sample_times
         from garage_mj.scene.drivable import TestPlan
 
@@ -78,21 +79,18 @@ class OracleDriver(BaseDriver):
         if not actors:
             return
         centre = self.path + (-self.car.rear_axle) * np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
-        plan = TestPlan(0, True, "", centre=centre, rear=self.path, heading=self.heading, curvature=self.kappa)
-
-        class _Planner:  # what Corridor needs: the car
-            car = self.car
-
-        corr = Corridor(plan, _Planner)
+        corr = Corridor(TestPlan(0, True, "", centre=centre, rear=self.path, heading=self.heading,
+                                 curvature=self.kappa), self.car)
         for k, d in enumerate(actors):
             a = d if isinstance(d, ActorSpec) else ActorSpec.from_dict(d)
             if a.static:
                 continue
             times = sample_times(a)
-            hit = corr.conflicts(a.shape, actor_poses(a, times), self.config.actor_margin)
-            trig = int(np.argmin(np.linalg.norm(centre - np.asarray(a.trigger), axis=1)))
+            hit = corr.conflicts(a.shape, actor_poses(a, times), self.config.actor_margin)  # (T, N)
             if hit.any():
-                self.blocks.append((k, times, hit, trig))
+                rest = np.logical_or.accumulate(hit[::-1], axis=0)[::-1]  # rest[t]: blocked at time t or later
+                trig = int(np.argmin(np.linalg.norm(centre - np.asarray(a.trigger), axis=1)))
+                self.blocks.append((k, times, rest, trig))
 
     def _actor_stop(self, obs: dict[str, Any], i: int) -> float:
         """[m] path station to stop at for the actors (inf when none blocks the path ahead)."""
@@ -100,22 +98,24 @@ class OracleDriver(BaseDriver):
             return math.inf
         state = np.asarray(obs["actors"], dtype=float)
         stop = math.inf
-        for k, times, hit, trig in self.blocks:
+        for k, times, rest, trig in self.blocks:
             tau = float(state[k, 3]) if k < len(state) else -1.0
-            rest = hit[times >= tau - 0.2] if tau >= 0 else hit
-            cols = np.flatnonzero(rest.any(axis=0))
+            t = int(np.searchsorted(times, tau - 0.2)) if tau >= 0 else 0
+            if t >= len(times):  # its trajectory has run out
+                continue
+            cols = np.flatnonzero(rest[t])
             # not started yet: it moves once the car reaches its trigger, so only the path beyond counts
             cols = cols[cols >= (i if tau >= 0 else max(i, trig))]
             if len(cols):
                 j = int(cols[0])
                 # wait on the straight before a turn, not in it: the tracker holds a curve worse
                 # from a standstill (measured: 0.5 m off after stopping mid-turn)
-                k = j
-                while k > i and abs(self.kappa[k]) > 1e-6:
-                    k -= 1
-                if tau < 0 and k < trig:  # it only starts once the car reaches its trigger: go there
-                    k = min(j, trig)
-                stop = min(stop, self.s[k] - self.config.actor_gap)
+                m = j
+                while m > i and abs(self.kappa[m]) > 1e-6:
+                    m -= 1
+                if tau < 0 and m < trig:  # it only starts once the car reaches its trigger: go there
+                    m = min(j, trig)
+                stop = min(stop, self.s[m] - self.config.actor_gap)
         return stop
 
     def _speed_profile(self) -> np.ndarray:

@@ -31,7 +31,15 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.actors import NO_ACTORS, ActorSpec, Scenario, ScenarioConfig, draw_scenario, judge, load_scenario_config
+from garage_mj.actors import (
+    NO_ACTORS,
+    ActorSpec,
+    Scenario,
+    ScenarioConfig,
+    draw_scenario,
+    judge,
+    load_scenario_config,
+)
 from garage_mj.config import load_config
 from garage_mj.garage import Garage
 from garage_mj.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
@@ -221,7 +229,7 @@ class GarageDriveEnv(gym.Env):
 
         self.target = target
         self.test_plan = plan = self.planner.plan(target)
-        self.scenario = self._scenario(plan, occupied, rng, options.get("actors"))
+        self.scenario = self._scenario(plan, rng, options.get("actors"))
         occupied = [s for s in occupied if s not in self.scenario.free_stalls]
         self.occupied = occupied
         if plan.feasible:
@@ -255,11 +263,11 @@ class GarageDriveEnv(gym.Env):
             self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, self.scenario.reason)
         return self._observe(), self._info()
 
-    def _scenario(self, plan: TestPlan, occupied: list[int], rng, given) -> Scenario:
+    def _scenario(self, plan: TestPlan, rng, given) -> Scenario:
         """The test's actors: drawn from ``rng`` per the scenario config, or ``given`` (a replay)."""
         cfg = self.scenario_config
         if given is None:
-            return draw_scenario(cfg, plan, self.planner, occupied, rng)
+            return draw_scenario(cfg, plan, self.planner, rng)
         actors = [a if isinstance(a, ActorSpec) else ActorSpec.from_dict(a) for a in given]
         if actors and self.actor_bodies is None:
             raise ValueError("this env has no actor bodies: build it with scenario= room for the replayed actors")
