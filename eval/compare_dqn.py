@@ -16,8 +16,8 @@ mean and 95% t-interval over seeds) goes to ``docs/compare_dqn.csv`` and is prin
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import csv
+import dataclasses
 import json
 import math
 from pathlib import Path
