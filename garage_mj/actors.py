@@ -51,8 +51,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from garage_mj.config import ConfigError, load_config, read_toml
-from garage_mj.geometry import DELTAS
+from garage_mj.core.config import ConfigError, load_config, read_toml
+from garage_mj.core.geometry import DELTAS
 from garage_mj.scene.drivable import START_OFFSET, DrivePlanner, TestPlan
 from garage_mj.scene.world import WORLD_DIR, cell_center, world_to_cell
 

@@ -20,7 +20,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from garage_mj.fsutil import atomic_write  # noqa: E402
+from garage_mj.core.fsutil import atomic_write  # noqa: E402
 
 #: SPEC section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 garages.
 PAPER_TABLE: tuple[tuple[float, float, float, float], ...] = (

@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 
 from garage_mj.analysis import PAPER_R, regression, regression_plot
-from garage_mj.errors import GarageMJError
-from garage_mj.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir
+from garage_mj.core.errors import GarageMJError
+from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir
 from garage_mj.garage import Garage
 from garage_mj.metrics import evaluate
 
@@ -439,9 +439,9 @@ def _jobs(sources: Sequence[CruiseSource], tests: int, done: set[tuple[str, int]
 
 def _results(jobs: list, workers: int, backend: str = "local", address: str | None = None
              ) -> Iterator[dict[str, Any] | None]:
-    """Rows as tests end (:func:`garage_mj.backends.map_unordered`: this process, a spawn pool or Ray actors);
+    """Rows as tests end (:func:`garage_mj.core.backends.map_unordered`: this process, a spawn pool or Ray actors);
     jobs come in garage order, so each worker builds each scene at most once."""
-    from garage_mj.backends import map_unordered
+    from garage_mj.core.backends import map_unordered
 
     if backend == "ray":  # paths as this machine sees them (a cluster needs them on a shared filesystem)
         jobs = [(s, i, st, os.path.abspath(x) if x is not None else None, e) for s, i, st, x, e in jobs]
@@ -476,11 +476,11 @@ def run_cruise(
     (``<garage hash 12>_<test>.xosc``, see :func:`replay_xosc`); garages without an asset pack get
     one in ``out_dir/packs/`` for it to refer to. ``backend`` runs the tests in this process or a
     spawn pool of ``workers`` (``"local"``) or on ``workers`` Ray actors (``"ray"``; ``address``: a
-    running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.backends`;
+    running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.core.backends`;
     tests.csv gets the same rows either way. Raises :class:`CruiseError`, ``DriverError`` (bad
     driver), ``BackendError`` (bad backend, Ray missing) before any test.
     """
-    from garage_mj.backends import check_backend
+    from garage_mj.core.backends import check_backend
     from garage_mj.drivers import resolve_driver
 
     if tests < 1:

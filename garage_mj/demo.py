@@ -12,8 +12,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from garage_mj.config import load_config
-from garage_mj.fsutil import atomic_write
+from garage_mj.core.config import load_config
+from garage_mj.core.fsutil import atomic_write
 
 FIGURES = "figures"
 

@@ -2,7 +2,7 @@
 
 A protocol TOML (``generation/paper.toml``) names the maps, the seeds, the timesteps per run
 and optionally a ``[dqn]`` table of hyper-parameters. :func:`run_experiment` trains the runs in
-a process pool or on a Ray cluster (:mod:`garage_mj.backends`), each in
+a process pool or on a Ray cluster (:mod:`garage_mj.core.backends`), each in
 ``out/runs/<map>/seed_<s>/``; a finished run is skipped and an interrupted one resumed, so the
 command can simply be started again after a crash.
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from garage_mj.config import ConfigError, read_toml
+from garage_mj.core.config import ConfigError, read_toml
 from garage_mj.library import Library
 from garage_mj.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
 
@@ -109,12 +109,12 @@ def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progre
 
     ``backend``: ``"local"`` (this process, or a spawn pool of ``workers``) or ``"ray"``
     (``workers`` Ray actors; ``address``: a running cluster, else a private local Ray), see
-    :mod:`garage_mj.backends`; a run's result does not depend on where it trains.
+    :mod:`garage_mj.core.backends`; a run's result does not depend on where it trains.
     Returns a summary: runs trained and skipped, garages per map, figure paths.
     """
     from tqdm import tqdm
 
-    from garage_mj.backends import check_backend, map_unordered
+    from garage_mj.core.backends import check_backend, map_unordered
     from garage_mj.map_io import load_map
 
     if workers < 1:

@@ -14,7 +14,7 @@ from typing import Any, Literal
 import numpy as np
 
 from garage_mj.blocks import INITIAL_CODES, NUM_CODES, STALL_CODES, Block
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 
 Axis = Literal["NS", "EW"]
 AXES: tuple[Axis, ...] = ("NS", "EW")

@@ -40,9 +40,9 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.config import ConfigError, load_config, read_toml
+from garage_mj.core.config import ConfigError, load_config, read_toml
 from garage_mj.envs.cond_env import ConditionConfig, GarageGenCondEnv, band_distance
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 from garage_mj.library import Library
 from garage_mj.map_io import list_maps, load_map
 from garage_mj.metrics import evaluate

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from garage_mj.blocks import NUM_CODES, Block
-from garage_mj.geometry import DELTAS
+from garage_mj.core.geometry import DELTAS
 
 CELL_PX = 16  # [pixels] side of one grid cell
 #: Colour of each block code, shared with :mod:`garage_mj.plots` (one table for every picture of a grid).

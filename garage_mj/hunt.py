@@ -40,8 +40,8 @@ from typing import Any
 import numpy as np
 
 from garage_mj.cruise import CruiseSettings, CruiseSource, close_cached_env, read_tests, run_cruise, run_test
-from garage_mj.errors import GarageMJError
-from garage_mj.fsutil import FolderLock, atomic_write, ensure_dir
+from garage_mj.core.errors import GarageMJError
+from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir
 from garage_mj.garage import Garage
 
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
@@ -165,12 +165,12 @@ def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: s
          **cruise_kwargs: Any) -> HuntResult:
     """Hunt the garages where ``driver`` fails (module docstring); resumable in ``out_dir``.
 
-    ``backend``/``address``: where the tests run (:mod:`garage_mj.backends`; one Ray session for
+    ``backend``/``address``: where the tests run (:mod:`garage_mj.core.backends`; one Ray session for
     the whole hunt). The results do not depend on it.
     """
     import contextlib
 
-    from garage_mj.backends import check_backend, ray_session
+    from garage_mj.core.backends import check_backend, ray_session
     from garage_mj.drivers import resolve_driver
 
     cfg = config or HuntConfig()

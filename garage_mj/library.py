@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 from garage_mj.garage import Garage, MapError, validate_garage
 from garage_mj.metrics import evaluate
 

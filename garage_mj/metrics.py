@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from garage_mj.blocks import Block, count_stalls
-from garage_mj.config import DifficultyConfig, RewardConfig
+from garage_mj.core.config import DifficultyConfig, RewardConfig
 from garage_mj.garage import Garage
 from garage_mj.roadgraph import analyse
 from garage_mj.rules import road_squares, stall_rule_violations

@@ -14,7 +14,7 @@ import numpy as np
 
 from garage_mj.blocks import Block
 from garage_mj.garage import Axis, Garage
-from garage_mj.geometry import DELTAS
+from garage_mj.core.geometry import DELTAS
 
 
 class ExitSeekingPainter:

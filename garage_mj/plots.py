@@ -23,10 +23,10 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from garage_mj.blocks import NUM_CODES, Block  # noqa: E402
-from garage_mj.errors import GarageMJError  # noqa: E402
-from garage_mj.fsutil import atomic_write  # noqa: E402
+from garage_mj.core.errors import GarageMJError  # noqa: E402
+from garage_mj.core.fsutil import atomic_write  # noqa: E402
 from garage_mj.garage import Garage  # noqa: E402
-from garage_mj.geometry import DELTAS  # noqa: E402
+from garage_mj.core.geometry import DELTAS  # noqa: E402
 from garage_mj.gridimage import BLOCK_COLOURS as _BLOCK_COLOURS
 from garage_mj.roadgraph import Tile, analyse  # noqa: E402
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from garage_mj.blocks import Block
 from garage_mj.garage import AXES, Axis, Garage
-from garage_mj.geometry import DELTAS
+from garage_mj.core.geometry import DELTAS
 from garage_mj.map_io import load_map
 from garage_mj.metrics import DEFAULT_DIFFICULTY, difficulty
 from garage_mj.roadgraph import analyse

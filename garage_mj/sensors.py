@@ -31,7 +31,7 @@ from dataclasses import dataclass  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from garage_mj.errors import GarageMJError  # noqa: E402
+from garage_mj.core.errors import GarageMJError  # noqa: E402
 from garage_mj.scene.semantics import geom_classes  # noqa: E402
 
 GL_FIX = (

@@ -15,7 +15,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from garage_mj.fsutil import public_mode
+from garage_mj.core.fsutil import public_mode
 from garage_mj.sensors import Camera, CameraConfig
 
 VIDEO_SIZE = (320, 240)  # [px] width, height

@@ -15,8 +15,8 @@ import json
 import sys
 from pathlib import Path
 
-from garage_mj.backends import BackendError
-from garage_mj.config import ConfigError
+from garage_mj.core.backends import BackendError
+from garage_mj.core.config import ConfigError
 from garage_mj.experiment import load_protocol, run_experiment
 from garage_mj.garage import MapError
 from garage_mj.library import LibraryError

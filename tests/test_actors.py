@@ -19,7 +19,7 @@ from garage_mj.actors import (
     sample_times,
 )
 from garage_mj.cli import main
-from garage_mj.config import ConfigError
+from garage_mj.core.config import ConfigError
 from garage_mj.cruise import read_tests, replay_xosc, run_cruise
 from garage_mj.drivers import load_driver
 from garage_mj.envs.drive_env import GarageDriveEnv

@@ -145,7 +145,7 @@ def test_timeout_truncates(painted_tiny):
 
 
 def test_bad_arguments_are_one_clear_error(painted_tiny):
-    from garage_mj.config import ConfigError
+    from garage_mj.core.config import ConfigError
 
     with pytest.raises(ValueError, match="needs garage="):
         GarageDriveEnv()

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from garage_mj.config import ConfigError
+from garage_mj.core.config import ConfigError
 from garage_mj.experiment import load_protocol, run_experiment
 from garage_mj.library import Library
 

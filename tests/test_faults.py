@@ -561,7 +561,7 @@ def test_demo_with_a_map_path_writes_only_inside_out(tmp_path):
 
 @pytest.mark.parametrize("command", ["cruise", "export", "train", "demo"])
 def test_every_long_job_refuses_a_locked_out_folder(pack_dir, tmp_path, capsys, command):
-    from garage_mj.fsutil import FolderLock
+    from garage_mj.core.fsutil import FolderLock
 
     out = tmp_path / "out"
     garage = tmp_path / "g.json"

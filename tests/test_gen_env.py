@@ -10,9 +10,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from garage_mj import Block, evaluate
-from garage_mj.config import ConfigError, RewardConfig
+from garage_mj.core.config import ConfigError, RewardConfig
 from garage_mj.envs.gen_env import GarageGenEnv
-from garage_mj.geometry import EAST, NORTH, SOUTH, WEST
+from garage_mj.core.geometry import EAST, NORTH, SOUTH, WEST
 from garage_mj.metrics import coverage
 from garage_mj.roadgraph import analyse
 from garage_mj.rules import road_squares, stall_rule_violations

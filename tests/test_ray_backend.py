@@ -1,4 +1,4 @@
-"""The Ray backend (garage_mj.backends): same rows as the local backend, resume, retries, experiments.
+"""The Ray backend (garage_mj.core.backends): same rows as the local backend, resume, retries, experiments.
 
 One private Ray (127.0.0.1, 2 CPUs) serves the whole module: its start-up costs seconds.
 """
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from garage_mj.backends import BackendError, check_backend, map_unordered, ray_session
+from garage_mj.core.backends import BackendError, check_backend, map_unordered, ray_session
 from garage_mj.cruise import run_cruise
 from garage_mj.experiment import load_protocol, run_experiment
 from garage_mj.library import Library

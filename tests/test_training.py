@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from stable_baselines3.common.callbacks import BaseCallback
 
-from garage_mj.config import ConfigError
+from garage_mj.core.config import ConfigError
 from garage_mj.library import Library
 from garage_mj.metrics import evaluate
 from garage_mj.training import DQNConfig, TrainingError, latest_checkpoint, load_dqn_config, train

@@ -2,7 +2,7 @@
 
 A module in :data:`COMMANDS` exposes ``register(subparsers)``, which adds its parser and sets
 ``func`` to a handler ``(args) -> int``. Errors a user can cause derive from
-:class:`garage_mj.errors.GarageMJError` (``UserError``, ``MapError``, ``ConfigError``,
+:class:`garage_mj.core.errors.GarageMJError` (``UserError``, ``MapError``, ``ConfigError``,
 ``LibraryError``, ``PackError``, ``CruiseError``, ...) and are printed as one line with exit
 status 2, no traceback; so are file-system failures (read-only or full folder: ``OSError``).
 Modules here import heavy packages (torch, SB3, MuJoCo, matplotlib) inside the handlers only,
@@ -16,7 +16,7 @@ import errno
 import importlib
 import sys
 
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ["maps", "demo", "export", "check", "train", "generate", "library", "plot", "show", "cruise", "hunt"]

@@ -7,7 +7,7 @@ import functools
 from collections.abc import Callable
 
 from garage_mj.cli import UserError
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 
 
 def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:

@@ -127,7 +127,7 @@ def replay(args: argparse.Namespace) -> int:
     import csv
 
     from garage_mj.cruise import TEST_COLUMNS, replay_xosc
-    from garage_mj.fsutil import atomic_write, ensure_dir
+    from garage_mj.core.fsutil import atomic_write, ensure_dir
 
     rows = []
     for path in args.scenario_file:

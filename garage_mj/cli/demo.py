@@ -6,7 +6,7 @@ import argparse
 
 from garage_mj.cli._common import positive_int, seed
 from garage_mj.demo import DemoConfig, demo_config, run_demo
-from garage_mj.fsutil import FolderLock
+from garage_mj.core.fsutil import FolderLock
 
 _D = DemoConfig()
 

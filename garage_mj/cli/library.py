@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from garage_mj.cli._common import add_filters, filters, non_negative_int, seed, user_errors
-from garage_mj.fsutil import atomic_write, write_error
+from garage_mj.core.fsutil import atomic_write, write_error
 
 HEADER = f"{'id':>6}  {'map':<18} {'seed':>4} {'episode':>7} {'timestep':>9}  {'diff':>5} {'cov':>5} {'stalls':>6} {'E[X]':>5} {'E[Y]':>5}"
 

@@ -17,7 +17,7 @@ from garage_mj.drivers.base import (
     DriverNoiseConfig,
     discretize,
 )
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 
 #: Built-in drivers: name -> "module:Class".
 DRIVERS: dict[str, str] = {

@@ -22,7 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from garage_mj.config import load_config
+from garage_mj.core.config import load_config
 from garage_mj.vehicle import CarGeometry, DiscreteAction, car_geometry
 
 

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.config import ConfigError, load_config
+from garage_mj.core.config import ConfigError, load_config
 from garage_mj.envs.gen_env import GarageGenEnv
 from garage_mj.metrics import difficulty
 

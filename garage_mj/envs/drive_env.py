@@ -40,7 +40,7 @@ from garage_mj.actors import (
     judge,
     load_scenario_config,
 )
-from garage_mj.config import load_config
+from garage_mj.core.config import load_config
 from garage_mj.garage import Garage
 from garage_mj.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states

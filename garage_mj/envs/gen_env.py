@@ -18,9 +18,9 @@ import numpy as np
 from gymnasium import spaces
 
 from garage_mj.blocks import NUM_CODES, STALL_TABLE, Block
-from garage_mj.config import RewardConfig, load_config
+from garage_mj.core.config import RewardConfig, load_config
 from garage_mj.garage import AXES, Axis, Garage
-from garage_mj.geometry import DELTAS, OPPOSITE
+from garage_mj.core.geometry import DELTAS, OPPOSITE
 from garage_mj.map_io import load_map
 from garage_mj.metrics import difficulty, utility_values
 from garage_mj.roadgraph import RoadTracker

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from lxml import etree
 
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 
 #: No entity expansion, no DTD or network fetches: the files parsed here may come from anywhere.
 _SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False)

@@ -68,8 +68,8 @@ import numpy as np
 from lxml import etree
 
 from garage_mj.actors import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
-from garage_mj.errors import GarageMJError
-from garage_mj.fsutil import atomic_write
+from garage_mj.core.errors import GarageMJError
+from garage_mj.core.fsutil import atomic_write
 
 OSC_MINOR = 2  # OpenSCENARIO 1.2
 FORMAT = 1  # gmj_format: bumped when the mapping above changes

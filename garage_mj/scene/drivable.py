@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from garage_mj.geometry import DELTAS, OPPOSITE
+from garage_mj.core.geometry import DELTAS, OPPOSITE
 from garage_mj.scene.semantics import Semantic
 from garage_mj.scene.world import WORLD_DIR, cell_center
 

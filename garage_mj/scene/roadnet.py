@@ -20,7 +20,7 @@ from enum import Enum
 
 from garage_mj.blocks import Block
 from garage_mj.garage import Garage
-from garage_mj.geometry import DELTAS, EAST, NORTH, SOUTH, WEST
+from garage_mj.core.geometry import DELTAS, EAST, NORTH, SOUTH, WEST
 from garage_mj.roadgraph import Tile, analyse
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig, cell_center
 

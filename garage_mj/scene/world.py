@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from garage_mj.geometry import EAST, NORTH, SOUTH, WEST
+from garage_mj.core.geometry import EAST, NORTH, SOUTH, WEST
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 
 BACKENDS = ("local", "ray")
 #: Environment variables a Ray worker gets from the parent (when set there), as a spawned pool worker would.

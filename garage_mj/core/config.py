@@ -18,7 +18,7 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the same parser from PyPI
     import tomli as tomllib
 
-from garage_mj.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError
 
 T = TypeVar("T")
 

@@ -21,7 +21,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from garage_mj.errors import FolderBusy, GarageMJError
+from garage_mj.core.errors import FolderBusy, GarageMJError
 
 LOCK_NAME = ".garage-mj.lock"
 

@@ -1,0 +1,8 @@
+"""Plumbing every stage uses; it imports none of the stages.
+
+- ``errors``: :class:`GarageMJError`, the one base class of errors a user can cause.
+- ``fsutil``: atomic writes, output-folder locks.
+- ``config``: typed, frozen config dataclasses loaded from TOML (unknown keys are an error).
+- ``backends``: the local process pool and Ray, behind one ``map_unordered``.
+- ``geometry``: grid directions and small geometric helpers.
+"""
