@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from garage_mj.library import Library
-from garage_mj.map_io import list_maps
+from garage_mj.grid.map_io import list_maps
 from garage_mj.search import BIN_WIDTH, search
 
 N_BINS = round(1 / BIN_WIDTH)

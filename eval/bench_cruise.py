@@ -21,7 +21,7 @@ import gymnasium as gym
 
 import garage_mj  # noqa: F401  (MUJOCO_GL, registers the envs)
 from garage_mj.drivers import load_driver
-from garage_mj.painter import paint_garage
+from garage_mj.grid.painters import paint_garage
 
 PAPER_TESTS = 2500  # 50 garages x 50 tests (SPEC section 5)
 TARGET_MIN = 30.0  # [min] issue 5 target on 2 cores

@@ -23,8 +23,8 @@ from garage_mj.export.meshes import garage_meshes
 from garage_mj.export.pack import export_pack
 from garage_mj.export.preview import render_preview
 from garage_mj.export.xodr import write_xodr
-from garage_mj.garage import Garage
-from garage_mj.painter import paint_garage
+from garage_mj.grid.garage import Garage
+from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.lanes import lane_graph
 from garage_mj.scene.mjcf_scene import build_scene
 

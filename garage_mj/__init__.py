@@ -11,10 +11,10 @@ import os as _os
 # MuJoCo reads MUJOCO_GL once, when it is first imported: default to headless EGL before any import.
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
-from garage_mj.blocks import Block  # noqa: E402
-from garage_mj.garage import Garage, MapError
-from garage_mj.map_io import list_maps, load_map
-from garage_mj.metrics import GarageMetrics, difficulty, evaluate
+from garage_mj.grid.blocks import Block  # noqa: E402
+from garage_mj.grid.garage import Garage, MapError
+from garage_mj.grid.map_io import list_maps, load_map
+from garage_mj.grid.metrics import GarageMetrics, difficulty, evaluate
 
 __version__ = "0.1.0"
 

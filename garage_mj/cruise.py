@@ -31,8 +31,8 @@ import numpy as np
 from garage_mj.analysis import PAPER_R, regression, regression_plot
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir
-from garage_mj.garage import Garage
-from garage_mj.metrics import evaluate
+from garage_mj.grid.garage import Garage
+from garage_mj.grid.metrics import evaluate
 
 TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",
                 "hit_geom", "reason", "time", "path_length", "route_length", "difficulty", "mean_road_length",
@@ -114,7 +114,7 @@ def painted_sources(map: str, n: int, seed: int = 0, oversample: int = 4) -> lis
     Paints ``oversample * n`` candidates (distinct garages) and keeps the ones at evenly spaced
     difficulty ranks, standing in for a library's stratified sample when there is no library.
     """
-    from garage_mj.painter import paint_garage
+    from garage_mj.grid.painters import paint_garage
 
     found: dict[str, CruiseSource] = {}
     for k in range(oversample * n * 3):

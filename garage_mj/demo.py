@@ -86,7 +86,7 @@ def run_demo(cfg: DemoConfig) -> Path:
     from garage_mj import plots
     from garage_mj.export.pack import export_pack
     from garage_mj.library import Library
-    from garage_mj.map_io import load_map
+    from garage_mj.grid.map_io import load_map
     from garage_mj.report import GalleryItem, ReportData, write_report
 
     t0 = time.perf_counter()

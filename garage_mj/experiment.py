@@ -115,7 +115,7 @@ def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progre
     from tqdm import tqdm
 
     from garage_mj.core.backends import check_backend, map_unordered
-    from garage_mj.map_io import load_map
+    from garage_mj.grid.map_io import load_map
 
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")

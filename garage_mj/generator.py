@@ -44,8 +44,8 @@ from garage_mj.core.config import ConfigError, load_config, read_toml
 from garage_mj.envs.cond_env import ConditionConfig, GarageGenCondEnv, band_distance
 from garage_mj.core.errors import GarageMJError
 from garage_mj.library import Library
-from garage_mj.map_io import list_maps, load_map
-from garage_mj.metrics import evaluate
+from garage_mj.grid.map_io import list_maps, load_map
+from garage_mj.grid.metrics import evaluate
 from garage_mj.training import DQNConfig, load_dqn_config
 
 GENERATORS = "generators"  # folder of the shipped generators inside the package data garage_mj.models
@@ -554,8 +554,8 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
             # and the scripted painter's garages, as the search baseline starts from: the policy's garages are
             # often one family, and the climb restarts from these too when it stalls (they alone seed it when
             # the policy painted nothing usable)
-            from garage_mj.garage import AXES
-            from garage_mj.painter import paint_garage
+            from garage_mj.grid.garage import AXES
+            from garage_mj.grid.painters import paint_garage
 
             for k in range(SEARCH_SEEDS):
                 for axis in AXES:

@@ -42,7 +42,7 @@ import numpy as np
 from garage_mj.cruise import CruiseSettings, CruiseSource, close_cached_env, read_tests, run_cruise, run_test
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir
-from garage_mj.garage import Garage
+from garage_mj.grid.garage import Garage
 
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
                    "failure_pct", "collisions", "deadlocks", "timeouts", "hit", "failure_progress", "failing_tests",
@@ -123,7 +123,7 @@ def _starting(map_name: str | None, library: str | Path | None, n: int, seed: in
         if not records:
             raise HuntError(f"{library}: no garages{' of ' + map_name if map_name else ''} to start the hunt from")
         return [CruiseSource.from_record(r) for r in records]
-    from garage_mj.painter import paint_garage
+    from garage_mj.grid.painters import paint_garage
 
     found: dict[str, CruiseSource] = {}
     for k in range(20 * n):

@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.garage import Garage, MapError, validate_garage
-from garage_mj.metrics import evaluate
+from garage_mj.grid.garage import Garage, MapError, validate_garage
+from garage_mj.grid.metrics import evaluate
 
 #: Schema version written to ``PRAGMA user_version``; bump it with a migration.
 SCHEMA_VERSION = 1
@@ -285,7 +285,7 @@ class Library:
     def add(self, garage: Garage, *, map: str, run: str, seed: int, episode: int, timestep: int) -> int | None:
         """Store ``garage`` with its provenance; returns the new id, or ``None`` if already stored.
 
-        The metrics are recomputed from the grid (:func:`garage_mj.metrics.evaluate`), so what
+        The metrics are recomputed from the grid (:func:`garage_mj.grid.metrics.evaluate`), so what
         the library says about a garage is what the rest of garage-mj computes for it.
         """
         m = evaluate(garage)
@@ -306,7 +306,7 @@ class Library:
 
     # -- reading ----------------------------------------------------------------------------------
     def id_of(self, garage_hash: str) -> int | None:
-        """The id of the stored garage with this :meth:`~garage_mj.garage.Garage.canonical_hash`, or None."""
+        """The id of the stored garage with this :meth:`~garage_mj.grid.garage.Garage.canonical_hash`, or None."""
         row = self._con.execute("SELECT id FROM garages WHERE hash = ?", (garage_hash,)).fetchone()
         return None if row is None else int(row[0])
 

@@ -22,20 +22,20 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from garage_mj.blocks import NUM_CODES, Block  # noqa: E402
+from garage_mj.grid.blocks import NUM_CODES, Block  # noqa: E402
 from garage_mj.core.errors import GarageMJError  # noqa: E402
 from garage_mj.core.fsutil import atomic_write  # noqa: E402
-from garage_mj.garage import Garage  # noqa: E402
+from garage_mj.grid.garage import Garage  # noqa: E402
 from garage_mj.core.geometry import DELTAS  # noqa: E402
-from garage_mj.gridimage import BLOCK_COLOURS as _BLOCK_COLOURS
-from garage_mj.roadgraph import Tile, analyse  # noqa: E402
+from garage_mj.grid.image import BLOCK_COLOURS as _BLOCK_COLOURS
+from garage_mj.grid.roadgraph import Tile, analyse  # noqa: E402
 
 BIN = 0.1  # heatmap cell width in difficulty and coverage
 CONFIDENCE = 0.95
 DPI = 120
 MAX_PANEL_COLUMNS = 3  # convergence panels per row
 
-#: Colour of each block code in :func:`garage_png` (the table of :mod:`garage_mj.gridimage`).
+#: Colour of each block code in :func:`garage_png` (the table of :mod:`garage_mj.grid.image`).
 BLOCK_COLOURS = _BLOCK_COLOURS
 TILE_MARKERS = {Tile.DEAD_END: "s", Tile.CURVE: "o", Tile.T: "^", Tile.CROSS: "P", Tile.ISOLATED: "x"}
 

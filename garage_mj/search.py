@@ -10,7 +10,7 @@ Every such R is painted error-free by a depth-first walk (:func:`painter_actions
 :func:`replay` checks it by running the env.
 
 :func:`search` is MAP-Elites over difficulty bins: start from garages of the scripted
-:class:`~garage_mj.painter.ExitSeekingPainter`, mutate a random elite or, half of the time, the lowest or highest garage so far (grow a straight road or a
+:class:`~garage_mj.grid.painters.ExitSeekingPainter`, mutate a random elite or, half of the time, the lowest or highest garage so far (grow a straight road or a
 staircase from a road cell, or cut one and keep what stays joined to the entrance), and keep the first garage of
 each bin plus the lowest and highest difficulty seen. The range it returns is what search reached:
 a lower bound on the map's true range, with each end replayed through the env.
@@ -27,13 +27,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from garage_mj.blocks import Block
-from garage_mj.garage import AXES, Axis, Garage
+from garage_mj.grid.blocks import Block
+from garage_mj.grid.garage import AXES, Axis, Garage
 from garage_mj.core.geometry import DELTAS
-from garage_mj.map_io import load_map
-from garage_mj.metrics import DEFAULT_DIFFICULTY, difficulty
-from garage_mj.roadgraph import analyse
-from garage_mj.rules import apply_stall_rule
+from garage_mj.grid.map_io import load_map
+from garage_mj.grid.metrics import DEFAULT_DIFFICULTY, difficulty
+from garage_mj.grid.roadgraph import analyse
+from garage_mj.grid.rules import apply_stall_rule
 
 BIN_WIDTH = 0.1  # difficulty bin of the report
 MAX_GROW = 4  # [cells] longest straight added by one mutation
@@ -367,7 +367,7 @@ def search(map: str | Garage, evaluations: int = 5_000, seed: int = 0, bin_width
     Raises RuntimeError if an end of the range does not replay to a usable garage of the same
     difficulty (the search's model of the painter would be wrong).
     """
-    from garage_mj.painter import paint_garage
+    from garage_mj.grid.painters import paint_garage
 
     base = map if isinstance(map, Garage) else load_map(map)
     m = _Map(base)

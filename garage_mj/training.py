@@ -30,7 +30,7 @@ from garage_mj.core.config import ConfigError, load_config
 from garage_mj.envs.gen_env import GarageGenEnv
 from garage_mj.core.errors import GarageMJError
 from garage_mj.library import Library
-from garage_mj.map_io import load_map
+from garage_mj.grid.map_io import load_map
 
 MANIFEST = "run.json"
 MONITOR = "monitor.csv"

@@ -18,7 +18,7 @@ from pathlib import Path
 from garage_mj.core.backends import BackendError
 from garage_mj.core.config import ConfigError
 from garage_mj.experiment import load_protocol, run_experiment
-from garage_mj.garage import MapError
+from garage_mj.grid.garage import MapError
 from garage_mj.library import LibraryError
 from garage_mj.plots import PlotError
 from garage_mj.training import TrainingError

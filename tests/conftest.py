@@ -9,7 +9,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import pytest  # noqa: E402
 
 from garage_mj import Garage  # noqa: E402
-from garage_mj.painter import paint_garage  # noqa: E402
+from garage_mj.grid.painters import paint_garage  # noqa: E402
 
 SHIPPED_MAPS = ["tiny_7x11", "m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u"]
 
@@ -41,8 +41,8 @@ def junction_garage() -> Garage:
     """A hand-drawn usable tiny garage with two adjacent T junctions, a cross, a loop and a dead end."""
     import numpy as np
 
-    from garage_mj.map_io import load_map
-    from garage_mj.rules import apply_stall_rule
+    from garage_mj.grid.map_io import load_map
+    from garage_mj.grid.rules import apply_stall_rule
 
     grid = np.array([[int(v) for v in line.split()] for line in JUNCTIONS_7X11.splitlines()])
     return Garage(apply_stall_rule(grid, "NS"), load_map("tiny_7x11").initial, name="junctions_7x11")

@@ -23,7 +23,7 @@ from garage_mj.core.config import ConfigError
 from garage_mj.cruise import read_tests, replay_xosc, run_cruise
 from garage_mj.drivers import load_driver
 from garage_mj.envs.drive_env import GarageDriveEnv
-from garage_mj.painter import paint_garage
+from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.semantics import COLLIDABLE, Semantic
 

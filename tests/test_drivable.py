@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from garage_mj import load_map
-from garage_mj.garage import Garage
-from garage_mj.metrics import evaluate
-from garage_mj.rules import apply_stall_rule
+from garage_mj.grid.garage import Garage
+from garage_mj.grid.metrics import evaluate
+from garage_mj.grid.rules import apply_stall_rule
 from garage_mj.scene import GarageScene
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, drivability
 from garage_mj.vehicle import CarConfig, car_geometry
@@ -134,7 +134,7 @@ def test_any_shape_plans_and_loads_in_mujoco(path):
 def test_the_drive_env_imports_nothing_from_export(painted_tiny):
     code = (
         "import sys, json\n"
-        "from garage_mj.garage import Garage\n"
+        "from garage_mj.grid.garage import Garage\n"
         "from garage_mj.envs.drive_env import GarageDriveEnv\n"
         f"g = Garage.from_json({painted_tiny.to_json()!r})\n"
         "env = GarageDriveEnv(garage=g, action_type='continuous')\n"

@@ -13,9 +13,9 @@ from garage_mj import Block, evaluate
 from garage_mj.core.config import ConfigError, RewardConfig
 from garage_mj.envs.gen_env import GarageGenEnv
 from garage_mj.core.geometry import EAST, NORTH, SOUTH, WEST
-from garage_mj.metrics import coverage
-from garage_mj.roadgraph import analyse
-from garage_mj.rules import road_squares, stall_rule_violations
+from garage_mj.grid.metrics import coverage
+from garage_mj.grid.roadgraph import analyse
+from garage_mj.grid.rules import road_squares, stall_rule_violations
 
 ENV_ID = "garage_mj/GarageGen-v0"
 
@@ -192,7 +192,7 @@ def test_rgb_array_render_shows_the_car_moving():
 
 
 def test_render_colours_are_those_of_garage_show():
-    from garage_mj.gridimage import BLOCK_RGB
+    from garage_mj.grid.image import BLOCK_RGB
     from garage_mj.plots import BLOCK_COLOURS
 
     for block, hex_colour in BLOCK_COLOURS.items():

@@ -12,8 +12,8 @@ from garage_mj.envs.cond_env import N_COND, ConditionConfig, GarageGenCondEnv
 from garage_mj.envs.gen_env import GarageGenEnv
 from garage_mj.generator import GenerationError, generate, shipped_generator, train_conditioned
 from garage_mj.library import Library
-from garage_mj.metrics import evaluate
-from garage_mj.painter import paint_garage
+from garage_mj.grid.metrics import evaluate
+from garage_mj.grid.painters import paint_garage
 from garage_mj.search import painter_actions
 
 ENV_ID = "garage_mj/GarageGenCond-v0"

@@ -8,7 +8,7 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from garage_mj.painter import paint_garage
+from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.lanes import entrance_pose, exit_pose, lane_graph, nearest_node, route
 from garage_mj.scene.roadmodel import build_road_model
 from garage_mj.scene.roadnet import RoadTile, road_network

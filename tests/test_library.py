@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from garage_mj.library import SCHEMA_VERSION, Library, LibraryError
-from garage_mj.metrics import evaluate
-from garage_mj.painter import paint_garage
+from garage_mj.grid.metrics import evaluate
+from garage_mj.grid.painters import paint_garage
 
 
 @pytest.fixture(scope="module")
@@ -176,7 +176,7 @@ def test_newer_schema_refused_untouched(tmp_path, garages):
 
 
 def _writer(path: str, grids: list, worker: int) -> None:
-    from garage_mj.garage import Garage
+    from garage_mj.grid.garage import Garage
 
     with Library(path) as lib:
         for i, g in enumerate(grids):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from garage_mj import Block, Garage, difficulty, evaluate
-from garage_mj.roadgraph import Tile, analyse
-from garage_mj.rules import apply_stall_rule
+from garage_mj.grid.roadgraph import Tile, analyse
+from garage_mj.grid.rules import apply_stall_rule
 
 # SPEC section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 tested garages.
 PAPER_ROWS = [
@@ -124,7 +124,7 @@ def test_coverage_of_blank_and_painted(painted_tiny):
 
 def test_long_straight_road_is_clipped_to_six():
     from garage_mj import load_map
-    from garage_mj.rules import apply_stall_rule
+    from garage_mj.grid.rules import apply_stall_rule
 
     g = load_map("m5_13x13_aligned")
     grid = g.grid.copy()

@@ -6,8 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.map_io import load_map
-from garage_mj.metrics import evaluate
+from garage_mj.grid.map_io import load_map
+from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.layout import build_layout, cover_cells, merge_intervals
 from garage_mj.scene.mjcf_scene import (
     HIDDEN_DEPTH,

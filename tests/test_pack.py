@@ -21,7 +21,7 @@ from garage_mj.export.pack import (
     pack_name,
 )
 from garage_mj.library import Library
-from garage_mj.metrics import evaluate
+from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.mjcf_scene import parked_car_bodies
 
 

@@ -7,8 +7,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from garage_mj import evaluate
-from garage_mj.painter import paint_garage
-from garage_mj.roadgraph import analyse
+from garage_mj.grid.painters import paint_garage
+from garage_mj.grid.roadgraph import analyse
 from garage_mj.scene.roadnet import RoadTile, road_network, tile_openings, tile_rotation
 from garage_mj.scene.stalls import stall_layout
 from garage_mj.scene.world import DEFAULT_WORLD, WORLD_DIR, cell_center, world_to_cell

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from garage_mj import evaluate
-from garage_mj.painter import paint_garage
+from garage_mj.grid.painters import paint_garage
 from garage_mj.search import BandClimber, mutate, painter_actions, replay, road_set, search
 
 

@@ -24,8 +24,8 @@ from garage_mj.export.validate import (
     qc_executable,
 )
 from garage_mj.export.xodr import write_xodr
-from garage_mj.painter import paint_garage
-from garage_mj.roadgraph import analyse
+from garage_mj.grid.painters import paint_garage
+from garage_mj.grid.roadgraph import analyse
 from garage_mj.scene.lanes import lane_graph_of
 from garage_mj.scene.roadmodel import IMPLICIT_ROAD, build_road_model
 from garage_mj.scene.stalls import stall_layout

@@ -61,7 +61,7 @@ def _from_library(args: argparse.Namespace) -> list:
 
 def run(args: argparse.Namespace) -> int:
     from garage_mj.export.pack import export_packs
-    from garage_mj.garage import Garage
+    from garage_mj.grid.garage import Garage
 
     if args.garage is not None:
         if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.feasible, args.limit)):

@@ -74,7 +74,7 @@ def _ls(args: argparse.Namespace) -> int:
 
 @user_errors
 def _show(args: argparse.Namespace) -> int:
-    from garage_mj.textdraw import draw
+    from garage_mj.grid.text import draw
 
     with _open(args.library) as lib:
         r = lib.get(args.id)

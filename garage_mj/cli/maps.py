@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from garage_mj.map_io import list_maps, load_map
-from garage_mj.textdraw import draw
+from garage_mj.grid.map_io import list_maps, load_map
+from garage_mj.grid.text import draw
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,7 +30,7 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from garage_mj.garage import MapError
+    from garage_mj.grid.garage import MapError
 
     bad = 0
     for f in args.files:

@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from garage_mj.library import Library
     from garage_mj.plots import garage_png
-    from garage_mj.textdraw import draw
+    from garage_mj.grid.text import draw
 
     with Library(args.library, create=False) as lib:
         r = lib.get(args.id)

@@ -41,7 +41,7 @@ from garage_mj.actors import (
     load_scenario_config,
 )
 from garage_mj.core.config import load_config
-from garage_mj.garage import Garage
+from garage_mj.grid.garage import Garage
 from garage_mj.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan

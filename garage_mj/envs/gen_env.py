@@ -17,14 +17,14 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.blocks import NUM_CODES, STALL_TABLE, Block
+from garage_mj.grid.blocks import NUM_CODES, STALL_TABLE, Block
 from garage_mj.core.config import RewardConfig, load_config
-from garage_mj.garage import AXES, Axis, Garage
+from garage_mj.grid.garage import AXES, Axis, Garage
 from garage_mj.core.geometry import DELTAS, OPPOSITE
-from garage_mj.map_io import load_map
-from garage_mj.metrics import difficulty, utility_values
-from garage_mj.roadgraph import RoadTracker
-from garage_mj.rules import stall_code
+from garage_mj.grid.map_io import load_map
+from garage_mj.grid.metrics import difficulty, utility_values
+from garage_mj.grid.roadgraph import RoadTracker
+from garage_mj.grid.rules import stall_code
 
 _FREE, _ROAD, _OBST = int(Block.FREE), int(Block.ROAD), int(Block.OBSTACLE)
 _ENTRANCE, _EXIT = int(Block.ENTRANCE), int(Block.EXIT)
@@ -182,11 +182,11 @@ class GarageGenEnv(gym.Env):
 
     def render(self):
         if self.render_mode == "ansi":
-            from garage_mj.textdraw import draw
+            from garage_mj.grid.text import draw
 
             return draw(self.grid, car=self.pos)
         if self.render_mode == "rgb_array":
-            from garage_mj.gridimage import grid_image
+            from garage_mj.grid.image import grid_image
 
             return grid_image(self.grid, car=self.pos, heading=self.heading)
         return None

@@ -20,7 +20,7 @@ import numpy as np
 import trimesh
 from trimesh.visual.material import PBRMaterial
 
-from garage_mj.garage import Garage
+from garage_mj.grid.garage import Garage
 from garage_mj.scene.garage_scene import GarageScene, as_scene
 from garage_mj.scene.layout import CLASS_RGBA, SceneLayout, build_layout
 from garage_mj.scene.semantics import PREFIXES, Semantic

@@ -32,8 +32,8 @@ from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import write_preview
 from garage_mj.export.xodr import write_xodr
 from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir, make_temp_dir
-from garage_mj.garage import Garage, MapError, validate_garage
-from garage_mj.metrics import evaluate
+from garage_mj.grid.garage import Garage, MapError, validate_garage
+from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.drivable import drivability
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import SCENE_XML, write_scene
@@ -227,7 +227,7 @@ def export_packs(
 
     Holds the lock of ``out_dir`` (a second export into it is refused, naming this one) and first
     removes the hidden temp folders a killed export left behind. Every garage is validated
-    (:func:`garage_mj.garage.validate_garage`) before any file is written.
+    (:func:`garage_mj.grid.garage.validate_garage`) before any file is written.
     """
     garages = [validate_garage(g) for g in garages]
     out_dir = ensure_dir(out_dir, "--out")

@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from garage_mj.garage import Garage
+from garage_mj.grid.garage import Garage
 from garage_mj.scene.garage_scene import GarageScene, as_scene
 from garage_mj.scene.layout import CLASS_RGBA, SceneLayout
 from garage_mj.scene.semantics import Semantic

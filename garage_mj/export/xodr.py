@@ -14,7 +14,7 @@ from pathlib import Path
 from lxml import etree
 
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.garage import Garage
+from garage_mj.grid.garage import Garage
 from garage_mj.scene.garage_scene import GarageScene, as_scene
 from garage_mj.scene.roadmodel import Link, ParkingSpace, Road, RoadModel
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig

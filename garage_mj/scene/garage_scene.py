@@ -11,7 +11,7 @@ from __future__ import annotations
 from functools import cached_property
 from typing import TYPE_CHECKING
 
-from garage_mj.garage import Garage
+from garage_mj.grid.garage import Garage
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
 if TYPE_CHECKING:

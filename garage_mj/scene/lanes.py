@@ -16,7 +16,7 @@ import math
 import networkx as nx
 import numpy as np
 
-from garage_mj.garage import Garage
+from garage_mj.grid.garage import Garage
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
 from .planview import sample

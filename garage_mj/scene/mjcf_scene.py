@@ -32,7 +32,7 @@ import mujoco
 import numpy as np
 from dm_control import mjcf
 
-from garage_mj.garage import Garage
+from garage_mj.grid.garage import Garage
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.layout import CLASS_RGBA, Box, SceneLayout, build_layout
 from garage_mj.scene.semantics import Semantic, geom_name

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from garage_mj.blocks import Block
+from garage_mj.grid.blocks import Block
 
 SYMBOLS = {
     Block.FREE: ".",

@@ -13,7 +13,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from garage_mj.blocks import INITIAL_CODES, NUM_CODES, STALL_CODES, Block
+from garage_mj.grid.blocks import INITIAL_CODES, NUM_CODES, STALL_CODES, Block
 from garage_mj.core.errors import GarageMJError
 
 Axis = Literal["NS", "EW"]
@@ -125,14 +125,14 @@ def validate_garage(garage: Garage, source: str | None = None) -> Garage:
     stall rule holds everywhere, no 2x2 square of road-like cells, and the entrance reaches the
     exit on road. The message names the first offending cell and the fix.
     """
-    from garage_mj.roadgraph import analyse
-    from garage_mj.rules import expected_cell, road_squares, stall_rule_violations
+    from garage_mj.grid.roadgraph import analyse
+    from garage_mj.grid.rules import expected_cell, road_squares, stall_rule_violations
 
     src = source or f"garage {garage.name!r}"
     for r, c in stall_rule_violations(garage.grid, garage.six_stall_axis)[:1]:
         want = expected_cell(garage.grid, r, c, garage.six_stall_axis)
         raise MapError(f"{_where(src, r, c)}: {Block(int(garage.grid[r, c])).name} breaks the stall rule "
-                       f"(it must be {want.name}); recolour stalls with garage_mj.rules.apply_stall_rule")
+                       f"(it must be {want.name}); recolour stalls with garage_mj.grid.rules.apply_stall_rule")
     for r, c in road_squares(garage.grid)[:1]:
         raise MapError(f"{_where(src, r, c)}: a 2x2 square of road starts here (rows {r}-{r + 1}, columns "
                        f"{c}-{c + 1}); roads must not form 2x2 squares")

@@ -18,7 +18,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from garage_mj.blocks import ROAD_LIKE_TABLE
+from garage_mj.grid.blocks import ROAD_LIKE_TABLE
 from garage_mj.core.geometry import DELTAS, OPPOSITE
 
 

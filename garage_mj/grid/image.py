@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from garage_mj.blocks import NUM_CODES, Block
+from garage_mj.grid.blocks import NUM_CODES, Block
 from garage_mj.core.geometry import DELTAS
 
 CELL_PX = 16  # [pixels] side of one grid cell

@@ -12,8 +12,8 @@ from collections import deque
 import gymnasium as gym
 import numpy as np
 
-from garage_mj.blocks import Block
-from garage_mj.garage import Axis, Garage
+from garage_mj.grid.blocks import Block
+from garage_mj.grid.garage import Axis, Garage
 from garage_mj.core.geometry import DELTAS
 
 
