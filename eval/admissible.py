@@ -3,7 +3,7 @@
     .venv/bin/python eval/admissible.py [--maps NAME ...] [--evaluations 20000] [--seeds 0 1 2]
         [--libraries runs/compare_dqn/*/*/library.sqlite] [--csv docs/admissible.csv]
 
-Per map: ``garage_mj.search.search`` (MAP-Elites over difficulty bins under the painter's rules,
+Per map: ``garage_mj.generation.search.search`` (MAP-Elites over difficulty bins under the painter's rules,
 both ends replayed through GarageGenEnv) with each seed; the admissible range is the lowest and
 highest difficulty any seed reached, and "bins" counts the 0.1-wide difficulty bins it reached.
 Search gives a lower bound on the true range. The DQN columns read every garage of the map in
@@ -17,9 +17,9 @@ import csv
 import time
 from pathlib import Path
 
-from garage_mj.library import Library
+from garage_mj.generation.library import Library
 from garage_mj.grid.map_io import list_maps
-from garage_mj.search import BIN_WIDTH, search
+from garage_mj.generation.search import BIN_WIDTH, search
 
 N_BINS = round(1 / BIN_WIDTH)
 

@@ -4,13 +4,13 @@
         [--seconds-unreached 60] [--seed 0] [--search-evaluations 10000] [--csv docs/bench_generate.csv]
         [--no-search] [--resume]
 
-Per map (default: the shipped 13x13 maps) and bin [b/10, (b+1)/10]: ``garage_mj.generator.generate``
+Per map (default: the shipped 13x13 maps) and bin [b/10, (b+1)/10]: ``garage_mj.generation.generator.generate``
 with the shipped generator, asking for ``--count`` garages with at most ``--seconds`` of CPU time
 of rollouts and search (``--seconds-unreached`` in bins the search reached no garage in; one process, torch on one thread; CPU time, since the machine is shared and wall
 time depends on the other jobs) into a throw-away library; the row records garages found (and how
 many came from the policy's rollouts and from the search stage), episodes, search steps, replays,
 CPU seconds and wall seconds. The CSV is rewritten after every bin; ``--resume`` keeps the rows of
-an existing CSV and runs only the missing bins. ``garage_mj.search.search`` tells which bins the map admits (search reached
+an existing CSV and runs only the missing bins. ``garage_mj.generation.search.search`` tells which bins the map admits (search reached
 a garage there; a lower bound, so an "unreached" bin may still be admissible). Prints a Markdown
 table per map and a summary line, and writes the CSV.
 """
@@ -23,8 +23,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from garage_mj.generator import GenerationError, generate
-from garage_mj.search import search
+from garage_mj.generation.generator import GenerationError, generate
+from garage_mj.generation.search import search
 
 MAPS = ["m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u"]
 N_BINS = 10

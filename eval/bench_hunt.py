@@ -26,7 +26,7 @@ from pathlib import Path
 
 from garage_mj.cruise import CruiseSource, run_cruise
 from garage_mj.hunt import HuntConfig, hunt
-from garage_mj.library import Library
+from garage_mj.generation.library import Library
 
 HOLDOUT_FIRST = 1000  # held-out test indices start here (the hunt uses far fewer per garage)
 

@@ -26,7 +26,7 @@ except ImportError:  # Python 3.10
     import tomli as tomllib
 from pathlib import Path
 
-from garage_mj.training import load_dqn_config, train
+from garage_mj.generation.training import load_dqn_config, train
 
 SHARES = {  # cProfile functions whose cumulative time is reported as a share of learn()
     "gradient updates": ("dqn.py", "train"),

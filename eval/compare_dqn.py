@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from garage_mj.training import DQNConfig, load_dqn_config, read_manifest, train
+from garage_mj.generation.training import DQNConfig, load_dqn_config, read_manifest, train
 
 # the default DQNConfig before the throughput work (commit 1efa9fa), the reference configuration
 BASELINE = dict(

@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     n_garages = max(2, round(GARAGES * args.scale))
     n_tests = max(2, round(TESTS * args.scale))
     if args.library is not None:
-        from garage_mj.library import Library
+        from garage_mj.generation.library import Library
 
         with Library(args.library, create=False) as lib:
             sources = [CruiseSource.from_record(r) for r in lib.sample(n_garages, args.seed, map=MAP)]

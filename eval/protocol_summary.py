@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from garage_mj.library import Library
+from garage_mj.generation.library import Library
 
 
 def last_returns(run: Path, n: int = 100) -> float | None:

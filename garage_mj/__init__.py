@@ -30,4 +30,21 @@ __all__ = [
     "load_map",
 ]
 
-from garage_mj import envs as _envs  # noqa: E402,F401  (registers the gymnasium ids)
+#: Gymnasium id -> entry point; registered once, when the package is imported (no env module loads).
+ENV_IDS = {
+    "garage_mj/GarageGen-v0": "garage_mj.generation.gen_env:GarageGenEnv",
+    "garage_mj/GarageGenCond-v0": "garage_mj.generation.cond_env:GarageGenCondEnv",
+    "garage_mj/GarageDrive-v0": "garage_mj.envs.drive_env:GarageDriveEnv",
+}
+
+
+def register_envs() -> None:
+    """Register every env id (idempotent)."""
+    import gymnasium as gym
+
+    for env_id, entry_point in ENV_IDS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=entry_point)
+
+
+register_envs()

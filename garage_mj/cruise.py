@@ -80,7 +80,7 @@ class CruiseSource:
 
     @classmethod
     def from_record(cls, record: Any) -> CruiseSource:
-        """From a :class:`garage_mj.library.GarageRecord`."""
+        """From a :class:`garage_mj.generation.library.GarageRecord`."""
         return cls(f"{record.map}#{record.id}", record.garage, record.difficulty, record.mean_road_length,
                    record.mean_intersection_degree)
 

@@ -44,7 +44,7 @@ def _say(msg: str) -> None:
 
 
 def _train(cfg: DemoConfig, out: Path, map_name: str) -> tuple[Path, list[Path]]:
-    from garage_mj.training import read_manifest, train
+    from garage_mj.generation.training import read_manifest, train
 
     library = out / "library.sqlite"
     runs = []
@@ -85,7 +85,7 @@ def run_demo(cfg: DemoConfig) -> Path:
     """Run every stage into ``cfg.out``; returns the report's path."""
     from garage_mj import plots
     from garage_mj.export.pack import export_pack
-    from garage_mj.library import Library
+    from garage_mj.generation.library import Library
     from garage_mj.grid.map_io import load_map
     from garage_mj.report import GalleryItem, ReportData, write_report
 

@@ -9,9 +9,9 @@ The search is an elitist evolution over garages, with the driver's failure rate 
    garage that failed 4 of 5); the ``elites`` best are *re-tested* with ``tests`` more test seeds
    (a garage's rate then rests on more tests, so noise does not keep a false elite), and
    ``population - elites`` children are made from them (tournament of two) by a mutation of
-   the road set under the painter's rules (:func:`garage_mj.search.mutate`: grow or cut a road,
+   the road set under the painter's rules (:func:`garage_mj.generation.search.mutate`: grow or cut a road,
    the stall rule re-applied, connectivity and the 2x2 rule kept), each re-painted through the
-   painter env (:func:`garage_mj.search.replay`) so only garages the generator could make
+   painter env (:func:`garage_mj.generation.search.replay`) so only garages the generator could make
    are tested, each new garage tested ``tests`` times.
 3. **Stop** when the budget of tests is spent.
 
@@ -113,7 +113,7 @@ class HuntResult:
 
 def _starting(map_name: str | None, library: str | Path | None, n: int, seed: int) -> list[CruiseSource]:
     if library is not None:
-        from garage_mj.library import Library, LibraryError
+        from garage_mj.generation.library import Library, LibraryError
 
         if not Path(library).is_file():
             raise LibraryError(f"{library}: no such library file; build one with garage-mj train or generate")
@@ -136,7 +136,7 @@ def _starting(map_name: str | None, library: str | Path | None, n: int, seed: in
 
 def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], tries: int) -> tuple[Garage, str] | None:
     """A new garage mutated from a tournament-picked parent, re-painted by the painter env; None if none found."""
-    from garage_mj.search import mutate, replay
+    from garage_mj.generation.search import mutate, replay
 
     for _ in range(tries):
         a, b = rng.choice(len(parents), size=2, replace=len(parents) < 2)
@@ -271,7 +271,7 @@ def _where(rows: list[dict[str, str]]) -> str:
 
 def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str, seed: int, action_type: str,
                    occupancy: float, env: dict, videos: bool) -> dict[str, Any]:
-    from garage_mj.library import Library
+    from garage_mj.generation.library import Library
 
     lib_path = out / "hunt.sqlite"
     ids: dict[str, int] = {}
@@ -381,7 +381,7 @@ def _report(out: Path, rows: list[dict], worst: list[Scored], packs: list[Path],
 
 def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:
     """Re-run one listed (garage, test) of a hunt in ``out_dir``: the cruise row (same seed, same outcome)."""
-    from garage_mj.library import Library
+    from garage_mj.generation.library import Library
 
     out = Path(out_dir)
     state = json.loads(_state_file(out).read_text())["settings"]

@@ -5,7 +5,7 @@
     .venv/bin/python generation/run.py generation/smoke.toml --workers 2 --backend ray --out runs/smoke_ray
 
 Finished runs are skipped and interrupted ones resumed, so after a crash start the same command
-again. Logic lives in :mod:`garage_mj.experiment`.
+again. Logic lives in :mod:`garage_mj.generation.protocol`.
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from pathlib import Path
 
 from garage_mj.core.backends import BackendError
 from garage_mj.core.config import ConfigError
-from garage_mj.experiment import load_protocol, run_experiment
+from garage_mj.generation.protocol import load_protocol, run_experiment
 from garage_mj.grid.garage import MapError
-from garage_mj.library import LibraryError
+from garage_mj.generation.library import LibraryError
 from garage_mj.plots import PlotError
-from garage_mj.training import TrainingError
+from garage_mj.generation.training import TrainingError
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from garage_mj.cli import main
-from garage_mj.library import Library
-from garage_mj.training import latest_checkpoint, train
+from garage_mj.generation.library import Library
+from garage_mj.generation.training import latest_checkpoint, train
 
 
 @pytest.fixture(scope="module")

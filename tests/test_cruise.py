@@ -92,7 +92,7 @@ def test_results_do_not_depend_on_the_worker_count(garages, tmp_path):
 
 @pytest.fixture(scope="module")
 def library(garages, tmp_path_factory):
-    from garage_mj.library import Library
+    from garage_mj.generation.library import Library
 
     path = tmp_path_factory.mktemp("lib") / "lib.sqlite"
     with Library(path) as lib:

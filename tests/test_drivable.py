@@ -183,7 +183,7 @@ def test_car_geometry_is_read_from_the_model():
 
 def test_check_cli_prints_stores_and_the_library_filters_on_it(painted_tiny, tmp_path, capsys):
     from garage_mj.cli import main
-    from garage_mj.library import Library
+    from garage_mj.generation.library import Library
 
     lib_path = tmp_path / "library.sqlite"
     with Library(lib_path) as lib:

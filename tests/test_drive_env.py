@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import garage_mj.envs  # noqa: F401  (registers the ids)
+import garage_mj  # noqa: F401  (registers the ids)
 from garage_mj.drivers import load_driver
 from garage_mj.envs.drive_env import START_OFFSET, GarageDriveEnv
 from garage_mj.scene.mjcf_scene import parked_stalls

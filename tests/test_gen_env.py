@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from garage_mj import Block, evaluate
 from garage_mj.core.config import ConfigError, RewardConfig
-from garage_mj.envs.gen_env import GarageGenEnv
+from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.core.geometry import EAST, NORTH, SOUTH, WEST
 from garage_mj.grid.metrics import coverage
 from garage_mj.grid.roadgraph import analyse
@@ -26,9 +26,9 @@ def test_check_env_and_registration():
     assert env.unwrapped.view_size == 5 and env.unwrapped.max_errors == 3
     assert env.observation_space.shape == (5 * 5 * 10 + 7,)
     assert ENV_ID in gym.registry
-    import garage_mj.envs
+    import garage_mj
 
-    garage_mj.envs.register_envs()  # idempotent: registering again is harmless
+    garage_mj.register_envs()  # idempotent: registering again is harmless
     assert sum(1 for k in gym.registry if k == ENV_ID) == 1
 
 

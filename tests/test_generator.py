@@ -8,13 +8,13 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from garage_mj.cli import main
-from garage_mj.envs.cond_env import N_COND, ConditionConfig, GarageGenCondEnv
-from garage_mj.envs.gen_env import GarageGenEnv
-from garage_mj.generator import GenerationError, generate, shipped_generator, train_conditioned
-from garage_mj.library import Library
+from garage_mj.generation.cond_env import N_COND, ConditionConfig, GarageGenCondEnv
+from garage_mj.generation.gen_env import GarageGenEnv
+from garage_mj.generation.generator import GenerationError, generate, shipped_generator, train_conditioned
+from garage_mj.generation.library import Library
 from garage_mj.grid.metrics import evaluate
 from garage_mj.grid.painters import paint_garage
-from garage_mj.search import painter_actions
+from garage_mj.generation.search import painter_actions
 
 ENV_ID = "garage_mj/GarageGenCond-v0"
 
@@ -112,7 +112,7 @@ def test_generate_cli_and_unreachable_band(tmp_path, capsys):
     assert main(["generate", "--map", "tiny_7x11", "--difficulty", "0.4", "1.0", "--count", "3",
                  "--library", str(lib), "--no-progress"]) == 0
     assert "3 distinct garages" in capsys.readouterr().out
-    # tiny_7x11 admits nothing below ~0.45 (garage_mj.search): the band stays empty
+    # tiny_7x11 admits nothing below ~0.45 (garage_mj.generation.search): the band stays empty
     assert main(["generate", "--map", "tiny_7x11", "--difficulty", "0.0", "0.05", "--count", "5",
                  "--library", str(lib), "--max-episodes", "40", "--no-progress"]) == 2
     assert "found 0 of 5" in _err_line(capsys)
@@ -140,7 +140,7 @@ def test_bad_input_is_one_line(tmp_path, capsys, argv, match):
 
 
 def test_train_a_tiny_generator_and_use_it(tmp_path):
-    from garage_mj.training import DQNConfig
+    from garage_mj.generation.training import DQNConfig
 
     dqn = DQNConfig(n_envs=2, learning_starts=100, checkpoint_every=400, buffer_size=2000)
     out = tmp_path / "gen"
@@ -173,7 +173,7 @@ def _replays_in_band(record, band) -> bool:
 
 
 def test_search_stage_fills_a_low_band_the_rollouts_never_reach(tmp_path):
-    # m5's generator paints 0.33-0.9; 0.2-0.3 is admissible (garage_mj.search) but no rollout lands there
+    # m5's generator paints 0.33-0.9; 0.2-0.3 is admissible (garage_mj.generation.search) but no rollout lands there
     band, hashes = (0.2, 0.3), []
     for name in ("a", "b"):
         lib = tmp_path / f"{name}.sqlite"

@@ -8,8 +8,8 @@ import pytest
 
 from garage_mj.cli import main
 from garage_mj.hunt import HuntConfig, HuntError, hunt, rerun
-from garage_mj.library import Library
-from garage_mj.search import replay
+from garage_mj.generation.library import Library
+from garage_mj.generation.search import replay
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
 CFG = HuntConfig(budget=16, tests=2, population=4, elites=2, worst=1)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from garage_mj.library import SCHEMA_VERSION, Library, LibraryError
+from garage_mj.generation.library import SCHEMA_VERSION, Library, LibraryError
 from garage_mj.grid.metrics import evaluate
 from garage_mj.grid.painters import paint_garage
 

@@ -20,7 +20,7 @@ from garage_mj.export.pack import (
     load_pack,
     pack_name,
 )
-from garage_mj.library import Library
+from garage_mj.generation.library import Library
 from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.mjcf_scene import parked_car_bodies
 

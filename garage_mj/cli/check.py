@@ -43,7 +43,7 @@ def _garages(args: argparse.Namespace) -> list[tuple[str, object]]:
     if args.library is not None:
         if args.packs:
             raise UserError("give pack folders or --library, not both")
-        from garage_mj.library import Library
+        from garage_mj.generation.library import Library
 
         with Library(args.library, create=False) as lib:
             records = lib.query(map=args.map, difficulty=tuple(args.difficulty) if args.difficulty else None,
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     found = _garages(args)
     store = None
     if args.store:
-        from garage_mj.library import Library
+        from garage_mj.generation.library import Library
 
         store = Library(args.library, create=False, readonly=False)
     car_key = f"models/car max_steer={car.max_steer:g}"

@@ -66,7 +66,7 @@ def _errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Nam
         from garage_mj.cruise import CruiseError
         from garage_mj.drivers import DriverError
         from garage_mj.export.pack import PackError
-        from garage_mj.library import LibraryError
+        from garage_mj.generation.library import LibraryError
 
         try:
             return func(args)
@@ -90,7 +90,7 @@ def sources(args: argparse.Namespace) -> list:
             dirs = dirs[: args.limit]
         found = [CruiseSource.from_pack(d) for d in dirs]
     else:
-        from garage_mj.library import Library, LibraryError
+        from garage_mj.generation.library import Library, LibraryError
 
         if not args.library.is_file():
             raise LibraryError(f"{args.library}: no such library file; build one with garage-mj train")

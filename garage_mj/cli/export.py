@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _from_library(args: argparse.Namespace) -> list:
-    from garage_mj.library import Library, LibraryError
+    from garage_mj.generation.library import Library, LibraryError
 
     try:
         lib = Library(args.library, create=False)

@@ -48,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _open(path: Path):
-    from garage_mj.library import Library
+    from garage_mj.generation.library import Library
 
     return Library(path, create=False)
 

@@ -46,7 +46,7 @@ def _convergence(args: argparse.Namespace) -> int:
 
 @user_errors
 def _heatmap(args: argparse.Namespace) -> int:
-    from garage_mj.library import Library
+    from garage_mj.generation.library import Library
     from garage_mj.plots import heatmap
 
     with Library(args.library, create=False) as lib:

@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 @user_errors
 def run(args: argparse.Namespace) -> int:
     from garage_mj.core.fsutil import FolderLock
-    from garage_mj.training import load_dqn_config, train
+    from garage_mj.generation.training import load_dqn_config, train
 
     overrides = {"checkpoint_every": args.checkpoint_every} if args.checkpoint_every else {}
     if args.config is not None and not args.config.is_file():

@@ -1,9 +1,9 @@
 """Controllable generation: train a difficulty-conditioned DQN painter, then ask it for garages.
 
 :func:`train_conditioned` runs SB3 DQN on ``GarageGenCondEnv`` (the painter with a target band in
-its observation), with the hyper-parameters of :class:`garage_mj.training.DQNConfig` and the
-band settings of :class:`~garage_mj.envs.cond_env.ConditionConfig`. The drawn bands cover the
-map's admissible difficulty range as :func:`garage_mj.search.search` estimates it. A run folder
+its observation), with the hyper-parameters of :class:`garage_mj.generation.training.DQNConfig` and the
+band settings of :class:`~garage_mj.generation.cond_env.ConditionConfig`. The drawn bands cover the
+map's admissible difficulty range as :func:`garage_mj.generation.search.search` estimates it. A run folder
 holds ``run.json``, ``episodes.csv`` (target band and outcome of every episode), checkpoints
 (``resume=True`` continues from the newest), ``generator.zip`` (the Q-network alone, a few hundred
 KB: what ships in ``models/generators/``), saved whenever the share of the last
@@ -16,11 +16,11 @@ training figures).
 conditioned on the band asked for, epsilon-greedy with a per-episode epsilon drawn from the seed
 so that distinct garages appear, and stores every distinct, usable garage that lands in the band
 in the scenario library. When that does not fill the band within :data:`POLICY_PATIENCE`
-episodes, a band-directed local search takes over (:class:`garage_mj.search.BandClimber`): it
+episodes, a band-directed local search takes over (:class:`garage_mj.generation.search.BandClimber`): it
 starts from the usable garages the policy painted, nearest to the band first (and a few of the
 scripted painter's, for variety), mutates their road
 sets under the painter's rules toward the band and then inside it, and re-paints every new road
-set that lands in the band through ``GarageGenEnv`` (:func:`garage_mj.search.replay`), so what
+set that lands in the band through ``GarageGenEnv`` (:func:`garage_mj.generation.search.replay`), so what
 is stored is what the painter makes. :func:`train_for_map` trains a generator for a map that has
 none (``garage-mj generate --map FILE``).
 """
@@ -41,12 +41,12 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.config import ConfigError, load_config, read_toml
-from garage_mj.envs.cond_env import ConditionConfig, GarageGenCondEnv, band_distance
+from garage_mj.generation.cond_env import ConditionConfig, GarageGenCondEnv, band_distance
 from garage_mj.core.errors import GarageMJError
-from garage_mj.library import Library
+from garage_mj.generation.library import Library
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.grid.metrics import evaluate
-from garage_mj.training import DQNConfig, load_dqn_config
+from garage_mj.generation.training import DQNConfig, load_dqn_config
 
 GENERATORS = "generators"  # folder of the shipped generators inside the package data garage_mj.models
 RUN_MANIFEST = "run.json"
@@ -187,8 +187,8 @@ def _truncate_rows(path: Path, rows: int) -> None:
 
 
 def admissible_range(map: str, evaluations: int = SEARCH_EVALUATIONS, seed: int = 0) -> tuple[float, float]:
-    """The difficulty range :func:`garage_mj.search.search` reaches on ``map`` (a lower bound of the truth)."""
-    from garage_mj.search import search
+    """The difficulty range :func:`garage_mj.generation.search.search` reaches on ``map`` (a lower bound of the truth)."""
+    from garage_mj.generation.search import search
 
     return search(map, evaluations, seed=seed).range
 
@@ -206,7 +206,7 @@ def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, 
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
-    from garage_mj.training import CheckpointEvery, latest_checkpoint
+    from garage_mj.generation.training import CheckpointEvery, latest_checkpoint
 
     out = Path(out_dir)
     garage = load_map(map)
@@ -430,7 +430,7 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     """
     import torch
 
-    from garage_mj.search import BandClimber, replay
+    from garage_mj.generation.search import BandClimber, replay
 
     for name, band in (("difficulty", difficulty), ("coverage", coverage)):
         if band is not None and not 0.0 <= band[0] <= band[1] <= 1.0:

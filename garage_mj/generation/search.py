@@ -347,7 +347,7 @@ def painter_actions(garage: Garage) -> list[int]:
 
 def replay(garage: Garage, max_errors: int = 10) -> tuple[Garage, dict]:
     """Paint ``garage`` with :func:`painter_actions` in ``GarageGenEnv``; the env's garage and last info."""
-    from garage_mj.envs.gen_env import GarageGenEnv
+    from garage_mj.generation.gen_env import GarageGenEnv
 
     actions = painter_actions(garage)
     env = GarageGenEnv(map=garage, six_stall_axis=garage.six_stall_axis, max_errors=max_errors,

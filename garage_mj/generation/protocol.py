@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from garage_mj.core.config import ConfigError, read_toml
-from garage_mj.library import Library
-from garage_mj.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
+from garage_mj.generation.library import Library
+from garage_mj.generation.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
 
 LIBRARY = "library.sqlite"
 MIN_TIMESTEPS = 100  # a scaled run never gets fewer

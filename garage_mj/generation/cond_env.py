@@ -24,7 +24,7 @@ import numpy as np
 from gymnasium import spaces
 
 from garage_mj.core.config import ConfigError, load_config
-from garage_mj.envs.gen_env import GarageGenEnv
+from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.grid.metrics import difficulty
 
 N_COND = 5  # observation entries appended: difficulty lo, hi, current difficulty, coverage lo, hi
