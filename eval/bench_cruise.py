@@ -20,7 +20,7 @@ import time
 import gymnasium as gym
 
 import garage_mj  # noqa: F401  (MUJOCO_GL, registers the envs)
-from garage_mj.drivers import load_driver
+from garage_mj.driving.drivers import load_driver
 from garage_mj.grid.painters import paint_garage
 
 PAPER_TESTS = 2500  # 50 garages x 50 tests (SPEC section 5)

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from garage_mj import list_maps
-from garage_mj.cruise import CruiseSource, painted_sources, run_cruise
+from garage_mj.driving.cruise import CruiseSource, painted_sources, run_cruise
 from garage_mj.grid.garage import Garage
 
 SHAPES = Path(__file__).resolve().parent.parent / "tests" / "data" / "shapes"

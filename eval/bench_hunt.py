@@ -24,8 +24,8 @@ import json
 import time
 from pathlib import Path
 
-from garage_mj.cruise import CruiseSource, run_cruise
-from garage_mj.hunt import HuntConfig, hunt
+from garage_mj.driving.cruise import CruiseSource, run_cruise
+from garage_mj.driving.hunt import HuntConfig, hunt
 from garage_mj.generation.library import Library
 
 HOLDOUT_FIRST = 1000  # held-out test indices start here (the hunt uses far fewer per garage)

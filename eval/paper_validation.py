@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from garage_mj.analysis import PAPER_R
-from garage_mj.cruise import CruiseSource, painted_sources, run_cruise
+from garage_mj.driving.cruise import CruiseSource, painted_sources, run_cruise
 
 MAP = "m5_13x13_aligned"
 GARAGES = 50

@@ -30,7 +30,7 @@ class DemoConfig:
     garages: int = 8  # garages sampled from the library, stratified by difficulty
     tests: int = 5  # cruise tests per garage and driver
     drivers: tuple[str, ...] = ("oracle", "waypoint", "vision")
-    # adverse events (garage_mj.actors): these drivers run once more with these actors per test
+    # adverse events (garage_mj.driving.actors): these drivers run once more with these actors per test
     actor_drivers: tuple[str, ...] = ("oracle", "vision")
     actors: dict = field(default_factory=lambda: {"pedestrians": 1, "moving_cars": 1, "clutter": 1})
     workers: int = 2
@@ -152,7 +152,7 @@ def run_demo(cfg: DemoConfig) -> Path:
 
 def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path):
     """Cruise tests with every driver; returns the report's table, regression figure and KPIs."""
-    from garage_mj.cruise import HIT_CLASSES, CruiseSource, run_cruise
+    from garage_mj.driving.cruise import HIT_CLASSES, CruiseSource, run_cruise
 
     sources = [CruiseSource.from_pack(p) for p in packs]
     columns = ["garage", "driver", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions",

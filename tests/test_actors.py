@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from garage_mj.actors import (
+from garage_mj.driving.actors import (
     ActorSpec,
     Corridor,
     ScenarioConfig,
@@ -20,9 +20,9 @@ from garage_mj.actors import (
 )
 from garage_mj.cli import main
 from garage_mj.core.config import ConfigError
-from garage_mj.cruise import read_tests, replay_xosc, run_cruise
-from garage_mj.drivers import load_driver
-from garage_mj.envs.drive_env import GarageDriveEnv
+from garage_mj.driving.cruise import read_tests, replay_xosc, run_cruise
+from garage_mj.driving.drivers import load_driver
+from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.semantics import COLLIDABLE, Semantic

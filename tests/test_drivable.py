@@ -17,7 +17,7 @@ from garage_mj.grid.metrics import evaluate
 from garage_mj.grid.rules import apply_stall_rule
 from garage_mj.scene import GarageScene
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, drivability
-from garage_mj.vehicle import CarConfig, car_geometry
+from garage_mj.driving.vehicle import CarConfig, car_geometry
 
 SHAPES = Path(__file__).parent / "data" / "shapes"
 
@@ -135,7 +135,7 @@ def test_the_drive_env_imports_nothing_from_export(painted_tiny):
     code = (
         "import sys, json\n"
         "from garage_mj.grid.garage import Garage\n"
-        "from garage_mj.envs.drive_env import GarageDriveEnv\n"
+        "from garage_mj.driving.drive_env import GarageDriveEnv\n"
         f"g = Garage.from_json({painted_tiny.to_json()!r})\n"
         "env = GarageDriveEnv(garage=g, action_type='continuous')\n"
         "env.reset(seed=0); env.step([0.5, 0.0]); env.close()\n"

@@ -8,10 +8,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from garage_mj.drivers import DRIVERS, DriverError, load_driver, resolve_driver
-from garage_mj.drivers.vision import VisionDriver
-from garage_mj.outcomes import OutcomeKind
-from garage_mj.vehicle import DiscreteAction
+from garage_mj.driving.drivers import DRIVERS, DriverError, load_driver, resolve_driver
+from garage_mj.driving.drivers.vision import VisionDriver
+from garage_mj.driving.outcomes import OutcomeKind
+from garage_mj.driving.vehicle import DiscreteAction
 from tests._scenes import run_test
 
 L_ROUTE = [(0.0, 0.0), (14.0, 0.0), (14.0, 12.0)]  # a left turn at 14 m
@@ -117,7 +117,7 @@ def test_vision_driver_stops_before_a_wall():
 
 
 def test_vision_obstacle_points_see_the_pillar():
-    from garage_mj.sensors import Camera
+    from garage_mj.driving.sensors import Camera
     from tests._scenes import build
 
     model, data, _ = build(PILLAR_ON_ROUTE)

@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from garage_mj.cli import main
-from garage_mj.cruise import TEST_COLUMNS, read_tests
+from garage_mj.driving.cruise import TEST_COLUMNS, read_tests
 from garage_mj.export.pack import PackError, export_pack, load_pack
 from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.generation.library import Library
@@ -459,7 +459,7 @@ def test_kill_9_during_the_first_cruise_test_then_resume(pack_dir, tmp_path):
 
 
 def test_an_empty_tests_csv_is_repaired_not_mangled(tiny, tmp_path):
-    from garage_mj.cruise import run_cruise
+    from garage_mj.driving.cruise import run_cruise
 
     out = tmp_path / "c"
     out.mkdir()

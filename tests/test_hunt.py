@@ -7,7 +7,7 @@ import csv
 import pytest
 
 from garage_mj.cli import main
-from garage_mj.hunt import HuntConfig, HuntError, hunt, rerun
+from garage_mj.driving.hunt import HuntConfig, HuntError, hunt, rerun
 from garage_mj.generation.library import Library
 from garage_mj.generation.search import replay
 

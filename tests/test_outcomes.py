@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.outcomes import Contact, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.driving.outcomes import Contact, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import Semantic, geom_classes
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from garage_mj.core.backends import BackendError, check_backend, map_unordered, ray_session
-from garage_mj.cruise import run_cruise
+from garage_mj.driving.cruise import run_cruise
 from garage_mj.generation.protocol import load_protocol, run_experiment
 from garage_mj.generation.library import Library
 from garage_mj.grid.painters import paint_garage
@@ -114,7 +114,7 @@ def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
 
 
 def test_hunt_on_ray_gives_the_local_hunt(ray2, tmp_path):
-    from garage_mj.hunt import HuntConfig, hunt
+    from garage_mj.driving.hunt import HuntConfig, hunt
 
     cfg = HuntConfig(budget=10, tests=2, population=4, elites=1, worst=1)
     kw = dict(map="tiny_7x11", config=cfg, seed=1, action_type="discrete", env=FAST, workers=2, progress=False,

@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--video", type=Path, metavar="PATH.mp4",
                    help="instead of the batch, write an MP4 of one test (the first garage, --video-test)")
     p.add_argument("--video-test", type=non_negative_int, default=0, help="test index for --video (default 0)")
-    act = p.add_argument_group("adverse events (garage_mj.actors; drawn per test from its seed)")
+    act = p.add_argument_group("adverse events (garage_mj.driving.actors; drawn per test from its seed)")
     act.add_argument("--pedestrians", type=non_negative_int, metavar="N",
                      help="pedestrians per test: crossing, stepping out between parked cars, walking along")
     act.add_argument("--moving-cars", type=non_negative_int, metavar="M",
@@ -63,8 +63,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
     @functools.wraps(func)
     def wrapper(args: argparse.Namespace) -> int:
-        from garage_mj.cruise import CruiseError
-        from garage_mj.drivers import DriverError
+        from garage_mj.driving.cruise import CruiseError
+        from garage_mj.driving.drivers import DriverError
         from garage_mj.export.pack import PackError
         from garage_mj.generation.library import LibraryError
 
@@ -78,7 +78,7 @@ def _errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Nam
 
 def sources(args: argparse.Namespace) -> list:
     """The garages to test, from ``--packs`` or ``--library`` with the filters."""
-    from garage_mj.cruise import CruiseSource
+    from garage_mj.driving.cruise import CruiseSource
 
     if args.packs is not None:
         if not args.packs.is_dir():
@@ -114,7 +114,7 @@ def scenario(args: argparse.Namespace) -> dict | None:
     counts = {"pedestrians": args.pedestrians, "moving_cars": args.moving_cars, "clutter": args.clutter}
     if args.scenario is None and all(v is None for v in counts.values()):
         return None
-    from garage_mj.actors import load_scenario_config
+    from garage_mj.driving.actors import load_scenario_config
 
     if args.scenario is not None and not args.scenario.is_file():
         raise UserError(f"--scenario {args.scenario}: no such file; give a TOML file with a [scenario] table")
@@ -126,7 +126,7 @@ def scenario(args: argparse.Namespace) -> dict | None:
 def replay(args: argparse.Namespace) -> int:
     import csv
 
-    from garage_mj.cruise import TEST_COLUMNS, replay_xosc
+    from garage_mj.driving.cruise import TEST_COLUMNS, replay_xosc
     from garage_mj.core.fsutil import atomic_write, ensure_dir
 
     rows = []
@@ -151,7 +151,7 @@ def replay(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.cruise import run_cruise
+    from garage_mj.driving.cruise import run_cruise
 
     if args.scenario_file is not None:
         return replay(args)

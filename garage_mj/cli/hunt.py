@@ -49,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from garage_mj.cli.cruise import scenario
-    from garage_mj.hunt import HuntConfig, hunt
+    from garage_mj.driving.hunt import HuntConfig, hunt
 
     if args.library is not None and not args.library.is_file():
         raise UserError(f"--library {args.library}: no such file; build one with garage-mj train or generate")

@@ -24,7 +24,7 @@ OpenSCENARIO element                               carries
 ``Entities/ScenarioObject[parkedcar_<stall>]``     a parked car in stall ``<stall>`` (Vehicle)
 ``Entities/ScenarioObject[<actor name>]``          an actor: pedestrian -> Pedestrian, moving_car ->
                                                    Vehicle, clutter -> MiscObject (obstacle); box
-                                                   from :data:`garage_mj.actors.SHAPE_SIZE`
+                                                   from :data:`garage_mj.driving.actors.SHAPE_SIZE`
 ``Init`` ``TeleportAction/WorldPosition``          start pose of every entity (x, y, z=0, h=yaw);
                                                    an actor's is its first waypoint
 ``Init`` ego ``FollowTrajectoryAction``            the planned route: ``Polyline`` of the centre
@@ -67,7 +67,7 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from garage_mj.actors import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
+from garage_mj.driving.actors import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
 
@@ -210,7 +210,7 @@ def _box(xosc, length: float, width: float, height: float):
 
 
 def _car(xosc, name: str, length: float, width: float, height: float):
-    from garage_mj.vehicle import car_geometry
+    from garage_mj.driving.vehicle import car_geometry
 
     g = car_geometry()
     front = xosc.Axle(g.max_steer, 0.65, 1.6, g.rear_axle + g.wheelbase, 0.325)

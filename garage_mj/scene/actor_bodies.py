@@ -1,7 +1,7 @@
-"""The MuJoCo side of the actors of :mod:`garage_mj.actors`: kinematic mocap bodies, built once per env.
+"""The MuJoCo side of the actors of :mod:`garage_mj.driving.actors`: kinematic mocap bodies, built once per env.
 
 :func:`add_actor_bodies` adds one mocap body per actor slot of a
-:class:`~garage_mj.actors.ScenarioConfig` to an ``mjcf.RootElement`` (before compiling): a
+:class:`~garage_mj.driving.actors.ScenarioConfig` to an ``mjcf.RootElement`` (before compiling): a
 pedestrian per ``pedestrians``, a car per ``moving_cars``, and per ``clutter`` slot one body of
 each clutter shape (cone, trolley, car), since a slot's shape is drawn per test. Body names
 carry the semantic class (``pedestrian_0``, ``movingcar_0``, ``clutter_0_cone``...), so the
@@ -22,7 +22,7 @@ from collections.abc import Iterable
 import mujoco
 import numpy as np
 
-from garage_mj.actors import SHAPE_SIZE, ActorSpec, ScenarioConfig
+from garage_mj.driving.actors import SHAPE_SIZE, ActorSpec, ScenarioConfig
 from garage_mj.scene.layout import CLASS_RGBA
 from garage_mj.scene.semantics import Semantic
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.drivers.base import BaseDriver
+from garage_mj.driving.drivers.base import BaseDriver
 
 
 @dataclass(frozen=True)

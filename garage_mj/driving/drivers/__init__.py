@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from garage_mj.drivers.base import (
+from garage_mj.driving.drivers.base import (
     BaseDriver,
     CameraGeometry,
     CarGeometry,
@@ -21,9 +21,9 @@ from garage_mj.core.errors import GarageMJError
 
 #: Built-in drivers: name -> "module:Class".
 DRIVERS: dict[str, str] = {
-    "oracle": "garage_mj.drivers.oracle:OracleDriver",
-    "waypoint": "garage_mj.drivers.waypoint:WaypointDriver",
-    "vision": "garage_mj.drivers.vision:VisionDriver",
+    "oracle": "garage_mj.driving.drivers.oracle:OracleDriver",
+    "waypoint": "garage_mj.driving.drivers.waypoint:WaypointDriver",
+    "vision": "garage_mj.driving.drivers.vision:VisionDriver",
 }
 
 __all__ = [

@@ -5,11 +5,11 @@ and ``act(obs) -> action`` once per control step. The observation dict holds ``d
 float32 metres), ``segmentation`` (H x W uint8 :class:`garage_mj.scene.semantics.Semantic` ids),
 optionally ``rgb``, ``waypoint`` (the route point a lookahead distance ahead, in the car frame:
 x forward, y left, metres) and ``speed`` (forward speed, m/s). An action is either the paper's
-discrete index (:class:`garage_mj.vehicle.DiscreteAction`) or ``[throttle, steer]`` in [-1, 1].
+discrete index (:class:`garage_mj.driving.vehicle.DiscreteAction`) or ``[throttle, steer]`` in [-1, 1].
 
 ``info`` at reset may carry ``seed`` (int), ``action_type`` ("continuous" or "discrete"),
 ``dt`` (control period, s), ``camera`` (a dict of :class:`CameraGeometry` fields) and ``car``
-(a :class:`garage_mj.vehicle.CarGeometry`).
+(a :class:`garage_mj.driving.vehicle.CarGeometry`).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from garage_mj.core.config import load_config
-from garage_mj.vehicle import CarGeometry, DiscreteAction, car_geometry
+from garage_mj.driving.vehicle import CarGeometry, DiscreteAction, car_geometry
 
 
 @runtime_checkable

@@ -16,7 +16,7 @@ every obstacle and stall outline. A target that no driver of this car could reac
 outcome ``infeasible`` and its reason, never driven. The car starts :data:`START_OFFSET` metres
 along the route, so it is wholly inside the garage.
 
-Outcomes are the environment's (:class:`~garage_mj.outcomes.OutcomeMonitor`): ``success`` and
+Outcomes are the environment's (:class:`~garage_mj.driving.outcomes.OutcomeMonitor`): ``success`` and
 ``collision``/``deadlock`` terminate, ``timeout`` truncates. The reward is route progress [m]
 per step, plus :data:`SUCCESS_REWARD` or :data:`COLLISION_PENALTY` at the end.
 """
@@ -31,7 +31,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.actors import (
+from garage_mj.driving.actors import (
     NO_ACTORS,
     ActorSpec,
     Scenario,
@@ -42,15 +42,15 @@ from garage_mj.actors import (
 )
 from garage_mj.core.config import load_config
 from garage_mj.grid.garage import Garage
-from garage_mj.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.driving.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import parked_car_bodies, set_parked
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import Semantic, geom_classes
-from garage_mj.sensors import Camera, CameraConfig
-from garage_mj.vehicle import Car, CarConfig, DiscreteAction, attach_car, car_geometry, compile_mjcf
+from garage_mj.driving.sensors import Camera, CameraConfig
+from garage_mj.driving.vehicle import Car, CarConfig, DiscreteAction, attach_car, car_geometry, compile_mjcf
 
 LOOKAHEAD = 4.0  # [m] the observed waypoint lies this far ahead of the car's route progress
 MAX_EXTENT = 1000.0  # [m] bound of the waypoint observation (far beyond any garage)
@@ -87,7 +87,7 @@ class GarageDriveEnv(gym.Env):
             ``MultiInputPolicy`` hands them to its CNN. The built-in drivers expect the default
             (depth in metres as ``(H, W)`` float32).
         render_mode: ``"rgb_array"`` renders the ``ego/top`` camera (``render_size`` pixels).
-        scenario: :class:`~garage_mj.actors.ScenarioConfig` (or a dict of its fields, or a TOML
+        scenario: :class:`~garage_mj.driving.actors.ScenarioConfig` (or a dict of its fields, or a TOML
             file): pedestrians, moving cars and clutter drawn per test from the test seed (after
             the draws above, so the same seed gives the same target, parked cars and start with
             or without actors). A test whose events no driver could avoid is ``infeasible``.
@@ -211,7 +211,7 @@ class GarageDriveEnv(gym.Env):
         """Draw target stall, parked cars and start pose from ``seed``.
 
         ``options`` may fix ``target`` (stall id), ``occupied`` (stall ids), ``start`` ((x, y, yaw))
-        or ``actors`` (a list of :class:`~garage_mj.actors.ActorSpec` or their dicts, replacing the
+        or ``actors`` (a list of :class:`~garage_mj.driving.actors.ActorSpec` or their dicts, replacing the
         drawn ones; a replayed ``.xosc`` does this); their avoidability is judged the same way.
         """
         super().reset(seed=seed)
@@ -378,7 +378,7 @@ class GarageDriveEnv(gym.Env):
         return info
 
     def driver_info(self, seed: int = 0) -> dict[str, Any]:
-        """What a :class:`~garage_mj.drivers.Driver` gets at reset.
+        """What a :class:`~garage_mj.driving.drivers.Driver` gets at reset.
 
         Seed, action type, control period, the car's geometry, and the test's plan: ``route``
         (the centre path, (N, 2) m), ``rear_path`` and ``rear_heading`` (the rear-axle path the

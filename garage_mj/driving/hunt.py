@@ -15,7 +15,7 @@ The search is an elitist evolution over garages, with the driver's failure rate 
    are tested, each new garage tested ``tests`` times.
 3. **Stop** when the budget of tests is spent.
 
-Everything is a resumable cruise run (``OUT/cruise``, :func:`garage_mj.cruise.run_cruise`): a
+Everything is a resumable cruise run (``OUT/cruise``, :func:`garage_mj.driving.cruise.run_cruise`): a
 generation's garages and mutations are drawn from ``(seed, generation)`` and the results so far,
 which a re-run reads back from ``tests.csv``, so an interrupted hunt continues where it stopped
 and the same seed gives the same hunt. Outputs in ``OUT``: ``hunt.sqlite`` (every garage tested,
@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.cruise import CruiseSettings, CruiseSource, close_cached_env, read_tests, run_cruise, run_test
+from garage_mj.driving.cruise import CruiseSettings, CruiseSource, close_cached_env, read_tests, run_cruise, run_test
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir
 from garage_mj.grid.garage import Garage
@@ -171,7 +171,7 @@ def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: s
     import contextlib
 
     from garage_mj.core.backends import check_backend, ray_session
-    from garage_mj.drivers import resolve_driver
+    from garage_mj.driving.drivers import resolve_driver
 
     cfg = config or HuntConfig()
     if map is None and library is None:
@@ -316,7 +316,7 @@ def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action
     """Pack, .xosc of every failing test and an MP4 of the first, for each of the worst garages."""
     import dataclasses
 
-    from garage_mj.cruise import xosc_name
+    from garage_mj.driving.cruise import xosc_name
     from garage_mj.export.pack import export_pack
 
     settings = CruiseSettings(driver, int(seed), action_type, float(occupancy), dict(env), {})

@@ -141,7 +141,7 @@ _CACHE: dict[str, Any] = {}
 
 def _env_for(source: CruiseSource, settings: CruiseSettings):
     """The worker's env for ``source`` (built once; the previous garage's env is closed)."""
-    from garage_mj.envs.drive_env import GarageDriveEnv
+    from garage_mj.driving.drive_env import GarageDriveEnv
 
     key = (source.hash, json.dumps(settings.env, sort_keys=True))
     if _CACHE.get("hash") != key:
@@ -161,7 +161,7 @@ def close_cached_env() -> None:
 
 
 def _driver_for(settings: CruiseSettings):
-    from garage_mj.drivers import load_driver
+    from garage_mj.driving.drivers import load_driver
 
     key = (settings.driver, json.dumps(settings.driver_kwargs, sort_keys=True))
     if _CACHE.get("driver_key") != key:
@@ -249,7 +249,7 @@ def replay_xosc(path: str | Path, driver: str | None = None, driver_kwargs: dict
     cars, start pose and actors; the env settings and the driver are the ones recorded, unless
     ``driver`` names another (a test engineer's own stack on a found scenario).
     """
-    from garage_mj.actors import load_scenario_config
+    from garage_mj.driving.actors import load_scenario_config
     from garage_mj.export.xosc import read_xosc
 
     test = read_xosc(path)
@@ -270,7 +270,7 @@ def replay_xosc(path: str | Path, driver: str | None = None, driver_kwargs: dict
                               dict(driver_kwargs if driver_kwargs is not None else meta.get("driver_kwargs") or {}))
     source = dataclasses.replace(CruiseSource.from_garage(pack.garage, str(meta.get("garage") or Path(pack.path).name)),
                                  pack=str(pack.path))
-    from garage_mj.envs.drive_env import GarageDriveEnv
+    from garage_mj.driving.drive_env import GarageDriveEnv
 
     env = GarageDriveEnv(garage=pack.garage, action_type=settings.action_type, occupancy=settings.occupancy,
                          infeasible="report", **env_kwargs)
@@ -481,7 +481,7 @@ def run_cruise(
     driver), ``BackendError`` (bad backend, Ray missing) before any test.
     """
     from garage_mj.core.backends import check_backend
-    from garage_mj.drivers import resolve_driver
+    from garage_mj.driving.drivers import resolve_driver
 
     if tests < 1:
         raise ValueError(f"tests must be >= 1, got {tests}")

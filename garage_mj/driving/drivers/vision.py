@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.drivers.base import BaseDriver
+from garage_mj.driving.drivers.base import BaseDriver
 from garage_mj.scene.semantics import DRIVABLE, NUM_CLASSES, Semantic
 
 _NOT_OBSTACLE = np.zeros(NUM_CLASSES, dtype=bool)
