@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from garage_mj.demo import DemoConfig, run_demo
+from garage_mj.reporting.demo import DemoConfig, run_demo
 from tests.browser import page_facts
 
 

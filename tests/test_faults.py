@@ -545,7 +545,7 @@ def test_garage_validation_is_shared_by_export_and_cruise(tiny):
 
 
 def test_demo_with_a_map_path_writes_only_inside_out(tmp_path):
-    from garage_mj.demo import DemoConfig, run_demo
+    from garage_mj.reporting.demo import DemoConfig, run_demo
 
     maps = tmp_path / "maps"
     maps.mkdir()

@@ -193,7 +193,7 @@ def test_rgb_array_render_shows_the_car_moving():
 
 def test_render_colours_are_those_of_garage_show():
     from garage_mj.grid.image import BLOCK_RGB
-    from garage_mj.plots import BLOCK_COLOURS
+    from garage_mj.reporting.plots import BLOCK_COLOURS
 
     for block, hex_colour in BLOCK_COLOURS.items():
         assert "#" + "".join(f"{v:02x}" for v in BLOCK_RGB[block]) == hex_colour.lower()

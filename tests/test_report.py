@@ -8,7 +8,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pytest  # noqa: E402
 
-from garage_mj.report import GalleryItem, ReportData, render_html, write_report  # noqa: E402
+from garage_mj.reporting.report import GalleryItem, ReportData, render_html, write_report  # noqa: E402
 from tests.browser import page_facts  # noqa: E402
 
 

@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
     if scen is not None:
         env["scenario"] = scen
     if args.video is not None:
-        from garage_mj.video import record_video
+        from garage_mj.reporting.video import record_video
 
         path = record_video(srcs[0], args.video, driver=args.driver, seed=args.seed, test=args.video_test,
                             action_type=args.action_type, occupancy=args.occupancy, env=env)

@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 @user_errors
 def _convergence(args: argparse.Namespace) -> int:
-    from garage_mj.plots import convergence
+    from garage_mj.reporting.plots import convergence
 
     if args.smooth < 1:
         raise UserError(f"--smooth must be >= 1, got {args.smooth}")
@@ -47,7 +47,7 @@ def _convergence(args: argparse.Namespace) -> int:
 @user_errors
 def _heatmap(args: argparse.Namespace) -> int:
     from garage_mj.generation.library import Library
-    from garage_mj.plots import heatmap
+    from garage_mj.reporting.plots import heatmap
 
     with Library(args.library, create=False) as lib:
         points = lib.points(args.map)

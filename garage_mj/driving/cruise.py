@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.analysis import PAPER_R, regression, regression_plot
+from garage_mj.reporting.analysis import PAPER_R, regression, regression_plot
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir
 from garage_mj.grid.garage import Garage

@@ -333,7 +333,7 @@ def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action
                     run_test(src, i, settings, str(out / "xosc"), export_only=True)
                 xoscs.append(path)
             if videos and s.failures:
-                from garage_mj.video import record_video
+                from garage_mj.reporting.video import record_video
 
                 i = int(s.failures[0]["test"])
                 mp4 = out / "videos" / f"{src.hash[:12]}_{i:05d}.mp4"

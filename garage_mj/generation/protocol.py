@@ -152,7 +152,7 @@ def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progre
 
 def draw_figures(protocol: Protocol, out: Path) -> list[Path]:
     """Convergence curves of all finished runs and one heatmap per map with garages."""
-    from garage_mj.plots import convergence, heatmap
+    from garage_mj.reporting.plots import convergence, heatmap
 
     figures = out / "figures"
     runs = [run_dir(out, m, s) for m in protocol.maps for s in protocol.seeds]

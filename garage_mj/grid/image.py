@@ -1,7 +1,7 @@
 """RGB pictures of an encoding matrix with the painter car, in numpy only (no matplotlib).
 
 ``grid_image(grid, car, heading)`` is what ``GarageGenEnv(render_mode="rgb_array")`` returns: one
-``cell_px`` square per cell in the block colours of ``garage-mj show`` (:data:`garage_mj.plots.BLOCK_COLOURS`),
+``cell_px`` square per cell in the block colours of ``garage-mj show`` (:data:`garage_mj.reporting.plots.BLOCK_COLOURS`),
 thin white lines between cells, and the car as a yellow square with a black nose on the side it heads to.
 Cheap enough for every frame of a ``RecordVideo`` (under a millisecond for a 7x11 grid).
 """
@@ -14,7 +14,7 @@ from garage_mj.grid.blocks import NUM_CODES, Block
 from garage_mj.core.geometry import DELTAS
 
 CELL_PX = 16  # [pixels] side of one grid cell
-#: Colour of each block code, shared with :mod:`garage_mj.plots` (one table for every picture of a grid).
+#: Colour of each block code, shared with :mod:`garage_mj.reporting.plots` (one table for every picture of a grid).
 BLOCK_COLOURS = {
     Block.FREE: "#f2f2f2",
     Block.ROAD: "#5b5b5b",

@@ -1,0 +1,8 @@
+"""Reporting: what a person reads of the results.
+
+- ``plots``: convergence curves, coverage x difficulty heatmaps, garage pictures (matplotlib).
+- ``analysis``: success against difficulty (regression, Pearson r) and its plot.
+- ``video``: an MP4 of one cruise test with the camera views and the outcome.
+- ``report``: the HTML report.
+- ``demo``: the main job end to end on a small garage (train, library, packs, cruise, report).
+"""
