@@ -18,8 +18,8 @@ import time
 from pathlib import Path
 
 from garage_mj.generation.library import Library
-from garage_mj.grid.map_io import list_maps
 from garage_mj.generation.search import BIN_WIDTH, search
+from garage_mj.grid.map_io import list_maps
 
 N_BINS = round(1 / BIN_WIDTH)
 

@@ -15,8 +15,8 @@ import sys
 import time
 from pathlib import Path
 
-from garage_mj.reporting.analysis import PAPER_R
 from garage_mj.driving.cruise import CruiseSource, painted_sources, run_cruise
+from garage_mj.reporting.analysis import PAPER_R
 
 MAP = "m5_13x13_aligned"
 GARAGES = 50

@@ -17,11 +17,11 @@ from pathlib import Path
 
 from garage_mj.core.backends import BackendError
 from garage_mj.core.config import ConfigError
-from garage_mj.generation.protocol import load_protocol, run_experiment
-from garage_mj.grid.garage import MapError
 from garage_mj.generation.library import LibraryError
-from garage_mj.reporting.plots import PlotError
+from garage_mj.generation.protocol import load_protocol, run_experiment
 from garage_mj.generation.training import TrainingError
+from garage_mj.grid.garage import MapError
+from garage_mj.reporting.plots import PlotError
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,10 +7,10 @@ import numpy as np
 from dm_control import mjcf
 
 from garage_mj.driving.outcomes import OutcomeMonitor, ego_contacts
-from garage_mj.scene.route import Route, to_car_frame
-from garage_mj.scene.semantics import geom_classes
 from garage_mj.driving.sensors import Camera, CameraConfig
 from garage_mj.driving.vehicle import Car, attach_car, compile_mjcf
+from garage_mj.scene.route import Route, to_car_frame
+from garage_mj.scene.semantics import geom_classes
 
 LOOKAHEAD = 4.0  # [m] waypoint distance ahead of the car's route projection
 

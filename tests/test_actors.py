@@ -8,6 +8,8 @@ import math
 import numpy as np
 import pytest
 
+from garage_mj.cli import main
+from garage_mj.core.config import ConfigError
 from garage_mj.driving.actors import (
     ActorSpec,
     Corridor,
@@ -18,11 +20,9 @@ from garage_mj.driving.actors import (
     load_scenario_config,
     sample_times,
 )
-from garage_mj.cli import main
-from garage_mj.core.config import ConfigError
 from garage_mj.driving.cruise import read_tests, replay_xosc, run_cruise
-from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.drive_env import GarageDriveEnv
+from garage_mj.driving.drivers import load_driver
 from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.semantics import COLLIDABLE, Semantic

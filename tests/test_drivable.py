@@ -16,8 +16,8 @@ from garage_mj.grid.garage import Garage
 from garage_mj.grid.metrics import evaluate
 from garage_mj.grid.rules import apply_stall_rule
 from garage_mj.scene import GarageScene
+from garage_mj.scene.car import CarConfig, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, drivability
-from garage_mj.driving.vehicle import CarConfig, car_geometry
 
 SHAPES = Path(__file__).parent / "data" / "shapes"
 

@@ -8,8 +8,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import garage_mj  # noqa: F401  (registers the ids)
-from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.drive_env import START_OFFSET, GarageDriveEnv
+from garage_mj.driving.drivers import load_driver
 from garage_mj.scene.mjcf_scene import parked_stalls
 
 ENV_ID = "garage_mj/GarageDrive-v0"

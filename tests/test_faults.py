@@ -32,8 +32,8 @@ from hypothesis import strategies as st
 from garage_mj.cli import main
 from garage_mj.driving.cruise import TEST_COLUMNS, read_tests
 from garage_mj.export.pack import PackError, export_pack, load_pack
-from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.generation.library import Library
+from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.grid.map_io import load_map, parse_map_text
 from garage_mj.grid.painters import paint_garage
 from garage_mj.grid.rules import apply_stall_rule

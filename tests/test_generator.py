@@ -12,9 +12,9 @@ from garage_mj.generation.cond_env import N_COND, ConditionConfig, GarageGenCond
 from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.generator import GenerationError, generate, shipped_generator, train_conditioned
 from garage_mj.generation.library import Library
+from garage_mj.generation.search import painter_actions
 from garage_mj.grid.metrics import evaluate
 from garage_mj.grid.painters import paint_garage
-from garage_mj.generation.search import painter_actions
 
 ENV_ID = "garage_mj/GarageGenCond-v0"
 

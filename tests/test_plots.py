@@ -7,7 +7,15 @@ import json
 import numpy as np
 import pytest
 
-from garage_mj.reporting.plots import PlotError, convergence, garage_png, heatmap, heatmap_counts, mean_ci, read_monitor
+from garage_mj.reporting.plots import (
+    PlotError,
+    convergence,
+    garage_png,
+    heatmap,
+    heatmap_counts,
+    mean_ci,
+    read_monitor,
+)
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from garage_mj import evaluate
-from garage_mj.grid.painters import paint_garage
 from garage_mj.generation.search import BandClimber, mutate, painter_actions, replay, road_set, search
+from garage_mj.grid.painters import paint_garage
 
 
 def test_painter_actions_repaint_a_painted_garage():

@@ -8,8 +8,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.scene.semantics import Semantic, classify_name, geom_classes, unclassified_geoms
 from garage_mj.driving.sensors import Camera, CameraConfig, RenderError
+from garage_mj.scene.semantics import Semantic, classify_name, geom_classes, unclassified_geoms
 from tests._scenes import build
 
 PILLAR_AHEAD = [("pillar_0", (8.0, 0.0, 1.5), (0.3, 0.3, 1.5))]

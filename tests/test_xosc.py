@@ -15,8 +15,8 @@ import pytest
 from lxml import etree
 from scenariogeneration.xosc import ParseOpenScenario
 
-from garage_mj.driving.actors import ActorSpec, ScenarioConfig, draw_scenario
 from garage_mj.core.errors import GarageMJError
+from garage_mj.driving.actors import ActorSpec, ScenarioConfig, draw_scenario
 from garage_mj.export.pack import export_pack
 from garage_mj.export.validate import ToolMissing, check_xosc_batch, qc_xosc_executable
 from garage_mj.export.xosc import XoscError, read_xosc, write_xosc

@@ -62,9 +62,9 @@ def _garages(args: argparse.Namespace) -> list[tuple[str, object]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from garage_mj.scene.car import CarConfig, car_geometry
     from garage_mj.scene.drivable import drivability
     from garage_mj.scene.garage_scene import GarageScene
-    from garage_mj.driving.vehicle import CarConfig, car_geometry
 
     if args.max_steer is not None and not 0.05 <= args.max_steer <= 1.2:
         raise UserError(f"--max-steer {args.max_steer} rad is not a plausible full-lock angle; use 0.05 to 1.2")

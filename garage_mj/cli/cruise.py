@@ -126,8 +126,8 @@ def scenario(args: argparse.Namespace) -> dict | None:
 def replay(args: argparse.Namespace) -> int:
     import csv
 
-    from garage_mj.driving.cruise import TEST_COLUMNS, replay_xosc
     from garage_mj.core.fsutil import atomic_write, ensure_dir
+    from garage_mj.driving.cruise import TEST_COLUMNS, replay_xosc
 
     rows = []
     for path in args.scenario_file:

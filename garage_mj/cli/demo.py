@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from garage_mj.cli._common import positive_int, seed
-from garage_mj.reporting.demo import DemoConfig, demo_config, run_demo
 from garage_mj.core.fsutil import FolderLock
+from garage_mj.reporting.demo import DemoConfig, demo_config, run_demo
 
 _D = DemoConfig()
 

@@ -26,8 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 @user_errors
 def run(args: argparse.Namespace) -> int:
     from garage_mj.generation.library import Library
-    from garage_mj.reporting.plots import garage_png
     from garage_mj.grid.text import draw
+    from garage_mj.reporting.plots import garage_png
 
     with Library(args.library, create=False) as lib:
         r = lib.get(args.id)

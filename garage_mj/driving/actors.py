@@ -57,7 +57,7 @@ from garage_mj.scene.drivable import START_OFFSET, DrivePlanner, TestPlan
 from garage_mj.scene.world import WORLD_DIR, cell_center, world_to_cell
 
 if TYPE_CHECKING:
-    from garage_mj.driving.vehicle import CarGeometry
+    from garage_mj.scene.car import CarGeometry
 
 KINDS = ("pedestrian", "moving_car", "clutter")
 BEHAVIOURS = {

@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.reporting.analysis import PAPER_R, regression, regression_plot
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.metrics import evaluate
+from garage_mj.reporting.analysis import PAPER_R, regression, regression_plot
 
 TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",
                 "hit_geom", "reason", "time", "path_length", "route_length", "difficulty", "mean_road_length",

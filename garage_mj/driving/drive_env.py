@@ -31,6 +31,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
+from garage_mj.core.config import load_config
 from garage_mj.driving.actors import (
     NO_ACTORS,
     ActorSpec,
@@ -40,17 +41,17 @@ from garage_mj.driving.actors import (
     judge,
     load_scenario_config,
 )
-from garage_mj.core.config import load_config
-from garage_mj.grid.garage import Garage
 from garage_mj.driving.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.driving.sensors import Camera, CameraConfig
+from garage_mj.driving.vehicle import Car, DiscreteAction, attach_car, compile_mjcf
+from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states
+from garage_mj.scene.car import CarConfig, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import parked_car_bodies, set_parked
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import Semantic, geom_classes
-from garage_mj.driving.sensors import Camera, CameraConfig
-from garage_mj.driving.vehicle import Car, CarConfig, DiscreteAction, attach_car, car_geometry, compile_mjcf
 
 LOOKAHEAD = 4.0  # [m] the observed waypoint lies this far ahead of the car's route progress
 MAX_EXTENT = 1000.0  # [m] bound of the waypoint observation (far beyond any garage)

@@ -39,9 +39,16 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.driving.cruise import CruiseSettings, CruiseSource, close_cached_env, read_tests, run_cruise, run_test
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir
+from garage_mj.driving.cruise import (
+    CruiseSettings,
+    CruiseSource,
+    close_cached_env,
+    read_tests,
+    run_cruise,
+    run_test,
+)
 from garage_mj.grid.garage import Garage
 
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",

@@ -28,10 +28,10 @@ from pathlib import Path
 from tqdm import tqdm
 
 from garage_mj.core.errors import GarageMJError
+from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir, make_temp_dir
 from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import write_preview
 from garage_mj.export.xodr import write_xodr
-from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir, make_temp_dir
 from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.drivable import drivability

@@ -67,9 +67,9 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from garage_mj.driving.actors import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
+from garage_mj.driving.actors import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
 
 OSC_MINOR = 2  # OpenSCENARIO 1.2
 FORMAT = 1  # gmj_format: bumped when the mapping above changes
@@ -210,7 +210,7 @@ def _box(xosc, length: float, width: float, height: float):
 
 
 def _car(xosc, name: str, length: float, width: float, height: float):
-    from garage_mj.driving.vehicle import car_geometry
+    from garage_mj.scene.car import car_geometry
 
     g = car_geometry()
     front = xosc.Axle(g.max_steer, 0.65, 1.6, g.rear_axle + g.wheelbase, 0.325)

@@ -41,12 +41,12 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.config import ConfigError, load_config, read_toml
-from garage_mj.generation.cond_env import ConditionConfig, GarageGenCondEnv, band_distance
 from garage_mj.core.errors import GarageMJError
+from garage_mj.generation.cond_env import ConditionConfig, GarageGenCondEnv, band_distance
 from garage_mj.generation.library import Library
+from garage_mj.generation.training import DQNConfig, load_dqn_config
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.grid.metrics import evaluate
-from garage_mj.generation.training import DQNConfig, load_dqn_config
 
 GENERATORS = "generators"  # folder of the shipped generators inside the package data garage_mj.models
 RUN_MANIFEST = "run.json"

@@ -27,8 +27,8 @@ import gymnasium as gym
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from garage_mj.core.config import ConfigError, load_config
-from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.core.errors import GarageMJError
+from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.library import Library
 from garage_mj.grid.map_io import load_map
 

@@ -13,8 +13,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from garage_mj.grid.blocks import INITIAL_CODES, NUM_CODES, STALL_CODES, Block
 from garage_mj.core.errors import GarageMJError
+from garage_mj.grid.blocks import INITIAL_CODES, NUM_CODES, STALL_CODES, Block
 
 Axis = Literal["NS", "EW"]
 AXES: tuple[Axis, ...] = ("NS", "EW")

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from garage_mj.grid.blocks import NUM_CODES, Block
 from garage_mj.core.geometry import DELTAS
+from garage_mj.grid.blocks import NUM_CODES, Block
 
 CELL_PX = 16  # [pixels] side of one grid cell
 #: Colour of each block code, shared with :mod:`garage_mj.reporting.plots` (one table for every picture of a grid).

@@ -10,8 +10,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from garage_mj.grid.blocks import Block, count_stalls
 from garage_mj.core.config import DifficultyConfig, RewardConfig
+from garage_mj.grid.blocks import Block, count_stalls
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.roadgraph import analyse
 from garage_mj.grid.rules import road_squares, stall_rule_violations

@@ -18,8 +18,8 @@ from enum import IntEnum
 
 import numpy as np
 
-from garage_mj.grid.blocks import ROAD_LIKE_TABLE
 from garage_mj.core.geometry import DELTAS, OPPOSITE
+from garage_mj.grid.blocks import ROAD_LIKE_TABLE
 
 
 class Tile(IntEnum):

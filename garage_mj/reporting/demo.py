@@ -83,10 +83,10 @@ def _render_overview(garage, path: Path, width: int = 480, height: int = 360) ->
 
 def run_demo(cfg: DemoConfig) -> Path:
     """Run every stage into ``cfg.out``; returns the report's path."""
-    from garage_mj.reporting import plots
     from garage_mj.export.pack import export_pack
     from garage_mj.generation.library import Library
     from garage_mj.grid.map_io import load_map
+    from garage_mj.reporting import plots
     from garage_mj.reporting.report import GalleryItem, ReportData, write_report
 
     t0 = time.perf_counter()

@@ -22,11 +22,11 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from garage_mj.grid.blocks import NUM_CODES, Block  # noqa: E402
 from garage_mj.core.errors import GarageMJError  # noqa: E402
 from garage_mj.core.fsutil import atomic_write  # noqa: E402
-from garage_mj.grid.garage import Garage  # noqa: E402
 from garage_mj.core.geometry import DELTAS  # noqa: E402
+from garage_mj.grid.blocks import NUM_CODES, Block  # noqa: E402
+from garage_mj.grid.garage import Garage  # noqa: E402
 from garage_mj.grid.image import BLOCK_COLOURS as _BLOCK_COLOURS
 from garage_mj.grid.roadgraph import Tile, analyse  # noqa: E402
 

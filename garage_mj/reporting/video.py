@@ -76,8 +76,8 @@ def record_video(
     import cv2
 
     from garage_mj.driving.cruise import CruiseSource, cruise_seed
-    from garage_mj.driving.drivers import load_driver
     from garage_mj.driving.drive_env import GarageDriveEnv
+    from garage_mj.driving.drivers import load_driver
 
     src = source if isinstance(source, CruiseSource) else CruiseSource.from_garage(source)
     drv = load_driver(driver, **(driver_kwargs or {}))

@@ -37,8 +37,8 @@ from garage_mj.scene.semantics import Semantic
 from garage_mj.scene.world import WORLD_DIR, cell_center
 
 if TYPE_CHECKING:
+    from garage_mj.scene.car import CarGeometry
     from garage_mj.scene.garage_scene import GarageScene
-    from garage_mj.driving.vehicle import CarGeometry
 
 START_OFFSET = 3.0  # [m] the car's centre starts this far along the route from the grid edge
 MIN_DRIVE = 2.0  # [m] the goal lies at least this far along the route beyond the start

@@ -18,12 +18,12 @@ if TYPE_CHECKING:
     import networkx as nx
     from dm_control import mjcf
 
+    from garage_mj.scene.car import CarGeometry
     from garage_mj.scene.drivable import DriveConfig, DrivePlanner
     from garage_mj.scene.layout import SceneLayout
     from garage_mj.scene.roadmodel import RoadModel
     from garage_mj.scene.roadnet import RoadNetwork
     from garage_mj.scene.stalls import StallLayout
-    from garage_mj.driving.vehicle import CarGeometry
 
 
 class GarageScene:
@@ -88,8 +88,8 @@ class GarageScene:
 
     def planner(self, car: CarGeometry | None = None, config: DriveConfig | None = None) -> DrivePlanner:
         """The ego car's route planner and drivability checks for ``car`` (default ``models/car``)."""
+        from garage_mj.scene.car import car_geometry
         from garage_mj.scene.drivable import DEFAULT_DRIVE, DrivePlanner
-        from garage_mj.driving.vehicle import car_geometry
 
         key = (car or car_geometry(), config or DEFAULT_DRIVE)
         if key not in self._planners:

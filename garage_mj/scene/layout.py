@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from garage_mj.core.geometry import OPPOSITE
 from garage_mj.grid.blocks import ROAD_LIKE_TABLE, STALL_TABLE, Block
 from garage_mj.grid.garage import Garage
-from garage_mj.core.geometry import OPPOSITE
 from garage_mj.scene.roadnet import RoadNetwork, RoadTile, road_network
 from garage_mj.scene.semantics import Semantic, geom_name
 from garage_mj.scene.stalls import StallLayout, stall_layout

@@ -23,8 +23,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from garage_mj.grid.garage import Garage
 from garage_mj.core.geometry import DELTAS, OPPOSITE
+from garage_mj.grid.garage import Garage
 from garage_mj.scene.roadnet import RoadNetwork, RoadTile, road_network
 from garage_mj.scene.stalls import Stall, StallLayout, stall_layout
 from garage_mj.scene.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig

@@ -18,9 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
+from garage_mj.core.geometry import DELTAS, EAST, NORTH, SOUTH, WEST
 from garage_mj.grid.blocks import Block
 from garage_mj.grid.garage import Garage
-from garage_mj.core.geometry import DELTAS, EAST, NORTH, SOUTH, WEST
 from garage_mj.grid.roadgraph import Tile, analyse
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig, cell_center
 

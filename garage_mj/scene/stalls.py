@@ -18,9 +18,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from garage_mj.core.geometry import DELTAS, EAST, NORTH, OPPOSITE, SOUTH, WEST
 from garage_mj.grid.blocks import STALLS_PER_BLOCK, Block
 from garage_mj.grid.garage import Garage
-from garage_mj.core.geometry import DELTAS, EAST, NORTH, OPPOSITE, SOUTH, WEST
 from garage_mj.scene.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig, cell_center
 
 SIDE_ORDER = (NORTH, SOUTH, WEST, EAST)

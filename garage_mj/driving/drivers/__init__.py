@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from garage_mj.core.errors import GarageMJError
 from garage_mj.driving.drivers.base import (
     BaseDriver,
     CameraGeometry,
@@ -17,7 +18,6 @@ from garage_mj.driving.drivers.base import (
     DriverNoiseConfig,
     discretize,
 )
-from garage_mj.core.errors import GarageMJError
 
 #: Built-in drivers: name -> "module:Class".
 DRIVERS: dict[str, str] = {

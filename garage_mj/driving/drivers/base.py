@@ -23,7 +23,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from garage_mj.core.config import load_config
-from garage_mj.driving.vehicle import CarGeometry, DiscreteAction, car_geometry
+from garage_mj.driving.vehicle import DiscreteAction
+from garage_mj.scene.car import CarGeometry, car_geometry
 
 
 @runtime_checkable
