@@ -10,10 +10,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from garage_mj import Block, evaluate
-from garage_mj.core.config import ConfigError, RewardConfig
+from garage_mj.core.config import ConfigError
 from garage_mj.core.geometry import EAST, NORTH, SOUTH, WEST
 from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.grid.metrics import coverage
+from garage_mj.grid.reward import RewardConfig
 from garage_mj.grid.roadgraph import analyse
 from garage_mj.grid.rules import road_squares, stall_rule_violations
 

@@ -17,12 +17,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.core.config import RewardConfig, load_config
+from garage_mj.core.config import load_config
 from garage_mj.core.geometry import DELTAS, OPPOSITE
 from garage_mj.grid.blocks import NUM_CODES, STALL_TABLE, Block
 from garage_mj.grid.garage import AXES, Axis, Garage
 from garage_mj.grid.map_io import load_map
 from garage_mj.grid.metrics import difficulty, utility_values
+from garage_mj.grid.reward import RewardConfig
 from garage_mj.grid.roadgraph import RoadTracker
 from garage_mj.grid.rules import stall_code
 

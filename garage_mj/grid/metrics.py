@@ -10,11 +10,28 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from garage_mj.core.config import DifficultyConfig, RewardConfig
 from garage_mj.grid.blocks import Block, count_stalls
 from garage_mj.grid.garage import Garage
+from garage_mj.grid.reward import RewardConfig
 from garage_mj.grid.roadgraph import analyse
 from garage_mj.grid.rules import road_squares, stall_rule_violations
+
+
+@dataclass(frozen=True)
+class DifficultyConfig:
+    """Difficulty lambda (SPEC section 4) and the ranges of X and Y.
+
+    The intersection term carries 0.33 and road length 0.67, as the paper's table of 16 garages
+    requires (its text says the opposite; SPEC follows the table).
+    """
+
+    w_intersection: float = 0.33
+    w_road_length: float = 0.67
+    road_length_min: int = 2  # [cells]
+    road_length_max: int = 6  # [cells]
+    intersection_min: int = 2  # [roads meeting at a key node]
+    intersection_max: int = 4
+
 
 DEFAULT_DIFFICULTY = DifficultyConfig()
 
