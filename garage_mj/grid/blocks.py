@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from enum import IntEnum
+from typing import Literal
 
 import numpy as np
 
@@ -23,6 +24,10 @@ class Block(IntEnum):
 
 
 NUM_CODES = len(Block)
+
+#: The axis along which a cell between two roads holds six stalls (SPEC section 3's stall rule).
+Axis = Literal["NS", "EW"]
+AXES: tuple[Axis, ...] = ("NS", "EW")
 
 #: Stalls held by each block code.
 STALLS_PER_BLOCK: dict[Block, int] = {

@@ -9,15 +9,15 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.grid.blocks import INITIAL_CODES, NUM_CODES, STALL_CODES, Block
+from garage_mj.grid.blocks import AXES, INITIAL_CODES, NUM_CODES, STALL_CODES, Axis, Block
+from garage_mj.grid.roadgraph import analyse
+from garage_mj.grid.rules import expected_cell, road_squares, stall_rule_violations
 
-Axis = Literal["NS", "EW"]
-AXES: tuple[Axis, ...] = ("NS", "EW")
 MAX_SIDE = 64  # [cells] rows or columns of a map or garage (576 m at 9 m per cell); bounds memory and time
 MAX_NAME = 128  # [characters] of a garage name (it becomes part of a pack's folder name)
 
@@ -125,9 +125,6 @@ def validate_garage(garage: Garage, source: str | None = None) -> Garage:
     stall rule holds everywhere, no 2x2 square of road-like cells, and the entrance reaches the
     exit on road. The message names the first offending cell and the fix.
     """
-    from garage_mj.grid.roadgraph import analyse
-    from garage_mj.grid.rules import expected_cell, road_squares, stall_rule_violations
-
     src = source or f"garage {garage.name!r}"
     for r, c in stall_rule_violations(garage.grid, garage.six_stall_axis)[:1]:
         want = expected_cell(garage.grid, r, c, garage.six_stall_axis)

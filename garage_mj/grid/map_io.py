@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from garage_mj.grid.garage import MAX_SIDE, Axis, Garage, MapError, validate_initial
+from garage_mj.grid.blocks import Axis
+from garage_mj.grid.garage import MAX_SIDE, Garage, MapError, validate_initial
 
 MAP_SUFFIX = ".txt"
 

@@ -13,8 +13,8 @@ import gymnasium as gym
 import numpy as np
 
 from garage_mj.core.geometry import DELTAS
-from garage_mj.grid.blocks import Block
-from garage_mj.grid.garage import Axis, Garage
+from garage_mj.grid.blocks import Axis, Block
+from garage_mj.grid.garage import Garage
 
 
 class ExitSeekingPainter:

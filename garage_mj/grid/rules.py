@@ -8,8 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from garage_mj.grid.blocks import PAINTABLE, ROAD_LIKE_TABLE, Block
-from garage_mj.grid.garage import Axis
+from garage_mj.grid.blocks import PAINTABLE, ROAD_LIKE_TABLE, Axis, Block
 
 _W, _E, _N, _S = 0, 1, 2, 3
 
