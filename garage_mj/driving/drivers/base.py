@@ -134,6 +134,20 @@ class BaseDriver:
         return float(np.clip(math.atan(self.car.wheelbase * curvature) / self.car.max_steer, -1.0, 1.0))
 
     @staticmethod
+    def curve_speed(kappa: float, cruise_speed: float, min_speed: float, lateral_accel: float) -> float:
+        """[m/s] ``cruise_speed`` capped on a curve of curvature ``kappa`` [1/m] by the comfort limit
+        v <= sqrt(lateral_accel / |kappa|), never below ``min_speed``."""
+        if abs(kappa) > 1e-6:
+            return min(cruise_speed, max(min_speed, math.sqrt(lateral_accel / abs(kappa))))
+        return cruise_speed
+
+    def drive_at(self, target_speed: float, speed: float, kappa: float) -> tuple[float, float]:
+        """``(throttle, steer)`` toward ``target_speed`` on curvature ``kappa``; full brake at target 0."""
+        if target_speed == 0.0:
+            return -1.0, self.steer_for(kappa)
+        return self.throttle_for(target_speed, speed), self.steer_for(kappa)
+
+    @staticmethod
     def approach_speed(obs: dict[str, Any], decel: float, creep: float = 0.3, stop_within: float = 0.2) -> float:
         """[m/s] the fastest speed that still stops at the goal at ``decel`` [m/s^2].
 

@@ -123,11 +123,7 @@ class VisionDriver(BaseDriver):
         best = int(np.argmin(cost))
         kappa = float(arcs[best])
         room = float(self.free_distance(points, arcs[best : best + 1])[0])  # also bounded by the view
-        v = cfg.cruise_speed
-        if abs(kappa) > 1e-6:
-            v = min(v, max(cfg.min_speed, math.sqrt(cfg.lateral_accel / abs(kappa))))
+        v = self.curve_speed(kappa, cfg.cruise_speed, cfg.min_speed, cfg.lateral_accel)
         v = min(v, math.sqrt(2 * cfg.comfort_decel * max(room - cfg.stop_distance, 0.0)))
         v = min(v, self.approach_speed(obs, cfg.stop_decel))
-        if v == 0.0:
-            return -1.0, self.steer_for(kappa)
-        return self.throttle_for(v, speed), self.steer_for(kappa)
+        return self.drive_at(v, speed, kappa)

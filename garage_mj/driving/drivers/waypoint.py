@@ -6,7 +6,6 @@ so its failures come only from geometry the car cannot follow (tight curves, nar
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,10 +34,6 @@ class WaypointDriver(BaseDriver):
         target = np.asarray(obs["waypoint"], dtype=float)
         speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
         kappa = self.pursuit_curvature(target)
-        v = cfg.cruise_speed
-        if abs(kappa) > 1e-6:
-            v = min(v, max(cfg.min_speed, math.sqrt(cfg.lateral_accel / abs(kappa))))
+        v = self.curve_speed(kappa, cfg.cruise_speed, cfg.min_speed, cfg.lateral_accel)
         v = min(v, self.approach_speed(obs, cfg.stop_decel))
-        if v == 0.0:
-            return -1.0, self.steer_for(kappa)
-        return self.throttle_for(v, speed), self.steer_for(kappa)
+        return self.drive_at(v, speed, kappa)
