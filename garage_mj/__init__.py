@@ -1,7 +1,19 @@
 """garage-mj: adverse underground-garage scenarios for automated valet parking, in MuJoCo.
 
-Stages, one module each: maps -> garage model -> rules/road graph/metrics -> generation env ->
-training and library -> exporters -> cruise testbed -> reports.
+One subpackage per pipeline stage; each imports only from the stages before it
+(``tests/test_layout.py`` checks it):
+
+- ``core``: plumbing every stage uses (errors, atomic writes, config loading, backends, geometry).
+- ``grid``: the garage as an encoding matrix: block codes, garage model, rules, metrics, map files.
+- ``generation``: the painter envs, DQN training, conditioned generation, search, the library.
+- ``scene``: the 3D world derived from a garage, computed once per garage as a ``GarageScene``.
+- ``export``: writers only: OpenDRIVE, OpenSCENARIO, meshes, preview, asset packs, validators.
+- ``driving``: car, sensors, outcomes, actors, the drive env, drivers, cruise tests, hunt.
+- ``reporting``: plots, analysis, video, the HTML report, the demo.
+- ``cli``: the ``garage-mj`` command line, thin, on top.
+
+This module keeps the public API (``load_map``, ``evaluate``, ``Garage``, ...) and registers the
+gymnasium ids (``garage_mj/GarageGen-v0``, ``garage_mj/GarageGenCond-v0``, ``garage_mj/GarageDrive-v0``).
 """
 
 from __future__ import annotations
@@ -11,12 +23,11 @@ import os as _os
 # MuJoCo reads MUJOCO_GL once, when it is first imported: default to headless EGL before any import.
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
-from garage_mj.grid.blocks import Block  # noqa: E402
+from garage_mj.core import __version__  # noqa: E402
+from garage_mj.grid.blocks import Block
 from garage_mj.grid.garage import Garage, MapError
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.grid.metrics import GarageMetrics, difficulty, evaluate
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Block",

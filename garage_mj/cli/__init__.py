@@ -1,5 +1,17 @@
 """The ``garage-mj`` command line. Each subcommand lives in its own module of this package.
 
+- ``maps``: list, show and validate map files.
+- ``demo``: the main job on a small garage (``garage_mj.reporting.demo``).
+- ``export``: asset packs from a library or garage files.
+- ``check``: drivability of a pack's or library's garages (routes, clearance).
+- ``train``: one DQN generation run.
+- ``generate``: garages on demand in a difficulty band.
+- ``library``: browse, sample and export the scenario library.
+- ``plot``: convergence and heatmap figures.
+- ``show``: draw one garage as text or PNG.
+- ``cruise``: batch cruise tests of a driver.
+- ``hunt``: search for garages that break a driver.
+
 A module in :data:`COMMANDS` exposes ``register(subparsers)``, which adds its parser and sets
 ``func`` to a handler ``(args) -> int``. Errors a user can cause derive from
 :class:`garage_mj.core.errors.GarageMJError` (``UserError``, ``MapError``, ``ConfigError``,
@@ -16,6 +28,7 @@ import errno
 import importlib
 import sys
 
+from garage_mj.core import __version__
 from garage_mj.core.errors import GarageMJError
 
 #: Subcommand modules, in the order ``--help`` lists them.
@@ -27,8 +40,6 @@ class UserError(GarageMJError):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from garage_mj import __version__
-
     parser = argparse.ArgumentParser(
         prog="garage-mj",
         description=(

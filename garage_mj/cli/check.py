@@ -15,6 +15,7 @@ import json
 from pathlib import Path
 
 from garage_mj.cli import UserError
+from garage_mj.generation.library import Library
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,7 +44,6 @@ def _garages(args: argparse.Namespace) -> list[tuple[str, object]]:
     if args.library is not None:
         if args.packs:
             raise UserError("give pack folders or --library, not both")
-        from garage_mj.generation.library import Library
 
         with Library(args.library, create=False) as lib:
             records = lib.query(map=args.map, difficulty=tuple(args.difficulty) if args.difficulty else None,
@@ -76,8 +76,6 @@ def run(args: argparse.Namespace) -> int:
     found = _garages(args)
     store = None
     if args.store:
-        from garage_mj.generation.library import Library
-
         store = Library(args.library, create=False, readonly=False)
     car_key = f"models/car max_steer={car.max_steer:g}"
     for name, garage, lib_id in found:

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import argparse
-import functools
-from collections.abc import Callable
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import add_filters, filters, non_negative_int, positive_int, seed, unit_range
+from garage_mj.cli._common import (
+    add_filters,
+    filters,
+    non_negative_int,
+    positive_int,
+    seed,
+    unit_range,
+    user_errors,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -57,23 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also write every test as OpenSCENARIO 1.2 into OUT/xosc/ (garages without an asset "
                         "pack get one in OUT/packs/); replay one with --scenario-file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_errors(run))
-
-
-def _errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    @functools.wraps(func)
-    def wrapper(args: argparse.Namespace) -> int:
-        from garage_mj.driving.cruise import CruiseError
-        from garage_mj.driving.drivers import DriverError
-        from garage_mj.export.pack import PackError
-        from garage_mj.generation.library import LibraryError
-
-        try:
-            return func(args)
-        except (CruiseError, DriverError, PackError, LibraryError) as exc:
-            raise UserError(str(exc)) from None
-
-    return wrapper
+    p.set_defaults(func=user_errors(run))
 
 
 def sources(args: argparse.Namespace) -> list:

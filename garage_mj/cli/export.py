@@ -11,6 +11,8 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
+from garage_mj.generation.library import Library, LibraryError
+from garage_mj.grid.garage import Garage
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -36,8 +38,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _from_library(args: argparse.Namespace) -> list:
-    from garage_mj.generation.library import Library, LibraryError
-
     try:
         lib = Library(args.library, create=False)
     except LibraryError as exc:
@@ -61,7 +61,6 @@ def _from_library(args: argparse.Namespace) -> list:
 
 def run(args: argparse.Namespace) -> int:
     from garage_mj.export.pack import export_packs
-    from garage_mj.grid.garage import Garage
 
     if args.garage is not None:
         if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.feasible, args.limit)):

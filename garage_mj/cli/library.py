@@ -9,6 +9,8 @@ from pathlib import Path
 
 from garage_mj.cli._common import add_filters, filters, non_negative_int, seed, user_errors
 from garage_mj.core.fsutil import atomic_write, write_error
+from garage_mj.generation.library import Library
+from garage_mj.grid.text import draw
 
 HEADER = f"{'id':>6}  {'map':<18} {'seed':>4} {'episode':>7} {'timestep':>9}  {'diff':>5} {'cov':>5} {'stalls':>6} {'E[X]':>5} {'E[Y]':>5}"
 
@@ -48,8 +50,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _open(path: Path):
-    from garage_mj.generation.library import Library
-
     return Library(path, create=False)
 
 
@@ -74,8 +74,6 @@ def _ls(args: argparse.Namespace) -> int:
 
 @user_errors
 def _show(args: argparse.Namespace) -> int:
-    from garage_mj.grid.text import draw
-
     with _open(args.library) as lib:
         r = lib.get(args.id)
     print(f"garage {r.id}: map {r.map}, run {r.run}, seed {r.seed}, episode {r.episode}, timestep {r.timestep}")

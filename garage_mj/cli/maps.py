@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from garage_mj.grid.garage import MapError
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.grid.text import draw
 
@@ -30,8 +31,6 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from garage_mj.grid.garage import MapError
-
     bad = 0
     for f in args.files:
         try:

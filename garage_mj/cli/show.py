@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli._common import user_errors
+from garage_mj.generation.library import Library
+from garage_mj.grid.text import draw
 
 DEFAULT_LIBRARY = Path("library.sqlite")
 
@@ -25,8 +27,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 @user_errors
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.generation.library import Library
-    from garage_mj.grid.text import draw
     from garage_mj.reporting.plots import garage_png
 
     with Library(args.library, create=False) as lib:

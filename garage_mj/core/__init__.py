@@ -6,3 +6,5 @@
 - ``backends``: the local process pool and Ray, behind one ``map_unordered``.
 - ``geometry``: grid directions and small geometric helpers.
 """
+
+__version__ = "0.1.0"

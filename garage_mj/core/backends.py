@@ -66,9 +66,11 @@ def check_backend(backend: str, address: str | None = None) -> None:
 
 
 def worker_env() -> dict[str, str]:
-    """The variables Ray workers get from this process (see :data:`WORKER_ENV`)."""
-    import garage_mj  # noqa: F401  (sets the MUJOCO_GL default, as in any process that imports the package)
+    """The variables Ray workers get from this process (see :data:`WORKER_ENV`).
 
+    MUJOCO_GL has its default here already: importing any ``garage_mj`` module runs the package's
+    ``__init__``, which sets it.
+    """
     return {k: v for k, v in os.environ.items() if k in WORKER_ENV or k.startswith(WORKER_ENV_PREFIX)}
 
 
