@@ -6,7 +6,7 @@
     .venv/bin/python generation/train_conditioned.py --all generation/conditioned.toml --ship
 
 Run folders go to runs/generators/<map> with --all (resumed when they exist). Logic lives in
-garage_mj.generation.generator.train_conditioned; this script only loops and copies.
+garage_mj.generation.conditioned.train_conditioned; this script only loops and copies.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import shutil
 import time
 from pathlib import Path
 
-from garage_mj.generation.generator import (
+from garage_mj.generation.conditioned import (
     GENERATOR,
     GENERATOR_META,
     RUN_MANIFEST,

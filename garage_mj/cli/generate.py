@@ -61,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 @user_errors
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.generation.generator import default_model_out, generate, shipped_generator, train_for_map
+    from garage_mj.generation.conditioned import default_model_out, shipped_generator, train_for_map
+    from garage_mj.generation.generator import generate
     from garage_mj.grid.map_io import list_maps, load_map
 
     for name in ("difficulty", "coverage"):
