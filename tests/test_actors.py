@@ -24,6 +24,7 @@ from garage_mj.driving.cruise import read_tests, replay_xosc, run_cruise
 from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.driving.drivers import load_driver
 from garage_mj.grid.painters import paint_garage
+from garage_mj.scene.drivable import drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.semantics import COLLIDABLE, Semantic
 
@@ -38,7 +39,7 @@ def m5():
 @pytest.fixture(scope="module")
 def long_plan(m5):
     scene = GarageScene(m5)
-    planner = scene.planner()
+    planner = drive_planner(scene)
     plan = max((p for p in planner.plans() if p.feasible), key=lambda p: p.length)
     return planner, plan
 

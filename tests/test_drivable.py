@@ -17,7 +17,8 @@ from garage_mj.grid.metrics import evaluate
 from garage_mj.grid.rules import apply_stall_rule
 from garage_mj.scene import GarageScene
 from garage_mj.scene.car import CarConfig, car_geometry
-from garage_mj.scene.drivable import START_OFFSET, DriveConfig, drivability
+from garage_mj.scene.drivable import START_OFFSET, DriveConfig, drivability, drive_planner
+from garage_mj.scene.mjcf_scene import build_scene
 
 SHAPES = Path(__file__).parent / "data" / "shapes"
 
@@ -36,7 +37,7 @@ def l_garage() -> Garage:
 
 def test_every_feasible_goal_is_a_pose_on_the_lane_beside_its_stall(painted_tiny):
     scene = GarageScene(painted_tiny)
-    planner = scene.planner()
+    planner = drive_planner(scene)
     plans = planner.plans()
     assert plans and all(p.feasible for p in plans), [p.reason for p in plans if not p.feasible]
     beside = []
@@ -63,7 +64,7 @@ def test_every_feasible_goal_is_a_pose_on_the_lane_beside_its_stall(painted_tiny
 def test_routes_never_turn_tighter_than_the_car_with_margin(painted_tiny):
     car = car_geometry()
     cfg = DriveConfig()
-    for p in GarageScene(painted_tiny).planner(car, cfg).plans():
+    for p in drive_planner(GarageScene(painted_tiny), car, cfg).plans():
         assert p.max_curvature <= car.max_curvature * (1 - cfg.curvature_margin) + 1e-9
         assert np.max(np.abs(p.curvature)) == pytest.approx(p.max_curvature)
         # the rear-axle path really has that curvature: heading change over arc length
@@ -76,8 +77,8 @@ def test_routes_never_turn_tighter_than_the_car_with_margin(painted_tiny):
 def test_a_turn_the_car_cannot_steer_is_infeasible_a_straight_one_is_not():
     g = l_garage()
     scene = GarageScene(g)
-    normal = scene.planner(car_geometry())
-    stiff = scene.planner(car_geometry(CarConfig(max_steer=0.25)))  # needs ~12 m radius
+    normal = drive_planner(scene, car_geometry())
+    stiff = drive_planner(scene, car_geometry(CarConfig(max_steer=0.25)))  # needs ~12 m radius
     north = [s.id for s in scene.stalls.stalls if s.road_cell[1] == 2 and s.road_cell[0] >= 2]
     east = [s.id for s in scene.stalls.stalls if s.road_cell[0] == 1 and s.road_cell[1] >= 4]
     assert north and east
@@ -97,21 +98,21 @@ def test_a_turn_the_car_cannot_steer_is_infeasible_a_straight_one_is_not():
 
 def test_clearance_is_checked_against_walls_pillars_and_stall_outlines():
     scene = GarageScene(l_garage())
-    strict = scene.planner(config=DriveConfig(clearance_margin=2.5))  # lanes pass stalls 1.8 m away
+    strict = drive_planner(scene, config=DriveConfig(clearance_margin=2.5))  # lanes pass stalls 1.8 m away
     plans = strict.plans()
     assert plans and not any(p.feasible for p in plans)
     assert any("parked_car" in p.reason for p in plans)
     # the measured clearance on a straight lane: stall outline 4.5 m, car side 1.75 + 0.95 m from the road centre
-    plan = scene.planner().plan(next(s.id for s in scene.stalls.stalls if s.road_cell == (3, 2)))
+    plan = drive_planner(scene).plan(next(s.id for s in scene.stalls.stalls if s.road_cell == (3, 2)))
     rear, hdg = plan.rear[40:41], plan.heading[40:41]
-    clear, what = scene.planner().clearance(rear, hdg)
+    clear, what = drive_planner(scene).clearance(rear, hdg)
     assert clear[0] == pytest.approx(4.5 - 1.75 - 0.95, abs=0.05) and what[0] in ("parked_car", "obstacle")
 
 
 def test_a_stall_with_no_forward_route_is_infeasible_with_a_reason():
     g = l_garage()
     scene = GarageScene(g)
-    planner = scene.planner()
+    planner = drive_planner(scene)
     # stalls of the exit cell's neighbours are reachable; make one unreachable by asking an empty candidate list
     planner._dist = {k: v for k, v in planner._dist.items() if k[0] != (1, 5)}
     sid = next(s.id for s in scene.stalls.stalls if s.road_cell == (1, 5))
@@ -125,7 +126,7 @@ def test_any_shape_plans_and_loads_in_mujoco(path):
 
     g = Garage.from_json(path.read_text())
     scene = GarageScene(g)
-    model = mujoco.MjModel.from_xml_string(scene.mjcf().to_xml_string(), scene.mjcf().get_assets())
+    model = mujoco.MjModel.from_xml_string(build_scene(scene).to_xml_string(), build_scene(scene).get_assets())
     assert model.ngeom > 0
     d = drivability(scene)
     assert d["feasible_share"] >= 0.9, d

@@ -20,7 +20,7 @@ from garage_mj.driving.actors import ActorSpec, ScenarioConfig, draw_scenario
 from garage_mj.export.pack import export_pack
 from garage_mj.export.validate import ToolMissing, check_xosc_batch, qc_xosc_executable
 from garage_mj.export.xosc import XoscError, read_xosc, write_xosc
-from garage_mj.scene.drivable import START_OFFSET
+from garage_mj.scene.drivable import START_OFFSET, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 
 META = {"seed": 123456, "driver": "pure_pursuit", "action_type": "continuous", "test": 3, "speed": 2.5,
@@ -60,7 +60,7 @@ def case(painted_tiny, tmp_path_factory):
     root = tmp_path_factory.mktemp("xosc")
     pack = export_pack(painted_tiny, root / "packs")
     scene = GarageScene(painted_tiny)
-    plan = next(p for p in scene.planner().plans() if p.feasible)
+    plan = next(p for p in drive_planner(scene).plans() if p.feasible)
     stalls = [pc.stall_id for pc in scene.layout.parked_cars if pc.stall_id != plan.stall]
     free = stalls[0]
     occupied = stalls[1:]
@@ -78,7 +78,7 @@ def files(case):
     scene, plan = case["scene"], case["plan"]
     drawn = None
     for seed in range(20):
-        sc = draw_scenario(ScenarioConfig(pedestrians=1, moving_cars=1, clutter=1), plan, scene.planner(),
+        sc = draw_scenario(ScenarioConfig(pedestrians=1, moving_cars=1, clutter=1), plan, drive_planner(scene),
                            np.random.default_rng(seed))
         if len({a.kind for a in sc.actors}) >= 2:
             drawn = sc

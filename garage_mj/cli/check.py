@@ -63,7 +63,7 @@ def _garages(args: argparse.Namespace) -> list[tuple[str, object]]:
 
 def run(args: argparse.Namespace) -> int:
     from garage_mj.scene.car import CarConfig, car_geometry
-    from garage_mj.scene.drivable import drivability
+    from garage_mj.scene.drivable import drivability, drive_planner
     from garage_mj.scene.garage_scene import GarageScene
 
     if args.max_steer is not None and not 0.05 <= args.max_steer <= 1.2:
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         if store is not None:
             store.set_drivability(lib_id, d, car_key)
         if args.stalls or args.json:
-            plans = [p.summary() for p in scene.planner(car).plans()]
+            plans = [p.summary() for p in drive_planner(scene, car).plans()]
             entry["stall_plans"] = plans
             if args.stalls:
                 for p in plans:

@@ -47,9 +47,9 @@ from garage_mj.driving.vehicle import Car, DiscreteAction, attach_car, compile_m
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states
 from garage_mj.scene.car import CarConfig, car_geometry
-from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan
+from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
-from garage_mj.scene.mjcf_scene import parked_car_bodies, set_parked
+from garage_mj.scene.mjcf_scene import build_scene, parked_car_bodies, set_parked
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import Semantic, geom_classes
 
@@ -186,7 +186,7 @@ class GarageDriveEnv(gym.Env):
     # -- scene -------------------------------------------------------------------------------------
     def _build(self) -> None:
         self.scene = GarageScene(self.garage)
-        root = self.scene.mjcf()
+        root = build_scene(self.scene)
         self._entrance = self.scene.entrance_pose
         attach_car(root, *self._entrance)
         if self.scenario_config.count:
@@ -199,7 +199,7 @@ class GarageDriveEnv(gym.Env):
         self.camera = Camera(self.model, self.camera_config)
         self._top: Camera | None = None
         self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
-        self.planner = self.scene.planner(self.car_geometry, self.drive_config)
+        self.planner = drive_planner(self.scene, self.car_geometry, self.drive_config)
         self.stalls = self.scene.stalls.stalls
         self.parkable = sorted(parked_car_bodies(self.model))
 

@@ -33,12 +33,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from garage_mj.core.geometry import DELTAS, OPPOSITE
+from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.semantics import Semantic
 from garage_mj.scene.world import WORLD_DIR, cell_center
 
 if TYPE_CHECKING:
     from garage_mj.scene.car import CarGeometry
-    from garage_mj.scene.garage_scene import GarageScene
 
 START_OFFSET = 3.0  # [m] the car's centre starts this far along the route from the grid edge
 MIN_DRIVE = 2.0  # [m] the goal lies at least this far along the route beyond the start
@@ -121,7 +121,7 @@ class Obstacles:
 
 
 class DrivePlanner:
-    """Routes and drivability of one :class:`GarageScene` for one car (use ``scene.planner(car)``)."""
+    """Routes and drivability of one :class:`GarageScene` for one car (use ``drive_planner(scene, car)``)."""
 
     def __init__(self, scene: GarageScene, car: CarGeometry, config: DriveConfig = DEFAULT_DRIVE) -> None:
         self.scene = scene
@@ -527,9 +527,23 @@ def _overlap_pairs(car: np.ndarray, boxes: np.ndarray, bc: np.ndarray) -> np.nda
     return ~sep
 
 
+def drive_planner(scene: GarageScene, car: CarGeometry | None = None,
+                  config: DriveConfig | None = None) -> DrivePlanner:
+    """The ego car's route planner and drivability checks of ``scene`` for ``car`` (default ``models/car``).
+
+    One planner per (car, config), kept on the scene: every consumer of a garage shares its routes.
+    """
+    from garage_mj.scene.car import car_geometry  # reads the car's MuJoCo model: keeps this module light
+
+    key = (car or car_geometry(), config or DEFAULT_DRIVE)
+    if key not in scene._planners:
+        scene._planners[key] = DrivePlanner(scene, *key)
+    return scene._planners[key]
+
+
 def drivability(scene: GarageScene, car: CarGeometry | None = None) -> dict[str, Any]:
     """Per-garage drivability: share of stalls with a feasible test, smallest clearance, curvature vs limit."""
-    planner = scene.planner(car)
+    planner = drive_planner(scene, car)
     plans = planner.plans()
     ok = [p for p in plans if p.feasible]
     reasons: dict[str, int] = {}
