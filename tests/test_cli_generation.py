@@ -15,7 +15,8 @@ import pytest
 
 from garage_mj.cli import main
 from garage_mj.generation.library import Library
-from garage_mj.generation.training import latest_checkpoint, train
+from garage_mj.generation.runs import latest_checkpoint
+from garage_mj.generation.training import train
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ from gymnasium.utils.env_checker import check_env
 
 from garage_mj.cli import main
 from garage_mj.generation.cond_env import N_COND, ConditionConfig, GarageGenCondEnv
-from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.conditioned import shipped_generator, train_conditioned
+from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.generator import GenerationError, generate
 from garage_mj.generation.library import Library
 from garage_mj.generation.search import painter_actions

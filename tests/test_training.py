@@ -10,7 +10,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from garage_mj.core.config import ConfigError
 from garage_mj.generation.library import Library
-from garage_mj.generation.training import DQNConfig, TrainingError, latest_checkpoint, load_dqn_config, train
+from garage_mj.generation.runs import latest_checkpoint
+from garage_mj.generation.training import DQNConfig, TrainingError, load_dqn_config, train
 from garage_mj.grid.metrics import evaluate
 
 FAST = DQNConfig(checkpoint_every=1000)

@@ -2,7 +2,8 @@
 
 - ``gen_env``: ``GarageGen-v0``, the turtle-style painter of SPEC section 3, and its reward config.
 - ``cond_env``: ``GarageGenCond-v0``, the painter conditioned on a difficulty target.
-- ``training``: resumable SB3 DQN runs; every usable garage goes to the library as it is found.
+- ``runs``: the lifecycle of a resumable DQN run (run folder, checkpoints, resume, Ctrl-C) both trainings share.
+- ``training``: DQN on the painter; every usable garage goes to the library as it is found.
 - ``conditioned``: the difficulty-conditioned generator: train it, find the shipped one, load it.
 - ``generator``: ``garage-mj generate``, garages on demand in a difficulty band.
 - ``search``: the band-directed hill-climb that fills bins the policy does not reach.

@@ -2,7 +2,8 @@
 
 :func:`train_conditioned` runs SB3 DQN on ``GarageGenCondEnv`` (the painter with a target band in
 its observation), with the hyper-parameters of :class:`garage_mj.generation.training.DQNConfig` and the
-band settings of :class:`~garage_mj.generation.cond_env.ConditionConfig`. The drawn bands cover the
+band settings of :class:`~garage_mj.generation.cond_env.ConditionConfig`, through the resumable run of
+:class:`garage_mj.generation.runs.DQNRun`. The drawn bands cover the
 map's admissible difficulty range as :func:`garage_mj.generation.search.search` estimates it. A run folder
 holds ``run.json``, ``episodes.csv`` (target band and outcome of every episode), checkpoints
 (``resume=True`` continues from the newest), ``generator.zip`` (the Q-network alone, a few hundred
@@ -23,17 +24,24 @@ import csv
 import dataclasses
 import json
 import os
+import shutil
 import time
 from collections import deque
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+from stable_baselines3.dqn.policies import DQNPolicy
 
 from garage_mj.core.config import ConfigError, load_config, read_toml
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.cond_env import ConditionConfig, GarageGenCondEnv
+from garage_mj.generation.runs import DQNRun, write_json
+from garage_mj.generation.search import search
 from garage_mj.generation.training import DQNConfig, load_dqn_config
 from garage_mj.grid.map_io import load_map
 
@@ -43,7 +51,6 @@ if TYPE_CHECKING:
 GENERATORS = "generators"  # folder of the shipped generators inside the package data garage_mj.models
 RUN_MANIFEST = "run.json"
 EPISODES = "episodes.csv"
-CHECKPOINTS = "checkpoints"
 GENERATOR = "generator.zip"  # the Q-network (policy) alone
 GENERATOR_META = "generator.json"
 SEARCH_EVALUATIONS = 10_000  # mutations of the search that estimates the admissible range
@@ -88,93 +95,79 @@ def load_generator_config(path: str | Path | None) -> tuple[DQNConfig, Condition
 
 
 # -- training -------------------------------------------------------------------------------------
-def _write_json(path: Path, data: dict[str, Any]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
+class EpisodeLog(BaseCallback):
+    """Appends the target band and outcome of every finished episode to ``episodes.csv``.
+
+    Counts the run's episodes (from ``episodes`` on: a resumed run's past) and calls
+    ``on_episodes(self)`` after each step in which episodes ended; :attr:`recent` holds
+    (in band, usable) of the last :data:`BEST_WINDOW` episodes.
+    """
+
+    def __init__(self, path: Path, episodes: int, on_episodes: Callable[[EpisodeLog], None]) -> None:
+        super().__init__()
+        self.on_episodes = on_episodes
+        self.episodes = episodes
+        self.in_band = 0
+        self.recent: deque[tuple[int, int]] = deque(maxlen=BEST_WINDOW)  # (in band, usable) of the latest
+        new = not path.exists()
+        self.file = open(path, "a", newline="")
+        self.writer = csv.writer(self.file)
+        if new:
+            self.writer.writerow(EPISODE_FIELDS)
+
+    def _on_step(self) -> bool:
+        ended = False
+        for done, info in zip(self.locals["dones"], self.locals["infos"]):
+            if not done:
+                continue
+            ended = True
+            self.recent.append((int(info["in_band"]), int(info["usable"])))
+            ep = info.get("episode", {})
+            (d_lo, d_hi), (c_lo, c_hi) = info["target_difficulty"], info["target_coverage"]
+            self.in_band += info["in_band"]
+            self.writer.writerow([self.episodes, self.num_timesteps, f"{d_lo:.4f}", f"{d_hi:.4f}",
+                                  f"{c_lo:.4f}", f"{c_hi:.4f}", int(info["usable"]),
+                                  f"{info['difficulty']:.4f}", f"{info['coverage']:.4f}", int(info["in_band"]),
+                                  f"{ep.get('r', float('nan')):.2f}", ep.get("l", 0)])
+            self.episodes += 1
+        if ended:
+            self.on_episodes(self)
+        return True
+
+    def flush(self) -> None:
+        if not self.file.closed:
+            self.file.flush()
+
+    def _on_training_end(self) -> None:
+        self.file.close()
 
 
-def _episode_callback(path: Path, episodes: int, on_episodes):
-    from stable_baselines3.common.callbacks import BaseCallback
+class ConditionedProgress(BaseCallback):
+    """A tqdm bar over the run's timesteps with episodes and in-band episodes."""
 
-    class EpisodeLog(BaseCallback):
-        """Appends the target band and outcome of every finished episode to ``episodes.csv``."""
+    def __init__(self, total: int, initial: int, name: str, log: EpisodeLog) -> None:
+        super().__init__()
+        self.total, self.initial, self.name, self.log = total, initial, name, log
 
-        def __init__(self) -> None:
-            super().__init__()
-            self.episodes = episodes
-            self.in_band = 0
-            self.recent: deque[tuple[int, int]] = deque(maxlen=BEST_WINDOW)  # (in band, usable) of the latest
-            new = not path.exists()
-            self.file = open(path, "a", newline="")
-            self.writer = csv.writer(self.file)
-            if new:
-                self.writer.writerow(EPISODE_FIELDS)
+    def _on_training_start(self) -> None:
+        from tqdm import tqdm
 
-        def _on_step(self) -> bool:
-            ended = False
-            for done, info in zip(self.locals["dones"], self.locals["infos"]):
-                if not done:
-                    continue
-                ended = True
-                self.recent.append((int(info["in_band"]), int(info["usable"])))
-                ep = info.get("episode", {})
-                (d_lo, d_hi), (c_lo, c_hi) = info["target_difficulty"], info["target_coverage"]
-                self.in_band += info["in_band"]
-                self.writer.writerow([self.episodes, self.num_timesteps, f"{d_lo:.4f}", f"{d_hi:.4f}",
-                                      f"{c_lo:.4f}", f"{c_hi:.4f}", int(info["usable"]),
-                                      f"{info['difficulty']:.4f}", f"{info['coverage']:.4f}", int(info["in_band"]),
-                                      f"{ep.get('r', float('nan')):.2f}", ep.get("l", 0)])
-                self.episodes += 1
-            if ended:
-                on_episodes(self)
-            return True
+        self.bar = tqdm(total=self.total, initial=self.initial, desc=f"{self.name} conditioned", unit="step",
+                        dynamic_ncols=True)
 
-        def flush(self) -> None:
-            if not self.file.closed:
-                self.file.flush()
-
-        def _on_training_end(self) -> None:
-            self.file.close()
-
-    return EpisodeLog()
-
-
-def _bar_callback(total: int, initial: int, name: str, log):
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class Bar(BaseCallback):
-        """A tqdm bar over the run's timesteps with episodes and in-band episodes."""
-
-        def _on_training_start(self) -> None:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, initial=initial, desc=f"{name} conditioned", unit="step", dynamic_ncols=True)
-
-        def _on_step(self) -> bool:
-            if self.n_calls % 64 == 0:
-                self.bar.update(self.num_timesteps - self.bar.n)
-                self.bar.set_postfix(episodes=log.episodes, in_band=log.in_band, refresh=False)
-            return True
-
-        def _on_training_end(self) -> None:
+    def _on_step(self) -> bool:
+        if self.n_calls % 64 == 0:
             self.bar.update(self.num_timesteps - self.bar.n)
-            self.bar.close()
+            self.bar.set_postfix(episodes=self.log.episodes, in_band=self.log.in_band, refresh=False)
+        return True
 
-    return Bar()
-
-
-def _truncate_rows(path: Path, rows: int) -> None:
-    """Keep the header and the first ``rows`` rows of a CSV (a resumed run's past)."""
-    if path.exists():
-        lines = path.read_text().splitlines(keepends=True)
-        path.write_text("".join(lines[: 1 + rows]))
+    def _on_training_end(self) -> None:
+        self.bar.update(self.num_timesteps - self.bar.n)
+        self.bar.close()
 
 
 def admissible_range(map: str, evaluations: int = SEARCH_EVALUATIONS, seed: int = 0) -> tuple[float, float]:
     """The difficulty range :func:`garage_mj.generation.search.search` reaches on ``map`` (a lower bound of the truth)."""
-    from garage_mj.generation.search import search
-
     return search(map, evaluations, seed=seed).range
 
 
@@ -186,13 +179,6 @@ def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, 
     Without a fixed range in ``condition`` (the default [0, 1]) the drawn difficulty bands
     cover the range search reaches on the map, widened by half a band at each end.
     """
-    import torch
-    from stable_baselines3 import DQN
-    from stable_baselines3.common.callbacks import CallbackList
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
-
-    from garage_mj.generation.training import CheckpointEvery, latest_checkpoint
-
     out = Path(out_dir)
     garage = load_map(map)
     if resume:
@@ -217,27 +203,16 @@ def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, 
         manifest = {"map": garage.name, "map_source": str(map), "seed": seed, "dqn": dqn.to_dict(),
                     "condition": dataclasses.asdict(condition), "searched_range": searched,
                     "search_evaluations": search_evaluations, "timesteps": 0, "episodes": 0, "wall_s": 0.0}
-    out.mkdir(parents=True, exist_ok=True)
-    (out / CHECKPOINTS).mkdir(exist_ok=True)
-    checkpoint = latest_checkpoint(out) if resume else None
-    done_steps, done_episodes = (checkpoint[1]["timesteps"], checkpoint[1]["episodes"]) if checkpoint else (0, 0)
-    if checkpoint:
-        _truncate_rows(out / EPISODES, done_episodes)
-    else:
-        (out / EPISODES).unlink(missing_ok=True)
+    run = DQNRun(out, manifest, RUN_MANIFEST, resume)
+    run.restart_log(out / EPISODES, header_lines=1)
     manifest.update(target_timesteps=timesteps, status="running")
 
-    torch.set_num_threads(dqn.torch_threads)
     env_kw = {"map": map, "view_size": dqn.view_size, "max_errors": dqn.max_errors, "condition": condition}
     venv = VecMonitor(DummyVecEnv([lambda: GarageGenCondEnv(**env_kw) for _ in range(dqn.n_envs)]))
-    if checkpoint:
-        model = DQN.load(checkpoint[0], env=venv, device="cpu")
-        model.set_random_seed(seed + done_steps)
-    else:
-        model = DQN("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **dqn.dqn_kwargs())
+    model = run.start_model(venv, dqn, seed)
     manifest.setdefault("best", {"score": -1.0, "timestep": 0, "episode": 0})
 
-    def keep_best(log) -> None:
+    def keep_best(log: EpisodeLog) -> None:
         """Save the policy as the generator when its score over the last BEST_WINDOW episodes is the best yet."""
         if len(log.recent) < BEST_WINDOW:
             return
@@ -250,48 +225,24 @@ def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, 
             manifest["best"] = {"score": round(score, 4), "in_band": round(in_band, 4), "usable": round(usable, 4),
                                 "timestep": model.num_timesteps, "episode": log.episodes}
 
-    log = _episode_callback(out / EPISODES, done_episodes, keep_best)
+    log = EpisodeLog(out / EPISODES, run.done_episodes, keep_best)
     wall0 = manifest.get("wall_s", 0.0)
     t0 = time.perf_counter()
-
-    def save_checkpoint() -> None:
-        log.flush()
-        step = model.num_timesteps
-        stem = out / CHECKPOINTS / f"step_{step:09d}"
-        model.save(stem.with_name(stem.name + ".tmp.zip"))
-        os.replace(stem.with_name(stem.name + ".tmp.zip"), stem.with_suffix(".zip"))
-        _write_json(stem.with_suffix(".json"), {"timesteps": step, "episodes": log.episodes})
-        for old in sorted((out / CHECKPOINTS).glob("step_*.json"))[:-2]:
-            old.unlink(missing_ok=True)
-            old.with_suffix(".zip").unlink(missing_ok=True)
-        manifest.update(timesteps=step, episodes=log.episodes, wall_s=round(wall0 + time.perf_counter() - t0, 1))
-        _write_json(out / RUN_MANIFEST, manifest)
-
-    cbs = [log, CheckpointEvery(dqn.checkpoint_every, save_checkpoint)]
-    if progress:
-        cbs.append(_bar_callback(timesteps, done_steps, garage.name, log))
-    _write_json(out / RUN_MANIFEST, manifest)
-    try:
-        if timesteps > done_steps:
-            model.learn(total_timesteps=timesteps - done_steps, callback=CallbackList(cbs),
-                        reset_num_timesteps=not checkpoint)
-    except KeyboardInterrupt:
-        save_checkpoint()
-        raise
-    finally:
-        venv.close()
-    save_checkpoint()
+    bar = [ConditionedProgress(timesteps, run.done_steps, garage.name, log)] if progress else []
+    run.learn(timesteps, log, bar, checkpoint_every=dqn.checkpoint_every, close=(venv.close,),
+              checkpoint_fields=lambda: {"wall_s": round(wall0 + time.perf_counter() - t0, 1)})
+    run.save_checkpoint()
     if not (out / GENERATOR).exists():  # too few episodes to choose: the last policy
         model.policy.save(out / GENERATOR)
         manifest["best"] = {"in_band": None, "timestep": model.num_timesteps, "episode": log.episodes}
     manifest["status"] = "finished"
-    _write_json(out / RUN_MANIFEST, manifest)
+    run.write_manifest()
     meta = {"map": garage.name, "seed": seed, "timesteps": model.num_timesteps, "episodes": log.episodes,
             "train_wall_s": manifest["wall_s"], "view_size": dqn.view_size, "max_errors": dqn.max_errors,
             "net_arch": list(dqn.net_arch), "dqn": dqn.to_dict(), "condition": manifest["condition"],
             "searched_range": manifest["searched_range"], "chosen": manifest["best"],
             "curve": training_curve(out / EPISODES)}
-    _write_json(out / GENERATOR_META, meta)
+    write_json(out / GENERATOR_META, meta)
     return meta
 
 
@@ -337,8 +288,6 @@ def train_for_map(map: str, model_out: str | Path, timesteps: int = TRAIN_TIMEST
     removed once the generator is saved), then writes ``model_out`` and its ``.json``. Returns
     the path and the training wall time in seconds (None when reused).
     """
-    import shutil
-
     out = Path(model_out)
     if out.is_file():
         return out, None
@@ -372,8 +321,6 @@ def train_command(map: str) -> str:
 
 def load_policy(path: Path):
     """The Q-network policy saved at ``path`` (a ``generator.zip``); :class:`GenerationError` if it is not one."""
-    from stable_baselines3.dqn.policies import DQNPolicy
-
     try:
         return DQNPolicy.load(str(path), device="cpu")
     except Exception as exc:  # a foreign or corrupt file: torch and pickle raise many kinds

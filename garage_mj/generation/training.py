@@ -4,7 +4,8 @@
 finished episode is logged by SB3's ``Monitor`` (``out_dir/monitor.csv``: return, length) and,
 when its garage is usable, committed to the library at once, so a crash loses no garage that
 was reported. Checkpoints (model + episode/timestep counters) are written atomically every
-``checkpoint_every`` timesteps and on Ctrl-C; ``resume=True`` continues from the newest one.
+``checkpoint_every`` timesteps and on Ctrl-C; ``resume=True`` continues from the newest one
+(the lifecycle of :class:`garage_mj.generation.runs.DQNRun`).
 
 A run folder holds ``run.json`` (the manifest: map, seed, config, progress, throughput),
 ``monitor.csv``, ``checkpoints/`` and, at the end, ``final_model.zip``.
@@ -15,29 +16,26 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.callbacks import BaseCallback
 
 from garage_mj.core.config import ConfigError, load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.library import Library
+from garage_mj.generation.runs import DQNRun
 from garage_mj.grid.map_io import load_map
 
 MANIFEST = "run.json"
 MONITOR = "monitor.csv"
-CHECKPOINTS = "checkpoints"
 FINAL_MODEL = "final_model.zip"
 LIBRARY = "library.sqlite"
-KEEP_CHECKPOINTS = 2  # older checkpoints are deleted
 PROGRESS_EVERY = 256  # [timesteps] between progress-bar refreshes
 
 
@@ -239,6 +237,9 @@ class LibraryCallback(BaseCallback):
             self.episodes += 1
         return True
 
+    def flush(self) -> None:
+        """Nothing to flush: every garage is committed as it is found."""
+
 
 class ProgressCallback(BaseCallback):
     """A tqdm bar over the run's timesteps with episodes and garages stored."""
@@ -271,33 +272,7 @@ class ProgressCallback(BaseCallback):
             self.bar = None
 
 
-class CheckpointEvery(BaseCallback):
-    """Saves a checkpoint every ``every`` timesteps through ``save`` (see :func:`_save_checkpoint`)."""
-
-    def __init__(self, every: int, save: Callable[[], None]) -> None:
-        super().__init__()
-        self.every, self.save = every, save
-        self.last = 0
-
-    def _on_training_start(self) -> None:
-        self.last = self.num_timesteps // self.every
-
-    def _on_step(self) -> bool:
-        # with n_envs > 1 the count moves n_envs at a time: save on crossing each multiple
-        if self.num_timesteps // self.every > self.last:
-            self.last = self.num_timesteps // self.every
-            self.save()
-        return True
-
-
 # -- run folder -----------------------------------------------------------------------------------
-def _write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write JSON atomically (temp file + rename), so a kill never leaves half a file."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
-
-
 def read_manifest(out_dir: str | Path) -> dict[str, Any]:
     """The ``run.json`` of a run folder; :class:`TrainingError` if there is none."""
     path = Path(out_dir) / MANIFEST
@@ -307,34 +282,6 @@ def read_manifest(out_dir: str | Path) -> dict[str, Any]:
         raise TrainingError(f"{out_dir} holds no training run (no {MANIFEST})") from None
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise TrainingError(f"{path} is not valid JSON ({str(exc)[:120]}); delete the run folder and train again") from None
-
-
-def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
-    """The newest complete checkpoint (model zip + counters) of a run folder, if any."""
-    best = None
-    for state_path in (out_dir / CHECKPOINTS).glob("step_*.json"):
-        model = state_path.with_suffix(".zip")
-        if not model.exists():
-            continue
-        try:
-            state = json.loads(state_path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError):
-            continue  # a torn or foreign checkpoint record: an older one is used
-        if best is None or state["timesteps"] > best[1]["timesteps"]:
-            best = (model, state)
-    return best
-
-
-def _truncate_monitor(path: Path, episodes: int) -> None:
-    """Keep the monitor's two header lines and its first ``episodes`` rows (the checkpoint's past)."""
-    if not path.exists():
-        return
-    lines = path.read_text().splitlines(keepends=True)
-    keep = lines[: 2 + episodes]
-    if len(keep) != len(lines):
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text("".join(keep))
-        os.replace(tmp, path)
 
 
 def _run_id(map_name: str, seed: int, out: Path) -> str:
@@ -374,9 +321,6 @@ def train(
         progress: show a tqdm progress bar.
         callbacks: extra SB3 callbacks (tests, instrumentation).
     """
-    import torch
-    from stable_baselines3 import DQN
-
     if timesteps < 1:
         raise TrainingError(f"--timesteps must be >= 1, got {timesteps}")
     out = Path(out_dir)
@@ -400,72 +344,23 @@ def train(
             "map": map_name, "map_source": str(map), "seed": seed, "algo": "dqn", "config": config.to_dict(),
             "status": "running", "timesteps": 0, "episodes": 0,
         }
-    out.mkdir(parents=True, exist_ok=True)
-    (out / CHECKPOINTS).mkdir(exist_ok=True)
+    run = DQNRun(out, manifest, MANIFEST, resume)
     library_path = Path(library_path) if library_path is not None else out / LIBRARY
     manifest.update(target_timesteps=timesteps, library=str(library_path))
-
-    checkpoint = latest_checkpoint(out) if resume else None
-    done_steps, done_episodes = (checkpoint[1]["timesteps"], checkpoint[1]["episodes"]) if checkpoint else (0, 0)
-    if resume and done_steps >= timesteps and manifest.get("status") == "finished":
+    if resume and run.done_steps >= timesteps and manifest.get("status") == "finished":
         return manifest
-    _truncate_monitor(out / MONITOR, done_episodes)
-    if not checkpoint:
-        (out / MONITOR).unlink(missing_ok=True)
+    run.restart_log(out / MONITOR, header_lines=2)
 
-    torch.set_num_threads(config.torch_threads)
     venv, envs = make_vec_env(map, config, out / MONITOR)
-    if checkpoint:
-        model = DQN.load(checkpoint[0], env=venv, device="cpu")
-        buffer = checkpoint[0].with_name(checkpoint[0].stem + "_replay.pkl")
-        if buffer.exists():
-            model.load_replay_buffer(buffer)
-        model.set_random_seed(seed + done_steps)  # a fresh, reproducible stream after the checkpoint
-    else:
-        model = DQN("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **config.dqn_kwargs())
-
+    model = run.start_model(venv, config, seed, save_replay_buffer=config.save_replay_buffer)
     library = Library(library_path)
-    lib_cb = LibraryCallback(library, map=map_name, run=manifest["run"], seed=seed, episodes=done_episodes)
-
-    def save_checkpoint() -> None:
-        step = model.num_timesteps
-        stem = out / CHECKPOINTS / f"step_{step:09d}"
-        tmp = stem.with_name(stem.name + ".tmp.zip")
-        model.save(tmp)
-        os.replace(tmp, stem.with_suffix(".zip"))
-        if config.save_replay_buffer:
-            tmp_buf = stem.with_name(stem.name + "_replay.tmp.pkl")
-            model.save_replay_buffer(tmp_buf)
-            os.replace(tmp_buf, stem.with_name(stem.name + "_replay.pkl"))
-        _write_json(stem.with_suffix(".json"), {"timesteps": step, "episodes": lib_cb.episodes})
-        states = sorted((out / CHECKPOINTS).glob("step_*.json"))
-        for old in states[:-KEEP_CHECKPOINTS]:
-            for path in (old, old.with_suffix(".zip"), old.with_name(old.stem + "_replay.pkl")):
-                path.unlink(missing_ok=True)
-        manifest.update(timesteps=step, episodes=lib_cb.episodes)
-        _write_json(out / MANIFEST, manifest)
-
-    bar = ProgressCallback(timesteps, done_steps, lib_cb, f"{map_name} seed {seed}", progress)
-    cbs = [lib_cb, CheckpointEvery(config.checkpoint_every, save_checkpoint), bar, *(callbacks or [])]
+    lib_cb = LibraryCallback(library, map=map_name, run=manifest["run"], seed=seed, episodes=run.done_episodes)
+    bar = ProgressCallback(timesteps, run.done_steps, lib_cb, f"{map_name} seed {seed}", progress)
     manifest["status"] = "running"
-    _write_json(out / MANIFEST, manifest)
-    t0, cpu0 = time.perf_counter(), time.process_time()
     steps0 = model.num_timesteps
-    try:
-        if timesteps > done_steps:
-            model.learn(total_timesteps=timesteps - done_steps, callback=CallbackList(cbs),
-                        reset_num_timesteps=not checkpoint)
-    except KeyboardInterrupt:
-        bar.close()
-        save_checkpoint()
-        manifest["status"] = "interrupted"
-        _write_json(out / MANIFEST, manifest)
-        raise
-    finally:
-        wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
-        bar.close()
-        library.close()
-        venv.close()
+    run.learn(timesteps, lib_cb, [bar, *(callbacks or [])], checkpoint_every=config.checkpoint_every,
+              close=(bar.close, library.close, venv.close), on_interrupt=bar.close, interrupted_status="interrupted")
+    wall, cpu = run.wall_s, run.cpu_s
     model.save(out / FINAL_MODEL)
     steps = model.num_timesteps - steps0
     manifest.update(
@@ -480,5 +375,5 @@ def train(
             "usable_episodes": lib_cb.usable, "garages_stored": lib_cb.stored,
         },
     )
-    _write_json(out / MANIFEST, manifest)
+    run.write_manifest()
     return manifest

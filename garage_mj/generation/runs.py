@@ -1,0 +1,218 @@
+"""The lifecycle every resumable DQN run shares: run folder, checkpoints, resume, Ctrl-C.
+
+Plain training (:func:`garage_mj.generation.training.train`) and the conditioned generator
+(:func:`garage_mj.generation.conditioned.train_conditioned`) run stable-baselines3 DQN the same way,
+through :class:`DQNRun`:
+
+- a run folder with a manifest (``run.json``) and ``checkpoints/step_<timesteps>.zip`` + ``.json``
+  (the model and its timestep/episode counters, each written atomically; the newest
+  :data:`KEEP_CHECKPOINTS` are kept);
+- on resume, the newest complete checkpoint: the model is loaded from it and re-seeded with
+  ``seed + timesteps`` (a fresh, reproducible stream), the episode log is cut back to its episodes;
+  a new run builds the model with ``seed``;
+- a checkpoint every ``checkpoint_every`` timesteps, and one on Ctrl-C before the interrupt goes on.
+
+What differs between the two (the manifest's fields, the env, the callbacks, what is saved at the
+end) stays with the caller.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+import torch
+from stable_baselines3 import DQN
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.vec_env import VecEnv
+
+if TYPE_CHECKING:
+    from garage_mj.generation.training import DQNConfig
+
+CHECKPOINTS = "checkpoints"
+KEEP_CHECKPOINTS = 2  # older checkpoints are deleted
+
+
+class EpisodeCounter(Protocol):
+    """The callback that counts a run's finished episodes (checkpoints record its count)."""
+
+    episodes: int
+
+    def flush(self) -> None:
+        """Put what it logged so far on disk (called before each checkpoint)."""
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write JSON atomically (temp file + rename), so a kill never leaves half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
+    """The newest complete checkpoint (model zip + counters) of a run folder, if any."""
+    best = None
+    for state_path in (out_dir / CHECKPOINTS).glob("step_*.json"):
+        model = state_path.with_suffix(".zip")
+        if not model.exists():
+            continue
+        try:
+            state = json.loads(state_path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError):
+            continue  # a torn or foreign checkpoint record: an older one is used
+        if best is None or state["timesteps"] > best[1]["timesteps"]:
+            best = (model, state)
+    return best
+
+
+def truncate_log(path: Path, header_lines: int, rows: int) -> None:
+    """Keep the first ``header_lines`` lines of a log and its first ``rows`` rows (a checkpoint's past)."""
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    keep = lines[: header_lines + rows]
+    if len(keep) != len(lines):
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text("".join(keep))
+        os.replace(tmp, path)
+
+
+class CheckpointEvery(BaseCallback):
+    """Saves a checkpoint every ``every`` timesteps through ``save`` (:meth:`DQNRun.save_checkpoint`)."""
+
+    def __init__(self, every: int, save: Callable[[], None]) -> None:
+        super().__init__()
+        self.every, self.save = every, save
+        self.last = 0
+
+    def _on_training_start(self) -> None:
+        self.last = self.num_timesteps // self.every
+
+    def _on_step(self) -> bool:
+        # with n_envs > 1 the count moves n_envs at a time: save on crossing each multiple
+        if self.num_timesteps // self.every > self.last:
+            self.last = self.num_timesteps // self.every
+            self.save()
+        return True
+
+
+class DQNRun:
+    """One resumable DQN run in the folder ``out`` (module docstring).
+
+    Creating it makes the folder and finds the checkpoint to resume from (when ``resume``):
+    :attr:`checkpoint`, :attr:`done_steps`, :attr:`done_episodes`. Then: :meth:`restart_log`,
+    :meth:`start_model`, :meth:`learn`.
+
+    Args:
+        out: the run folder (created, with ``checkpoints/``).
+        manifest: the run's manifest; every checkpoint sets its ``timesteps`` and ``episodes`` and
+            writes it to ``out / manifest_name``.
+        manifest_name: the manifest's file name.
+        resume: continue from the newest checkpoint of ``out``, if it has one.
+    """
+
+    def __init__(self, out: Path, manifest: dict[str, Any], manifest_name: str, resume: bool) -> None:
+        self.out, self.manifest, self.manifest_path = out, manifest, out / manifest_name
+        out.mkdir(parents=True, exist_ok=True)
+        (out / CHECKPOINTS).mkdir(exist_ok=True)
+        self.checkpoint = latest_checkpoint(out) if resume else None
+        state = self.checkpoint[1] if self.checkpoint else {"timesteps": 0, "episodes": 0}
+        self.done_steps: int = state["timesteps"]
+        self.done_episodes: int = state["episodes"]
+        self.model: DQN | None = None
+        self.counter: EpisodeCounter | None = None
+        self.checkpoint_fields: Callable[[], dict[str, Any]] | None = None
+        self.save_replay_buffer = False
+        self.wall_s = self.cpu_s = 0.0  # of the last learn()
+
+    def write_manifest(self) -> None:
+        write_json(self.manifest_path, self.manifest)
+
+    def restart_log(self, path: Path, header_lines: int) -> None:
+        """Cut the episode log ``path`` back to the checkpoint's episodes; a run without one starts it anew."""
+        if self.checkpoint:
+            truncate_log(path, header_lines, self.done_episodes)
+        else:
+            path.unlink(missing_ok=True)
+
+    def start_model(self, venv: VecEnv, config: DQNConfig, seed: int, save_replay_buffer: bool = False) -> DQN:
+        """The run's model on ``venv``: the checkpoint's (with its replay buffer, when one was saved), re-seeded
+        with ``seed + timesteps``, or a new ``MlpPolicy`` DQN seeded with ``seed``.
+
+        ``save_replay_buffer``: checkpoints also save the replay buffer.
+        """
+        torch.set_num_threads(config.torch_threads)
+        self.save_replay_buffer = save_replay_buffer
+        if self.checkpoint:
+            model = DQN.load(self.checkpoint[0], env=venv, device="cpu")
+            buffer = self.checkpoint[0].with_name(self.checkpoint[0].stem + "_replay.pkl")
+            if buffer.exists():
+                model.load_replay_buffer(buffer)
+            model.set_random_seed(seed + self.done_steps)  # a fresh, reproducible stream after the checkpoint
+        else:
+            model = DQN("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **config.dqn_kwargs())
+        self.model = model
+        return model
+
+    def save_checkpoint(self) -> None:
+        """The model (and replay buffer) and the counters at ``checkpoints/step_<timesteps>``; then the manifest."""
+        assert self.model is not None and self.counter is not None, "save_checkpoint() before learn()"
+        self.counter.flush()
+        model = self.model
+        step = model.num_timesteps
+        stem = self.out / CHECKPOINTS / f"step_{step:09d}"
+        tmp = stem.with_name(stem.name + ".tmp.zip")
+        model.save(tmp)
+        os.replace(tmp, stem.with_suffix(".zip"))
+        if self.save_replay_buffer:
+            tmp_buf = stem.with_name(stem.name + "_replay.tmp.pkl")
+            model.save_replay_buffer(tmp_buf)
+            os.replace(tmp_buf, stem.with_name(stem.name + "_replay.pkl"))
+        write_json(stem.with_suffix(".json"), {"timesteps": step, "episodes": self.counter.episodes})
+        states = sorted((self.out / CHECKPOINTS).glob("step_*.json"))
+        for old in states[:-KEEP_CHECKPOINTS]:
+            for path in (old, old.with_suffix(".zip"), old.with_name(old.stem + "_replay.pkl")):
+                path.unlink(missing_ok=True)
+        self.manifest.update(timesteps=step, episodes=self.counter.episodes)
+        if self.checkpoint_fields is not None:
+            self.manifest.update(self.checkpoint_fields())
+        self.write_manifest()
+
+    def learn(self, timesteps: int, counter: EpisodeCounter, callbacks: Sequence[BaseCallback], *,
+              checkpoint_every: int, close: Sequence[Callable[[], None]] = (),
+              on_interrupt: Callable[[], None] | None = None, interrupted_status: str | None = None,
+              checkpoint_fields: Callable[[], dict[str, Any]] | None = None) -> None:
+        """Write the manifest, then learn until the run has ``timesteps`` in all.
+
+        The callbacks run in this order: ``counter`` (which counts the episodes), a checkpoint every
+        ``checkpoint_every`` timesteps, ``callbacks``. Each checkpoint, from here on, also sets the
+        manifest fields ``checkpoint_fields()`` returns (e.g. the wall time so far). On Ctrl-C:
+        ``on_interrupt``, a checkpoint, the manifest's status set to ``interrupted_status`` (unless
+        None), and the interrupt goes on. Whatever happens, :attr:`wall_s` and :attr:`cpu_s` get the
+        time spent and the ``close`` functions are called.
+        """
+        assert self.model is not None, "learn() before start_model()"
+        self.counter, self.checkpoint_fields = counter, checkpoint_fields
+        cbs = [counter, CheckpointEvery(checkpoint_every, self.save_checkpoint), *callbacks]
+        self.write_manifest()
+        t0, cpu0 = time.perf_counter(), time.process_time()
+        try:
+            if timesteps > self.done_steps:
+                self.model.learn(total_timesteps=timesteps - self.done_steps, callback=CallbackList(cbs),
+                                 reset_num_timesteps=not self.checkpoint)
+        except KeyboardInterrupt:
+            if on_interrupt is not None:
+                on_interrupt()
+            self.save_checkpoint()
+            if interrupted_status is not None:
+                self.manifest["status"] = interrupted_status
+                self.write_manifest()
+            raise
+        finally:
+            self.wall_s, self.cpu_s = time.perf_counter() - t0, time.process_time() - cpu0
+            for fn in close:
+                fn()
