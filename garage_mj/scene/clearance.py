@@ -1,0 +1,135 @@
+"""How far the ego car's body stays from what it may not touch, along a path (SPEC section 7).
+
+The obstacles of a scene are axis-aligned rectangles: walls, obstacle blocks, pillars and every
+stall's outline (parked cars lie wholly inside stall outlines, so any occupancy is covered).
+The car's body is a rectangle around its rear-axle midpoint (:func:`footprint`); the swept
+clearance (:func:`clearance`) is, per pose, the distance of that rectangle to the nearest
+obstacle: a bounding-circle lower bound first, exact polygon distances only where the bound
+is below ``EXACT_BELOW``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from garage_mj.scene.garage_scene import GarageScene
+from garage_mj.scene.semantics import Semantic
+
+if TYPE_CHECKING:
+    from garage_mj.scene.car import CarGeometry
+
+NEAR_OBSTACLE = 6.0  # [m] obstacles farther than this from every path point are not tested
+EXACT_BELOW = 2.0  # [m] clearances above this are reported as the bounding-circle lower bound
+
+
+@dataclass
+class Obstacles:
+    """Axis-aligned obstacle rectangles [xmin, ymin, xmax, ymax] with their class and stall id (or -1)."""
+
+    boxes: np.ndarray
+    classes: list[str]
+    stall: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+
+
+def scene_obstacles(scene: GarageScene) -> Obstacles:
+    """Walls, obstacle blocks, pillars and stall outlines of ``scene`` as axis-aligned rectangles."""
+    boxes, classes, stall = [], [], []
+    lay = scene.layout
+    for box in lay.boxes:
+        if box.collides and box.cls in (Semantic.WALL, Semantic.OBSTACLE):
+            (cx, cy, _), (hx, hy, _) = box.center, box.half
+            boxes.append((cx - hx, cy - hy, cx + hx, cy + hy))
+            classes.append(box.cls.name.lower())
+            stall.append(-1)
+    h = scene.world.pillar_size / 2
+    for p in lay.pillars:
+        boxes.append((p.x - h, p.y - h, p.x + h, p.y + h))
+        classes.append("pillar")
+        stall.append(-1)
+    for s in scene.stalls.stalls:
+        xs, ys = zip(*s.corners)
+        boxes.append((min(xs), min(ys), max(xs), max(ys)))
+        classes.append("parked_car")
+        stall.append(s.id)
+    return Obstacles(np.array(boxes, dtype=float).reshape(-1, 4), classes, np.array(stall, dtype=int))
+
+
+def footprint(car: CarGeometry, rear: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """(N, 4, 2) corners of the car's body with its rear-axle midpoint at ``rear`` and ``heading``."""
+    x0, x1 = car.rear - car.rear_axle, car.front - car.rear_axle
+    w = car.half_width
+    local = np.array([[x1, w], [x0, w], [x0, -w], [x1, -w]])
+    c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
+    x = rear[:, 0:1] + c * local[:, 0] - s * local[:, 1]
+    y = rear[:, 1:2] + s * local[:, 0] + c * local[:, 1]
+    return np.stack([x, y], axis=-1)
+
+
+def clearance(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.ndarray,
+              exclude_stall: int = -1) -> tuple[np.ndarray, list[str]]:
+    """Per pose, the distance [m] of the car body to the nearest obstacle (0 when touching), and its class.
+
+    The outline of stall ``exclude_stall`` (the test's target) is not an obstacle.
+    """
+    keep = obs.stall != exclude_stall if exclude_stall >= 0 else np.ones(len(obs.boxes), dtype=bool)
+    boxes = obs.boxes
+    # only obstacles near the path
+    lo, hi = rear.min(axis=0) - NEAR_OBSTACLE, rear.max(axis=0) + NEAR_OBSTACLE
+    keep &= (boxes[:, 2] >= lo[0]) & (boxes[:, 0] <= hi[0]) & (boxes[:, 3] >= lo[1]) & (boxes[:, 1] <= hi[1])
+    idx = np.flatnonzero(keep)
+    if not len(idx):
+        return np.full(len(rear), np.inf), [""] * len(rear)
+    boxes = boxes[idx]
+    body = footprint(car, rear, heading)  # (N, 4, 2)
+    # a cheap lower bound from the body's bounding circle; exact distances only where it is small
+    mid = body.mean(axis=1)  # (N, 2) body centre
+    radius = float(np.linalg.norm(body[0, 0] - mid[0]))
+    dx = np.maximum(np.maximum(boxes[None, :, 0] - mid[:, None, 0], mid[:, None, 0] - boxes[None, :, 2]), 0.0)
+    dy = np.maximum(np.maximum(boxes[None, :, 1] - mid[:, None, 1], mid[:, None, 1] - boxes[None, :, 3]), 0.0)
+    bound = np.hypot(dx, dy) - radius  # (N, M) <= the true distance
+    dist = np.maximum(bound, 0.0)
+    n_i, m_i = np.nonzero(bound < EXACT_BELOW)
+    if len(n_i):
+        cars, bx = body[n_i], boxes[m_i]  # (K, 4, 2), (K, 4)
+        bc = _box_corners(bx)
+        exact = np.minimum(_points_to_edges(cars, bc), _points_to_edges(bc, cars))
+        exact[_overlap_pairs(cars, bx, bc)] = 0.0
+        dist[n_i, m_i] = exact
+    j = np.argmin(dist, axis=1)
+    names = [obs.classes[idx[k]] for k in j]
+    return dist[np.arange(len(rear)), j], names
+
+
+def _points_to_edges(points: np.ndarray, polys: np.ndarray) -> np.ndarray:
+    """Smallest distance from any of ``points`` (..., 4, 2) to any edge of ``polys`` (..., 4, 2)."""
+    a = polys
+    b = np.roll(polys, -1, axis=-2)
+    ab = b - a  # (..., 4, 2) edges
+    p = points[..., :, None, :]  # (..., 4 points, 1, 2)
+    ap = p - a[..., None, :, :]
+    denom = np.maximum((ab * ab).sum(-1), 1e-12)[..., None, :]
+    t = np.clip((ap * ab[..., None, :, :]).sum(-1) / denom, 0.0, 1.0)
+    closest = a[..., None, :, :] + t[..., None] * ab[..., None, :, :]
+    d = np.linalg.norm(p - closest, axis=-1)
+    return d.min(axis=(-1, -2))
+
+
+def _box_corners(boxes: np.ndarray) -> np.ndarray:
+    """(K, 4, 2) corners, counter-clockwise, of axis-aligned boxes (K, 4) [xmin, ymin, xmax, ymax]."""
+    return np.stack([boxes[:, [0, 1]], boxes[:, [2, 1]], boxes[:, [2, 3]], boxes[:, [0, 3]]], axis=1)
+
+
+def _overlap_pairs(car: np.ndarray, boxes: np.ndarray, bc: np.ndarray) -> np.ndarray:
+    """(K,) whether each car rectangle (K, 4, 2) overlaps its axis-aligned box (K, 4), corners ``bc``."""
+    sep = ((car[..., 0].max(-1) < boxes[:, 0]) | (car[..., 0].min(-1) > boxes[:, 2])
+           | (car[..., 1].max(-1) < boxes[:, 1]) | (car[..., 1].min(-1) > boxes[:, 3]))
+    for e in (0, 1):  # the car's two axes
+        axis = car[:, e + 1] - car[:, e]
+        axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+        pc = np.einsum("kcd,kd->kc", car, axis)
+        pb = np.einsum("kcd,kd->kc", bc, axis)
+        sep |= (pc.max(-1) < pb.min(-1)) | (pc.min(-1) > pb.max(-1))
+    return ~sep
