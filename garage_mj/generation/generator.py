@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from garage_mj.generation.cond_env import GarageGenCondEnv, band_distance
 from garage_mj.generation.conditioned import (
@@ -32,8 +34,12 @@ from garage_mj.generation.conditioned import (
     train_command,
 )
 from garage_mj.generation.library import Library
+from garage_mj.generation.search import BandClimber, replay
+from garage_mj.grid.blocks import AXES
+from garage_mj.grid.garage import Garage
 from garage_mj.grid.map_io import list_maps, load_map
-from garage_mj.grid.metrics import evaluate
+from garage_mj.grid.metrics import GarageMetrics, evaluate
+from garage_mj.grid.painters import paint_garage
 
 EPS_RANGE = (0.02, 0.3)  # per-episode exploration of generate, drawn uniformly
 GEN_ENVS = 16  # envs stepped together by generate (one batched Q-network call)
@@ -62,32 +68,51 @@ class GenerateResult:
     search_seeds: int = 0  # garages the search started from (usable garages of the policy, or painter garages)
 
 
-def generate(map: str, difficulty: tuple[float, float], count: int, library: str | Path, *,
-             coverage: tuple[float, float] | None = None, model: str | Path | None = None, seed: int = 0,
-             max_episodes: int | None = None, max_seconds: float | None = None, progress: bool = True,
-             n_envs: int = GEN_ENVS, clock=time.perf_counter, search: bool = True) -> GenerateResult:
-    """Store ``count`` distinct usable garages of ``map`` with difficulty (and coverage) in the bands.
+class _Collector:
+    """What both stages share: the library, the bands, the clock, and the store of garages found.
 
-    Stage 1 rolls out the generator; if it has not filled the band after ``POLICY_PATIENCE``
-    episodes (``a + b * count``) or :data:`POLICY_TIME_SHARE` of ``max_seconds``, stage 2 (unless
-    ``search=False``) climbs from the usable garages it painted toward the band (module docstring).
-    The budget is shared: a rollout episode or a replay counts one episode,
-    :data:`SEARCH_STEPS_PER_EPISODE` search mutations count one. Raises :class:`GenerationError`
-    (after storing what it found) when ``max_episodes`` (default ``2,000 + 200 * count``) or
-    ``max_seconds`` measured by ``clock`` (wall time; ``time.process_time`` for CPU time on a
-    shared machine) do not find ``count``. The same seed gives the same garages (unless
-    ``max_seconds`` cuts a run short).
+    :meth:`keep` stores a garage that is usable, new to this call and in the bands, and counts
+    it in :attr:`result`; :meth:`elapsed` is the ``clock`` time since ``c0``, when the call began.
     """
-    import torch
 
-    from garage_mj.generation.search import BandClimber, replay
+    def __init__(self, lib: Library, map_name: str, run: str, seed: int, difficulty: tuple[float, float],
+                 coverage: tuple[float, float], count: int, result: GenerateResult, bar: Any,
+                 clock: Callable[[], float], c0: float) -> None:
+        self.lib, self.map_name, self.run, self.seed = lib, map_name, run, seed
+        self.difficulty, self.coverage, self.count, self.result, self.bar = difficulty, coverage, count, result, bar
+        self.clock, self.c0 = clock, c0
+        self.seen: set[str] = set()
 
-    for name, band in (("difficulty", difficulty), ("coverage", coverage)):
-        if band is not None and not 0.0 <= band[0] <= band[1] <= 1.0:
-            raise GenerationError(f"--{name} {band[0]} {band[1]}: need 0 <= LO <= HI <= 1")
-    if count < 1:
-        raise GenerationError(f"--count must be >= 1, got {count}")
-    garage0 = load_map(map)
+    def elapsed(self) -> float:
+        return self.clock() - self.c0
+
+    def keep(self, g: Garage, m: GarageMetrics, stage: str, episode: int, timestep: int) -> bool:
+        """Store ``g`` (metrics ``m``) if it is usable, new to this call and in the bands."""
+        key = g.canonical_hash()
+        if key in self.seen or not m.usable or band_distance(m.difficulty, self.difficulty) > 0.0 \
+                or band_distance(m.coverage, self.coverage) > 0.0:
+            return False
+        self.seen.add(key)
+        result = self.result
+        new = self.lib.add(g, map=self.map_name, run=self.run + ("+search" if stage == "search" else ""),
+                           seed=self.seed, episode=episode, timestep=timestep)
+        result.found += 1
+        if stage == "search":
+            result.found_search += 1
+        else:
+            result.found_policy += 1
+        result.stored += new is not None
+        if new is not None:
+            result.ids.append(new)
+        result.difficulties.append(m.difficulty)
+        if self.bar is not None:
+            self.bar.update(1)
+            self.bar.set_postfix(stage=stage, episodes=result.episodes, search_steps=result.search_steps, refresh=False)
+        return True
+
+
+def _generator_path(map: str, garage0: Garage, model: str | Path | None) -> Path:
+    """The generator file: ``model`` (a file, or a shipped map's name), else the shipped one of ``map``."""
     shipped_name = isinstance(map, str) and "/" not in map and garage0.name in {m.name for m in list_maps()}
     if model is None:
         path = shipped_generator(garage0.name) if shipped_name else None
@@ -99,59 +124,25 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
             path = shipped_generator(str(model))  # a shipped generator by its map's name
         if not path.is_file():
             raise GenerationError(f"--model {model} does not exist (a generator file, or a shipped map's name)")
+    return path
+
+
+def _generator_meta(path: Path) -> dict[str, Any]:
+    """The ``generator.json`` beside a generator (its env settings), or {} when there is none."""
     meta_path = path.with_suffix(".json") if path.with_suffix(".json").is_file() else path.with_name(GENERATOR_META)
-    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-    max_episodes = max_episodes if max_episodes is not None else 2_000 + 200 * count
-    max_errors = meta.get("max_errors", 10)
-    torch.set_num_threads(1)
-    policy = load_policy(path)
-    policy.set_training_mode(False)
-    envs = [GarageGenCondEnv(map=garage0, view_size=meta.get("view_size", 7), max_errors=max_errors)
-            for _ in range(n_envs)]
-    if policy.observation_space.shape != envs[0].observation_space.shape:
-        raise GenerationError(f"{path} was trained with observations of shape {policy.observation_space.shape}, "
-                              f"this map's env gives {envs[0].observation_space.shape}")
-    cov = coverage or (0.0, 1.0)
-    band_opts = {"difficulty": tuple(difficulty), "coverage": cov}
-    rng = np.random.default_rng(seed)
-    run = f"generate:{path.stem if path.name != GENERATOR else path.parent.name}"
-    seen: set[str] = set()
-    usable_pool: list[tuple[float, int, Any]] = []  # (distance to the bands, episode, garage) of usable rollouts
-    result = GenerateResult(0, 0, [], 0, 0.0, [])
-    t0, cpu0, c0 = time.perf_counter(), time.process_time(), clock()
-    patience = POLICY_PATIENCE[0] + POLICY_PATIENCE[1] * count if search else max_episodes
-    policy_seconds = None if max_seconds is None else (max_seconds * POLICY_TIME_SHARE if search else max_seconds)
-    policy_episodes = min(max_episodes, patience)
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    return json.loads(meta_path.read_text()) if meta_path.is_file() else {}
 
-        bar = tqdm(total=count, desc=f"{garage0.name} difficulty {difficulty[0]:.2f}-{difficulty[1]:.2f}",
-                   unit="garage", dynamic_ncols=True)
 
-    def keep(lib: Library, g, m, stage: str, episode: int, timestep: int) -> bool:
-        """Store ``g`` (metrics ``m``) if it is usable, new to this call and in the bands."""
-        key = g.canonical_hash()
-        if key in seen or not m.usable or band_distance(m.difficulty, difficulty) > 0.0 \
-                or band_distance(m.coverage, cov) > 0.0:
-            return False
-        seen.add(key)
-        new = lib.add(g, map=garage0.name, run=run + ("+search" if stage == "search" else ""), seed=seed,
-                      episode=episode, timestep=timestep)
-        result.found += 1
-        if stage == "search":
-            result.found_search += 1
-        else:
-            result.found_policy += 1
-        result.stored += new is not None
-        if new is not None:
-            result.ids.append(new)
-        result.difficulties.append(m.difficulty)
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(stage=stage, episodes=result.episodes, search_steps=result.search_steps, refresh=False)
-        return True
+def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Generator, collector: _Collector,
+                  episodes: int, seconds: float | None, pool: list[tuple[float, int, Garage]] | None) -> int:
+    """Stage 1: roll the policy out in ``envs`` for up to ``episodes`` episodes (and ``seconds``).
 
+    Each episode draws its reset seed and its epsilon from ``rng``. Garages that land in the bands go
+    to the collector; when ``pool`` is given, every usable garage goes there too as (distance to
+    the bands, episode, garage), for the search. Returns the env steps taken.
+    """
+    result, n_envs = collector.result, len(envs)
+    band_opts = {"difficulty": tuple(collector.difficulty), "coverage": collector.coverage}
     started = 0
     eps = np.zeros(n_envs)
     episode_of = [0] * n_envs
@@ -167,80 +158,153 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
         started += 1
 
     steps = 0
-    with Library(library) as lib:
-        # -- stage 1: policy rollouts ---------------------------------------------------------------
-        for i in range(min(n_envs, policy_episodes)):
-            start(i)
-        while active.any() and result.found < count:
-            if policy_seconds is not None and clock() - c0 >= policy_seconds:
-                break
-            with torch.no_grad():
-                greedy = policy.q_net(torch.as_tensor(obs)).argmax(dim=1).numpy()
-            explore = rng.random(n_envs) < eps
-            random_a = rng.integers(4, size=n_envs)
-            for i in np.flatnonzero(active):
-                a = int(random_a[i] if explore[i] else greedy[i])
-                obs[i], _, term, trunc, info = envs[i].step(a)
-                steps += 1
-                if not (term or trunc):
-                    continue
-                result.episodes += 1
-                active[i] = False
-                if info["usable"]:
-                    g = envs[i].garage()
-                    if search:
-                        dist = band_distance(info["difficulty"], difficulty) + band_distance(info["coverage"], cov)
-                        usable_pool.append((dist, episode_of[i], g))
-                    if info["in_band"] and result.found < count:
-                        keep(lib, g, evaluate(g), "policy", episode_of[i], steps)
-                if started < policy_episodes and result.found < count:
-                    start(i)
-        # -- stage 2: band-directed local search from the policy's usable garages -------------------
-        if search and result.found < count:
-            climber = BandClimber(garage0, difficulty, coverage, rng=np.random.default_rng([seed, 1]))
-            usable_pool.sort(key=lambda e: (e[0], e[1]))  # nearest to the band first, then oldest
-            for _, _, g in usable_pool:
-                result.search_seeds += climber.add(g) is not None
-            # and the scripted painter's garages, as the search baseline starts from: the policy's garages are
-            # often one family, and the climb restarts from these too when it stalls (they alone seed it when
-            # the policy painted nothing usable)
-            from garage_mj.grid.garage import AXES
-            from garage_mj.grid.painters import paint_garage
+    for i in range(min(n_envs, episodes)):
+        start(i)
+    while active.any() and result.found < collector.count:
+        if seconds is not None and collector.elapsed() >= seconds:
+            break
+        with torch.no_grad():
+            greedy = policy.q_net(torch.as_tensor(obs)).argmax(dim=1).numpy()
+        explore = rng.random(n_envs) < eps
+        random_a = rng.integers(4, size=n_envs)
+        for i in np.flatnonzero(active):
+            a = int(random_a[i] if explore[i] else greedy[i])
+            obs[i], _, term, trunc, info = envs[i].step(a)
+            steps += 1
+            if not (term or trunc):
+                continue
+            result.episodes += 1
+            active[i] = False
+            if info["usable"]:
+                g = envs[i].garage()
+                if pool is not None:
+                    dist = (band_distance(info["difficulty"], collector.difficulty)
+                            + band_distance(info["coverage"], collector.coverage))
+                    pool.append((dist, episode_of[i], g))
+                if info["in_band"] and result.found < collector.count:
+                    collector.keep(g, evaluate(g), "policy", episode_of[i], steps)
+            if started < episodes and result.found < collector.count:
+                start(i)
+    return steps
 
-            for k in range(SEARCH_SEEDS):
-                for axis in AXES:
-                    result.search_seeds += climber.add(
-                        paint_garage(garage0, seed=seed * 1000 + k, six_stall_axis=axis)) is not None
-            if bar is not None:
-                bar.set_postfix(stage="search", episodes=result.episodes, refresh=True)
-            while result.found < count and (climber.climbers or climber.inside):
-                if result.episodes + result.replays + result.search_steps / SEARCH_STEPS_PER_EPISODE >= max_episodes:
-                    break
-                if max_seconds is not None and result.search_steps % 16 == 0 and clock() - c0 >= max_seconds:
-                    break
-                found = climber.step()
-                result.search_steps += 1
-                if found is None:
-                    continue
-                painted, info = replay(found[0], max_errors=max_errors)
-                result.replays += 1
-                if info.get("usable") and np.array_equal(painted.grid, found[0].grid):
-                    keep(lib, painted, evaluate(painted), "search", result.search_steps, steps)
+
+def _search_stage(garage0: Garage, coverage: tuple[float, float] | None, seed: int, max_errors: int,
+                  collector: _Collector, pool: list[tuple[float, int, Garage]], max_episodes: int,
+                  max_seconds: float | None, steps: int) -> None:
+    """Stage 2: the band-directed local search from the policy's usable garages (``pool``).
+
+    The climb starts from the pool, nearest to the bands first, and from the scripted painter's
+    garages; every road set it finds in the bands is re-painted through the painter env and kept
+    if the painter makes the same usable garage. Stops at ``max_episodes`` (rollout episodes,
+    replays and search steps / :data:`SEARCH_STEPS_PER_EPISODE`) or ``max_seconds``.
+    """
+    result = collector.result
+    climber = BandClimber(garage0, collector.difficulty, coverage, rng=np.random.default_rng([seed, 1]))
+    pool.sort(key=lambda e: (e[0], e[1]))  # nearest to the band first, then oldest
+    for _, _, g in pool:
+        result.search_seeds += climber.add(g) is not None
+    # and the scripted painter's garages, as the search baseline starts from: the policy's garages are
+    # often one family, and the climb restarts from these too when it stalls (they alone seed it when
+    # the policy painted nothing usable)
+    for k in range(SEARCH_SEEDS):
+        for axis in AXES:
+            result.search_seeds += climber.add(
+                paint_garage(garage0, seed=seed * 1000 + k, six_stall_axis=axis)) is not None
+    if collector.bar is not None:
+        collector.bar.set_postfix(stage="search", episodes=result.episodes, refresh=True)
+    while result.found < collector.count and (climber.climbers or climber.inside):
+        if result.episodes + result.replays + result.search_steps / SEARCH_STEPS_PER_EPISODE >= max_episodes:
+            break
+        if max_seconds is not None and result.search_steps % 16 == 0 and collector.elapsed() >= max_seconds:
+            break
+        found = climber.step()
+        result.search_steps += 1
+        if found is None:
+            continue
+        painted, info = replay(found[0], max_errors=max_errors)
+        result.replays += 1
+        if info.get("usable") and np.array_equal(painted.grid, found[0].grid):
+            collector.keep(painted, evaluate(painted), "search", result.search_steps, steps)
+
+
+def _not_filled(result: GenerateResult, count: int, map_name: str, difficulty: tuple[float, float],
+                coverage: tuple[float, float] | None, search: bool, max_seconds: float | None,
+                library: str | Path) -> GenerationError:
+    """The error of a call that did not find ``count`` garages, carrying its result."""
+    cov = coverage or (0.0, 1.0)
+    what = f"difficulty in [{difficulty[0]}, {difficulty[1]}]" + (
+        f" and coverage in [{cov[0]}, {cov[1]}]" if coverage is not None else "")
+    searched = f" and {result.search_steps} search steps" if search and result.search_steps else ""
+    exc = GenerationError(
+        f"found {result.found} of {count} distinct usable garages of {map_name} with {what} in "
+        f"{result.episodes} episodes{searched} ({result.seconds:.0f} s; {result.stored} new stored in {library}); "
+        f"{'' if max_seconds is None else f'--max-seconds {max_seconds:g}; '}"
+        "widen the band, raise --max-episodes, or see what the map admits (eval/admissible.py)")
+    exc.result = result
+    return exc
+
+
+def generate(map: str, difficulty: tuple[float, float], count: int, library: str | Path, *,
+             coverage: tuple[float, float] | None = None, model: str | Path | None = None, seed: int = 0,
+             max_episodes: int | None = None, max_seconds: float | None = None, progress: bool = True,
+             n_envs: int = GEN_ENVS, clock: Callable[[], float] = time.perf_counter,
+             search: bool = True) -> GenerateResult:
+    """Store ``count`` distinct usable garages of ``map`` with difficulty (and coverage) in the bands.
+
+    Stage 1 rolls out the generator; if it has not filled the band after ``POLICY_PATIENCE``
+    episodes (``a + b * count``) or :data:`POLICY_TIME_SHARE` of ``max_seconds``, stage 2 (unless
+    ``search=False``) climbs from the usable garages it painted toward the band (module docstring).
+    The budget is shared: a rollout episode or a replay counts one episode,
+    :data:`SEARCH_STEPS_PER_EPISODE` search mutations count one. Raises :class:`GenerationError`
+    (after storing what it found) when ``max_episodes`` (default ``2,000 + 200 * count``) or
+    ``max_seconds`` measured by ``clock`` (wall time; ``time.process_time`` for CPU time on a
+    shared machine) do not find ``count``. The same seed gives the same garages (unless
+    ``max_seconds`` cuts a run short).
+    """
+    for name, band in (("difficulty", difficulty), ("coverage", coverage)):
+        if band is not None and not 0.0 <= band[0] <= band[1] <= 1.0:
+            raise GenerationError(f"--{name} {band[0]} {band[1]}: need 0 <= LO <= HI <= 1")
+    if count < 1:
+        raise GenerationError(f"--count must be >= 1, got {count}")
+    garage0 = load_map(map)
+    path = _generator_path(map, garage0, model)
+    meta = _generator_meta(path)
+    max_episodes = max_episodes if max_episodes is not None else 2_000 + 200 * count
+    max_errors = meta.get("max_errors", 10)
+    torch.set_num_threads(1)
+    policy = load_policy(path)
+    policy.set_training_mode(False)
+    envs = [GarageGenCondEnv(map=garage0, view_size=meta.get("view_size", 7), max_errors=max_errors)
+            for _ in range(n_envs)]
+    if policy.observation_space.shape != envs[0].observation_space.shape:
+        raise GenerationError(f"{path} was trained with observations of shape {policy.observation_space.shape}, "
+                              f"this map's env gives {envs[0].observation_space.shape}")
+    rng = np.random.default_rng(seed)
+    run = f"generate:{path.stem if path.name != GENERATOR else path.parent.name}"
+    usable_pool: list[tuple[float, int, Garage]] | None = [] if search else None  # of the rollouts, for the search
+    result = GenerateResult(0, 0, [], 0, 0.0, [])
+    t0, cpu0, c0 = time.perf_counter(), time.process_time(), clock()
+    patience = POLICY_PATIENCE[0] + POLICY_PATIENCE[1] * count if search else max_episodes
+    policy_seconds = None if max_seconds is None else (max_seconds * POLICY_TIME_SHARE if search else max_seconds)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=count, desc=f"{garage0.name} difficulty {difficulty[0]:.2f}-{difficulty[1]:.2f}",
+                   unit="garage", dynamic_ncols=True)
+    with Library(library) as lib:
+        collector = _Collector(lib, garage0.name, run, seed, difficulty, coverage or (0.0, 1.0), count, result, bar,
+                               clock, c0)
+        steps = _policy_stage(policy, envs, rng, collector, min(max_episodes, patience), policy_seconds, usable_pool)
+        if usable_pool is not None and result.found < count:
+            _search_stage(garage0, coverage, seed, max_errors, collector, usable_pool, max_episodes, max_seconds,
+                          steps)
     result.seconds = time.perf_counter() - t0
     result.cpu_seconds = time.process_time() - cpu0
     if bar is not None:
         bar.close()
     if result.found < count:
-        what = f"difficulty in [{difficulty[0]}, {difficulty[1]}]" + (
-            f" and coverage in [{cov[0]}, {cov[1]}]" if coverage is not None else "")
-        searched = f" and {result.search_steps} search steps" if search and result.search_steps else ""
-        exc = GenerationError(
-            f"found {result.found} of {count} distinct usable garages of {garage0.name} with {what} in "
-            f"{result.episodes} episodes{searched} ({result.seconds:.0f} s; {result.stored} new stored in {library}); "
-            f"{'' if max_seconds is None else f'--max-seconds {max_seconds:g}; '}"
-            "widen the band, raise --max-episodes, or see what the map admits (eval/admissible.py)")
-        exc.result = result
-        raise exc
+        raise _not_filled(result, count, garage0.name, difficulty, coverage, search, max_seconds, library)
     return result
 
 
