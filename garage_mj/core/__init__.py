@@ -5,6 +5,7 @@
 - ``config``: typed, frozen config dataclasses loaded from TOML (unknown keys are an error).
 - ``backends``: the local process pool and Ray, behind one ``map_unordered``.
 - ``geometry``: grid directions and small geometric helpers.
+- ``lazy``: ``lazy_exports``, the lazy re-exports of a stage's public names (``scene``, ``export``).
 """
 
 __version__ = "0.1.0"

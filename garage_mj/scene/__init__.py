@@ -1,19 +1,47 @@
 """The scene: the 3D world derived from a garage, computed once per garage as a :class:`GarageScene`.
 
-World frame and sizes (``world``), road network matrix (``roadnet``), stalls (``stalls``), road
-model and plan view (``roadmodel``, ``planview``), lanes and routes (``lanes``, ``route``),
-drivable routes and their checks (``drivable``), layout and the MJCF builder (``layout``,
-``mjcf_scene``, ``templates``) and semantic classes (``semantics``). The writers in
-:mod:`garage_mj.export` and the drive env read this package; it imports neither.
+The writers in :mod:`garage_mj.export` and the drive env read this package; it imports neither.
 Public names load lazily (``from garage_mj.scene import GarageScene``).
+
+- ``world``: the world frame (x east, y north, metres) and the sizes of blocks, lanes, stalls, pillars.
+- ``garage_scene``: :class:`GarageScene`, every part below built on first use, at most once per garage.
+- ``roadnet``: the road network matrix: per road cell its tile type, rotation and world position.
+- ``stalls``: where every stall (and obstruction pillar) lies in the world.
+- ``roadmodel``: roads, junctions and parking spaces as OpenDRIVE spells them, before any XML.
+- ``planview``: plan-view geometry (lines, arcs, poses along them) shared by the road model and lanes.
+- ``lanes``: the lane graph (right-hand lane waypoints of the road model), routes on it, gate poses.
+- ``route``: a route as a 2D polyline: length, projection of the car, lookahead points.
+- ``routing``: the ego car's forward routes on the road network matrix, filleted into turns it can steer.
+- ``clearance``: obstacles as rectangles, the car's footprint and its swept clearance along a path.
+- ``drivable``: the planned test to each stall (goal, route, checks) and a garage's drivability.
+- ``car``: the ego car's model file and geometry (outline, axles, steering limit).
+- ``layout``: the garage as named, classified boxes and model placements (pure, no MuJoCo).
+- ``templates``: the models of ``models/`` as stamps for scene builders.
+- ``mjcf_scene``: the MuJoCo scene (``build_scene``) and parked-car occupancy on a compiled model.
+- ``semantics``: the semantic classes and the geom naming rule that carries them.
+- ``actor_spec``: what an actor of a cruise test is (kind, shape, size, trajectory, trigger).
+- ``actor_bodies``: the actors' kinematic mocap bodies in the MuJoCo scene.
+
+Four modules describe the roads, each for its own reader. ``garage_mj.grid.roadgraph`` (grid
+stage) is the road graph on the grid: road-like cells, their tile by degree, key nodes and the
+segments between them, the counts the paper's metrics use; it knows no world coordinates.
+``roadnet`` is the road network matrix, one entry per road cell: its tile type (dead end,
+straight, curve, T, cross, gate), the rotation of the tile's model and its world position;
+every exporter reads road cells from it. ``roadmodel`` turns it (with ``stalls``) into roads,
+junctions with connecting roads and parking spaces as OpenDRIVE spells them; the
+``garage.xodr`` writer spells exactly this. ``lanes`` samples the road model's right-hand
+lanes into waypoints in driving direction, linked across junctions, for driving: routes between
+two points as a car in CARLA would drive them (``lanes.route``), the pose the ego car starts from and
+the lane centre lines a test's goal must lie on. The ego car's planned route itself
+(``routing``) follows the right-hand lane lines of ``roadnet`` cells, filleted into turns the
+car can steer.
 """
 
 from __future__ import annotations
 
-from importlib import import_module
+from garage_mj.core.lazy import lazy_exports
 
-#: Public name -> submodule that defines it.
-_EXPORTS: dict[str, str] = {
+__getattr__, __all__ = lazy_exports(__name__, {
     "GarageScene": "garage_scene",
     "WorldConfig": "world",
     "DEFAULT_WORLD": "world",
@@ -32,15 +60,8 @@ _EXPORTS: dict[str, str] = {
     "set_parked": "mjcf_scene",
     "DrivePlanner": "drivable",
     "TestPlan": "drivable",
+    "drive_planner": "drivable",
     "drivability": "drivable",
     "Semantic": "semantics",
     "geom_classes": "semantics",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+})
