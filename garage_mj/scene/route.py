@@ -1,7 +1,7 @@
 """A route as a 2D polyline in world coordinates: length, projection of the car, lookahead points.
 
-Pure geometry (no MuJoCo): the drive env builds a :class:`Route` from the lane graph, the outcome
-monitor measures progress and deviation on it, and the env gives drivers the lookahead point.
+Pure geometry (no MuJoCo): the drive env builds a :class:`Route` from a test's planned path, the
+outcome monitor measures progress and deviation on it, and the env gives drivers the lookahead point.
 """
 
 from __future__ import annotations
