@@ -10,20 +10,15 @@ import pytest
 
 from garage_mj.cli import main
 from garage_mj.core.config import ConfigError
-from garage_mj.driving.actors import (
-    ActorSpec,
-    Corridor,
-    ScenarioConfig,
-    actor_poses,
-    draw_scenario,
-    judge,
-    load_scenario_config,
-    sample_times,
-)
+from garage_mj.driving.actor_config import ScenarioConfig, load_scenario_config
+from garage_mj.driving.actor_judging import judge
+from garage_mj.driving.actor_placement import draw_scenario
+from garage_mj.driving.actors import Corridor, actor_poses, sample_times
 from garage_mj.driving.cruise import read_tests, replay_xosc, run_cruise
 from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.driving.drivers import load_driver
 from garage_mj.grid.painters import paint_garage
+from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.semantics import COLLIDABLE, Semantic

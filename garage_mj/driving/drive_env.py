@@ -32,20 +32,16 @@ import numpy as np
 from gymnasium import spaces
 
 from garage_mj.core.config import load_config
-from garage_mj.driving.actors import (
-    NO_ACTORS,
-    ActorSpec,
-    Scenario,
-    ScenarioConfig,
-    draw_scenario,
-    judge,
-    load_scenario_config,
-)
+from garage_mj.driving.actor_config import NO_ACTORS, ScenarioConfig, load_scenario_config
+from garage_mj.driving.actor_judging import judge
+from garage_mj.driving.actor_placement import draw_scenario
+from garage_mj.driving.actors import Scenario
 from garage_mj.driving.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
 from garage_mj.driving.sensors import Camera, CameraConfig
 from garage_mj.driving.vehicle import Car, DiscreteAction, attach_car, compile_mjcf
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states
+from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.car import CarConfig, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
@@ -88,7 +84,7 @@ class GarageDriveEnv(gym.Env):
             ``MultiInputPolicy`` hands them to its CNN. The built-in drivers expect the default
             (depth in metres as ``(H, W)`` float32).
         render_mode: ``"rgb_array"`` renders the ``ego/top`` camera (``render_size`` pixels).
-        scenario: :class:`~garage_mj.driving.actors.ScenarioConfig` (or a dict of its fields, or a TOML
+        scenario: :class:`~garage_mj.driving.actor_config.ScenarioConfig` (or a dict of its fields, or a TOML
             file): pedestrians, moving cars and clutter drawn per test from the test seed (after
             the draws above, so the same seed gives the same target, parked cars and start with
             or without actors). A test whose events no driver could avoid is ``infeasible``.
@@ -212,7 +208,7 @@ class GarageDriveEnv(gym.Env):
         """Draw target stall, parked cars and start pose from ``seed``.
 
         ``options`` may fix ``target`` (stall id), ``occupied`` (stall ids), ``start`` ((x, y, yaw))
-        or ``actors`` (a list of :class:`~garage_mj.driving.actors.ActorSpec` or their dicts, replacing the
+        or ``actors`` (a list of :class:`~garage_mj.scene.actor_spec.ActorSpec` or their dicts, replacing the
         drawn ones; a replayed ``.xosc`` does this); their avoidability is judged the same way.
         """
         super().reset(seed=seed)

@@ -24,7 +24,7 @@ OpenSCENARIO element                               carries
 ``Entities/ScenarioObject[parkedcar_<stall>]``     a parked car in stall ``<stall>`` (Vehicle)
 ``Entities/ScenarioObject[<actor name>]``          an actor: pedestrian -> Pedestrian, moving_car ->
                                                    Vehicle, clutter -> MiscObject (obstacle); box
-                                                   from :data:`garage_mj.driving.actors.SHAPE_SIZE`
+                                                   from :data:`garage_mj.scene.actor_spec.SHAPE_SIZE`
 ``Init`` ``TeleportAction/WorldPosition``          start pose of every entity (x, y, z=0, h=yaw);
                                                    an actor's is its first waypoint
 ``Init`` ego ``FollowTrajectoryAction``            the planned route: ``Polyline`` of the centre
@@ -69,7 +69,7 @@ from lxml import etree
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.actors import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
+from garage_mj.scene.actor_spec import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
 
 OSC_MINOR = 2  # OpenSCENARIO 1.2
 FORMAT = 1  # gmj_format: bumped when the mapping above changes

@@ -1,7 +1,8 @@
-"""The MuJoCo side of the actors of :mod:`garage_mj.driving.actors`: kinematic mocap bodies, built once per env.
+"""The MuJoCo side of the actors (:mod:`garage_mj.scene.actor_spec`): kinematic mocap bodies, built once per env.
 
-:func:`add_actor_bodies` adds one mocap body per actor slot of a
-:class:`~garage_mj.driving.actors.ScenarioConfig` to an ``mjcf.RootElement`` (before compiling): a
+:func:`add_actor_bodies` adds one mocap body per actor slot of an
+:class:`~garage_mj.scene.actor_spec.ActorSlots` (the drive env's
+:class:`~garage_mj.driving.actor_config.ScenarioConfig`) to an ``mjcf.RootElement`` (before compiling): a
 pedestrian per ``pedestrians``, a car per ``moving_cars``, and per ``clutter`` slot one body of
 each clutter shape (cone, trolley, car), since a slot's shape is drawn per test. Body names
 carry the semantic class (``pedestrian_0``, ``movingcar_0``, ``clutter_0_cone``...), so the
@@ -22,7 +23,7 @@ from collections.abc import Iterable
 import mujoco
 import numpy as np
 
-from garage_mj.driving.actors import SHAPE_SIZE, ActorSpec, ScenarioConfig
+from garage_mj.scene.actor_spec import SHAPE_SIZE, ActorSlots, ActorSpec
 from garage_mj.scene.layout import CLASS_RGBA
 from garage_mj.scene.semantics import Semantic
 
@@ -60,7 +61,7 @@ def _add_shape(body, shape: str, cls: Semantic) -> None:
         raise ValueError(f"unknown actor shape {shape!r}")
 
 
-def slot_names(config: ScenarioConfig) -> list[tuple[str, str]]:
+def slot_names(config: ActorSlots) -> list[tuple[str, str]]:
     """(body name, shape) of every actor slot a scene built for ``config`` holds."""
     out = [(f"pedestrian_{k}", "pedestrian") for k in range(config.pedestrians)]
     out += [(f"movingcar_{k}", "car") for k in range(config.moving_cars)]
@@ -73,7 +74,7 @@ def slot_of(actor: ActorSpec) -> str:
     return f"{actor.name}_{actor.shape}" if actor.kind == "clutter" else actor.name
 
 
-def add_actor_bodies(root, config: ScenarioConfig) -> list[str]:
+def add_actor_bodies(root, config: ActorSlots) -> list[str]:
     """Add the mocap bodies of ``config``'s actor slots to ``root``; returns their names."""
     classes = {"pedestrian": Semantic.PEDESTRIAN, "movingcar": Semantic.MOVING_CAR, "clutter": Semantic.CLUTTER}
     names = []
@@ -87,7 +88,7 @@ def add_actor_bodies(root, config: ScenarioConfig) -> list[str]:
 class ActorBodies:
     """Moves the actor slots of a compiled model (``data.mocap_pos`` / ``mocap_quat``)."""
 
-    def __init__(self, model: mujoco.MjModel, config: ScenarioConfig) -> None:
+    def __init__(self, model: mujoco.MjModel, config: ActorSlots) -> None:
         self.model = model
         self.mocap: dict[str, int] = {}
         self.geoms: dict[str, np.ndarray] = {}

@@ -29,7 +29,10 @@ from typing import Any
 
 import numpy as np
 
+from garage_mj.driving.actors import Corridor, actor_poses, sample_times
 from garage_mj.driving.drivers.base import BaseDriver
+from garage_mj.scene.actor_spec import ActorSpec
+from garage_mj.scene.drivable import TestPlan
 
 
 @dataclass(frozen=True)
@@ -72,9 +75,6 @@ class OracleDriver(BaseDriver):
     def _actor_blocks(self, actors: list) -> None:
         """Per moving actor that comes near the path: its sample times and, per time, which path poses
         the rest of its trajectory from then on blocks (computed once here, read each step)."""
-        from garage_mj.driving.actors import ActorSpec, Corridor, actor_poses, sample_times
-        from garage_mj.scene.drivable import TestPlan
-
         self.blocks: list[tuple[int, np.ndarray, np.ndarray, int]] = []  # (actor, times, blocked (T, N), trigger index)
         if not actors:
             return
