@@ -16,10 +16,13 @@ from lxml import etree
 from scenariogeneration.xosc import ParseOpenScenario
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.driving.actors import ActorSpec, ScenarioConfig, draw_scenario
+from garage_mj.driving.actor_config import ScenarioConfig
+from garage_mj.driving.actor_placement import draw_scenario
 from garage_mj.export.pack import export_pack
 from garage_mj.export.validate import ToolMissing, check_xosc_batch, qc_xosc_executable
-from garage_mj.export.xosc import XoscError, read_xosc, write_xosc
+from garage_mj.export.xosc import XoscError, write_xosc
+from garage_mj.export.xosc_read import read_xosc
+from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import START_OFFSET, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 

@@ -1,0 +1,343 @@
+"""Reading back a cruise test written as OpenSCENARIO by :func:`garage_mj.export.xosc.write_xosc` (with lxml).
+
+Where each field comes from is the table of :mod:`garage_mj.export.xosc`. Both forms of the
+*near* condition are read: a ``ReachPositionCondition`` (OpenSCENARIO 1.0/1.1) and its 1.2
+replacement, a euclidean ``DistanceCondition`` between reference points. A static actor (one
+waypoint, no trigger) reads back with ``trigger_radius`` 0. :func:`read_xosc` rebuilds everything
+from the file alone and raises :class:`~garage_mj.export.xosc.XoscError` (one line naming the file
+and the problem) on anything malformed or inconsistent; :meth:`XoscTest.pack` loads the pack it
+refers to.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lxml import etree
+
+from garage_mj.export.pack import load_pack
+from garage_mj.export.xosc import EGO, FORMAT, PARKED_PREFIX, XoscError
+from garage_mj.scene.actor_spec import BEHAVIOURS, KINDS, ActorSpec
+
+#: meta keys promoted to :class:`XoscTest` fields
+KNOWN_META = ("garage_hash", "seed", "driver", "action_type")
+_ENTITY_TAG = {"pedestrian": "Pedestrian", "moving_car": "Vehicle", "clutter": "MiscObject"}
+_SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False,
+                               remove_comments=True)
+
+
+@dataclass
+class XoscTest:
+    """One cruise test read from a ``.xosc`` (the table of :mod:`garage_mj.export.xosc` says where each field
+    comes from)."""
+
+    path: Path
+    pack_dir: Path
+    xodr_path: Path
+    garage_hash: str | None
+    target_stall: int
+    occupied: list[int]
+    start: tuple[float, float, float]  # x, y, yaw of the ego's centre
+    goal: tuple[float, float, float]
+    route: np.ndarray  # (N, 2) centre path [m]
+    actors: list[ActorSpec]
+    parked: dict[int, tuple[float, float, float]]  # stall -> pose of its parked car
+    seed: int | None = None
+    driver: str | None = None
+    action_type: str | None = None
+    meta: dict[str, Any] = field(default_factory=dict)  # every other gmj_ parameter
+
+    def pack(self):
+        """The verified pack (:func:`garage_mj.export.pack.load_pack`), checked against ``gmj_garage_hash``."""
+        pack = load_pack(self.pack_dir)
+        if self.garage_hash is not None and pack.manifest["garage_hash"] != self.garage_hash:
+            raise XoscError(f"scenario file {self.path}: gmj_garage_hash {self.garage_hash[:12]} is not the garage of pack "
+                            f"{self.pack_dir} ({pack.manifest['garage_hash'][:12]})")
+        return pack
+
+
+class _Bad(Exception):
+    """What is wrong, without the file name (added once by :func:`read_xosc`)."""
+
+
+def _attr_f(el, name: str, where: str) -> float:
+    v = el.get(name)
+    if v is None:
+        raise _Bad(f"{where} has no {name} attribute")
+    try:
+        x = float(v)
+    except ValueError:
+        raise _Bad(f"{where} {name}={v[:40]!r} is not a number") from None
+    if not math.isfinite(x):
+        raise _Bad(f"{where} {name}={v[:40]!r} is not finite")
+    return x
+
+
+def _world(el, where: str) -> tuple[float, float, float]:
+    wp = el.find("Position/WorldPosition") if el.tag != "Position" else el.find("WorldPosition")
+    if wp is None:
+        raise _Bad(f"{where} has no Position/WorldPosition")
+    h = wp.get("h")
+    return _attr_f(wp, "x", where), _attr_f(wp, "y", where), 0.0 if h is None else _attr_f(wp, "h", where)
+
+
+def _polyline(ft, where: str, timed: bool) -> np.ndarray:
+    poly = ft.findall(".//Shape/Polyline")
+    if len(poly) != 1:
+        raise _Bad(f"{where} needs one Trajectory/Shape/Polyline, found {len(poly)}")
+    rows = []
+    for i, v in enumerate(poly[0].findall("Vertex")):
+        x, y, h = _world(v, f"{where} vertex {i}")
+        if timed:
+            rows.append((_attr_f(v, "time", f"{where} vertex {i}"), x, y, h))
+        else:
+            rows.append((x, y))
+    if len(rows) < 2:
+        raise _Bad(f"{where}: its Polyline has {len(rows)} vertices (2 or more needed)")
+    return np.asarray(rows, dtype=float)
+
+
+def _reach(cond_parent, where: str) -> tuple[tuple[float, float, float], float, str]:
+    """(position, radius, triggering entity) of the one "entity near a point" condition under ``cond_parent``:
+    a ReachPositionCondition (tolerance) or a euclidean DistanceCondition between reference points
+    (rule lessThan / lessOrEqual, value)."""
+    conds = cond_parent.findall(".//EntityCondition/*")
+    if len(conds) != 1 or conds[0].tag not in ("ReachPositionCondition", "DistanceCondition"):
+        raise _Bad(f"{where} needs one ReachPositionCondition or DistanceCondition, found "
+                   f"{[c.tag for c in conds] or 'none'}")
+    c = conds[0]
+    if c.tag == "ReachPositionCondition":
+        tol = _attr_f(c, "tolerance", f"{where} ReachPositionCondition")
+    else:
+        if (c.get("freespace"), c.get("relativeDistanceType", "euclidianDistance")) != ("false", "euclidianDistance") \
+                or c.get("rule") not in ("lessThan", "lessOrEqual"):
+            raise _Bad(f"{where} DistanceCondition must be euclidean between reference points (freespace false, "
+                       f"relativeDistanceType euclidianDistance, rule lessThan or lessOrEqual)")
+        tol = _attr_f(c, "value", f"{where} DistanceCondition")
+    if tol < 0:
+        raise _Bad(f"{where} {c.tag}: distance {tol} is negative")
+    refs = [e.get("entityRef") for e in cond_parent.findall(".//ByEntityCondition/TriggeringEntities/EntityRef")]
+    return _world(c, f"{where} {c.tag}"), tol, refs[0] if len(refs) == 1 else ""
+
+
+def _params(root) -> dict[str, tuple[str, str]]:
+    out = {}
+    for p in root.findall("ParameterDeclarations/ParameterDeclaration"):
+        name = p.get("name")
+        if name is None or p.get("value") is None:
+            raise _Bad("a ParameterDeclaration lacks its name or value")
+        if name.startswith("gmj_"):
+            out[name] = (p.get("parameterType", "string"), p.get("value"))
+    return out
+
+
+def _typed(name: str, typ: str, value: str) -> Any:
+    try:
+        if typ in ("int", "integer", "unsignedInt", "unsignedShort"):
+            return int(value)
+        if typ == "double":
+            return float(value)
+        if typ == "boolean":
+            if value not in ("true", "false"):
+                raise ValueError(value)
+            return value == "true"
+        if name.startswith("gmj_json_"):
+            return json.loads(value)
+        return value
+    except ValueError:
+        raise _Bad(f"parameter {name}: {value[:40]!r} is not a valid {typ}") from None
+
+
+def _int_list(name: str, text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.split(",")] if text.strip() else []
+    except ValueError:
+        raise _Bad(f"parameter {name}: {text[:40]!r} is not a comma-separated list of stall ids") from None
+
+
+def _read(path: Path) -> XoscTest:
+    try:
+        root = etree.parse(str(path), _SAFE_PARSER).getroot()
+    except etree.XMLSyntaxError as exc:
+        raise _Bad(f"not well-formed XML ({exc.msg}, line {exc.lineno})") from None
+    if root.tag != "OpenSCENARIO":
+        raise _Bad(f"the root element is <{root.tag}>, not <OpenSCENARIO>")
+    hdr = root.find("FileHeader")
+    if hdr is None or hdr.get("revMajor") != "1":
+        raise _Bad("no FileHeader of OpenSCENARIO 1.x")
+    raw = _params(root)
+    meta = {}
+    for name, (typ, value) in raw.items():
+        meta[name] = _typed(name, typ, value)
+
+    def need(name: str, kind: type):
+        if name not in meta:
+            raise _Bad(f"parameter {name} is missing; not a garage-mj cruise test")
+        v = meta.pop(name)
+        if kind is int and (not isinstance(v, int) or isinstance(v, bool)):
+            raise _Bad(f"parameter {name} must be an integer")
+        if kind is str and not isinstance(v, str):
+            raise _Bad(f"parameter {name} must be a string")
+        return v
+
+    fmt = need("gmj_format", int)
+    if fmt != FORMAT:
+        raise _Bad(f"gmj_format {fmt} is not the supported {FORMAT}")
+    target = need("gmj_target_stall", int)
+    occupied = _int_list("gmj_occupied", need("gmj_occupied", str))
+    actor_names = [n for n in need("gmj_actors", str).split(",") if n]
+
+    # road network -> pack
+    lf = root.find("RoadNetwork/LogicFile")
+    if lf is None or not lf.get("filepath"):
+        raise _Bad("RoadNetwork/LogicFile@filepath is missing")
+    fp = Path(lf.get("filepath"))
+    xodr = (fp if fp.is_absolute() else path.resolve().parent / fp).resolve()
+    if not xodr.is_file():
+        raise _Bad(f"its road network {lf.get('filepath')} ({xodr}) does not exist")
+
+    # entities
+    ents: dict[str, str] = {}
+    for so in root.findall("Entities/ScenarioObject"):
+        name = so.get("name")
+        kids = [c.tag for c in so if isinstance(c.tag, str)]
+        tag = next((t for t in kids if t in ("Vehicle", "Pedestrian", "MiscObject")), None)
+        if name is None or tag is None:
+            raise _Bad(f"ScenarioObject {name!r} is not a Vehicle, Pedestrian or MiscObject")
+        if name in ents:
+            raise _Bad(f"entity {name!r} is declared twice")
+        ents[name] = tag
+    if ents.get(EGO) != "Vehicle":
+        raise _Bad("no Vehicle entity named 'ego'")
+
+    # init: poses and the ego's route
+    poses: dict[str, tuple[float, float, float]] = {}
+    route = None
+    for priv in root.findall("Storyboard/Init/Actions/Private"):
+        ref = priv.get("entityRef")
+        if ref not in ents:
+            raise _Bad(f"Init acts on unknown entity {ref!r}")
+        for tp in priv.findall("PrivateAction/TeleportAction"):
+            poses[ref] = _world(tp, f"the TeleportAction of {ref}")
+        for ft in priv.findall("PrivateAction/RoutingAction/FollowTrajectoryAction"):
+            if ref != EGO:
+                raise _Bad(f"Init gives {ref!r} a FollowTrajectoryAction; only the ego's route goes there")
+            route = _polyline(ft, "the ego's route", timed=False)
+    missing = [n for n in ents if n not in poses]
+    if missing:
+        raise _Bad(f"no Init TeleportAction for {missing[:5]}")
+    if route is None:
+        raise _Bad("the ego has no FollowTrajectoryAction (its route) in Init")
+
+    # the goal
+    stop = root.find("Storyboard/StopTrigger")
+    if stop is None:
+        raise _Bad("the Storyboard has no StopTrigger (the goal)")
+    goal, tol, who = _reach(stop, "the StopTrigger")
+    if who != EGO:
+        raise _Bad(f"the goal condition is on {who or 'no single entity'}, not on the ego")
+
+    # parked cars
+    parked: dict[int, tuple[float, float, float]] = {}
+    for name in ents:
+        if name.startswith(PARKED_PREFIX):
+            try:
+                sid = int(name[len(PARKED_PREFIX):])
+            except ValueError:
+                raise _Bad(f"entity {name!r} does not name a stall id") from None
+            parked[sid] = poses[name]
+    if sorted(parked) != occupied:
+        raise _Bad(f"gmj_occupied {occupied} does not match the parked cars {sorted(parked)}")
+
+    # actors
+    events: dict[str, Any] = {}
+    for group in root.findall("Storyboard/Story/Act/ManeuverGroup"):
+        refs = [e.get("entityRef") for e in group.findall("Actors/EntityRef")]
+        if len(refs) != 1 or refs[0] not in actor_names:
+            raise _Bad(f"ManeuverGroup {group.get('name')!r} does not move exactly one declared actor")
+        evs = group.findall("Maneuver/Event")
+        if len(evs) != 1 or refs[0] in events:
+            raise _Bad(f"actor {refs[0]} needs exactly one Event")
+        events[refs[0]] = evs[0]
+    known = {EGO, *(n for n in ents if n.startswith(PARKED_PREFIX))}
+    extra = [n for n in ents if n not in known and n not in actor_names]
+    if extra:
+        raise _Bad(f"entities {extra[:5]} are neither the ego, parked cars nor listed in gmj_actors")
+    actors = []
+    for name in actor_names:
+        if name not in ents:
+            raise _Bad(f"actor {name!r} of gmj_actors has no entity")
+        kind = need(f"gmj_actor_{name}_kind", str)
+        behaviour = need(f"gmj_actor_{name}_behaviour", str)
+        stall = need(f"gmj_actor_{name}_stall", int)
+        if kind not in KINDS or behaviour not in BEHAVIOURS[kind]:
+            raise _Bad(f"actor {name}: unknown kind/behaviour {kind!r}/{behaviour!r}")
+        if ents[name] != _ENTITY_TAG[kind]:
+            raise _Bad(f"actor {name} ({kind}) is a {ents[name]}, expected a {_ENTITY_TAG[kind]}")
+        ev = events.get(name)
+        if ev is None:
+            w = np.array([[0.0, *poses[name]]])
+            actors.append(ActorSpec(name, kind, behaviour, w, None, 0.0, stall))
+            continue
+        fts = ev.findall("Action/PrivateAction/RoutingAction/FollowTrajectoryAction")
+        if len(fts) != 1:
+            raise _Bad(f"actor {name}: its Event needs one FollowTrajectoryAction")
+        tr = fts[0].find("TimeReference/Timing")
+        if tr is None or tr.get("domainAbsoluteRelative") != "relative" \
+                or _attr_f(tr, "scale", f"actor {name} Timing") != 1.0 \
+                or _attr_f(tr, "offset", f"actor {name} Timing") != 0.0:
+            raise _Bad(f"actor {name}: its trajectory timing must be relative, scale 1, offset 0")
+        w = _polyline(fts[0], f"actor {name}'s trajectory", timed=True)
+        if (np.diff(w[:, 0]) < 0).any():
+            raise _Bad(f"actor {name}: vertex times decrease")
+        if not np.allclose(w[0, 1:], poses[name], atol=1e-9):
+            raise _Bad(f"actor {name}: its TeleportAction is not its first waypoint")
+        st = ev.find("StartTrigger")
+        if st is None:
+            raise _Bad(f"actor {name}: its Event has no StartTrigger")
+        (tx, ty, _), radius, who = _reach(st, f"actor {name}'s StartTrigger")
+        if who != EGO:
+            raise _Bad(f"actor {name}: its trigger watches {who or 'no single entity'}, not the ego")
+        actors.append(ActorSpec(name, kind, behaviour, w, (tx, ty), radius, stall))
+    garage_hash = meta.pop("gmj_garage_hash", None)
+    seed = meta.pop("gmj_seed", None)
+    driver = meta.pop("gmj_driver", None)
+    action_type = meta.pop("gmj_action_type", None)
+    if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool)):
+        raise _Bad("parameter gmj_seed must be an integer")
+    for n, v in (("gmj_garage_hash", garage_hash), ("gmj_driver", driver), ("gmj_action_type", action_type)):
+        if v is not None and not isinstance(v, str):
+            raise _Bad(f"parameter {n} must be a string")
+    leftover = [n for n in meta if n.startswith("gmj_actor_")]
+    if leftover:
+        raise _Bad(f"parameters {leftover[:3]} name no actor of gmj_actors")
+    rest = {(n[len("gmj_json_"):] if n.startswith("gmj_json_") else n[len("gmj_"):]): v for n, v in meta.items()}
+    return XoscTest(path=path, pack_dir=xodr.parent, xodr_path=xodr, garage_hash=garage_hash, target_stall=target,
+                    occupied=occupied, start=poses[EGO], goal=goal, route=route, actors=actors, parked=parked,
+                    seed=seed, driver=driver, action_type=action_type, meta=rest)
+
+
+def read_xosc(path: str | Path) -> XoscTest:
+    """The cruise test of a ``.xosc`` written by :func:`~garage_mj.export.xosc.write_xosc`; :class:`XoscError` if it is
+    not one."""
+    path = Path(path)
+    try:
+        if not path.is_file():
+            raise _Bad("no such file")
+        return _read(path)
+    except _Bad as exc:
+        msg = " ".join(str(exc).split())
+        raise XoscError(f"scenario file {path}: {msg}") from None
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError) as exc:  # a structure not foreseen above
+        msg = " ".join(str(exc).split())[:200]
+        raise XoscError(f"scenario file {path}: not a garage-mj cruise test ({type(exc).__name__}: {msg})") from None
+    except OSError as exc:
+        raise XoscError(f"scenario file {path}: cannot read it ({exc.strerror or exc})") from None
+
+
+__all__ = ["XoscTest", "read_xosc"]
