@@ -5,7 +5,8 @@
     .venv/bin/python generation/run.py generation/smoke.toml --workers 2 --backend ray --out runs/smoke_ray
 
 Finished runs are skipped and interrupted ones resumed, so after a crash start the same command
-again. Logic lives in :mod:`garage_mj.generation.protocol`.
+again. Logic lives in :mod:`garage_mj.generation.protocol` (the runs) and
+:mod:`garage_mj.reporting.experiment` (runs, then figures).
 """
 
 from __future__ import annotations
@@ -18,9 +19,10 @@ from pathlib import Path
 from garage_mj.core.backends import BackendError
 from garage_mj.core.config import ConfigError
 from garage_mj.generation.library import LibraryError
-from garage_mj.generation.protocol import load_protocol, run_experiment
+from garage_mj.generation.protocol import load_protocol
 from garage_mj.generation.training import TrainingError
 from garage_mj.grid.garage import MapError
+from garage_mj.reporting.experiment import run_experiment
 from garage_mj.reporting.plots import PlotError
 
 

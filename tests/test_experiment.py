@@ -8,7 +8,8 @@ import pytest
 
 from garage_mj.core.config import ConfigError
 from garage_mj.generation.library import Library
-from garage_mj.generation.protocol import load_protocol, run_experiment
+from garage_mj.generation.protocol import load_protocol
+from garage_mj.reporting.experiment import run_experiment
 
 GENERATION = Path(__file__).resolve().parents[1] / "generation"
 

@@ -14,8 +14,9 @@ import pytest
 from garage_mj.core.backends import BackendError, check_backend, map_unordered, ray_session
 from garage_mj.driving.cruise import run_cruise
 from garage_mj.generation.library import Library
-from garage_mj.generation.protocol import load_protocol, run_experiment
+from garage_mj.generation.protocol import load_protocol
 from garage_mj.grid.painters import paint_garage
+from garage_mj.reporting.experiment import run_experiment
 
 pytest.importorskip("ray", reason="pip install 'garage-mj[ray]' (make install does)")
 

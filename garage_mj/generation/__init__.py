@@ -8,5 +8,5 @@
 - ``generator``: ``garage-mj generate``, garages on demand in a difficulty band.
 - ``search``: the band-directed hill-climb that fills bins the policy does not reach.
 - ``library``: the scenario library (embedded SQLite).
-- ``protocol``: the paper's protocol (maps x seeds x timesteps), resumable.
+- ``protocol``: the paper's protocol (maps x seeds x timesteps) trained into one library, resumable.
 """

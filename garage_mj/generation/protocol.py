@@ -1,14 +1,15 @@
-"""The generation experiment: every (map, seed) run of a protocol, one library, the figures.
+"""The generation protocol: every (map, seed) run of a protocol, into one library.
 
 A protocol TOML (``generation/paper.toml``) names the maps, the seeds, the timesteps per run
-and optionally a ``[dqn]`` table of hyper-parameters. :func:`run_experiment` trains the runs in
+and optionally a ``[dqn]`` table of hyper-parameters. :func:`run_protocol` trains the runs in
 a process pool or on a Ray cluster (:mod:`garage_mj.core.backends`), each in
 ``out/runs/<map>/seed_<s>/``; a finished run is skipped and an interrupted one resumed, so the
 command can simply be started again after a crash.
 
 All runs write to one ``out/library.sqlite``: SQLite in WAL mode lets several processes insert
 at once (each insert is a tiny transaction; writers wait on a busy timeout), and the UNIQUE hash
-keeps a garage two runs both found once. Figures go to ``out/figures/``. The runs write into
+keeps a garage two runs both found once. The figures are drawn a stage later, by
+:func:`garage_mj.reporting.experiment.run_experiment` (runs, then figures). The runs write into
 ``out`` themselves, so with Ray they must all run on machines that share it; SQLite's WAL mode
 works only between processes on one host, so train on one Ray node (the local instance, or a
 cluster of one machine) until the library writes move to this process.
@@ -21,9 +22,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from garage_mj.core.backends import check_backend, map_unordered
 from garage_mj.core.config import ConfigError, read_toml
 from garage_mj.generation.library import Library
 from garage_mj.generation.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
+from garage_mj.grid.map_io import load_map
 
 LIBRARY = "library.sqlite"
 MIN_TIMESTEPS = 100  # a scaled run never gets fewer
@@ -82,7 +85,13 @@ def run_dir(out: Path, map: str, seed: int) -> Path:
     return out / "runs" / Path(map).stem / f"seed_{seed}"
 
 
-def _status(folder: Path, timesteps: int) -> str:
+def protocol_folder(out: str | Path, backend: str = "local") -> Path:
+    """The folder the runs write into: ``out``, made absolute for Ray (its workers start elsewhere)."""
+    out = Path(out)
+    return out.absolute() if backend == "ray" else out
+
+
+def run_status(folder: Path, timesteps: int) -> str:
     """``new``, ``finished`` (nothing to do) or ``resume``."""
     if not (folder / MANIFEST).exists():
         return "new"
@@ -103,26 +112,21 @@ def _job(args: tuple) -> dict[str, Any]:
     return _one_run(*args)
 
 
-def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progress: bool = True,
-                   backend: str = "local", address: str | None = None) -> dict[str, Any]:
-    """Train every (map, seed) of ``protocol`` not yet finished, then draw the figures.
+def run_protocol(protocol: Protocol, out: str | Path, workers: int = 1, progress: bool = True,
+                 backend: str = "local", address: str | None = None) -> dict[str, Any]:
+    """Train every (map, seed) of ``protocol`` not yet finished, into ``out`` (:func:`protocol_folder`).
 
     ``backend``: ``"local"`` (this process, or a spawn pool of ``workers``) or ``"ray"``
     (``workers`` Ray actors; ``address``: a running cluster, else a private local Ray), see
     :mod:`garage_mj.core.backends`; a run's result does not depend on where it trains.
-    Returns a summary: runs trained and skipped, garages per map, figure paths.
+    Returns a summary: runs trained and skipped, the library, garages per map, each trained run's throughput.
     """
     from tqdm import tqdm
-
-    from garage_mj.core.backends import check_backend, map_unordered
-    from garage_mj.grid.map_io import load_map
 
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     check_backend(backend, address)
-    out = Path(out)
-    if backend == "ray":
-        out = out.absolute()  # Ray workers start elsewhere: give them absolute paths
+    out = protocol_folder(out, backend)
     for m in protocol.maps:
         load_map(m)  # fail on a bad map before any run starts
     out.mkdir(parents=True, exist_ok=True)
@@ -132,7 +136,7 @@ def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progre
     for m in protocol.maps:
         for s in protocol.seeds:
             folder = run_dir(out, m, s)
-            (skipped if _status(folder, protocol.timesteps) == "finished" else jobs).append((m, s, folder))
+            (skipped if run_status(folder, protocol.timesteps) == "finished" else jobs).append((m, s, folder))
     done: list[dict[str, Any]] = []
     if jobs:
         bar = tqdm(total=len(jobs), desc=f"{protocol.name}: runs", unit="run", disable=not progress)
@@ -142,28 +146,8 @@ def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progre
             done.append(result)
             bar.update()
         bar.close()
-    figures = draw_figures(protocol, out)
     with Library(library) as lib:
         per_map = {m: lib.count(map=Path(m).stem) for m in protocol.maps}
     return {"trained": [(d["map"], d["seed"]) for d in done], "skipped": [(m, s) for m, s, _ in skipped],
-            "library": str(library), "garages": per_map, "figures": [str(f) for f in figures],
+            "library": str(library), "garages": per_map,
             "throughput": {f"{d['map']}/seed_{d['seed']}": d.get("last_session") for d in done}}
-
-
-def draw_figures(protocol: Protocol, out: Path) -> list[Path]:
-    """Convergence curves of all finished runs and one heatmap per map with garages."""
-    from garage_mj.reporting.plots import convergence, heatmap
-
-    figures = out / "figures"
-    runs = [run_dir(out, m, s) for m in protocol.maps for s in protocol.seeds]
-    runs = [r for r in runs if (r / "monitor.csv").exists() and _status(r, 1) != "new"]
-    paths = []
-    if runs:
-        paths.append(convergence(runs, figures / "convergence.png", smooth=10))
-    with Library(out / LIBRARY) as lib:
-        for m in protocol.maps:
-            name = Path(m).stem
-            points = lib.points(name)
-            if len(points):
-                paths.append(heatmap(points, figures / f"heatmap_{name}.png", title=name))
-    return paths

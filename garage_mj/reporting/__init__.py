@@ -2,6 +2,7 @@
 
 - ``plots``: convergence curves, coverage x difficulty heatmaps, garage pictures (matplotlib).
 - ``analysis``: success against difficulty (regression, Pearson r) and its plot.
+- ``experiment``: the generation experiment as ``generation/run.py`` runs it: the protocol's runs, then their figures.
 - ``video``: an MP4 of one cruise test with the camera views and the outcome.
 - ``report``: the HTML report.
 - ``demo``: the main job end to end on a small garage (train, library, packs, cruise, report).
