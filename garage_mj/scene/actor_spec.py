@@ -1,7 +1,8 @@
 """What an actor of a cruise test is: its kind, behaviour, body shape and size, trajectory and trigger.
 
-The adverse events of a test (pedestrians, moving cars, clutter) are drawn and judged in
-:mod:`garage_mj.driving.actors`; this module holds only the data they are made of, so the scene
+The adverse events of a test (pedestrians, moving cars, clutter) are drawn
+(:mod:`garage_mj.driving.actor_placement`) and judged (:mod:`garage_mj.driving.actor_judging`) in
+driving; this module holds only the data they are made of, so the scene
 (:mod:`garage_mj.scene.actor_bodies`, the actors' mocap bodies) and the OpenSCENARIO writer
 (:mod:`garage_mj.export.xosc`) read it without reaching into driving.
 
