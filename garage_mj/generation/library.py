@@ -5,192 +5,41 @@ stored once (``hash`` is UNIQUE). Several training processes may write to the sa
 same time: each insert is its own short transaction and writers wait up to
 :data:`BUSY_TIMEOUT_S` for the lock.
 
-Opening a file checks it before SQLite touches it: the 100-byte header must carry the SQLite
-magic, the garage-mj application id and a schema version this code knows. A foreign, corrupt
-or newer file raises :class:`LibraryError` naming the file and the fix, and nothing on disk
-changes (the check reads bytes, then opens the file ``immutable``, which writes nothing).
+Opening a file checks it before SQLite touches it (:mod:`garage_mj.generation.library_format`):
+the 100-byte header must carry the SQLite magic, the garage-mj application id and a schema
+version this code knows. A foreign, corrupt or newer file raises :class:`LibraryError` naming
+the file and the fix, and nothing on disk changes (the check reads bytes, then opens the file
+``immutable``, which writes nothing).
 """
 
 from __future__ import annotations
 
 import json
-import math
 import sqlite3
-import struct
-import time
-from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from garage_mj.core.errors import GarageMJError
-from garage_mj.grid.garage import Garage, MapError, validate_garage
+from garage_mj.generation.library_format import (
+    APPLICATION_ID,
+    COLUMNS,
+    DRIVABILITY_SCHEMA,
+    KINDS,
+    SCHEMA,
+    SCHEMA_VERSION,
+    GarageRecord,
+    LibraryError,
+    check_body,
+    check_header,
+    record_from_row,
+)
+from garage_mj.grid.garage import Garage
 from garage_mj.grid.metrics import evaluate
 
-#: Schema version written to ``PRAGMA user_version``; bump it with a migration.
-SCHEMA_VERSION = 1
-#: ``PRAGMA application_id`` of a garage-mj library ("GMJL" in ASCII).
-APPLICATION_ID = 0x474D4A4C
 BUSY_TIMEOUT_S = 60.0  # [s] a writer waits this long for another writer's lock
-SQLITE_MAGIC = b"SQLite format 3\x00"
 DIFFICULTY_BIN = 0.1  # width of the difficulty strata of :meth:`Library.sample`
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS garages (
-    id INTEGER PRIMARY KEY AUTOINCREMENT,
-    map TEXT NOT NULL,
-    run TEXT NOT NULL,
-    seed INTEGER NOT NULL,
-    episode INTEGER NOT NULL,
-    timestep INTEGER NOT NULL,
-    hash TEXT NOT NULL UNIQUE,
-    rows INTEGER NOT NULL,
-    cols INTEGER NOT NULL,
-    grid TEXT NOT NULL,
-    initial TEXT NOT NULL,
-    six_stall_axis TEXT NOT NULL CHECK (six_stall_axis IN ('NS', 'EW')),
-    coverage REAL NOT NULL,
-    difficulty REAL NOT NULL,
-    stalls INTEGER NOT NULL,
-    mean_road_length REAL NOT NULL,
-    mean_intersection_degree REAL NOT NULL,
-    created_at TEXT NOT NULL
-);
-CREATE INDEX IF NOT EXISTS garages_map_difficulty ON garages (map, difficulty);
-CREATE INDEX IF NOT EXISTS garages_run ON garages (run);
-"""
-#: Optional table written by ``garage-mj check --store`` (older readers ignore it: no schema bump).
-_DRIVABILITY_SCHEMA = """
-CREATE TABLE IF NOT EXISTS drivability (
-    garage_id INTEGER PRIMARY KEY REFERENCES garages (id),
-    car TEXT NOT NULL,
-    feasible_share REAL NOT NULL,
-    feasible_stalls INTEGER NOT NULL,
-    stalls INTEGER NOT NULL,
-    min_clearance REAL,
-    max_curvature REAL,
-    checked_at TEXT NOT NULL
-)
-"""
-_COLUMNS = (
-    "id, map, run, seed, episode, timestep, hash, grid, initial, six_stall_axis, coverage, "
-    "difficulty, stalls, mean_road_length, mean_intersection_degree, created_at"
-)
-
-_KINDS: dict[str, type] = {
-    "id": int, "map": str, "run": str, "seed": int, "episode": int, "timestep": int, "hash": str,
-    "grid": list, "initial": list, "six_stall_axis": str, "coverage": float, "difficulty": float,
-    "stalls": int, "mean_road_length": float, "mean_intersection_degree": float, "created_at": str,
-}
-
-
-class LibraryError(GarageMJError):
-    """A library file cannot be used (foreign, corrupt, newer schema, missing)."""
-
-
-@dataclass(frozen=True)
-class GarageRecord:
-    """One row of the library; :attr:`garage` rebuilds the :class:`Garage`."""
-
-    id: int
-    map: str
-    run: str
-    seed: int
-    episode: int
-    timestep: int
-    hash: str
-    grid: list[list[int]]
-    initial: list[list[int]]
-    six_stall_axis: str
-    coverage: float
-    difficulty: float
-    stalls: int
-    mean_road_length: float
-    mean_intersection_degree: float
-    created_at: str
-
-    @property
-    def garage(self) -> Garage:
-        return Garage(
-            np.array(self.grid), np.array(self.initial), six_stall_axis=self.six_stall_axis,  # type: ignore[arg-type]
-            name=f"{self.map}#{self.id}",
-        )
-
-    def verify(self, where: str = "library") -> GarageRecord:
-        """Recompute the garage's hash and metrics from the stored grid; :class:`LibraryError` if any differ.
-
-        SQLite's own checks pass when one digit of a stored grid flips; this catches it before
-        the row is exported or driven. Also checks the garage with :func:`validate_garage`.
-        """
-        fix = "the row was altered after it was stored; delete it or restore the library from a backup"
-        try:
-            garage = validate_garage(self.garage)
-        except MapError as exc:
-            raise LibraryError(f"{where}, row id {self.id}: {exc}; {fix}") from None
-        if garage.canonical_hash() != self.hash:
-            raise LibraryError(f"{where}, row id {self.id}: the grid does not match its stored hash; {fix}")
-        m = evaluate(garage)
-        for col in ("coverage", "difficulty", "stalls", "mean_road_length", "mean_intersection_degree"):
-            if not math.isclose(getattr(m, col), getattr(self, col), rel_tol=1e-9, abs_tol=1e-9):
-                raise LibraryError(f"{where}, row id {self.id}: stored {col} {getattr(self, col)} is not the "
-                                   f"grid's ({getattr(m, col)}); {fix}")
-        return self
-
-    def to_dict(self) -> dict[str, Any]:
-        return dict(self.__dict__)
-
-
-def _check_header(path: Path) -> int:
-    """Validate the file header without SQLite; returns its schema version (0: empty file)."""
-    try:
-        with path.open("rb") as f:
-            head = f.read(100)
-    except OSError as exc:
-        raise LibraryError(f"{path}: cannot read the library: {exc.strerror}") from None
-    if not head:
-        return 0
-    if len(head) < 100 or not head.startswith(SQLITE_MAGIC):
-        raise LibraryError(
-            f"{path} is not an SQLite database (corrupt, or another kind of file); "
-            "pass a garage-mj library.sqlite or a new path"
-        )
-    user_version, application_id = struct.unpack(">I4xI", head[60:72])
-    if application_id != APPLICATION_ID:
-        raise LibraryError(
-            f"{path} is an SQLite database but not a garage-mj library; "
-            "pass a garage-mj library.sqlite or a new path"
-        )
-    if user_version > SCHEMA_VERSION:
-        raise LibraryError(
-            f"{path} has library schema version {user_version}, newer than this garage-mj "
-            f"understands ({SCHEMA_VERSION}); upgrade garage-mj to read it"
-        )
-    return user_version
-
-
-def _check_body(path: Path) -> None:
-    """Read the schema through an ``immutable`` connection (writes nothing, not even -wal/-shm)."""
-    if Path(f"{path}-wal").exists():
-        return  # a writer is live or crashed: SQLite must replay the WAL, the normal open checks
-    for attempt in range(2):
-        try:
-            con = sqlite3.connect(f"{path.resolve().as_uri()}?immutable=1", uri=True)
-            try:
-                con.execute("SELECT name FROM sqlite_master").fetchall()
-                con.execute("SELECT count(*) FROM garages").fetchone()
-            finally:
-                con.close()
-            return
-        except sqlite3.DatabaseError as exc:
-            if attempt == 0:
-                time.sleep(0.2)  # a checkpoint in another process may have torn our read
-                continue
-            raise LibraryError(
-                f"{path} is a damaged garage-mj library ({exc}); restore it from a backup or "
-                "pass a new path"
-            ) from None
 
 
 class Library:
@@ -211,9 +60,9 @@ class Library:
             raise LibraryError(f"no library at {self.path}; train first (garage-mj train) or pass --library")
         if exists and self.path.is_dir():
             raise LibraryError(f"{self.path} is a folder; pass the library file (library.sqlite)")
-        version = _check_header(self.path) if exists else 0
+        version = check_header(self.path) if exists else 0
         if version:
-            _check_body(self.path)
+            check_body(self.path)
         if self.readonly:
             if not exists or not version:
                 raise LibraryError(f"{self.path} is an empty file, not a library; train first (garage-mj train)")
@@ -261,7 +110,7 @@ class Library:
             tables = [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")]
             if app == 0 and tables:
                 raise LibraryError(f"{self.path} is an SQLite database but not a garage-mj library")
-            for statement in _SCHEMA.split(";"):
+            for statement in SCHEMA.split(";"):
                 if statement.strip():
                     con.execute(statement)
             con.execute(f"PRAGMA application_id = {APPLICATION_ID}")
@@ -310,32 +159,9 @@ class Library:
         row = self._con.execute("SELECT id FROM garages WHERE hash = ?", (garage_hash,)).fetchone()
         return None if row is None else int(row[0])
 
-    def _record(self, row: tuple) -> GarageRecord:
-        """A row as a record; a damaged row (bad JSON, text in a numeric column) is a one-line error."""
-        values = list(row)
-        where = f"{self.path}, row id {values[0]}"
-        fix = "the library is damaged: delete that row or restore the file from a backup"
-        for i, name in ((7, "grid"), (8, "initial")):
-            try:
-                values[i] = json.loads(values[i]) if isinstance(values[i], str) else None
-            except (ValueError, RecursionError):
-                values[i] = None
-            if not isinstance(values[i], list):
-                raise LibraryError(f"{where}: column {name} is not a JSON list of rows; {fix}")
-        for i, name in enumerate(_COLUMNS.split(", ")):
-            kind = _KINDS[name]
-            v = values[i]
-            ok = (isinstance(v, str) if kind is str else isinstance(v, list) if kind is list
-                  else isinstance(v, int) if kind is int
-                  else isinstance(v, (int, float)) and math.isfinite(v))
-            if not ok:
-                raise LibraryError(f"{where}: column {name} holds {str(v)[:30]!r}, not a "
-                                   f"{kind.__name__}; {fix}")
-        return GarageRecord(*values)
-
     def _check_numbers(self) -> None:
         """Refuse, naming the row, a library where text stands in a numeric column (aggregates would lie)."""
-        cols = [c for c, k in _KINDS.items() if k in (int, float)]
+        cols = [c for c, k in KINDS.items() if k in (int, float)]
         cond = " OR ".join(f"typeof({c}) NOT IN ('integer', 'real')" for c in cols)
         row = self._con.execute(f"SELECT id, {', '.join(cols)} FROM garages WHERE {cond} LIMIT 1").fetchone()
         if row is not None:
@@ -351,10 +177,10 @@ class Library:
         """The record with ``id``; :class:`LibraryError` if there is none."""
         if not -(2**63) <= int(id) < 2**63:
             raise LibraryError(f"{self.path} has no garage with id {id}; list them with garage-mj library ls")
-        row = self._con.execute(f"SELECT {_COLUMNS} FROM garages WHERE id = ?", (int(id),)).fetchone()
+        row = self._con.execute(f"SELECT {COLUMNS} FROM garages WHERE id = ?", (int(id),)).fetchone()
         if row is None:
             raise LibraryError(f"{self.path} has no garage with id {id}; list them with garage-mj library ls")
-        return self._record(row)
+        return record_from_row(row, self.path)
 
     # -- drivability (garage-mj check --store) ---------------------------------------------------
     def has_drivability(self) -> bool:
@@ -364,7 +190,7 @@ class Library:
 
     def set_drivability(self, id: int, figures: dict[str, Any], car: str) -> None:
         """Store garage ``id``'s drivability (:func:`garage_mj.scene.drivable.drivability`) for ``car``."""
-        self._con.execute(_DRIVABILITY_SCHEMA)
+        self._con.execute(DRIVABILITY_SCHEMA)
         self._con.execute(
             "INSERT OR REPLACE INTO drivability VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
             (int(id), car, float(figures["feasible_share"]), int(figures["feasible_stalls"]), int(figures["stalls"]),
@@ -424,12 +250,12 @@ class Library:
         ``garage-mj check --library FILE --store``.
         """
         where, params = self._where(map, difficulty, coverage, run, feasible)
-        sql = f"SELECT {_COLUMNS} FROM garages{where} ORDER BY id"
+        sql = f"SELECT {COLUMNS} FROM garages{where} ORDER BY id"
         if limit is not None:
             if limit < 0:
                 raise ValueError(f"limit must be >= 0, got {limit}")
             sql += f" LIMIT {int(limit)}"
-        return [self._record(r) for r in self._con.execute(sql, params)]
+        return [record_from_row(r, self.path) for r in self._con.execute(sql, params)]
 
     def count(self, map: str | None = None, run: str | None = None) -> int:
         where, params = self._where(map, None, None, run)
