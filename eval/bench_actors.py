@@ -5,13 +5,13 @@
         [--out runs/bench_actors] [--json docs/bench_actors.json]
 
 ``oracle``: on each shipped 13x13 map, ``--garages`` painted garages spread over difficulty
-(:func:`garage_mj.driving.cruise.painted_sources`) x ``--tests`` tests, the privileged ``oracle`` with
+(:func:`garage_mj.driving.sources.painted_sources`) x ``--tests`` tests, the privileged ``oracle`` with
 continuous actions and 2 pedestrians, 1 moving car and 2 clutter objects per test; every test
 also written as OpenSCENARIO (``--xosc``). Reports success over feasible tests, the infeasible
 share (and reasons), failures, and simulated seconds per wall second per worker (camera on).
 
 ``replay``: the first ``--replays`` exported ``.xosc`` files (sorted by name) replayed with
-:func:`garage_mj.driving.cruise.replay_xosc`; a replay is identical when outcome, simulated time, what was
+:func:`garage_mj.driving.replay.replay_xosc`; a replay is identical when outcome, simulated time, what was
 hit and path length equal the batch's row.
 
 ``density``: the ``vision`` driver (continuous actions) on ``--density-garages`` painted
@@ -29,7 +29,10 @@ import json
 import time
 from pathlib import Path
 
-from garage_mj.driving.cruise import painted_sources, read_tests, replay_xosc, run_cruise
+from garage_mj.driving.replay import replay_xosc
+from garage_mj.driving.results import read_tests
+from garage_mj.driving.sources import painted_sources
+from garage_mj.reporting.cruise import run_cruise
 
 MAPS = ["m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u"]
 ACTORS = {"pedestrians": 2, "moving_cars": 1, "clutter": 2}

@@ -19,8 +19,9 @@ import time
 from pathlib import Path
 
 from garage_mj import list_maps
-from garage_mj.driving.cruise import CruiseSource, painted_sources, run_cruise
+from garage_mj.driving.sources import CruiseSource, painted_sources
 from garage_mj.grid.garage import Garage
+from garage_mj.reporting.cruise import run_cruise
 
 SHAPES = Path(__file__).resolve().parent.parent / "tests" / "data" / "shapes"
 

@@ -15,8 +15,9 @@ import sys
 import time
 from pathlib import Path
 
-from garage_mj.driving.cruise import CruiseSource, painted_sources, run_cruise
-from garage_mj.reporting.analysis import PAPER_R
+from garage_mj.driving.regression import PAPER_R
+from garage_mj.driving.sources import CruiseSource, painted_sources
+from garage_mj.reporting.cruise import run_cruise
 
 MAP = "m5_13x13_aligned"
 GARAGES = 50

@@ -9,9 +9,11 @@ import cv2
 import pytest
 
 from garage_mj.cli import main
-from garage_mj.driving.cruise import CruiseError, CruiseSource, cruise_seed, read_tests, run_cruise
+from garage_mj.driving.regression import PAPER_R, PAPER_TABLE, paper_regression, pearson, regression
+from garage_mj.driving.results import read_tests
+from garage_mj.driving.sources import CruiseError, CruiseSource, cruise_seed
 from garage_mj.grid.painters import paint_garage
-from garage_mj.reporting.analysis import PAPER_R, PAPER_TABLE, paper_regression, pearson, regression
+from garage_mj.reporting.cruise import run_cruise
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
 

@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from garage_mj.cli import main
-from garage_mj.driving.cruise import TEST_COLUMNS, read_tests
+from garage_mj.driving.results import TEST_COLUMNS, read_tests
 from garage_mj.export.pack import PackError, export_pack, load_pack
 from garage_mj.generation.library import Library
 from garage_mj.grid.garage import Garage, MapError, validate_garage

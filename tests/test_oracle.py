@@ -6,9 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from garage_mj.driving.cruise import CruiseSource, run_cruise
+from garage_mj.driving.cruise import run_cruise
 from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.driving.drivers import load_driver
+from garage_mj.driving.sources import CruiseSource
 from garage_mj.grid.garage import Garage
 
 SHAPES = Path(__file__).parent / "data" / "shapes"

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import csv
+import io
 from pathlib import Path
 
 from garage_mj.cli import UserError
@@ -15,6 +17,12 @@ from garage_mj.cli._common import (
     unit_range,
     user_errors,
 )
+from garage_mj.core.fsutil import atomic_write, ensure_dir
+from garage_mj.driving.actor_config import load_scenario_config
+from garage_mj.driving.replay import replay_xosc
+from garage_mj.driving.results import TEST_COLUMNS
+from garage_mj.driving.sources import CruiseSource
+from garage_mj.generation.library import Library, LibraryError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -68,8 +76,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def sources(args: argparse.Namespace) -> list:
     """The garages to test, from ``--packs`` or ``--library`` with the filters."""
-    from garage_mj.driving.cruise import CruiseSource
-
     if args.packs is not None:
         if not args.packs.is_dir():
             raise UserError(f"--packs {args.packs}: no such folder; export packs with garage-mj export")
@@ -80,8 +86,6 @@ def sources(args: argparse.Namespace) -> list:
             dirs = dirs[: args.limit]
         found = [CruiseSource.from_pack(d) for d in dirs]
     else:
-        from garage_mj.generation.library import Library, LibraryError
-
         if not args.library.is_file():
             raise LibraryError(f"{args.library}: no such library file; build one with garage-mj train")
         with Library(args.library, create=False) as lib:
@@ -104,8 +108,6 @@ def scenario(args: argparse.Namespace) -> dict | None:
     counts = {"pedestrians": args.pedestrians, "moving_cars": args.moving_cars, "clutter": args.clutter}
     if args.scenario is None and all(v is None for v in counts.values()):
         return None
-    from garage_mj.driving.actors import load_scenario_config
-
     if args.scenario is not None and not args.scenario.is_file():
         raise UserError(f"--scenario {args.scenario}: no such file; give a TOML file with a [scenario] table")
     cfg = load_scenario_config(args.scenario, **counts)
@@ -114,11 +116,6 @@ def scenario(args: argparse.Namespace) -> dict | None:
 
 
 def replay(args: argparse.Namespace) -> int:
-    import csv
-
-    from garage_mj.core.fsutil import atomic_write, ensure_dir
-    from garage_mj.driving.cruise import TEST_COLUMNS, replay_xosc
-
     rows = []
     for path in args.scenario_file:
         if not path.is_file():
@@ -128,8 +125,6 @@ def replay(args: argparse.Namespace) -> int:
         extra = f" ({row['hit']})" if row["hit"] else ""
         print(f"{path}: {row['outcome']}{extra} after {row['time']} s, driver {row['driver']}: {row['reason']}")
     out = ensure_dir(args.out, "--out")
-    import io
-
     buf = io.StringIO(newline="")
     w = csv.DictWriter(buf, fieldnames=("file", *TEST_COLUMNS), extrasaction="ignore")
     w.writeheader()
@@ -141,7 +136,7 @@ def replay(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.driving.cruise import run_cruise
+    from garage_mj.reporting.cruise import run_cruise  # matplotlib, for regression.png
 
     if args.scenario_file is not None:
         return replay(args)

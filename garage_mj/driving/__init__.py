@@ -3,9 +3,17 @@
 - ``vehicle``: the car in MuJoCo (actuation, discrete and continuous actions).
 - ``sensors``: the front camera (depth + segmentation, offscreen).
 - ``outcomes``: how a test ends (success, collision, timeout, deadlock) and why.
-- ``actors``: adverse events (pedestrians, moving cars, clutter): behaviours, placement, judging.
+- ``actor_config``: ``ScenarioConfig``, how many adverse events (pedestrians, moving cars, clutter) a test gets.
+- ``actors``: a test's drawn ``Scenario`` and the car's swept path (``Corridor``) actors are checked on.
+- ``actor_placement``: ``draw_scenario``, the actors' trajectories and triggers around a test's route.
+- ``actor_judging``: ``judge``, whether every event stays avoidable (decided before the drive).
 - ``drive_env``: ``GarageDrive-v0``, one garage, one test per episode.
 - ``drivers``: the built-in drivers (``oracle``, ``waypoint``, ``vision``) and user drivers.
+- ``sources``: what a cruise run tests (``CruiseSource``), its settings and each test's seed.
+- ``episode``: one cruise test driven to its row, with the scene and driver a process keeps.
+- ``regression``: Pearson r and the regression of success on difficulty, the paper's table (numpy).
+- ``results``: a cruise run's folder: ``run.json``, ``tests.csv`` read back and repaired, the summaries.
 - ``cruise``: batch cruise tests over packs or library garages, resumable.
+- ``replay``: a cruise test driven again from its OpenSCENARIO file (``replay_xosc``).
 - ``hunt``: the search for garages that break a given driver.
 """

@@ -1,9 +1,8 @@
-"""Analysis of cruise results: Pearson r and the linear regression of success rate on difficulty.
+"""The regression figure of cruise results: success rate against difficulty (paper Fig. "Linear regression").
 
-The paper validates its difficulty metric with r(difficulty, success %) = -0.638 over 16 garages
-of the 13x13 aligned map (SPEC section 5, :data:`PAPER_TABLE`) and a regression plot (paper Fig.
-"Linear regression"). :func:`regression` and :func:`regression_plot` reproduce both from any
-``(difficulty, success %)`` pairs, numpy only.
+The numbers (Pearson r, the least-squares line, the paper's table) are computed in
+:mod:`garage_mj.driving.regression`, numpy only, so the cruise runner writes them without matplotlib;
+:func:`regression_plot` draws them next to the paper's 16 garages.
 """
 
 from __future__ import annotations
@@ -11,7 +10,6 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import matplotlib
@@ -21,57 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from garage_mj.core.fsutil import atomic_write  # noqa: E402
-
-#: SPEC section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 garages.
-PAPER_TABLE: tuple[tuple[float, float, float, float], ...] = (
-    (3.8, 6, 0.033, 86), (3.25, 6, 0.124, 80), (3.6, 5.4, 0.167, 86), (3.167, 4.833, 0.333, 90),
-    (3.667, 5.75, 0.097, 84), (3.2, 4.833, 0.328, 86), (3.333, 5, 0.278, 98), (2.8, 4.833, 0.394, 96),
-    (4, 5, 0.168, 92), (3, 4.6, 0.4, 86), (2.667, 3.714, 0.603, 78), (3.5, 4.333, 0.362, 98),
-    (2.4, 3.667, 0.655, 78), (2.167, 3.429, 0.733, 0), (2.2, 3.333, 0.744, 68), (2.222, 2.8, 0.829, 42),
-)
-PAPER_R = -0.638  # Pearson r(difficulty, success %) over PAPER_TABLE
-
-
-@dataclass(frozen=True)
-class Regression:
-    """Pearson r and the least-squares line ``success = slope * difficulty + intercept`` over n points."""
-
-    r: float  # NaN when either variable is constant or n < 2
-    slope: float  # [success % per unit difficulty]
-    intercept: float  # [success %]
-    n: int
-
-    def as_dict(self) -> dict:
-        return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in asdict(self).items()}
-
-
-def pearson(x: Sequence[float], y: Sequence[float]) -> float:
-    """Pearson correlation of ``x`` and ``y``; NaN when either is constant or fewer than 2 points."""
-    a, b = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    if a.shape != b.shape:
-        raise ValueError(f"x and y differ in length ({a.size} vs {b.size})")
-    if a.size < 2:
-        return math.nan
-    da, db = a - a.mean(), b - b.mean()
-    den = math.sqrt(float(da @ da) * float(db @ db))
-    return float(da @ db) / den if den > 0 else math.nan
-
-
-def regression(difficulty: Sequence[float], success: Sequence[float]) -> Regression:
-    """Pearson r and the least-squares line of ``success`` [%] on ``difficulty``."""
-    x, y = np.asarray(difficulty, dtype=float), np.asarray(success, dtype=float)
-    r = pearson(x, y)
-    if x.size < 2 or float(np.ptp(x)) == 0.0:
-        return Regression(r, math.nan, math.nan, int(x.size))
-    dx = x - x.mean()
-    slope = float(dx @ (y - y.mean())) / float(dx @ dx)
-    return Regression(r, slope, float(y.mean() - slope * x.mean()), int(x.size))
-
-
-def paper_regression() -> Regression:
-    """The regression over the paper's table (r = -0.638)."""
-    table = np.array(PAPER_TABLE)
-    return regression(table[:, 2], table[:, 3])
+from garage_mj.driving.regression import PAPER_TABLE, paper_regression, regression  # noqa: E402
 
 
 def regression_plot(

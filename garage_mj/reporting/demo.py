@@ -152,7 +152,9 @@ def run_demo(cfg: DemoConfig) -> Path:
 
 def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path):
     """Cruise tests with every driver; returns the report's table, regression figure and KPIs."""
-    from garage_mj.driving.cruise import HIT_CLASSES, CruiseSource, run_cruise
+    from garage_mj.driving.results import HIT_CLASSES
+    from garage_mj.driving.sources import CruiseSource
+    from garage_mj.reporting.cruise import run_cruise
 
     sources = [CruiseSource.from_pack(p) for p in packs]
     columns = ["garage", "driver", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions",

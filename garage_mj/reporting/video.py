@@ -17,6 +17,7 @@ import numpy as np
 
 from garage_mj.core.fsutil import public_mode
 from garage_mj.driving.sensors import Camera, CameraConfig
+from garage_mj.driving.sources import CruiseSource, cruise_seed
 
 VIDEO_SIZE = (320, 240)  # [px] width, height
 ROUTE_BGR = (40, 200, 255)  # orange-yellow route line
@@ -72,10 +73,9 @@ def record_video(
     driver_kwargs: dict[str, Any] | None = None,
     env: dict[str, Any] | None = None,
 ) -> Path:
-    """Drive test ``test`` of a :class:`~garage_mj.driving.cruise.CruiseSource` (same seed as the batch) into an MP4."""
+    """Drive test ``test`` of a :class:`~garage_mj.driving.sources.CruiseSource` (same seed as the batch) into an MP4."""
     import cv2
 
-    from garage_mj.driving.cruise import CruiseSource, cruise_seed
     from garage_mj.driving.drive_env import GarageDriveEnv
     from garage_mj.driving.drivers import load_driver
 

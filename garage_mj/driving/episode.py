@@ -1,0 +1,80 @@
+"""One cruise test driven to its ``tests.csv`` row, and the scene and driver a process keeps between tests.
+
+Building a scene (compiling MuJoCo) is the slow part of a test, so a process keeps one env, for
+the garage it tested last, and one driver (:func:`cached_env`); the runner sends a worker its
+tests grouped by garage, so each scene is built at most once per worker and garage.
+:func:`drive_test` drives an env that was just reset to a test and returns the row; the runner
+(:mod:`garage_mj.driving.cruise`) and the replay of a ``.xosc`` (:mod:`garage_mj.driving.replay`)
+both use it.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
+
+_CACHE: dict[str, Any] = {}
+
+
+def cached_env(source: CruiseSource, settings: CruiseSettings):
+    """This process's env for ``source`` (built once; the previous garage's env is closed)."""
+    from garage_mj.driving.drive_env import GarageDriveEnv
+
+    key = (source.hash, json.dumps(settings.env, sort_keys=True))
+    if _CACHE.get("hash") != key:
+        if "env" in _CACHE:
+            _CACHE.pop("env").close()
+        _CACHE["env"] = GarageDriveEnv(garage=source.garage, action_type=settings.action_type,
+                                       occupancy=settings.occupancy, infeasible="report", **settings.env)
+        _CACHE["hash"] = key
+    return _CACHE["env"]
+
+
+def close_cached_env() -> None:
+    """Close the scene this process keeps for :func:`garage_mj.driving.cruise.run_test` (tests run in-process,
+    then done)."""
+    if "env" in _CACHE:
+        _CACHE.pop("env").close()
+        _CACHE.pop("hash", None)
+
+
+def _driver_for(settings: CruiseSettings):
+    from garage_mj.driving.drivers import load_driver
+
+    key = (settings.driver, json.dumps(settings.driver_kwargs, sort_keys=True))
+    if _CACHE.get("driver_key") != key:
+        _CACHE["driver"] = load_driver(settings.driver, **settings.driver_kwargs)
+        _CACHE["driver_key"] = key
+    return _CACHE["driver"]
+
+
+def drive_test(env, obs, info, seed: int, settings: CruiseSettings, source: CruiseSource, index: int,
+               start: float) -> dict[str, Any]:
+    """Drive the reset ``env`` to the end of its test; the CSV row."""
+    driver = _driver_for(settings)
+    try:
+        if info.get("outcome") != "infeasible":  # decided from the scene: never driven
+            driver.reset(env.driver_info(seed))
+            while True:
+                obs, _, term, trunc, info = env.step(driver.act(obs))
+                if term or trunc:
+                    break
+    except Exception as exc:  # a user's driver may raise anything; name it, keep the traceback
+        raise CruiseError(f"driver {settings.driver!r} failed on {source.name} test {index}: "
+                          f"{type(exc).__name__}: {exc}") from exc
+    return {
+        "garage": source.name, "garage_hash": source.hash, "test": index, "seed": seed,
+        "driver": settings.driver, "target_stall": info["target_stall"],
+        "feasible": int(info["outcome"] != "infeasible"), "outcome": info["outcome"],
+        "hit": info["hit"] or "", "hit_geom": info["hit_geom"] or "", "reason": info["reason"],
+        "time": round(info["time"], 3),
+        "path_length": round(info["path_length"], 3), "route_length": round(info["route_length"], 3),
+        "difficulty": source.difficulty, "mean_road_length": source.mean_road_length,
+        "mean_intersection_degree": source.mean_intersection_degree,
+        "pedestrians": info["actors"]["pedestrian"], "moving_cars": info["actors"]["moving_car"],
+        "clutter": info["actors"]["clutter"],
+        "wall_s": round(time.perf_counter() - start, 3),
+    }

@@ -1,0 +1,170 @@
+"""A cruise run's folder: ``run.json``, ``tests.csv`` read back and repaired, ``summary.csv`` and ``summary.json``.
+
+``tests.csv`` holds one row per test (:data:`TEST_COLUMNS`), appended by the runner as each test
+ends; :func:`read_tests` reads it back and repairs what a crash or a careless edit leaves, so a
+re-run skips what is there. ``run.json`` holds the settings (:func:`check_settings` refuses a
+re-run with other ones). :func:`write_outputs` summarizes the rows per garage (``summary.csv``,
+the paper's table columns) and over the run (``summary.json``: counts, timing, Pearson r and the
+regression of success rate on difficulty, :mod:`garage_mj.driving.regression`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garage_mj.core.fsutil import atomic_write
+from garage_mj.driving.regression import PAPER_R, regression
+from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
+
+TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",
+                "hit_geom", "reason", "time", "path_length", "route_length", "difficulty", "mean_road_length",
+                "mean_intersection_degree", "pedestrians", "moving_cars", "clutter", "wall_s")
+#: What a collision can hit (``hit`` column): the summary counts collisions per class.
+HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
+#: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
+SUMMARY_COLUMNS = ("garage", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
+                   "collisions", "timeouts", "deadlocks", "success_pct", *(f"hit_{c}" for c in HIT_CLASSES))
+
+
+def _is_header(fields: Sequence[str]) -> bool:
+    return "garage_hash" in fields and "outcome" in fields
+
+
+def _complete(row: dict[str, str]) -> bool:
+    """A row a test wrote in full: every field present, an outcome, a wall time and a test index."""
+    if any(v is None for v in row.values()) or row.get("outcome", "") == "" or row.get("wall_s", "") == "":
+        return False
+    return row.get("garage_hash", "") != "" and row.get("test", "").isdigit()
+
+
+def read_tests(path: Path) -> list[dict[str, str]]:
+    """The complete rows of ``tests.csv``, each (garage_hash, test) once; the file is repaired in place.
+
+    Repairs what a crash, a second run or a careless edit can leave, never dropping a complete
+    row: an empty file or a missing header (the header is written back), a torn last line (a
+    ``kill -9`` mid-write: dropped), a header of other columns (rewritten with
+    :data:`TEST_COLUMNS`), and duplicate (garage_hash, test) rows (the first one is kept).
+    """
+    if not path.is_file():
+        return []
+    text = path.read_bytes().decode("utf-8", errors="replace")
+    parts = text.split("\n")  # not splitlines(): it also breaks at \r, \x0b, \u2028... inside fields
+    lines = [p + "\n" for p in parts[:-1]] + ([parts[-1]] if parts[-1] else [])
+    first = next(csv.reader(lines[:1]), [])
+    has_header = bool(lines) and lines[0].endswith("\n") and _is_header(first)
+    columns = first if has_header else list(TEST_COLUMNS)
+    body = lines[1:] if has_header else lines
+    torn = bool(body) and not body[-1].endswith("\n")
+    if torn:
+        body = body[:-1]
+    good: list[dict[str, str]] = []
+    seen: set[tuple[str, str]] = set()
+    dropped = 0
+    for fields in csv.reader(body):
+        row = dict(zip(columns, fields)) if len(fields) == len(columns) else None
+        if row is None or not _complete(row) or (row["garage_hash"], row["test"]) in seen:
+            dropped += 1
+            continue
+        seen.add((row["garage_hash"], row["test"]))
+        good.append(row)
+    if torn or dropped or not has_header or tuple(columns) != TEST_COLUMNS:
+        write_csv(path, TEST_COLUMNS, good)
+    return good
+
+
+def _csv_text(columns: Sequence[str], rows: Iterable[dict[str, Any]]) -> str:
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", restval="")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict[str, Any]]) -> None:
+    atomic_write(path, _csv_text(columns, rows))
+
+
+def check_settings(out: Path, settings: CruiseSettings) -> None:
+    """Store the settings in ``run.json`` (atomically), or refuse a run whose settings differ."""
+    path = out / "run.json"
+    mine = json.loads(json.dumps(asdict(settings)))
+    if path.is_file():
+        try:
+            theirs = json.loads(path.read_bytes().decode("utf-8"))
+            if not isinstance(theirs, dict):
+                raise ValueError("not an object")
+        except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+            if read_tests(out / "tests.csv"):
+                raise CruiseError(f"{path} is damaged ({type(exc).__name__}: {exc}); it holds the settings "
+                                  f"of the tests in {out / 'tests.csv'}: restore it, or use another --out") from None
+            theirs = mine  # no test was recorded under it: nothing to lose, write it afresh
+            atomic_write(path, json.dumps(mine, indent=2) + "\n")
+        if theirs != mine:
+            diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
+            raise CruiseError(f"{out} holds a run with other settings ({', '.join(diff)}); "
+                              "use another --out or the same settings to resume it")
+    else:
+        atomic_write(path, json.dumps(mine, indent=2) + "\n")
+
+
+def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -> list[dict[str, Any]]:
+    """One row per garage with tests: the paper's table columns."""
+    out = []
+    for s in sources:
+        mine = [r for r in rows if r["garage_hash"] == s.hash]
+        if not mine:
+            continue
+        kinds = [r["outcome"] for r in mine]
+        feasible = len(mine) - kinds.count("infeasible")
+        hits = _hits(mine)
+        out.append({
+            "garage": s.name, "difficulty": round(s.difficulty, 4), "E[X]": round(s.mean_road_length, 3),
+            "E[Y]": round(s.mean_intersection_degree, 3), "tests": len(mine),
+            "infeasible": kinds.count("infeasible"), "feasible": feasible,
+            "successes": kinds.count("success"), "collisions": kinds.count("collision"),
+            "timeouts": kinds.count("timeout"), "deadlocks": kinds.count("deadlock"),
+            "success_pct": round(100.0 * kinds.count("success") / feasible, 2) if feasible else None,
+            **{f"hit_{c}": hits.get(c, 0) for c in HIT_CLASSES},
+        })
+    return out
+
+
+def _hits(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """Collisions by the class of what was hit."""
+    out: dict[str, int] = {}
+    for r in rows:
+        if r["outcome"] == "collision":
+            out[r["hit"] or "?"] = out.get(r["hit"] or "?", 0) + 1
+    return dict(sorted(out.items()))
+
+
+def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
+                  settings: CruiseSettings) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """``summary.csv`` and ``summary.json`` from the test rows (``regression.png`` is drawn from them by
+    :func:`garage_mj.reporting.cruise.cruise_figure`)."""
+    summary = summarize(rows, sources)
+    write_csv(out / "summary.csv", SUMMARY_COLUMNS, summary)
+    rated = [r for r in summary if r["success_pct"] is not None]  # garages with a feasible test
+    fit = regression([r["difficulty"] for r in rated], [r["success_pct"] for r in rated])
+    driven = [r for r in rows if r["outcome"] != "infeasible"]
+    walls = [float(r["wall_s"]) for r in driven]
+    sims = [float(r["time"]) for r in driven]
+    kinds = [r["outcome"] for r in rows]
+    stats = {**fit.as_dict(), "paper_r": PAPER_R, "garages": len(summary), "tests": len(rows),
+             "infeasible": kinds.count("infeasible"), "feasible": len(driven),
+             "driver": settings.driver, "seed": settings.seed,
+             "success_pct": round(100.0 * kinds.count("success") / len(driven), 2) if driven else None,
+             "failures": {k: kinds.count(k) for k in ("collision", "timeout", "deadlock")},
+             "hits": _hits(driven),
+             "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
+             "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}
+    atomic_write(out / "summary.json", json.dumps(stats, indent=2) + "\n")
+    return summary, stats

@@ -1,0 +1,101 @@
+"""What a cruise run tests: the garages (:class:`CruiseSource`), the settings that make two runs
+comparable (:class:`CruiseSettings`), and each test's seed (:func:`cruise_seed`).
+
+A source is a garage with the metrics the summary reports, from an asset pack, a library record,
+a :class:`~garage_mj.grid.garage.Garage`, or painted by the scripted painter
+(:func:`painted_sources`). :class:`CruiseError` is what a cruise run raises when it cannot go on.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garage_mj.core.errors import GarageMJError
+from garage_mj.grid.garage import Garage
+from garage_mj.grid.metrics import evaluate
+
+
+class CruiseError(GarageMJError):
+    """A cruise run cannot go on (settings differ from the out dir's run, a driver crashed)."""
+
+
+@dataclass(frozen=True)
+class CruiseSource:
+    """One garage to test, with the metrics the summary reports."""
+
+    name: str  # row key in the CSVs (pack folder, "map#id", or the garage's name)
+    garage: Garage
+    difficulty: float
+    mean_road_length: float  # E[X]
+    mean_intersection_degree: float  # E[Y]
+    pack: str = ""  # its asset pack folder, when it came from one (the .xosc export refers to it)
+
+    @property
+    def hash(self) -> str:
+        return self.garage.canonical_hash()
+
+    @classmethod
+    def from_garage(cls, garage: Garage, name: str | None = None) -> CruiseSource:
+        m = evaluate(garage)
+        name = name or f"{garage.name or 'garage'}-{garage.canonical_hash()[:8]}"
+        return cls(name, garage, m.difficulty,
+                   m.mean_road_length, m.mean_intersection_degree)
+
+    @classmethod
+    def from_pack(cls, path: str | Path) -> CruiseSource:
+        from garage_mj.export.pack import load_pack
+
+        pack = load_pack(path)
+        src = cls.from_garage(pack.garage, Path(pack.path).name)
+        return dataclasses.replace(src, pack=str(Path(pack.path).resolve()))
+
+    @classmethod
+    def from_record(cls, record: Any) -> CruiseSource:
+        """From a :class:`garage_mj.generation.library.GarageRecord`."""
+        return cls(f"{record.map}#{record.id}", record.garage, record.difficulty, record.mean_road_length,
+                   record.mean_intersection_degree)
+
+
+@dataclass(frozen=True)
+class CruiseSettings:
+    """What makes two runs comparable; stored in ``run.json``."""
+
+    driver: str = "vision"  # built-in name or module:Class
+    seed: int = 0
+    action_type: str = "discrete"
+    occupancy: float = 0.5
+    env: dict[str, Any] = field(default_factory=dict)  # more GarageDriveEnv keyword arguments
+    driver_kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+def painted_sources(map: str, n: int, seed: int = 0, oversample: int = 4) -> list[CruiseSource]:
+    """``n`` garages of ``map`` painted by the scripted painter, spread evenly over difficulty.
+
+    Paints ``oversample * n`` candidates (distinct garages) and keeps the ones at evenly spaced
+    difficulty ranks, standing in for a library's stratified sample when there is no library.
+    """
+    from garage_mj.grid.painters import paint_garage
+
+    found: dict[str, CruiseSource] = {}
+    for k in range(oversample * n * 3):
+        if len(found) >= oversample * n:
+            break
+        g = paint_garage(map, seed=seed * 10_007 + k)
+        found.setdefault(g.canonical_hash(), CruiseSource.from_garage(g, f"{map}-painted{k}"))
+    ranked = sorted(found.values(), key=lambda s: (s.difficulty, s.name))
+    if len(ranked) <= n:
+        return ranked
+    picks = np.linspace(0, len(ranked) - 1, n).round().astype(int)
+    return [ranked[i] for i in picks]
+
+
+def cruise_seed(seed: int, garage_hash: str, index: int) -> int:
+    """The seed of test ``index`` on a garage: a function of (run seed, garage hash, index) only."""
+    digest = hashlib.sha256(f"{seed}:{garage_hash}:{index}".encode()).digest()
+    return int.from_bytes(digest[:4], "little")
