@@ -24,9 +24,11 @@ import json
 import time
 from pathlib import Path
 
-from garage_mj.driving.cruise import CruiseSource, run_cruise
-from garage_mj.driving.hunt import HuntConfig, hunt
+from garage_mj.driving.hunt import HuntConfig
+from garage_mj.driving.sources import CruiseSource
 from garage_mj.generation.library import Library
+from garage_mj.reporting.cruise import run_cruise
+from garage_mj.reporting.hunt import hunt
 
 HOLDOUT_FIRST = 1000  # held-out test indices start here (the hunt uses far fewer per garage)
 

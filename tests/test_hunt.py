@@ -7,9 +7,10 @@ import csv
 import pytest
 
 from garage_mj.cli import main
-from garage_mj.driving.hunt import HuntConfig, HuntError, hunt, rerun
+from garage_mj.driving.hunt import HuntConfig, HuntError, rerun
 from garage_mj.generation.library import Library
 from garage_mj.generation.search import replay
+from garage_mj.reporting.hunt import hunt
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
 CFG = HuntConfig(budget=16, tests=2, population=4, elites=2, worst=1)

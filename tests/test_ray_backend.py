@@ -115,7 +115,8 @@ def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
 
 
 def test_hunt_on_ray_gives_the_local_hunt(ray2, tmp_path):
-    from garage_mj.driving.hunt import HuntConfig, hunt
+    from garage_mj.driving.hunt import HuntConfig
+    from garage_mj.reporting.hunt import hunt
 
     cfg = HuntConfig(budget=10, tests=2, population=4, elites=1, worst=1)
     kw = dict(map="tiny_7x11", config=cfg, seed=1, action_type="discrete", env=FAST, workers=2, progress=False,

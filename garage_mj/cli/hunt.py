@@ -7,6 +7,8 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import positive_int, seed, unit_range
+from garage_mj.cli.cruise import scenario
+from garage_mj.driving.hunt import HuntConfig
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,8 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.cli.cruise import scenario
-    from garage_mj.driving.hunt import HuntConfig, hunt
+    from garage_mj.reporting.hunt import hunt  # matplotlib and MuJoCo, for the figure and the videos
 
     if args.library is not None and not args.library.is_file():
         raise UserError(f"--library {args.library}: no such file; build one with garage-mj train or generate")

@@ -22,13 +22,16 @@ and the same seed gives the same hunt. Outputs in ``OUT``: ``hunt.sqlite`` (ever
 run ``hunt:<driver>``), ``failures.csv`` (garages ranked by failure rate: tests, failures and
 their classes, what was hit, where on the route the failures happened, the failing test seeds),
 ``packs/`` (asset pack of the worst ``--worst`` garages), ``xosc/`` (each of their failing tests
-as OpenSCENARIO: ``garage-mj cruise --scenario-file`` replays it), ``videos/`` (an MP4 of the
-first failing test of each) and ``report.html``.
+as OpenSCENARIO: ``garage-mj cruise --scenario-file`` replays it) and ``report.html``. The videos
+(``videos/``, an MP4 of the first failing test of each) and ``OUT/cruise/regression.png`` are the
+reporting stage's: :func:`garage_mj.reporting.hunt.hunt` (what ``garage-mj hunt`` runs) adds them.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import dataclasses
 import html
 import io
 import json
@@ -39,16 +42,15 @@ from typing import Any
 
 import numpy as np
 
+from garage_mj.core.backends import check_backend, ray_session
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir
-from garage_mj.driving.cruise import (
-    CruiseSettings,
-    CruiseSource,
-    close_cached_env,
-    read_tests,
-    run_cruise,
-    run_test,
-)
+from garage_mj.driving.cruise import run_cruise, run_test, xosc_name
+from garage_mj.driving.episode import close_cached_env
+from garage_mj.driving.results import read_tests
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
+from garage_mj.generation.library import Library, LibraryError
+from garage_mj.generation.search import mutate, replay
 from garage_mj.grid.garage import Garage
 
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
@@ -68,7 +70,7 @@ class HuntConfig:
     tests: int = 5  # tests per garage per evaluation (an elite gets this many more each generation)
     population: int = 20  # garages per generation
     elites: int = 5  # best garages kept, re-tested and mutated
-    worst: int = 5  # garages exported with packs, .xosc files, videos
+    worst: int = 5  # garages exported with packs, .xosc files (and videos, by the reporting stage)
     max_tries: int = 50  # mutation draws per child before giving up on a parent
 
     def __post_init__(self) -> None:
@@ -116,12 +118,12 @@ class HuntResult:
     generations: int
     ranked: list[Scored]
     files: dict[str, Any]
+    worst: list[Scored] = field(default_factory=list)  # the garages exported (packs, .xosc), worst first
+    table: list[dict[str, Any]] = field(default_factory=list)  # the rows of failures.csv
 
 
 def _starting(map_name: str | None, library: str | Path | None, n: int, seed: int) -> list[CruiseSource]:
     if library is not None:
-        from garage_mj.generation.library import Library, LibraryError
-
         if not Path(library).is_file():
             raise LibraryError(f"{library}: no such library file; build one with garage-mj train or generate")
         with Library(library, create=False) as lib:
@@ -143,8 +145,6 @@ def _starting(map_name: str | None, library: str | Path | None, n: int, seed: in
 
 def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], tries: int) -> tuple[Garage, str] | None:
     """A new garage mutated from a tournament-picked parent, re-painted by the painter env; None if none found."""
-    from garage_mj.generation.search import mutate, replay
-
     for _ in range(tries):
         a, b = rng.choice(len(parents), size=2, replace=len(parents) < 2)
         parent = parents[a] if parents[a].score >= parents[b].score else parents[b]
@@ -168,16 +168,14 @@ def _state_file(out: Path) -> Path:
 def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: str | Path | None = None,
          config: HuntConfig | None = None, seed: int = 0, action_type: str = "continuous",
          occupancy: float = 0.5, env: dict[str, Any] | None = None, workers: int = 1,
-         progress: bool = True, videos: bool = True, backend: str = "local", address: str | None = None,
+         progress: bool = True, backend: str = "local", address: str | None = None,
          **cruise_kwargs: Any) -> HuntResult:
     """Hunt the garages where ``driver`` fails (module docstring); resumable in ``out_dir``.
 
     ``backend``/``address``: where the tests run (:mod:`garage_mj.core.backends`; one Ray session for
-    the whole hunt). The results do not depend on it.
+    the whole hunt). The results do not depend on it. No videos: :func:`garage_mj.reporting.hunt.hunt`
+    records them after this.
     """
-    import contextlib
-
-    from garage_mj.core.backends import check_backend, ray_session
     from garage_mj.driving.drivers import resolve_driver
 
     cfg = config or HuntConfig()
@@ -200,11 +198,11 @@ def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: s
         else:
             atomic_write(state_path, json.dumps({"settings": settings}, indent=2) + "\n")
         return _hunt(driver, out, map, library, cfg, seed, action_type, occupancy, env or {}, workers,
-                     progress, videos, settings, cruise_kwargs)
+                     progress, settings, cruise_kwargs)
 
 
 def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, action_type, occupancy, env, workers,
-          progress, videos, settings, cruise_kwargs) -> HuntResult:
+          progress, settings, cruise_kwargs) -> HuntResult:
     from tqdm import tqdm
 
     cruise_dir = out / "cruise"
@@ -257,12 +255,12 @@ def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, action_ty
     bar.close()
     ranked = sorted(scored.values(), key=lambda s: (-(s.rate if s.feasible else -1.0), -len(s.feasible),
                                                       s.source.hash))
-    files = _write_outputs(out, ranked, cfg, driver, seed, action_type, occupancy, env, videos)
+    files, worst, table = _write_outputs(out, ranked, cfg, driver, seed, action_type, occupancy, env)
     state = json.loads(_state_file(out).read_text())
     state.update({"generations": generation, "tests": sum(len(s.rows) for s in scored.values()),
                   "garages": len(scored), "files": {k: str(v) for k, v in files.items() if not isinstance(v, list)}})
     atomic_write(_state_file(out), json.dumps(state, indent=2) + "\n")
-    return HuntResult(out, state["tests"], generation, ranked, files)
+    return HuntResult(out, state["tests"], generation, ranked, files, worst, table)
 
 
 def _where(rows: list[dict[str, str]]) -> str:
@@ -277,9 +275,9 @@ def _where(rows: list[dict[str, str]]) -> str:
 
 
 def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str, seed: int, action_type: str,
-                   occupancy: float, env: dict, videos: bool) -> dict[str, Any]:
-    from garage_mj.generation.library import Library
-
+                   occupancy: float, env: dict) -> tuple[dict[str, Any], list[Scored], list[dict[str, Any]]]:
+    """``hunt.sqlite``, ``failures.csv``, the worst garages' packs and .xosc files, ``report.html`` (no videos);
+    the files, the worst garages and the rows of failures.csv."""
     lib_path = out / "hunt.sqlite"
     ids: dict[str, int] = {}
     with Library(lib_path) as lib:
@@ -312,22 +310,19 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str
     w.writerows(rows)
     atomic_write(out / "failures.csv", buf.getvalue())
     worst = [s for s in ranked if s.failures][: cfg.worst]
-    packs, xoscs, mp4s = _export_worst(out, worst, driver, seed, action_type, occupancy, env, videos)
-    report = _report(out, rows, worst, packs, xoscs, mp4s, driver)
-    return {"library": lib_path, "failures": out / "failures.csv", "report": report, "packs": packs,
-            "xosc": xoscs, "videos": mp4s}
+    packs, xoscs = _export_worst(out, worst, driver, seed, action_type, occupancy, env)
+    report = write_report(out, rows, worst, packs, xoscs, [], driver)
+    return ({"library": lib_path, "failures": out / "failures.csv", "report": report, "packs": packs,
+             "xosc": xoscs, "videos": []}, worst, rows)
 
 
 def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action_type: str, occupancy: float,
-                  env: dict, videos: bool) -> tuple[list[Path], list[Path], list[Path]]:
-    """Pack, .xosc of every failing test and an MP4 of the first, for each of the worst garages."""
-    import dataclasses
-
-    from garage_mj.driving.cruise import xosc_name
+                  env: dict) -> tuple[list[Path], list[Path]]:
+    """Pack and .xosc of every failing test, for each of the worst garages."""
     from garage_mj.export.pack import export_pack
 
     settings = CruiseSettings(driver, int(seed), action_type, float(occupancy), dict(env), {})
-    packs, xoscs, mp4s = [], [], []
+    packs, xoscs = [], []
     try:
         for s in worst:
             pack = export_pack(s.source.garage, out / "packs")
@@ -339,23 +334,14 @@ def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action
                 if not path.is_file():
                     run_test(src, i, settings, str(out / "xosc"), export_only=True)
                 xoscs.append(path)
-            if videos and s.failures:
-                from garage_mj.reporting.video import record_video
-
-                i = int(s.failures[0]["test"])
-                mp4 = out / "videos" / f"{src.hash[:12]}_{i:05d}.mp4"
-                if not mp4.is_file():
-                    record_video(src, mp4, driver=driver, seed=seed, test=i, action_type=action_type,
-                                 occupancy=occupancy, env=env)
-                mp4s.append(mp4)
     finally:
         close_cached_env()  # the scene run_test kept for the exports
-    return packs, xoscs, mp4s
+    return packs, xoscs
 
 
-def _report(out: Path, rows: list[dict], worst: list[Scored], packs: list[Path], xoscs: list[Path],
-            mp4s: list[Path], driver: str) -> Path:
-    """``report.html``: the ranking, then per worst garage its preview, failures and files."""
+def write_report(out: Path, rows: list[dict], worst: list[Scored], packs: list[Path], xoscs: list[Path],
+                 mp4s: list[Path], driver: str) -> Path:
+    """``report.html``: the ranking, then per worst garage its preview, failures, files and videos (``mp4s``)."""
     e = html.escape
     head = ["rank", "garage", "difficulty", "tests", "feasible", "failures", "failure_pct", "hit",
             "failure_progress"]
@@ -386,12 +372,15 @@ def _report(out: Path, rows: list[dict], worst: list[Scored], packs: list[Path],
     return path
 
 
+def read_settings(out_dir: str | Path) -> dict[str, Any]:
+    """The settings of the hunt in ``out_dir`` (``hunt.json``): driver, seed, action type, occupancy, env, ..."""
+    return json.loads(_state_file(Path(out_dir)).read_text())["settings"]
+
+
 def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:
     """Re-run one listed (garage, test) of a hunt in ``out_dir``: the cruise row (same seed, same outcome)."""
-    from garage_mj.generation.library import Library
-
     out = Path(out_dir)
-    state = json.loads(_state_file(out).read_text())["settings"]
+    state = read_settings(out)
     rows = [r for r in read_tests(out / "cruise" / "tests.csv") if r["garage_hash"].startswith(garage_hash)]
     if not rows:
         raise HuntError(f"{out}: no hunted garage with hash {garage_hash}")
