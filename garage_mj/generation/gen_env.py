@@ -21,11 +21,13 @@ from garage_mj.core.config import load_config
 from garage_mj.core.geometry import DELTAS, OPPOSITE
 from garage_mj.grid.blocks import NUM_CODES, STALL_TABLE, Block
 from garage_mj.grid.garage import AXES, Axis, Garage
+from garage_mj.grid.image import grid_image
 from garage_mj.grid.map_io import load_map
 from garage_mj.grid.metrics import difficulty, utility_values
 from garage_mj.grid.reward import RewardConfig
 from garage_mj.grid.roadgraph import RoadTracker
 from garage_mj.grid.rules import stall_code
+from garage_mj.grid.text import draw
 
 _FREE, _ROAD, _OBST = int(Block.FREE), int(Block.ROAD), int(Block.OBSTACLE)
 _ENTRANCE, _EXIT = int(Block.ENTRANCE), int(Block.EXIT)
@@ -183,12 +185,8 @@ class GarageGenEnv(gym.Env):
 
     def render(self):
         if self.render_mode == "ansi":
-            from garage_mj.grid.text import draw
-
             return draw(self.grid, car=self.pos)
         if self.render_mode == "rgb_array":
-            from garage_mj.grid.image import grid_image
-
             return grid_image(self.grid, car=self.pos, heading=self.heading)
         return None
 

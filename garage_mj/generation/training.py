@@ -25,7 +25,7 @@ from typing import Any
 import gymnasium as gym
 from stable_baselines3.common.callbacks import BaseCallback
 
-from garage_mj.core.config import ConfigError, load_config
+from garage_mj.core.config import ConfigError, load_config, read_toml
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.library import Library
@@ -137,8 +137,6 @@ def _adam_kwargs() -> dict[str, Any]:
 def load_dqn_config(source: str | Path | dict[str, Any] | None = None, **overrides: Any) -> DQNConfig:
     """A :class:`DQNConfig` from a TOML file or dict (a ``[dqn]`` table or top-level keys)."""
     if isinstance(source, (str, Path)):
-        from garage_mj.core.config import read_toml
-
         path = Path(source)
         data = read_toml(path)
         if set(data) == {"dqn"}:
