@@ -13,9 +13,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from garage_mj.core.config import load_config
+from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
+from garage_mj.driving.results import HIT_CLASSES
+from garage_mj.driving.sources import CruiseSource
+from garage_mj.generation.library import Library
+from garage_mj.grid.map_io import load_map
+from garage_mj.reporting.report import GalleryItem, ReportData, write_report
 
 FIGURES = "figures"
+
+
+class DemoError(GarageMJError):
+    """The demo cannot go on (training stored no usable garage)."""
 
 
 #: Action type per driver in the demo (others: discrete, the paper's actions).
@@ -83,11 +93,8 @@ def _render_overview(garage, path: Path, width: int = 480, height: int = 360) ->
 
 def run_demo(cfg: DemoConfig) -> Path:
     """Run every stage into ``cfg.out``; returns the report's path."""
-    from garage_mj.export.pack import export_pack
-    from garage_mj.generation.library import Library
-    from garage_mj.grid.map_io import load_map
+    from garage_mj.export.pack import export_pack, write_index
     from garage_mj.reporting import plots
-    from garage_mj.reporting.report import GalleryItem, ReportData, write_report
 
     t0 = time.perf_counter()
     out = Path(cfg.out)
@@ -99,9 +106,7 @@ def run_demo(cfg: DemoConfig) -> Path:
     with Library(library_path) as lib:
         total = lib.count(map=map_name)
         if total == 0:
-            from garage_mj.cli import UserError
-
-            raise UserError(f"training on {cfg.map} stored no usable garage; raise --timesteps")
+            raise DemoError(f"training on {cfg.map} stored no usable garage; raise --timesteps")
         points = lib.points(map=map_name)
         sample = lib.sample(cfg.garages, seed=cfg.seed, stratify="difficulty", map=map_name)
     _say(f"library {library_path}: {total} usable garages; sampled {len(sample)} stratified by difficulty")
@@ -121,8 +126,6 @@ def run_demo(cfg: DemoConfig) -> Path:
         gallery.append(
             GalleryItem(rec.id, rec.difficulty, rec.coverage, rec.stalls, pack / "preview.png", render, pack)
         )
-    from garage_mj.export.pack import write_index
-
     write_index(packs_dir)
 
     columns, rows, regression_png, regression_text, kpis = _cruise(cfg, packs, out, figs)
@@ -152,9 +155,7 @@ def run_demo(cfg: DemoConfig) -> Path:
 
 def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path):
     """Cruise tests with every driver; returns the report's table, regression figure and KPIs."""
-    from garage_mj.driving.results import HIT_CLASSES
-    from garage_mj.driving.sources import CruiseSource
-    from garage_mj.reporting.cruise import run_cruise
+    from garage_mj.reporting.cruise import run_cruise  # matplotlib, for regression.png
 
     sources = [CruiseSource.from_pack(p) for p in packs]
     columns = ["garage", "driver", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions",
