@@ -7,6 +7,7 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import positive_int, seed, unit_range, user_errors
+from garage_mj.grid.map_io import list_maps, load_map
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -63,7 +64,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from garage_mj.generation.conditioned import default_model_out, shipped_generator, train_for_map
     from garage_mj.generation.generator import generate
-    from garage_mj.grid.map_io import list_maps, load_map
 
     for name in ("difficulty", "coverage"):
         band = getattr(args, name)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import user_errors
+from garage_mj.generation.library import Library
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,7 +47,6 @@ def _convergence(args: argparse.Namespace) -> int:
 
 @user_errors
 def _heatmap(args: argparse.Namespace) -> int:
-    from garage_mj.generation.library import Library
     from garage_mj.reporting.plots import heatmap
 
     with Library(args.library, create=False) as lib:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import positive_int, seed, user_errors
+from garage_mj.core.fsutil import FolderLock
 
 ALGOS = ("dqn",)
 
@@ -39,7 +40,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 @user_errors
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.core.fsutil import FolderLock
     from garage_mj.generation.training import load_dqn_config, train
 
     overrides = {"checkpoint_every": args.checkpoint_every} if args.checkpoint_every else {}
