@@ -19,8 +19,8 @@ from gymnasium import spaces
 
 from garage_mj.core.config import load_config
 from garage_mj.core.geometry import DELTAS, OPPOSITE
-from garage_mj.grid.blocks import NUM_CODES, STALL_TABLE, Block
-from garage_mj.grid.garage import AXES, Axis, Garage
+from garage_mj.grid.blocks import AXES, NUM_CODES, STALL_TABLE, Axis, Block
+from garage_mj.grid.garage import Garage
 from garage_mj.grid.image import grid_image
 from garage_mj.grid.map_io import load_map
 from garage_mj.grid.metrics import difficulty, utility_values

@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from garage_mj.core.geometry import DELTAS
-from garage_mj.grid.blocks import Block
-from garage_mj.grid.garage import AXES, Axis, Garage
+from garage_mj.grid.blocks import AXES, Axis, Block
+from garage_mj.grid.garage import Garage
 from garage_mj.grid.map_io import load_map
 from garage_mj.grid.metrics import DEFAULT_DIFFICULTY, difficulty
 from garage_mj.grid.roadgraph import analyse
