@@ -22,9 +22,10 @@ and the same seed gives the same hunt. Outputs in ``OUT``: ``hunt.sqlite`` (ever
 run ``hunt:<driver>``), ``failures.csv`` (garages ranked by failure rate: tests, failures and
 their classes, what was hit, where on the route the failures happened, the failing test seeds),
 ``packs/`` (asset pack of the worst ``--worst`` garages), ``xosc/`` (each of their failing tests
-as OpenSCENARIO: ``garage-mj cruise --scenario-file`` replays it) and ``report.html``. The videos
-(``videos/``, an MP4 of the first failing test of each) and ``OUT/cruise/regression.png`` are the
-reporting stage's: :func:`garage_mj.reporting.hunt.hunt` (what ``garage-mj hunt`` runs) adds them.
+as OpenSCENARIO: ``garage-mj cruise --scenario-file`` replays it). What a person reads of it,
+``report.html``, ``videos/`` (an MP4 of the first failing test of each) and
+``OUT/cruise/regression.png``, is the reporting stage's: :func:`garage_mj.reporting.hunt.hunt`
+(what ``garage-mj hunt`` runs) adds them.
 """
 
 from __future__ import annotations
@@ -32,7 +33,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
-import html
 import io
 import json
 import math
@@ -117,7 +117,7 @@ class HuntResult:
     tests: int  # tests in tests.csv for this hunt
     generations: int
     ranked: list[Scored]
-    files: dict[str, Any]
+    files: dict[str, Any]  # library, failures, packs, xosc (reporting.hunt adds report, videos)
     worst: list[Scored] = field(default_factory=list)  # the garages exported (packs, .xosc), worst first
     table: list[dict[str, Any]] = field(default_factory=list)  # the rows of failures.csv
 
@@ -276,8 +276,8 @@ def _where(rows: list[dict[str, str]]) -> str:
 
 def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str, seed: int, action_type: str,
                    occupancy: float, env: dict) -> tuple[dict[str, Any], list[Scored], list[dict[str, Any]]]:
-    """``hunt.sqlite``, ``failures.csv``, the worst garages' packs and .xosc files, ``report.html`` (no videos);
-    the files, the worst garages and the rows of failures.csv."""
+    """``hunt.sqlite``, ``failures.csv``, the worst garages' packs and .xosc files; the files, the worst
+    garages and the rows of failures.csv."""
     lib_path = out / "hunt.sqlite"
     ids: dict[str, int] = {}
     with Library(lib_path) as lib:
@@ -311,9 +311,7 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str
     atomic_write(out / "failures.csv", buf.getvalue())
     worst = [s for s in ranked if s.failures][: cfg.worst]
     packs, xoscs = _export_worst(out, worst, driver, seed, action_type, occupancy, env)
-    report = write_report(out, rows, worst, packs, xoscs, [], driver)
-    return ({"library": lib_path, "failures": out / "failures.csv", "report": report, "packs": packs,
-             "xosc": xoscs, "videos": []}, worst, rows)
+    return {"library": lib_path, "failures": out / "failures.csv", "packs": packs, "xosc": xoscs}, worst, rows
 
 
 def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action_type: str, occupancy: float,
@@ -339,42 +337,17 @@ def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action
     return packs, xoscs
 
 
-def write_report(out: Path, rows: list[dict], worst: list[Scored], packs: list[Path], xoscs: list[Path],
-                 mp4s: list[Path], driver: str) -> Path:
-    """``report.html``: the ranking, then per worst garage its preview, failures, files and videos (``mp4s``)."""
-    e = html.escape
-    head = ["rank", "garage", "difficulty", "tests", "feasible", "failures", "failure_pct", "hit",
-            "failure_progress"]
-    table = "".join("<tr>" + "".join(f"<td>{e(str(r[c]))}</td>" for c in head) + "</tr>" for r in rows[:50])
-    cards = []
-    for s, pack in zip(worst, packs, strict=True):
-        rel = pack.relative_to(out)
-        mine = [p for p in xoscs if p.name.startswith(s.source.hash[:12])]
-        vid = [p for p in mp4s if p.name.startswith(s.source.hash[:12])]
-        fails = "".join(f"<li>test {e(r['test'])} (seed {e(r['seed'])}): {e(r['outcome'])}"
-                        f"{' (' + e(r['hit']) + ')' if r['hit'] else ''}: {e(r['reason'])}</li>" for r in s.failures)
-        files = " ".join(f'<a href="{e(str(p.relative_to(out)))}">{e(p.name)}</a>' for p in mine)
-        video = "".join(f'<p><video src="{e(str(p.relative_to(out)))}" controls width="480"></video></p>' for p in vid)
-        preview = rel / "preview.png"
-        cards.append(f'<section><h3>{e(s.source.name)}: {len(s.failures)} of {len(s.feasible)} feasible tests '
-                     f'failed</h3><p><a href="{e(str(rel))}">asset pack</a></p>'
-                     f'<img src="{e(str(preview))}" alt="preview of {e(s.source.name)}" width="360">'
-                     f'<ul>{fails}</ul><p>OpenSCENARIO: {files}</p>{video}</section>')
-    page = (f"<!doctype html><html><head><meta charset='utf-8'><title>hunt: {e(driver)}</title>"
-            "<style>body{font-family:sans-serif;margin:2em}td,th{border:1px solid #ccc;padding:2px 6px}"
-            "table{border-collapse:collapse}</style></head><body>"
-            f"<h1>Hunt: where {e(driver)} fails</h1><p>{len(rows)} garages tested; ranked by failure rate on "
-            "feasible tests (failures.csv has them all).</p><table><tr>"
-            + "".join(f"<th>{e(c)}</th>" for c in head) + f"</tr>{table}</table><h2>The worst garages</h2>"
-            + "".join(cards) + "</body></html>")
-    path = out / "report.html"
-    atomic_write(path, page)
-    return path
-
-
 def read_settings(out_dir: str | Path) -> dict[str, Any]:
     """The settings of the hunt in ``out_dir`` (``hunt.json``): driver, seed, action type, occupancy, env, ..."""
     return json.loads(_state_file(Path(out_dir)).read_text())["settings"]
+
+
+def add_file(out_dir: str | Path, name: str, path: Path) -> None:
+    """Name one more of the hunt's files in ``hunt.json`` (the reporting stage adds ``report``)."""
+    state_path = _state_file(Path(out_dir))
+    state = json.loads(state_path.read_text())
+    state["files"][name] = str(path)
+    atomic_write(state_path, json.dumps(state, indent=2) + "\n")
 
 
 def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:

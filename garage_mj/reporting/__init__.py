@@ -3,7 +3,7 @@
 - ``plots``: convergence curves, coverage x difficulty heatmaps, garage pictures (matplotlib).
 - ``analysis``: the regression figure, success against difficulty (numbers in ``driving.regression``).
 - ``cruise``: a cruise run as the command runs it: the tests, then ``regression.png``.
-- ``hunt``: a hunt as the command runs it: the search, then the figure, the videos and the report with them.
+- ``hunt``: a hunt as the command runs it: the search, then the figure, the videos and its HTML report.
 - ``experiment``: the generation experiment as ``generation/run.py`` runs it: the protocol's runs, then their figures.
 - ``video``: an MP4 of one cruise test with the camera views and the outcome.
 - ``report``: the HTML report.
