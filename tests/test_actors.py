@@ -14,9 +14,10 @@ from garage_mj.driving.actor_config import ScenarioConfig, load_scenario_config
 from garage_mj.driving.actor_judging import judge
 from garage_mj.driving.actor_placement import draw_scenario
 from garage_mj.driving.actors import Corridor, actor_poses, sample_times
-from garage_mj.driving.cruise import read_tests, replay_xosc, run_cruise
+from garage_mj.driving.cruise import read_tests, run_cruise
 from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.driving.drivers import load_driver
+from garage_mj.driving.replay import replay_xosc
 from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import drive_planner
