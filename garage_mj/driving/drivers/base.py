@@ -9,7 +9,7 @@ discrete index (:class:`garage_mj.driving.vehicle.DiscreteAction`) or ``[throttl
 
 ``info`` at reset may carry ``seed`` (int), ``action_type`` ("continuous" or "discrete"),
 ``dt`` (control period, s), ``camera`` (a dict of :class:`CameraGeometry` fields) and ``car``
-(a :class:`garage_mj.driving.vehicle.CarGeometry`).
+(a :class:`garage_mj.scene.car.CarGeometry`).
 """
 
 from __future__ import annotations
