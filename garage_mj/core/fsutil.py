@@ -19,6 +19,7 @@ import re
 import shutil
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from garage_mj.core.errors import FolderBusy, GarageMJError
@@ -151,6 +152,9 @@ def clean_temp(folder: str | Path) -> list[Path]:
     return gone
 
 
+HOLDER_WAIT = 2.0  # [s] how long a refused job waits for the holder to write its name into the lock file
+
+
 class FolderLock:
     """Exclusive lock of an output folder for one long job; a context manager.
 
@@ -170,17 +174,25 @@ class FolderLock:
             fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, public_mode())
         except OSError as exc:
             raise write_error(path, exc) from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+        holder: dict = {}
+        deadline = time.monotonic() + HOLDER_WAIT
+        while True:
             try:
-                holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
-            except (ValueError, UnicodeDecodeError):
-                holder = {}
-            os.close(fd)
-            who = f"{holder.get('what', 'another garage-mj process')} (pid {holder.get('pid', '?')})"
-            raise FolderBusy(f"{self.folder} is in use by {who}; wait for it to finish or use "
-                             "another output folder") from None
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                try:
+                    holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
+                except (ValueError, UnicodeDecodeError):
+                    holder = {}
+            # An empty file: the holder has just taken the lock and not yet said who it is, or is
+            # just letting go. Look again shortly, so the message names it (or the lock is ours).
+            if holder or time.monotonic() >= deadline:
+                os.close(fd)
+                who = f"{holder.get('what', 'another garage-mj process')} (pid {holder.get('pid', '?')})"
+                raise FolderBusy(f"{self.folder} is in use by {who}; wait for it to finish or use "
+                                 "another output folder") from None
+            time.sleep(0.02)
         info = json.dumps({"pid": os.getpid(), "what": self.what, "argv": sys.argv[1:8]}).encode()
         os.ftruncate(fd, 0)
         os.pwrite(fd, info, 0)
