@@ -27,6 +27,7 @@ import argparse
 import errno
 import importlib
 import sys
+import traceback
 
 from garage_mj.core import __version__
 from garage_mj.core.errors import GarageMJError
@@ -48,6 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     parser.add_argument("--version", action="version", version=f"garage-mj {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="on an error, print its full traceback (and that of a failing driver) before the "
+                             "one-line message: for bug reports and for debugging your own driver")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"garage_mj.cli.{name}").register(sub)
@@ -60,6 +64,13 @@ def one_line(text: object, limit: int = 600) -> str:
     return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
+def _close_progress_bars() -> None:
+    """End any progress bar still open, so an error is printed on a line of its own."""
+    tqdm = sys.modules.get("tqdm")
+    for bar in list(getattr(getattr(tqdm, "tqdm", None), "_instances", ()) or ()):
+        bar.close()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -69,9 +80,17 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except GarageMJError as exc:
+        _close_progress_bars()
+        if args.debug:
+            traceback.print_exc()
+            if exc.details:
+                print(f"the failure behind it:\n{exc.details}", file=sys.stderr, end="")
         print(f"garage-mj {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except OSError as exc:  # the file system refused: read-only or full folder, a file in the way
+        _close_progress_bars()
+        if args.debug:
+            traceback.print_exc()
         where = f" {exc.filename}" if exc.filename else ""
         hint = ("free some disk space and run again (finished work is kept)"
                 if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "check the path and its permissions")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import time
+import traceback
 from typing import Any
 
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
@@ -63,8 +64,10 @@ def drive_test(env, obs, info, seed: int, settings: CruiseSettings, source: Crui
                 if term or trunc:
                     break
     except Exception as exc:  # a user's driver may raise anything; name it, keep the traceback
-        raise CruiseError(f"driver {settings.driver!r} failed on {source.name} test {index}: "
-                          f"{type(exc).__name__}: {exc}") from exc
+        err = CruiseError(f"driver {settings.driver!r} failed on {source.name} test {index}: "
+                          f"{type(exc).__name__}: {exc} (put --debug before the command for its traceback)")
+        err.details = "".join(traceback.format_exception(exc))  # text: survives a worker process
+        raise err from exc
     return {
         "garage": source.name, "garage_hash": source.hash, "test": index, "seed": seed,
         "driver": settings.driver, "target_stall": info["target_stall"],
