@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         d = drivability(scene, car)
         reasons = sorted(d["infeasible_reasons"].items(), key=lambda kv: -kv[1])
         why = f"{reasons[0][0]} ({reasons[0][1]})" if reasons else "-"
-        clear = "-" if d["min_clearance"] is None else f"{d['min_clearance']:.2f} m"
+        clear = _metres(d["min_clearance"])
         curv = "-" if d["max_curvature"] is None else f"{d['max_curvature']:.3f}/{d['car_curvature_limit']:.3f}"
         print(f"{name[:32]:32s} {d['feasible_stalls']:>4d}/{d['stalls']:<4d}{100 * d['feasible_share']:3.0f}% "
               f"{clear:>10s} {curv:>16s}  {why}")
@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
                 for p in plans:
                     state = "feasible" if p["feasible"] else f"INFEASIBLE: {p['reason']}"
                     print(f"    stall {p['stall']:3d} {p['stall_side'] or '-':6s} route {p['route_length'] or 0:6.1f} m  "
-                          f"clearance {p['clearance'] if p['clearance'] is not None else '-'}  {state}")
+                          f"clearance {_metres(p['clearance'])}  {state}")
         report.append(entry)
     if store is not None:
         store.close()
@@ -106,3 +106,8 @@ def run(args: argparse.Namespace) -> int:
         args.json.write_text(json.dumps(report, indent=2) + "\n")
         print(f"wrote {args.json}")
     return 0
+
+
+def _metres(value: float | None) -> str:
+    """A clearance for people: '0.93 m', or '-' when there is none (no route)."""
+    return "-" if value is None else f"{value:.2f} m"

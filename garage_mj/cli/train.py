@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--map", required=True, help="shipped map name (garage-mj maps list) or map file")
     p.add_argument("--timesteps", required=True, type=positive_int, help="total timesteps of the run")
-    p.add_argument("--seed", required=True, type=seed, help="random seed of the run")
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the run (default 0)")
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
     p.add_argument("--algo", default="dqn", choices=ALGOS, help="RL algorithm (default: dqn)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")

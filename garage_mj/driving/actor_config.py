@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from garage_mj.core.config import ConfigError, load_config, read_toml
@@ -94,4 +95,10 @@ def load_scenario_config(source: str | dict[str, Any] | ScenarioConfig | None, *
         if "scenario" in raw and set(raw) - {"scenario"}:
             raise ConfigError(f"{source}: unknown table(s) {sorted(set(raw) - {'scenario'})}; known: scenario")
     data.update({k: v for k, v in overrides.items() if v is not None})
-    return load_config(ScenarioConfig, data)
+    try:
+        return load_config(ScenarioConfig, data)
+    except ConfigError as exc:
+        if isinstance(source, (str, Path)):  # name the file the bad value came from
+            raise ConfigError(f"{source}: {exc}; see garage_mj.driving.actor_config.ScenarioConfig for the keys") \
+                from None
+        raise

@@ -292,17 +292,20 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
 
         bar = tqdm(total=count, desc=f"{garage0.name} difficulty {difficulty[0]:.2f}-{difficulty[1]:.2f}",
                    unit="garage", dynamic_ncols=True)
-    with Library(library) as lib:
-        collector = _Collector(lib, garage0.name, run, seed, difficulty, coverage or (0.0, 1.0), count, result, bar,
-                               clock, c0)
-        steps = _policy_stage(policy, envs, rng, collector, min(max_episodes, patience), policy_seconds, usable_pool)
-        if usable_pool is not None and result.found < count:
-            _search_stage(garage0, coverage, seed, max_errors, collector, usable_pool, max_episodes, max_seconds,
-                          steps)
+    try:
+        with Library(library) as lib:
+            collector = _Collector(lib, garage0.name, run, seed, difficulty, coverage or (0.0, 1.0), count, result,
+                                   bar, clock, c0)
+            steps = _policy_stage(policy, envs, rng, collector, min(max_episodes, patience), policy_seconds,
+                                  usable_pool)
+            if usable_pool is not None and result.found < count:
+                _search_stage(garage0, coverage, seed, max_errors, collector, usable_pool, max_episodes, max_seconds,
+                              steps)
+    finally:  # an error is printed on a line of its own, never after the bar
+        if bar is not None:
+            bar.close()
     result.seconds = time.perf_counter() - t0
     result.cpu_seconds = time.process_time() - cpu0
-    if bar is not None:
-        bar.close()
     if result.found < count:
         raise _not_filled(result, count, garage0.name, difficulty, coverage, search, max_seconds, library)
     return result

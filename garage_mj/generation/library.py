@@ -57,7 +57,8 @@ class Library:
         self.readonly = (not create) if readonly is None else readonly
         exists = self.path.exists()
         if not exists and not create:
-            raise LibraryError(f"no library at {self.path}; train first (garage-mj train) or pass --library")
+            raise LibraryError(f"no library at {self.path}; check the path, or make one with garage-mj train or "
+                               "garage-mj generate (both write library.sqlite)")
         if exists and self.path.is_dir():
             raise LibraryError(f"{self.path} is a folder; pass the library file (library.sqlite)")
         version = check_header(self.path) if exists else 0
