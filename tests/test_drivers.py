@@ -4,11 +4,20 @@ from __future__ import annotations
 
 import sys
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
 
-from garage_mj.driving.drivers import DRIVERS, DriverError, load_driver, resolve_driver
+from garage_mj.driving.drivers import (
+    DRIVERS,
+    ActionTypeWarning,
+    DriverError,
+    action_type_of,
+    choose_action_type,
+    load_driver,
+    resolve_driver,
+)
 from garage_mj.driving.drivers.vision import VisionDriver
 from garage_mj.driving.outcomes import OutcomeKind
 from garage_mj.driving.vehicle import DiscreteAction
@@ -65,6 +74,59 @@ def test_user_driver_by_module_and_class(tmp_path, monkeypatch):
             load_driver("my_driver:NeedsArgument")
     finally:
         sys.modules.pop("my_driver", None)
+
+
+@pytest.mark.parametrize("name", sorted(DRIVERS))
+def test_builtins_are_made_for_continuous_actions(name):
+    assert action_type_of(name) == "continuous"
+    choice = choose_action_type(name)
+    assert (choice.action_type, choice.source, choice.label) == (
+        "continuous", "driver", "continuous actions, the driver's own")
+
+
+@pytest.fixture
+def user_drivers(tmp_path, monkeypatch):
+    (tmp_path / "typed_drivers.py").write_text(textwrap.dedent("""
+        class Paper:  # no action_type: the paper's discrete actions
+            def reset(self, info): pass
+            def act(self, obs): return 0
+
+        class Steering(Paper):
+            action_type = "continuous"
+
+        class Joystick(Paper):
+            action_type = "joystick"
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield "typed_drivers"
+    sys.modules.pop("typed_drivers", None)
+
+
+def test_a_user_driver_declares_its_action_type_or_is_discrete(user_drivers):
+    assert action_type_of(f"{user_drivers}:Paper") == "discrete"
+    assert action_type_of(f"{user_drivers}:Steering") == "continuous"
+    with pytest.raises(DriverError, match=r"Joystick.action_type is 'joystick'; declare one of 'continuous', "):
+        action_type_of(f"{user_drivers}:Joystick")
+
+
+def test_another_action_type_than_the_drivers_own_is_warned_about(user_drivers):
+    with pytest.warns(ActionTypeWarning) as caught:
+        choice = choose_action_type("oracle", "discrete")
+    (w,) = caught
+    assert str(w.message).startswith("driver 'oracle' is made for continuous actions but runs with discrete ones: "
+                                     "its [throttle, steer] commands are rounded to the paper's 4 actions")
+    assert "\n" not in str(w.message) and "fails most feasible tests" in str(w.message)
+    assert choice.label == "discrete actions from --action-type; the driver's own: continuous"
+    with pytest.warns(ActionTypeWarning, match="'typed_drivers:Paper' is made for discrete actions but runs with "
+                                               "continuous"):
+        choose_action_type(f"{user_drivers}:Paper", "continuous")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # its own type, given or not: no warning
+        assert choose_action_type("waypoint", "continuous").source == "--action-type"
+        assert choose_action_type(f"{user_drivers}:Paper").action_type == "discrete"
+        assert choose_action_type("oracle", "discrete", warn=False).action_type == "discrete"
+    with pytest.raises(DriverError, match="action type 'joystick'"):
+        choose_action_type("oracle", "joystick")
 
 
 def test_noise_is_seeded_and_delay_shifts_commands():

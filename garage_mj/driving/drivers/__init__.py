@@ -2,11 +2,19 @@
 
 Usage: ``driver = load_driver("waypoint", noise={"steer_std": 0.05})``, then per test
 ``driver.reset({"seed": 0, "action_type": "continuous"})`` and per step ``driver.act(obs)``.
+
+Each driver class declares the action type it is made for in a class attribute ``action_type``
+(``"continuous"``: ``[throttle, steer]``, or ``"discrete"``: the paper's 4 actions). The built-ins
+steer continuously (:class:`BaseDriver`'s default); a user class without the attribute is taken as
+``"discrete"``, the paper's actions. Cruise and hunt run a driver with its own type unless told
+otherwise (:func:`choose_action_type`), and warn when told otherwise.
 """
 
 from __future__ import annotations
 
 import importlib
+import warnings
+from dataclasses import dataclass
 from typing import Any
 
 from garage_mj.core.errors import GarageMJError
@@ -33,11 +41,22 @@ __all__ = [
     "CarGeometry",
     "Driver",
     "DriverError",
+    "ACTION_TYPES",
+    "ActionChoice",
+    "ActionTypeWarning",
     "DriverNoiseConfig",
+    "UNDECLARED_ACTION_TYPE",
+    "action_type_of",
+    "choose_action_type",
     "discretize",
     "load_driver",
     "resolve_driver",
 ]
+
+#: The action types a driver can be made for: ``[throttle, steer]`` in [-1, 1], or the paper's 4 actions.
+ACTION_TYPES = ("continuous", "discrete")
+#: The action type of a driver class that does not declare one: the paper's actions.
+UNDECLARED_ACTION_TYPE = "discrete"
 
 
 class DriverError(GarageMJError, ValueError):
@@ -71,3 +90,67 @@ def load_driver(spec: str, **kwargs: Any) -> Driver:
         return cls(**kwargs)
     except TypeError as exc:
         raise DriverError(f"driver {spec!r}: cannot construct {cls.__name__} ({exc})") from None
+
+
+class ActionTypeWarning(UserWarning):
+    """A driver runs with another action type than the one it declares (it will likely drive badly)."""
+
+
+def action_type_of(spec: str) -> str:
+    """The action type driver ``spec`` (built-in name or ``module:Class``) is made for: its class's
+    ``action_type`` attribute, ``"discrete"`` (the paper's actions) when it has none."""
+    cls = resolve_driver(spec)
+    kind = getattr(cls, "action_type", UNDECLARED_ACTION_TYPE)
+    if kind not in ACTION_TYPES:
+        raise DriverError(f"driver {spec!r}: {cls.__name__}.action_type is {kind!r}; "
+                          f"declare one of {', '.join(map(repr, ACTION_TYPES))}")
+    return kind
+
+
+@dataclass(frozen=True)
+class ActionChoice:
+    """The action type a run uses, where it came from, and the one the driver declares."""
+
+    driver: str
+    action_type: str  # the one used
+    source: str  # "driver" (its own) or "--action-type" (given by the caller)
+    declared: str  # the driver's own
+
+    @property
+    def label(self) -> str:
+        """What a closing line says, e.g. "continuous actions, the driver's own"."""
+        if self.source == "driver":
+            return f"{self.action_type} actions, the driver's own"
+        if self.action_type == self.declared:
+            return f"{self.action_type} actions from --action-type, the driver's own too"
+        return f"{self.action_type} actions from --action-type; the driver's own: {self.declared}"
+
+    @property
+    def mismatch(self) -> str | None:
+        """One line naming the driver, both types and the consequence; None when the driver runs its own."""
+        if self.action_type == self.declared:
+            return None
+        if self.declared == "continuous":
+            why = ("its [throttle, steer] commands are rounded to the paper's 4 actions, which costs precision "
+                   "(the oracle fails most feasible tests that way)")
+        else:
+            why = ("the env tells it to send [throttle, steer] commands, which a driver made for the paper's 4 "
+                   "actions may not do")
+        return (f"driver {self.driver!r} is made for {self.declared} actions but runs with {self.action_type} ones: "
+                f"{why}; leave out --action-type to use its own")
+
+
+def choose_action_type(spec: str, action_type: str | None = None, warn: bool = True) -> ActionChoice:
+    """The action type to run driver ``spec`` with: ``action_type`` when given, else the driver's own
+    (:func:`action_type_of`). With ``warn``, a type other than the driver's own is an
+    :class:`ActionTypeWarning` (``garage-mj`` prints it as one line), never silent."""
+    declared = action_type_of(spec)
+    if action_type is None:
+        return ActionChoice(spec, declared, "driver", declared)
+    if action_type not in ACTION_TYPES:
+        raise DriverError(f"action type {action_type!r}: use one of {', '.join(map(repr, ACTION_TYPES))} "
+                          "(or none: the driver's own)")
+    choice = ActionChoice(spec, action_type, "--action-type", declared)
+    if warn and choice.mismatch:
+        warnings.warn(choice.mismatch, ActionTypeWarning, stacklevel=3)
+    return choice

@@ -7,6 +7,8 @@ optionally ``rgb``, ``waypoint`` (the route point a lookahead distance ahead, in
 x forward, y left, metres) and ``speed`` (forward speed, m/s). An action is either the paper's
 discrete index (:class:`garage_mj.driving.vehicle.DiscreteAction`) or ``[throttle, steer]`` in [-1, 1].
 
+A driver class declares the action type it is made for in a class attribute ``action_type``
+("continuous" or "discrete"; none: "discrete"); cruise and hunt run it with that type by default.
 ``info`` at reset may carry ``seed`` (int), ``action_type`` ("continuous" or "discrete"),
 ``dt`` (control period, s), ``camera`` (a dict of :class:`CameraGeometry` fields) and ``car``
 (a :class:`garage_mj.scene.car.CarGeometry`).
@@ -77,10 +79,13 @@ def discretize(throttle: float, steer: float, deadband: float = 0.15) -> int:
 class BaseDriver:
     """Common machinery: config loading, seeded noise, reaction delay, continuous/discrete output.
 
-    Subclasses implement :meth:`command` returning ``(throttle, steer)``.
+    Subclasses implement :meth:`command` returning ``(throttle, steer)``. They are made for
+    continuous actions (``action_type``); with discrete ones the command is rounded to the
+    nearest paper action (:func:`discretize`), which costs precision.
     """
 
     config_class: type = object
+    action_type: str = "continuous"  # what the driver is made for (see garage_mj.driving.drivers)
 
     def __init__(self, config=None, noise=None, car=None, **overrides) -> None:
         self.config = config if isinstance(config, self.config_class) else load_config(

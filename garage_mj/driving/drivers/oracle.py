@@ -56,6 +56,7 @@ class OracleDriver(BaseDriver):
     """Tracks the test's planned route with its exact pose; privileged, continuous control."""
 
     config_class = OracleConfig
+    action_type = "continuous"  # made for [throttle, steer]; discrete actions round its commands
 
     def reset(self, info: dict[str, Any]) -> None:
         super().reset(info)

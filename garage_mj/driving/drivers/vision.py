@@ -50,6 +50,7 @@ class VisionDriver(BaseDriver):
     """Free-space arc selection from depth + segmentation, toward the route waypoint."""
 
     config_class = VisionConfig
+    action_type = "continuous"  # made for [throttle, steer]; discrete actions round its commands
 
     def obstacle_points(self, depth: np.ndarray, segmentation: np.ndarray) -> np.ndarray:
         """(N, 2) obstacle points (x forward, y left, metres) in the car frame."""

@@ -28,6 +28,7 @@ class WaypointDriver(BaseDriver):
     """Pure pursuit toward ``obs["waypoint"]`` with a curvature-limited speed."""
 
     config_class = WaypointConfig
+    action_type = "continuous"  # made for [throttle, steer]; discrete actions round its commands
 
     def command(self, obs: dict[str, Any]) -> tuple[float, float]:
         cfg: WaypointConfig = self.config
