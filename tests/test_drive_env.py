@@ -135,6 +135,16 @@ def test_braking_forever_deadlocks(env):
     assert term and info["outcome"] == "deadlock" and "no progress" in info["reason"]
 
 
+def test_a_missed_goal_terminates_like_a_deadlock(painted_tiny):
+    # the same stop at the entrance, counted as near the goal (a radius wider than the garage): missed_goal
+    env = gym.make(ENV_ID, garage=painted_tiny, action_type="continuous", outcome={"missed_goal_radius": 1000.0})
+    env.reset(seed=0)
+    info, _, term, trunc = rollout(env, lambda _: BRAKE)
+    assert term and not trunc and info["outcome"] == "missed_goal"
+    assert "from the goal pose (tolerance 1 m, 0.35 rad), no progress for" in info["reason"]
+    env.close()
+
+
 def test_timeout_truncates(painted_tiny):
     env = gym.make(ENV_ID, garage=painted_tiny, action_type="discrete",
                    outcome={"min_mean_speed": 1000.0, "time_slack": 2.0})

@@ -6,7 +6,15 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.driving.outcomes import Contact, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.driving.outcomes import (
+    FAILURES,
+    PAPER_CLASS,
+    Contact,
+    OutcomeConfig,
+    OutcomeKind,
+    OutcomeMonitor,
+    ego_contacts,
+)
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import Semantic, geom_classes
 
@@ -90,7 +98,47 @@ def test_deadlock_when_stuck():
     path = along(Route([(0, 0), (6, 0)]), 0.2) + [np.array([6.0, 0.0])] * 200
     out = drive(OutcomeMonitor(L_ROUTE, cfg), path)
     assert out.kind is OutcomeKind.DEADLOCK and "no progress" in out.reason
+    assert "goal" not in out.reason  # stuck 24 m from the goal: not a missed goal
     assert 5.0 <= out.time - 3.0 <= 5.2  # stopped at t = 3 s
+
+
+def stop_short(monitor: OutcomeMonitor, short: float, yaw: float, steps: int = 200):
+    """Drive the L route to ``short`` metres before its end, then stand there facing ``yaw``; the outcome."""
+    stop = L_ROUTE.length - short
+    path = [L_ROUTE.point_at(s) for s in np.arange(0.0, stop, 0.2)] + [L_ROUTE.point_at(stop)] * steps
+    for k, p in enumerate(path):
+        moving = k + 1 < len(path) and not np.allclose(p, path[k + 1])
+        out = monitor.update(k * 0.1, p, 2.0 if moving else 0.0, yaw=yaw)
+        if out is not None:
+            return out
+    return None
+
+
+def test_a_car_stopped_near_the_goal_missed_it():
+    # 1.5 m short of the goal, 0.4 rad off its heading (the goal faces +y): outside both tolerances
+    out = stop_short(OutcomeMonitor(L_ROUTE), 1.5, np.pi / 2 - 0.4)
+    assert out.kind is OutcomeKind.MISSED_GOAL and not out.success
+    assert out.reason.startswith("stopped 1.50 m and 0.40 rad from the goal pose (tolerance 1 m, 0.35 rad)")
+    assert "no progress for 8.0 s" in out.reason
+    # within the position tolerance but 0.5 rad off the heading: missed too, with both numbers
+    out = stop_short(OutcomeMonitor(L_ROUTE), 0.5, np.pi / 2 + 0.5)
+    assert out.kind is OutcomeKind.MISSED_GOAL and "stopped 0.50 m and 0.50 rad" in out.reason
+
+
+def test_missed_goal_radius_separates_a_missed_goal_from_a_deadlock():
+    assert OutcomeConfig().missed_goal_radius == 2 * OutcomeConfig().max_deviation  # the criterion deadlocks had
+    assert stop_short(OutcomeMonitor(L_ROUTE), 6.5, np.pi / 2).kind is OutcomeKind.MISSED_GOAL
+    stuck = stop_short(OutcomeMonitor(L_ROUTE), 7.5, np.pi / 2)
+    assert stuck.kind is OutcomeKind.DEADLOCK and stuck.reason == "no progress for 8.0 s"
+    tight = OutcomeMonitor(L_ROUTE, OutcomeConfig(missed_goal_radius=1.0))
+    assert stop_short(tight, 1.5, np.pi / 2).kind is OutcomeKind.DEADLOCK
+
+
+def test_missed_goal_is_a_failure_and_a_deadlock_in_the_papers_classes():
+    assert OutcomeKind.MISSED_GOAL in FAILURES and OutcomeKind.MISSED_GOAL.value == "missed_goal"
+    assert PAPER_CLASS == {"collision": "collision", "timeout": "timeout", "deadlock": "deadlock",
+                           "missed_goal": "deadlock"}
+    assert set(PAPER_CLASS) == {k.value for k in FAILURES}
 
 
 def test_deadlock_when_off_route():

@@ -17,7 +17,7 @@ outcome ``infeasible`` and its reason, never driven. The car starts :data:`START
 along the route, so it is wholly inside the garage.
 
 Outcomes are the environment's (:class:`~garage_mj.driving.outcomes.OutcomeMonitor`): ``success`` and
-``collision``/``deadlock`` terminate, ``timeout`` truncates. The reward is route progress [m]
+``collision``/``deadlock``/``missed_goal`` terminate, ``timeout`` truncates. The reward is route progress [m]
 per step, plus :data:`SUCCESS_REWARD` or :data:`COLLISION_PENALTY` at the end.
 """
 

@@ -8,7 +8,12 @@ Checks, in this order: collision (ego touches a wall, pillar, obstacle or parked
 (within ``goal_tolerance`` of the goal pose, heading within ``goal_heading_tolerance``, slower
 than ``goal_speed``), deadlock (farther than ``max_deviation`` from the route, past the goal by
 more than ``goal_tolerance``, or less than ``stuck_progress`` of progress along the route in
-``stuck_time``), timeout (``time_limit = route length / min_mean_speed + time_slack``).
+``stuck_time``), missed goal (that lack of progress, but stopped within ``missed_goal_radius`` of
+the goal: the car meant to park there and ended outside the tolerance, it was not stuck), timeout
+(``time_limit = route length / min_mean_speed + time_slack``).
+
+The paper has three failure classes (collision, timeout, deadlock); in them a missed goal counts as
+a deadlock (:data:`PAPER_CLASS`), as it did here before it had a class of its own.
 
 ``infeasible`` is not decided here: the drive env gives it before the drive, from the scene alone
 (:mod:`garage_mj.scene.drivable`), and such a test is never driven.
@@ -33,11 +38,14 @@ class OutcomeKind(str, enum.Enum):
     SUCCESS = "success"
     COLLISION = "collision"
     TIMEOUT = "timeout"
-    DEADLOCK = "deadlock"
+    DEADLOCK = "deadlock"  # stuck, off the route, or past the goal
+    MISSED_GOAL = "missed_goal"  # stopped near the goal, outside the tolerance of its pose
     INFEASIBLE = "infeasible"  # no driver of this car can drive it; decided from the scene, excluded from rates
 
 
-FAILURES = (OutcomeKind.COLLISION, OutcomeKind.TIMEOUT, OutcomeKind.DEADLOCK)
+FAILURES = (OutcomeKind.COLLISION, OutcomeKind.TIMEOUT, OutcomeKind.DEADLOCK, OutcomeKind.MISSED_GOAL)
+#: Each failure kind's class among the paper's three (collision, timeout, deadlock).
+PAPER_CLASS = {"collision": "collision", "timeout": "timeout", "deadlock": "deadlock", "missed_goal": "deadlock"}
 
 
 @dataclass(frozen=True)
@@ -52,6 +60,7 @@ class OutcomeConfig:
     max_deviation: float = 3.5  # [m] farther than this from the route: deadlock (lost)
     stuck_time: float = 8.0  # [s] window in which the car must make progress
     stuck_progress: float = 0.5  # [m] progress along the route needed in that window
+    missed_goal_radius: float = 7.0  # [m] no progress this close to the goal: missed_goal, not deadlock
 
 
 @dataclass(frozen=True)
@@ -186,8 +195,11 @@ class OutcomeMonitor:
             self._mark_time, self._mark_progress = time, self.progress
         elif time - self._mark_time >= cfg.stuck_time:
             why = f"no progress for {time - self._mark_time:.1f} s"
-            if goal_dist <= 2 * cfg.max_deviation:  # stopped near the goal, but not on its pose
-                why += f", stopped {goal_dist:.2f} m and {yaw_err:.2f} rad from the goal pose"
+            if goal_dist <= cfg.missed_goal_radius:  # stopped near the goal, but not on its pose
+                moving = f", still at {abs(speed):.1f} m/s" if abs(speed) > cfg.goal_speed else ""
+                return self._end(OutcomeKind.MISSED_GOAL, time,
+                                 f"stopped {goal_dist:.2f} m and {yaw_err:.2f} rad from the goal pose (tolerance "
+                                 f"{cfg.goal_tolerance:g} m, {cfg.goal_heading_tolerance:g} rad), {why}{moving}")
             return self._end(OutcomeKind.DEADLOCK, time, why)
         if time >= self.time_limit:
             return self._end(OutcomeKind.TIMEOUT, time, f"time limit {self.time_limit:.1f} s reached")
