@@ -3,8 +3,8 @@
     python eval/bench_cruise.py [--map m5_13x13_aligned] [--tests 10] [--workers 2] [--driver vision]
         [--pedestrians 2 --moving-cars 1 --clutter 2]     # with actors (issue 12)
 
-Runs ``--tests`` seeded tests of ``garage_mj/GarageDrive-v0`` (built-in ``--driver``, depth +
-segmentation 64x64 at 10 Hz) in ``--workers`` processes, one env per worker, and prints seconds
+Runs ``--tests`` seeded tests of ``garage_mj/GarageDrive-v0`` (built-in ``--driver`` with the action
+type it declares, depth + segmentation 64x64 at 10 Hz) in ``--workers`` processes, one env per worker, and prints seconds
 per test, simulated seconds per wall second, camera frames per second (render only, and
 depth+segmentation on their own over the recorded states) and the projected wall time of the
 paper experiment (issue 5: 2,500 tests in <= 30 minutes on 2 cores). Env build time is reported
@@ -20,7 +20,7 @@ import time
 import gymnasium as gym
 
 import garage_mj  # noqa: F401  (MUJOCO_GL, registers the envs)
-from garage_mj.driving.drivers import load_driver
+from garage_mj.driving.drivers import action_type_of, load_driver
 from garage_mj.grid.painters import paint_garage
 
 PAPER_TESTS = 2500  # 50 garages x 50 tests (SPEC section 5)
@@ -28,11 +28,11 @@ TARGET_MIN = 30.0  # [min] issue 5 target on 2 cores
 _ENV = {}  # per worker process: the env, built once
 
 
-def _env(map_name: str, seed: int, scenario: dict | None = None):
+def _env(map_name: str, seed: int, action_type: str, scenario: dict | None = None):
     if "env" not in _ENV:
         t0 = time.perf_counter()
         _ENV["env"] = gym.make("garage_mj/GarageDrive-v0", garage=paint_garage(map_name, seed=seed),
-                               action_type="continuous", scenario=scenario)
+                               action_type=action_type, scenario=scenario)
         _ENV["build_s"] = time.perf_counter() - t0
     return _ENV["env"]
 
@@ -40,7 +40,7 @@ def _env(map_name: str, seed: int, scenario: dict | None = None):
 def run_one(job: tuple[str, int, str, int]) -> dict:
     """One cruise test; wall time, simulated time and camera time."""
     map_name, garage_seed, driver_name, seed, scenario = job
-    env = _env(map_name, garage_seed, scenario)
+    env = _env(map_name, garage_seed, action_type_of(driver_name), scenario)
     base = env.unwrapped
     camera = base.camera
     render, spent = camera.render, [0.0, 0]
@@ -97,7 +97,8 @@ def main() -> None:
     outcomes = {o: sum(r["outcome"] == o for r in rows) for o in sorted({r["outcome"] for r in rows})}
     per_test = (total - max(builds, default=0.0)) / len(rows) * args.workers  # [s] one worker's wall per test
     projected = PAPER_TESTS * per_test / args.workers / 60  # [min]
-    print(f"{args.map} (garage seed {args.garage_seed}), driver {args.driver}, actors {scenario}, {len(rows)} tests, "
+    print(f"{args.map} (garage seed {args.garage_seed}), driver {args.driver} ({action_type_of(args.driver)} "
+          f"actions, its own), actors {scenario}, {len(rows)} tests, "
           f"{args.workers} workers; outcomes {outcomes}")
     print(f"{'env build (per worker)':38s} {sum(builds) / max(len(builds), 1):9.2f} s")
     print(f"{'seconds per test (one worker)':38s} {per_test:9.2f} s   (in-test mean {wall / len(rows):.2f} s)")

@@ -27,13 +27,13 @@ def drive(env: GarageDriveEnv, seed: int):
             return info, trace
 
 
-def test_oracle_succeeds_on_every_feasible_tiny_test(painted_tiny, tmp_path):
-    res = run_cruise([painted_tiny], 8, driver="oracle", action_type="continuous", out_dir=tmp_path,
-                     progress=False)
+def test_oracle_succeeds_on_every_feasible_tiny_test_with_default_settings(painted_tiny, tmp_path):
+    res = run_cruise([painted_tiny], 8, driver="oracle", out_dir=tmp_path, progress=False)  # its own action type
     outcomes = [r["outcome"] for r in res.rows]
     assert "infeasible" not in outcomes  # the painted tiny garage is wholly drivable
     assert outcomes == ["success"] * 8, [(r["outcome"], r["reason"]) for r in res.rows]
     assert res.stats["success_pct"] == 100.0 and res.stats["infeasible"] == 0
+    assert (res.stats["action_type"], res.stats["action_type_from"]) == ("continuous", "driver")
 
 
 @pytest.mark.parametrize("name", ["wide_15x21_s0", "small_5x9_s1", "island_9x9_s0"])

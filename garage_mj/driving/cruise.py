@@ -10,7 +10,8 @@ Outputs in ``out_dir`` (:mod:`garage_mj.driving.results`): ``tests.csv`` (one ro
 appended and flushed as each test ends, so a crash or Ctrl-C loses nothing and a re-run skips
 what is there), ``summary.csv`` (the paper's table columns per garage), ``summary.json`` (Pearson
 r and the linear regression of success rate on difficulty), and ``run.json`` (the settings; a
-re-run with other settings is refused). ``regression.png`` is the reporting stage's
+re-run with other settings is refused). Both JSON files record the action type used and where it
+came from (``action_type_from``: ``"driver"``, the driver's own, or ``"--action-type"``, given). ``regression.png`` is the reporting stage's
 (:func:`garage_mj.reporting.cruise.run_cruise` draws it after the run).
 """
 
@@ -23,7 +24,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from garage_mj.core.backends import check_backend, map_unordered
 from garage_mj.core.fsutil import FolderLock, clean_temp, ensure_dir
@@ -32,6 +33,9 @@ from garage_mj.driving.replay import write_test_xosc
 from garage_mj.driving.results import TEST_COLUMNS, check_settings, read_tests, write_csv, write_outputs
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
+
+if TYPE_CHECKING:
+    from garage_mj.driving.drivers import ActionChoice
 
 
 @dataclass(frozen=True)
@@ -43,6 +47,7 @@ class CruiseResult:
     rows: list[dict[str, str]]
     summary: list[dict[str, Any]]
     stats: dict[str, Any]
+    action_label: str = ""  # the action type and where it came from, e.g. "continuous actions, the driver's own"
 
 
 # -- one test, in a worker ----------------------------------------------------------------------------
@@ -105,7 +110,7 @@ def run_cruise(
     seed: int = 0,
     out_dir: str | Path = "cruise",
     *,
-    action_type: str = "discrete",
+    action_type: str | ActionChoice | None = None,
     occupancy: float = 0.5,
     env: dict[str, Any] | None = None,
     driver_kwargs: dict[str, Any] | None = None,
@@ -117,6 +122,10 @@ def run_cruise(
 ) -> CruiseResult:
     """Run ``tests`` tests on every source with ``driver``; resumable (see the module docstring).
 
+    ``action_type``: ``"continuous"`` or ``"discrete"``; None runs the driver with the one it declares
+    (:func:`garage_mj.driving.drivers.action_type_of`); another one than that is an
+    ``ActionTypeWarning``. An :class:`~garage_mj.driving.drivers.ActionChoice` (a caller that chose
+    already, as the hunt does once for all its runs) is used as is.
     ``max_tests`` stops after that many new tests (a deliberate partial run); ``progress``
     shows a tqdm bar. ``xosc`` also writes every test as OpenSCENARIO into ``out_dir/xosc/``
     (``<garage hash 12>_<test>.xosc``, see :func:`garage_mj.driving.replay.replay_xosc`); garages without an asset pack get
@@ -126,21 +135,22 @@ def run_cruise(
     tests.csv gets the same rows either way. Raises :class:`CruiseError`, ``DriverError`` (bad
     driver), ``BackendError`` (bad backend, Ray missing) before any test.
     """
-    from garage_mj.driving.drivers import resolve_driver
+    from garage_mj.driving.drivers import ActionChoice, choose_action_type
 
     if tests < 1:
         raise ValueError(f"tests must be >= 1, got {tests}")
-    resolve_driver(driver)  # fail fast, in this process, with the loader's one-line message
+    # fails fast, in this process, with the loader's one-line message on a bad driver
+    choice = action_type if isinstance(action_type, ActionChoice) else choose_action_type(driver, action_type)
     check_backend(backend, address)
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     hashes = [s.hash for s in srcs]
     if len(set(hashes)) != len(hashes):
         raise CruiseError("the same garage is listed twice; give each garage once")
-    settings = CruiseSettings(driver, int(seed), action_type, float(occupancy), dict(env or {}),
+    settings = CruiseSettings(driver, int(seed), choice.action_type, float(occupancy), dict(env or {}),
                               dict(driver_kwargs or {}))
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise"):  # a second run into `out` is refused, naming this one
-        return _run_locked(srcs, tests, workers, out, settings, max_tests, progress, xosc, backend, address)
+        return _run_locked(srcs, tests, workers, out, settings, choice, max_tests, progress, xosc, backend, address)
 
 
 def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
@@ -152,11 +162,11 @@ def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
 
 
 def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Path, settings: CruiseSettings,
-                max_tests: int | None, progress: bool, xosc: bool = False, backend: str = "local",
+                choice: ActionChoice, max_tests: int | None, progress: bool, xosc: bool = False, backend: str = "local",
                 address: str | None = None) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
     clean_temp(out)  # temp files of a killed run's atomic writes
-    check_settings(out, settings)
+    check_settings(out, settings, choice.source)
     csv_path = out / "tests.csv"
     rows = read_tests(csv_path)
     done = {(r["garage_hash"], int(r["test"])) for r in rows}
@@ -190,5 +200,5 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Pat
                 bar.update()
     wanted = {(s.hash, i) for s in srcs for i in range(tests)}
     mine = [r for r in rows if (r["garage_hash"], int(r["test"])) in wanted]
-    summary, stats = write_outputs(out, mine, srcs, settings)
-    return CruiseResult(out, new, mine, summary, stats)
+    summary, stats = write_outputs(out, mine, srcs, settings, choice.source)
+    return CruiseResult(out, new, mine, summary, stats, choice.label)

@@ -54,7 +54,7 @@ from garage_mj.generation.search import mutate, replay
 from garage_mj.grid.garage import Garage
 
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
-                   "failure_pct", "collisions", "deadlocks", "timeouts", "hit", "failure_progress", "failing_tests",
+                   "failure_pct", "collisions", "deadlocks", "missed_goals", "timeouts", "hit", "failure_progress", "failing_tests",
                    "failing_seeds", "parent")
 
 
@@ -120,6 +120,8 @@ class HuntResult:
     files: dict[str, Any]  # library, failures, packs, xosc (reporting.hunt adds report, videos)
     worst: list[Scored] = field(default_factory=list)  # the garages exported (packs, .xosc), worst first
     table: list[dict[str, Any]] = field(default_factory=list)  # the rows of failures.csv
+    action_type: str = ""  # the action type the tests ran with
+    action_label: str = ""  # e.g. "continuous actions, the driver's own" (ActionChoice.label)
 
 
 def _starting(map_name: str | None, library: str | Path | None, n: int, seed: int) -> list[CruiseSource]:
@@ -166,22 +168,25 @@ def _state_file(out: Path) -> Path:
 
 
 def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: str | Path | None = None,
-         config: HuntConfig | None = None, seed: int = 0, action_type: str = "continuous",
+         config: HuntConfig | None = None, seed: int = 0, action_type: str | None = None,
          occupancy: float = 0.5, env: dict[str, Any] | None = None, workers: int = 1,
          progress: bool = True, backend: str = "local", address: str | None = None,
          **cruise_kwargs: Any) -> HuntResult:
     """Hunt the garages where ``driver`` fails (module docstring); resumable in ``out_dir``.
 
+    ``action_type``: None runs the driver with the one it declares; another one than that is an
+    ``ActionTypeWarning`` (once). ``hunt.json`` records the type and where it came from.
     ``backend``/``address``: where the tests run (:mod:`garage_mj.core.backends`; one Ray session for
     the whole hunt). The results do not depend on it. No videos: :func:`garage_mj.reporting.hunt.hunt`
     records them after this.
     """
-    from garage_mj.driving.drivers import resolve_driver
+    from garage_mj.driving.drivers import choose_action_type
 
     cfg = config or HuntConfig()
     if map is None and library is None:
         raise HuntError("hunt: give a map (--map) or a library (--library)")
-    resolve_driver(driver)
+    choice = choose_action_type(driver, action_type)  # a bad driver fails here; one warning for all the runs
+    action_type = choice.action_type
     check_backend(backend, address)
     cruise_kwargs = {**cruise_kwargs, "backend": backend, "address": address}
     out = ensure_dir(out_dir, "--out")
@@ -192,19 +197,26 @@ def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: s
     with FolderLock(out, "garage-mj hunt"), session:
         state_path = _state_file(out)
         if state_path.is_file():
-            old = json.loads(state_path.read_text())
-            if old.get("settings") != json.loads(json.dumps(settings)):
-                raise HuntError(f"{out} holds a hunt with other settings; use another --out or the same settings")
+            old = json.loads(state_path.read_text()).get("settings") or {}
+            mine = json.loads(json.dumps(settings))
+            if old != mine:
+                diff = sorted(k for k in set(mine) | set(old) if mine.get(k) != old.get(k))
+                raise HuntError(f"{out} holds a hunt with other settings ({', '.join(diff)}); use another --out "
+                                "or the same settings")
         else:
-            atomic_write(state_path, json.dumps({"settings": settings}, indent=2) + "\n")
-        return _hunt(driver, out, map, library, cfg, seed, action_type, occupancy, env or {}, workers,
-                     progress, settings, cruise_kwargs)
+            atomic_write(state_path, json.dumps({"settings": settings, "action_type_from": choice.source},
+                                                indent=2) + "\n")
+        result = _hunt(driver, out, map, library, cfg, seed, choice, occupancy, env or {}, workers,
+                       progress, settings, cruise_kwargs)
+    result.action_type, result.action_label = choice.action_type, choice.label
+    return result
 
 
-def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, action_type, occupancy, env, workers,
+def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, choice, occupancy, env, workers,
           progress, settings, cruise_kwargs) -> HuntResult:
     from tqdm import tqdm
 
+    action_type = choice.action_type
     cruise_dir = out / "cruise"
     scored: dict[str, Scored] = {}
     spent = 0  # tests asked for so far (finished or read back)
@@ -217,7 +229,7 @@ def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, action_ty
             by_count.setdefault(first + cfg.tests, []).append(s)
         for count, group in sorted(by_count.items()):
             res = run_cruise([s.source for s in group], count, driver, workers, seed, cruise_dir,
-                             action_type=action_type, occupancy=occupancy, env=env, progress=False, **cruise_kwargs)
+                             action_type=choice, occupancy=occupancy, env=env, progress=False, **cruise_kwargs)
             for s in group:
                 s.rows = [r for r in res.rows if r["garage_hash"] == s.source.hash]
         spent += cfg.tests * len(batch)
@@ -257,7 +269,8 @@ def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, action_ty
                                                       s.source.hash))
     files, worst, table = _write_outputs(out, ranked, cfg, driver, seed, action_type, occupancy, env)
     state = json.loads(_state_file(out).read_text())
-    state.update({"generations": generation, "tests": sum(len(s.rows) for s in scored.values()),
+    state.update({"action_type_from": choice.source, "generations": generation,
+                  "tests": sum(len(s.rows) for s in scored.values()),
                   "garages": len(scored), "files": {k: str(v) for k, v in files.items() if not isinstance(v, list)}})
     atomic_write(_state_file(out), json.dumps(state, indent=2) + "\n")
     return HuntResult(out, state["tests"], generation, ranked, files, worst, table)
@@ -299,6 +312,7 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str
             "failure_pct": round(100.0 * s.rate, 2) if s.feasible else "",
             "collisions": sum(r["outcome"] == "collision" for r in fails),
             "deadlocks": sum(r["outcome"] == "deadlock" for r in fails),
+            "missed_goals": sum(r["outcome"] == "missed_goal" for r in fails),
             "timeouts": sum(r["outcome"] == "timeout" for r in fails),
             "hit": " ".join(f"{c}:{n}" for c, n in sorted(hits.items())), "failure_progress": _where(fails),
             "failing_tests": " ".join(r["test"] for r in fails), "failing_seeds": " ".join(r["seed"] for r in fails),

@@ -43,9 +43,11 @@ def replay_xosc(path: str | Path, driver: str | None = None, driver_kwargs: dict
     """Replay the cruise test of a ``.xosc`` written by :func:`write_test_xosc`; returns its tests.csv row.
 
     Everything comes from the file: the pack (checked against its hash), target stall, parked
-    cars, start pose and actors; the env settings and the driver are the ones recorded, unless
-    ``driver`` names another (a test engineer's own stack on a found scenario).
+    cars, start pose and actors; the env settings, the driver and its action type are the ones
+    recorded, unless ``driver`` names another (a test engineer's own stack on a found scenario),
+    which then runs with the action type it declares.
     """
+    from garage_mj.driving.drivers import action_type_of
     from garage_mj.export.xosc_read import read_xosc
 
     test = read_xosc(path)
@@ -61,7 +63,9 @@ def replay_xosc(path: str | Path, driver: str | None = None, driver_kwargs: dict
                                    moving_cars=max(scenario.moving_cars, need.get("moving_car", 0)),
                                    clutter=max(scenario.clutter, need.get("clutter", 0)))
     env_kwargs["scenario"] = scenario
-    settings = CruiseSettings(driver or test.driver or "vision", int(test.seed or 0), test.action_type or "discrete",
+    name = driver or test.driver or "vision"
+    same = name == test.driver and test.action_type
+    settings = CruiseSettings(name, int(test.seed or 0), test.action_type if same else action_type_of(name),
                               float(meta.get("occupancy", 0.5)), {},
                               dict(driver_kwargs if driver_kwargs is not None else meta.get("driver_kwargs") or {}))
     source = dataclasses.replace(CruiseSource.from_garage(pack.garage, str(meta.get("garage") or Path(pack.path).name)),

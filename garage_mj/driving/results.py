@@ -3,9 +3,15 @@
 ``tests.csv`` holds one row per test (:data:`TEST_COLUMNS`), appended by the runner as each test
 ends; :func:`read_tests` reads it back and repairs what a crash or a careless edit leaves, so a
 re-run skips what is there. ``run.json`` holds the settings (:func:`check_settings` refuses a
-re-run with other ones). :func:`write_outputs` summarizes the rows per garage (``summary.csv``,
-the paper's table columns) and over the run (``summary.json``: counts, timing, Pearson r and the
-regression of success rate on difficulty, :mod:`garage_mj.driving.regression`).
+re-run with other ones) and where the action type came from. :func:`write_outputs` summarizes the
+rows per garage (``summary.csv``, the paper's table columns) and over the run (``summary.json``:
+counts, timing, Pearson r and the regression of success rate on difficulty,
+:mod:`garage_mj.driving.regression`).
+
+Failures are counted per outcome class (:data:`FAILURE_KINDS`), ``missed_goal`` apart from
+``deadlock``; the paper has three classes (collision, timeout, deadlock), in which a missed goal
+counts as a deadlock (:data:`garage_mj.driving.outcomes.PAPER_CLASS`): ``summary.json`` gives both.
+Rows of older runs (no ``missed_goal``: such stops were ``deadlock``) load as they are.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.fsutil import atomic_write
+from garage_mj.driving.outcomes import FAILURES, PAPER_CLASS
 from garage_mj.driving.regression import PAPER_R, regression
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
@@ -31,7 +38,12 @@ TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall
 HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
 #: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
 SUMMARY_COLUMNS = ("garage", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
-                   "collisions", "timeouts", "deadlocks", "success_pct", *(f"hit_{c}" for c in HIT_CLASSES))
+                   "collisions", "timeouts", "deadlocks", "missed_goals", "success_pct",
+                   *(f"hit_{c}" for c in HIT_CLASSES))
+#: The failure outcomes, as ``tests.csv`` writes them: collision, timeout, deadlock, missed_goal.
+FAILURE_KINDS = tuple(k.value for k in FAILURES)
+#: Settings beside the compared ones in ``run.json``: how they were chosen, not what the tests are.
+PROVENANCE_KEYS = ("action_type_from",)
 
 
 def _is_header(fields: Sequence[str]) -> bool:
@@ -92,10 +104,20 @@ def write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict[str, Any]]
     atomic_write(path, _csv_text(columns, rows))
 
 
-def check_settings(out: Path, settings: CruiseSettings) -> None:
-    """Store the settings in ``run.json`` (atomically), or refuse a run whose settings differ."""
+def _shown(value: Any) -> str:
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--action-type") -> None:
+    """Store the settings in ``run.json`` (atomically), or refuse a run whose settings differ.
+
+    ``action_from`` (``"driver"`` or ``"--action-type"``) is recorded beside them, not compared: the same
+    action type chosen another way runs the same tests, so the run resumes.
+    """
     path = out / "run.json"
     mine = json.loads(json.dumps(asdict(settings)))
+    record = {**mine, "action_type_from": action_from}
     if path.is_file():
         try:
             theirs = json.loads(path.read_bytes().decode("utf-8"))
@@ -105,14 +127,17 @@ def check_settings(out: Path, settings: CruiseSettings) -> None:
             if read_tests(out / "tests.csv"):
                 raise CruiseError(f"{path} is damaged ({type(exc).__name__}: {exc}); it holds the settings "
                                   f"of the tests in {out / 'tests.csv'}: restore it, or use another --out") from None
-            theirs = mine  # no test was recorded under it: nothing to lose, write it afresh
-            atomic_write(path, json.dumps(mine, indent=2) + "\n")
+            theirs = record  # no test was recorded under it: nothing to lose, write it afresh
+            atomic_write(path, json.dumps(record, indent=2) + "\n")
+        theirs = {k: v for k, v in theirs.items() if k not in PROVENANCE_KEYS}
         if theirs != mine:
             diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
-            raise CruiseError(f"{out} holds a run with other settings ({', '.join(diff)}); "
-                              "use another --out or the same settings to resume it")
+            shown = ", ".join(f"{k} {_shown(theirs.get(k))} there, {_shown(mine.get(k))} now" for k in diff)
+            hint = f" (--action-type {theirs['action_type']})" if diff == ["action_type"] else ""
+            raise CruiseError(f"{out} holds a run with other settings ({shown}); "
+                              f"use another --out or the same settings to resume it{hint}")
     else:
-        atomic_write(path, json.dumps(mine, indent=2) + "\n")
+        atomic_write(path, json.dumps(record, indent=2) + "\n")
 
 
 def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -> list[dict[str, Any]]:
@@ -131,6 +156,7 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -
             "infeasible": kinds.count("infeasible"), "feasible": feasible,
             "successes": kinds.count("success"), "collisions": kinds.count("collision"),
             "timeouts": kinds.count("timeout"), "deadlocks": kinds.count("deadlock"),
+            "missed_goals": kinds.count("missed_goal"),
             "success_pct": round(100.0 * kinds.count("success") / feasible, 2) if feasible else None,
             **{f"hit_{c}": hits.get(c, 0) for c in HIT_CLASSES},
         })
@@ -146,10 +172,19 @@ def _hits(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
     return dict(sorted(out.items()))
 
 
+def paper_failures(failures: dict[str, int]) -> dict[str, int]:
+    """Failure counts by outcome folded into the paper's three classes (a missed goal is a deadlock)."""
+    out = {c: 0 for c in dict.fromkeys(PAPER_CLASS.values())}
+    for kind, n in failures.items():
+        out[PAPER_CLASS[kind]] += n
+    return out
+
+
 def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
-                  settings: CruiseSettings) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+                  settings: CruiseSettings, action_from: str = "--action-type"
+                  ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``summary.csv`` and ``summary.json`` from the test rows (``regression.png`` is drawn from them by
-    :func:`garage_mj.reporting.cruise.cruise_figure`)."""
+    :func:`garage_mj.reporting.cruise.cruise_figure`); ``action_from``: where the action type came from."""
     summary = summarize(rows, sources)
     write_csv(out / "summary.csv", SUMMARY_COLUMNS, summary)
     rated = [r for r in summary if r["success_pct"] is not None]  # garages with a feasible test
@@ -158,11 +193,14 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
     walls = [float(r["wall_s"]) for r in driven]
     sims = [float(r["time"]) for r in driven]
     kinds = [r["outcome"] for r in rows]
+    failures = {k: kinds.count(k) for k in FAILURE_KINDS}
     stats = {**fit.as_dict(), "paper_r": PAPER_R, "garages": len(summary), "tests": len(rows),
              "infeasible": kinds.count("infeasible"), "feasible": len(driven),
              "driver": settings.driver, "seed": settings.seed,
+             "action_type": settings.action_type, "action_type_from": action_from,
              "success_pct": round(100.0 * kinds.count("success") / len(driven), 2) if driven else None,
-             "failures": {k: kinds.count(k) for k in ("collision", "timeout", "deadlock")},
+             "failures": failures,
+             "paper_failures": paper_failures(failures),  # collision, timeout, deadlock (with missed_goal)
              "hits": _hits(driven),
              "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
              "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}

@@ -68,7 +68,7 @@ class CruiseSettings:
 
     driver: str = "vision"  # built-in name or module:Class
     seed: int = 0
-    action_type: str = "discrete"
+    action_type: str = "continuous"  # as run_cruise resolved it: the driver's own unless given
     occupancy: float = 0.5
     env: dict[str, Any] = field(default_factory=dict)  # more GarageDriveEnv keyword arguments
     driver_kwargs: dict[str, Any] = field(default_factory=dict)

@@ -4,7 +4,8 @@ watches and reads of it.
 The driving stage writes the hunt's results (``hunt.sqlite``, ``failures.csv``, packs, ``.xosc``
 files); :func:`hunt` then draws ``OUT/cruise/regression.png``
 (:func:`garage_mj.reporting.cruise.cruise_figure`), records an MP4 of the first failing test of each
-of the worst garages into ``OUT/videos/`` (:func:`record_videos`, the same seed as the hunt's test)
+of the worst garages into ``OUT/videos/`` (:func:`record_videos`, the same seed as the hunt's test, the
+outcome in the file name)
 and writes ``OUT/report.html`` (:func:`write_hunt_report`): the ranking, then per worst garage its
 preview, failures, files and video.
 """
@@ -38,17 +39,21 @@ def hunt(driver: str, out_dir: str | Path, *, videos: bool = True, **kwargs: Any
 
 
 def record_videos(result: HuntResult) -> list[Path]:
-    """``OUT/videos/<hash 12>_<test>.mp4``: the first failing test of each of the worst garages (kept if there)."""
+    """``OUT/videos/<hash 12>_<test>_<outcome>.mp4``: the first failing test of each of the worst garages (kept
+    if there)."""
+    from garage_mj.driving.drivers import choose_action_type
+
     settings = read_settings(result.out_dir)
+    action = choose_action_type(settings["driver"], settings["action_type"], warn=False)  # the hunt warned
     mp4s = []
     for s in result.worst:
         if not s.failures:
             continue
         i = int(s.failures[0]["test"])
-        mp4 = result.out_dir / "videos" / f"{s.source.hash[:12]}_{i:05d}.mp4"
+        mp4 = result.out_dir / "videos" / f"{s.source.hash[:12]}_{i:05d}_{s.failures[0]['outcome']}.mp4"
         if not mp4.is_file():
             record_video(s.source, mp4, driver=settings["driver"], seed=settings["seed"], test=i,
-                         action_type=settings["action_type"], occupancy=settings["occupancy"], env=settings["env"])
+                         action_type=action, occupancy=settings["occupancy"], env=settings["env"])
         mp4s.append(mp4)
     return mp4s
 

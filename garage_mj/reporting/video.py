@@ -10,7 +10,7 @@ import math
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -18,6 +18,9 @@ import numpy as np
 from garage_mj.core.fsutil import public_mode
 from garage_mj.driving.sensors import Camera, CameraConfig
 from garage_mj.driving.sources import CruiseSource, cruise_seed
+
+if TYPE_CHECKING:
+    from garage_mj.driving.drivers import ActionChoice
 
 VIDEO_SIZE = (320, 240)  # [px] width, height
 ROUTE_BGR = (40, 200, 255)  # orange-yellow route line
@@ -68,21 +71,25 @@ def record_video(
     test: int = 0,
     camera: str = "ego/top",
     size: tuple[int, int] = VIDEO_SIZE,
-    action_type: str = "discrete",
+    action_type: str | ActionChoice | None = None,
     occupancy: float = 0.5,
     driver_kwargs: dict[str, Any] | None = None,
     env: dict[str, Any] | None = None,
 ) -> Path:
-    """Drive test ``test`` of a :class:`~garage_mj.driving.sources.CruiseSource` (same seed as the batch) into an MP4."""
+    """Drive test ``test`` of a :class:`~garage_mj.driving.sources.CruiseSource` (same seed as the batch) into an MP4.
+
+    ``action_type``: as :func:`garage_mj.driving.cruise.run_cruise` (None: the driver's own).
+    """
     import cv2
 
     from garage_mj.driving.drive_env import GarageDriveEnv
-    from garage_mj.driving.drivers import load_driver
+    from garage_mj.driving.drivers import ActionChoice, choose_action_type, load_driver
 
     src = source if isinstance(source, CruiseSource) else CruiseSource.from_garage(source)
+    choice = action_type if isinstance(action_type, ActionChoice) else choose_action_type(driver, action_type)
     drv = load_driver(driver, **(driver_kwargs or {}))
     env_kwargs = env
-    env = GarageDriveEnv(garage=src.garage, action_type=action_type, occupancy=occupancy,
+    env = GarageDriveEnv(garage=src.garage, action_type=choice.action_type, occupancy=occupancy,
                          infeasible="report", **(env_kwargs or {}))  # as the cruise runner: same seed, same test
     width, height = size
     cam = Camera(env.model, CameraConfig(camera=camera, width=width, height=height, rgb=True, depth=False,
