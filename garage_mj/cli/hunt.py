@@ -7,8 +7,8 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import positive_int, seed, unit_range
-from garage_mj.cli.cruise import scenario
-from garage_mj.driving.hunt import HuntConfig
+from garage_mj.cli.cruise import action_warnings, scenario
+from garage_mj.driving.hunt import HuntConfig, HuntResult
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,7 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="garages exported with pack, .xosc and MP4 (default 5)")
     p.add_argument("--no-videos", action="store_true", help="skip the MP4s")
     p.add_argument("--seed", type=seed, default=0, help="hunt seed: start garages, mutations, test seeds")
-    p.add_argument("--action-type", choices=("discrete", "continuous"), default="continuous")
+    p.add_argument("--action-type", choices=("discrete", "continuous"), default=None,
+                   help="the paper's 4 actions or [throttle, steer] (default: the driver's own; the built-ins are "
+                        "made for continuous, a module:Class without an action_type attribute is taken as "
+                        "discrete); another one than the driver's own is warned about")
     p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
     p.add_argument("--pedestrians", type=int, metavar="N", help="actors per test, as garage-mj cruise")
     p.add_argument("--moving-cars", type=int, metavar="M")
@@ -61,16 +64,29 @@ def run(args: argparse.Namespace) -> int:
     env = {} if scen is None else {"scenario": scen}
     cfg = HuntConfig(budget=args.budget, tests=args.tests, population=args.population, elites=args.elites,
                      worst=args.worst)
-    res = hunt(args.driver, args.out, map=args.map if args.library is None else args.library_map,
-               library=args.library, config=cfg, seed=args.seed, action_type=args.action_type,
-               occupancy=args.occupancy, env=env, workers=args.workers, progress=not args.quiet,
-               videos=not args.no_videos, backend=args.backend, address=args.address)
-    failing = [s for s in res.ranked if s.failures]
-    print(f"{res.tests} tests on {len(res.ranked)} garages in {res.generations} generations; "
-          f"{len(failing)} garages with a failure")
-    for s in res.ranked[:5]:
-        if s.feasible:
-            print(f"  {s.source.name}: {len(s.failures)} of {len(s.feasible)} feasible tests failed "
-                  f"({100 * s.rate:.0f}%)")
+    with action_warnings("hunt"):
+        res = hunt(args.driver, args.out, map=args.map if args.library is None else args.library_map,
+                   library=args.library, config=cfg, seed=args.seed, action_type=args.action_type,
+                   occupancy=args.occupancy, env=env, workers=args.workers, progress=not args.quiet,
+                   videos=not args.no_videos, backend=args.backend, address=args.address)
+    print(failure_summary(res))
     print(f"ranking: {res.files['failures']}; report: {res.files['report']}")
     return 0
+
+
+def _n(count: int, noun: str) -> str:
+    return f"{count} {noun}{'' if count == 1 else 's'}"
+
+
+def failure_summary(res: HuntResult, show: int = 5) -> str:
+    """The closing lines: tests, garages, the action type, how many garages failed, and the worst of those."""
+    failing = [s for s in res.ranked if s.failures]  # ranked worst first
+    head = (f"{_n(res.tests, 'test')} on {_n(len(res.ranked), 'garage')} in {_n(res.generations, 'generation')} "
+            f"({res.action_label}); {_n(len(failing), 'garage')} with a failure")
+    if len(failing) > show:
+        head += f", the {show} worst:"
+    elif failing:
+        head += ":"
+    lines = [head] + [f"  {s.source.name}: {len(s.failures)} of {len(s.feasible)} feasible tests failed "
+                      f"({100 * s.rate:.0f}%)" for s in failing[:show]]
+    return "\n".join(lines)
