@@ -9,11 +9,12 @@ import cv2
 import pytest
 
 from garage_mj.cli import main
+from garage_mj.driving.drivers import ActionTypeWarning
 from garage_mj.driving.regression import PAPER_R, PAPER_TABLE, paper_regression, pearson, regression
-from garage_mj.driving.results import read_tests
-from garage_mj.driving.sources import CruiseError, CruiseSource, cruise_seed
+from garage_mj.driving.results import SUMMARY_COLUMNS, TEST_COLUMNS, read_tests, write_csv, write_outputs
+from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.painters import paint_garage
-from garage_mj.reporting.cruise import run_cruise
+from garage_mj.reporting.cruise import pick_tests, run_cruise, video_name
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
 
@@ -61,7 +62,80 @@ def test_append_resume_no_duplicates_no_loss(garages, tmp_path):
     stats = json.loads((out / "summary.json").read_text())
     assert {"r", "slope", "intercept", "n"} <= set(stats) and stats["n"] == 2
     assert (out / "regression.png").stat().st_size > 1000
-    assert all(r["outcome"] in ("success", "collision", "timeout", "deadlock") for r in after)
+    assert all(r["outcome"] in ("success", "collision", "timeout", "deadlock", "missed_goal") for r in after)
+    # no action type given: the driver's own (waypoint: continuous), recorded with where it came from
+    run = json.loads((out / "run.json").read_text())
+    assert (run["action_type"], run["action_type_from"]) == ("continuous", "driver")
+    assert (stats["action_type"], stats["action_type_from"]) == ("continuous", "driver")
+    assert second.action_label == "continuous actions, the driver's own"
+
+
+def test_another_action_type_is_warned_recorded_and_resumes(garages, tmp_path):
+    out = tmp_path / "discrete"
+    with pytest.warns(ActionTypeWarning, match="driver 'waypoint' is made for continuous actions but runs with "
+                                               "discrete ones"):
+        first = run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, action_type="discrete", progress=False)
+    run = json.loads((out / "run.json").read_text())
+    stats = json.loads((out / "summary.json").read_text())
+    assert (run["action_type"], run["action_type_from"]) == ("discrete", "--action-type")
+    assert (stats["action_type"], stats["action_type_from"]) == ("discrete", "--action-type")
+    assert first.action_label == "discrete actions from --action-type; the driver's own: continuous"
+    with pytest.warns(ActionTypeWarning):
+        again = run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, action_type="discrete", progress=False)
+    assert again.tests_run == 0  # the same settings: resumed
+    with pytest.raises(CruiseError, match='other settings \\(action_type "discrete" there, "continuous" now\\); '
+                                          'use another --out or the same settings to resume it '
+                                          '\\(--action-type discrete\\)'):
+        run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, progress=False)
+
+
+def test_a_run_json_without_action_type_from_resumes(garages, tmp_path):
+    # a folder from before action types were the driver's own: its run.json has an explicit action_type only
+    out = tmp_path / "old"
+    run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, action_type="continuous", progress=False)
+    run = json.loads((out / "run.json").read_text())
+    assert run.pop("action_type_from") == "--action-type"
+    (out / "run.json").write_text(json.dumps(run))
+    assert run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, progress=False).tests_run == 0
+    assert run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, action_type="continuous",
+                      progress=False).tests_run == 0
+
+
+def fake_row(source: CruiseSource, test: int, outcome: str, reason: str = "") -> dict:
+    row = dict.fromkeys(TEST_COLUMNS, "")
+    row.update(garage=source.name, garage_hash=source.hash, test=str(test), seed="1", driver="vision",
+               target_stall="3", feasible="0" if outcome == "infeasible" else "1", outcome=outcome, reason=reason,
+               time="20.0", path_length="10.0", route_length="12.0", difficulty=str(source.difficulty),
+               wall_s="0.5")
+    return row
+
+
+def test_missed_goals_are_counted_and_old_deadlock_rows_load(garages, tmp_path):
+    src = CruiseSource.from_garage(garages[0])
+    old = [fake_row(src, 0, "deadlock", "no progress for 8.0 s, stopped 1.20 m and 0.40 rad from the goal pose"),
+           fake_row(src, 1, "success")]  # a tests.csv from before missed_goal had a class of its own
+    write_csv(tmp_path / "tests.csv", TEST_COLUMNS, old)
+    rows = read_tests(tmp_path / "tests.csv") + [
+        fake_row(src, 2, "missed_goal", "stopped 1.50 m and 0.40 rad from the goal pose (tolerance 1 m, 0.35 rad)"),
+        fake_row(src, 3, "missed_goal", "stopped 2.00 m ..."), fake_row(src, 4, "collision")]
+    assert [r["outcome"] for r in rows[:2]] == ["deadlock", "success"]
+    summary, stats = write_outputs(tmp_path, rows, [src], CruiseSettings("vision"))
+    header = (tmp_path / "summary.csv").read_text().splitlines()[0].split(",")
+    assert header == list(SUMMARY_COLUMNS) and header.index("missed_goals") == header.index("deadlocks") + 1
+    assert (summary[0]["deadlocks"], summary[0]["missed_goals"], summary[0]["success_pct"]) == (1, 2, 20.0)
+    assert stats["failures"] == {"collision": 1, "timeout": 0, "deadlock": 1, "missed_goal": 2}
+    assert stats["paper_failures"] == {"collision": 1, "timeout": 0, "deadlock": 3}  # missed goals are deadlocks
+
+
+def test_videos_show_failures_first(garages):
+    a, b = (CruiseSource.from_garage(g) for g in garages)
+    rows = [fake_row(b, 0, "collision"), fake_row(a, 1, "success"), fake_row(a, 0, "infeasible"),
+            fake_row(a, 2, "missed_goal"), fake_row(a, 0, "success") | {"garage_hash": "elsewhere"}]
+    picked = pick_tests(rows, [a, b], 5)
+    assert [(r["garage_hash"], r["outcome"]) for r in picked] == [
+        (a.hash, "missed_goal"), (b.hash, "collision"), (a.hash, "success")]  # never an infeasible one
+    assert pick_tests(rows, [a, b], 1) == picked[:1]
+    assert video_name({"garage": "m5#12", "test": 3, "outcome": "missed_goal"}) == "m5-12_00003_missed_goal.mp4"
 
 
 def test_a_torn_last_line_is_dropped_and_rerun(garages, tmp_path):
@@ -105,8 +179,10 @@ def library(garages, tmp_path_factory):
 
 def test_cli_cruise_runs_and_bad_driver_is_one_line(library, tmp_path, capsys):
     assert main(["cruise", "--library", str(library), "--map", "tiny_7x11", "--tests", "1", "--driver",
-                 "waypoint", "--out", str(tmp_path / "c"), "--quiet", "--action-type", "continuous"]) == 0
-    assert "Pearson r" in capsys.readouterr().out
+                 "waypoint", "--out", str(tmp_path / "c"), "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert "Pearson r" in out and "feasible (continuous actions, the driver's own), Pearson" in out
+    assert "warning" not in err
     assert len(rows_of(tmp_path / "c" / "tests.csv")) == 2
     assert main(["cruise", "--library", str(library), "--tests", "1", "--driver", "nope:Nothing",
                  "--out", str(tmp_path / "d")]) == 2
@@ -116,11 +192,40 @@ def test_cli_cruise_runs_and_bad_driver_is_one_line(library, tmp_path, capsys):
     assert "no such folder" in capsys.readouterr().err
 
 
-def test_cli_video_is_a_readable_mp4(library, tmp_path):
-    video = tmp_path / "one.mp4"
-    assert main(["cruise", "--library", str(library), "--limit", "1", "--driver", "waypoint",
-                 "--video", str(video)]) == 0
-    cap = cv2.VideoCapture(str(video))
+def test_cli_another_action_type_is_one_warning_line(library, tmp_path, capsys):
+    assert main(["cruise", "--library", str(library), "--limit", "1", "--tests", "1", "--driver", "oracle",
+                 "--action-type", "discrete", "--out", str(tmp_path / "c"), "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert err.splitlines() == [
+        "garage-mj cruise: warning: driver 'oracle' is made for continuous actions but runs with discrete ones: "
+        "its [throttle, steer] commands are rounded to the paper's 4 actions, which costs precision (the oracle "
+        "fails most feasible tests that way); leave out --action-type to use its own"]
+    assert "(discrete actions from --action-type; the driver's own: continuous)" in out
+
+
+@pytest.mark.parametrize("command", ["cruise", "hunt"])
+def test_help_says_the_action_type_defaults_to_the_drivers_own(command, capsys):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    assert "(default: the driver's own;" in " ".join(capsys.readouterr().out.split())
+
+
+def test_cli_videos_of_the_batch_in_out(library, tmp_path, capsys):
+    out = tmp_path / "v"
+    argv = ["cruise", "--library", str(library), "--tests", "2", "--driver", "waypoint", "--videos", "3",
+            "--out", str(out), "--quiet"]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out.splitlines()
+    rows = rows_of(out / "tests.csv")
+    assert len(rows) == 4
+    videos = sorted((out / "videos").glob("*.mp4"))
+    assert len(videos) == 3 and printed[1] == f"3 video(s) in {out / 'videos'}:"
+    by_name = {video_name(r): r for r in rows}
+    for line in printed[2:]:
+        name, outcome = line.strip().split(": ")[:2]
+        assert by_name[name]["outcome"] == outcome.split(" (")[0]  # the outcome of tests.csv, in the name too
+    assert {p.name for p in videos} == {ln.strip().split(": ")[0] for ln in printed[2:]} <= set(by_name)
+    cap = cv2.VideoCapture(str(videos[0]))
     frames = 0
     while True:
         ok, frame = cap.read()
@@ -130,6 +235,17 @@ def test_cli_video_is_a_readable_mp4(library, tmp_path):
         assert frame.shape == (240, 320, 3)
     cap.release()
     assert frames > 5
+    stamps = {p: p.stat().st_mtime_ns for p in videos}
+    assert main(argv) == 0  # a re-run: no test, the videos kept
+    assert "(0 new)" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in videos} == stamps
+
+
+def test_cli_video_file_name_is_one_line(library, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["cruise", "--library", str(library), "--video", str(tmp_path / "one.mp4")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith(("usage:", " "))]
+    assert len(err) == 1 and "give how many tests to record into OUT/videos/ (e.g. --videos 3)" in err[0]
 
 
 def test_sources_carry_the_metrics(garages):

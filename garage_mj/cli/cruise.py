@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import io
+import sys
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 from garage_mj.cli import UserError
@@ -30,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "cruise", help="run cruise tests of a driver in garages and correlate success with difficulty",
         description="Run --tests cruise tests per garage with --driver in GarageDrive-v0 over a process "
                     "pool. Writes tests.csv (appended as tests end; a re-run resumes), summary.csv, "
-                    "summary.json (Pearson r, regression) and regression.png into --out.")
+                    "summary.json (Pearson r, regression) and regression.png into --out, and with --videos N "
+                    "MP4s of N tests into OUT/videos/.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--packs", type=Path, metavar="DIR", help="a folder of asset packs (garage-mj export)")
     src.add_argument("--library", type=Path, metavar="FILE", help="a garage library (garage-mj train)")
@@ -51,12 +56,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --backend ray: a running Ray cluster (ray start --head), e.g. HOST:6379")
     p.add_argument("--seed", type=seed, default=0, help="run seed; test seeds derive from it (default 0)")
     p.add_argument("--out", type=Path, default=Path("cruise"), help="output folder (default ./cruise)")
-    p.add_argument("--action-type", choices=("discrete", "continuous"), default="discrete",
-                   help="the paper's 4 actions or [throttle, steer] (default discrete)")
+    p.add_argument("--action-type", choices=("discrete", "continuous"), default=None,
+                   help="the paper's 4 actions or [throttle, steer] (default: the driver's own; the built-ins "
+                        "are made for continuous, a module:Class without an action_type attribute is taken as "
+                        "discrete); another one than the driver's own is warned about")
     p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
-    p.add_argument("--video", type=Path, metavar="PATH.mp4",
-                   help="instead of the batch, write an MP4 of one test (the first garage, --video-test)")
-    p.add_argument("--video-test", type=non_negative_int, default=0, help="test index for --video (default 0)")
+    p.add_argument("--videos", type=video_count, default=0, metavar="N",
+                   help="after the tests, MP4s of N of them (failures first, then successes, in garage and test "
+                        "order) into OUT/videos/<garage>_<test>_<outcome>.mp4; re-run on a finished --out to only "
+                        "make videos")
     act = p.add_argument_group("adverse events (garage_mj.driving.actors; drawn per test from its seed)")
     act.add_argument("--pedestrians", type=non_negative_int, metavar="N",
                      help="pedestrians per test: crossing, stepping out between parked cars, walking along")
@@ -72,6 +80,35 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "pack get one in OUT/packs/); replay one with --scenario-file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=user_errors(run))
+
+
+def video_count(text: str) -> int:
+    """argparse type of --videos: how many tests to record (an integer >= 0), not a file name."""
+    try:
+        return non_negative_int(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give how many tests to record into OUT/videos/ (e.g. --videos 3), not a file name") from None
+
+
+@contextlib.contextmanager
+def action_warnings(command: str) -> Iterator[None]:
+    """Print each ``ActionTypeWarning`` (a driver run with another action type than its own) as one line,
+    ``garage-mj <command>: warning: ...``; other warnings as Python prints them."""
+    from garage_mj.driving.drivers import ActionTypeWarning
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, ActionTypeWarning):
+            print(f"garage-mj {command}: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", ActionTypeWarning)
+        warnings.showwarning = show
+        yield
 
 
 def sources(args: argparse.Namespace) -> list:
@@ -116,6 +153,11 @@ def scenario(args: argparse.Namespace) -> dict | None:
 
 
 def replay(args: argparse.Namespace) -> int:
+    if args.videos:
+        raise UserError("--videos records tests of a batch (--packs or --library), not --scenario-file replays")
+    if args.action_type is not None:
+        raise UserError("--action-type: a --scenario-file replay runs with the action type the file records "
+                        "(another --driver: that driver's own); leave it out")
     rows = []
     for path in args.scenario_file:
         if not path.is_file():
@@ -146,19 +188,21 @@ def run(args: argparse.Namespace) -> int:
     scen = scenario(args)
     if scen is not None:
         env["scenario"] = scen
-    if args.video is not None:
-        from garage_mj.reporting.video import record_video
-
-        path = record_video(srcs[0], args.video, driver=args.driver, seed=args.seed, test=args.video_test,
-                            action_type=args.action_type, occupancy=args.occupancy, env=env)
-        print(f"wrote {path} ({srcs[0].name}, test {args.video_test}, driver {args.driver})")
-        return 0
-    res = run_cruise(srcs, args.tests, args.driver, args.workers, args.seed, args.out,
-                     action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet, env=env,
-                     xosc=args.xosc, backend=args.backend, address=args.address)
+    with action_warnings("cruise"):
+        res = run_cruise(srcs, args.tests, args.driver, args.workers, args.seed, args.out,
+                         action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet, env=env,
+                         xosc=args.xosc, backend=args.backend, address=args.address)
     s = res.stats
     r = "n/a" if s["r"] is None else f"{s['r']:.3f}"
     print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "
-          f"(excluded), success {s['success_pct']}% of {s['feasible']} feasible, "
+          f"(excluded), success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
           f"Pearson r(difficulty, success) = {r} (paper {s['paper_r']}); results in {res.out_dir}")
+    if args.videos:
+        from garage_mj.reporting.cruise import record_cruise_videos
+
+        made = record_cruise_videos(res, srcs, args.videos)
+        print(f"{len(made)} video(s) in {res.out_dir / 'videos'}" + (":" if made else
+                                                                      " (no driven test to record)"))
+        for path, row in made:
+            print(f"  {path.name}: {row['outcome']}{' (' + row['hit'] + ')' if row['hit'] else ''}: {row['reason']}")
     return 0

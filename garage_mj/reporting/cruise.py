@@ -1,21 +1,32 @@
 """A cruise run as the command runs it: the tests (:func:`garage_mj.driving.cruise.run_cruise`), then
-the regression figure a person reads (``regression.png``).
+what a person reads and watches of it: the regression figure (``regression.png``) and, if asked, MP4s
+of chosen tests (``videos/``).
 
 The driving stage writes the run's numbers (``tests.csv``, ``summary.csv``, ``summary.json`` with
 Pearson r); :func:`cruise_figure` draws ``regression.png`` from those files, so it can also be
-drawn for a run folder another job filled (the hunt's ``OUT/cruise``).
+drawn for a run folder another job filled (the hunt's ``OUT/cruise``). :func:`record_cruise_videos`
+drives chosen tests again with the run's settings and seeds (the same test, the same outcome) into
+``OUT/videos/<garage>_<test>_<outcome>.mp4``, failures first.
 """
 
 from __future__ import annotations
 
 import csv
 import json
+import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving import cruise as driving_cruise
 from garage_mj.driving.cruise import CruiseResult
+from garage_mj.driving.outcomes import FAILURES
+from garage_mj.driving.sources import CruiseSource
+from garage_mj.grid.garage import Garage
 from garage_mj.reporting.analysis import regression_plot
+
+_FAILED = {k.value for k in FAILURES}
 
 
 def cruise_figure(out_dir: str | Path) -> Path:
@@ -27,6 +38,45 @@ def cruise_figure(out_dir: str | Path) -> Path:
     driver = json.loads((out / "run.json").read_text())["driver"]
     return regression_plot([float(r["difficulty"]) for r in rated], [float(r["success_pct"]) for r in rated],
                            out / "regression.png", title=f"Cruise success vs. difficulty ({driver})")
+
+
+def video_name(row: dict[str, Any]) -> str:
+    """File name of a test's MP4: ``<garage>_<test>_<outcome>.mp4`` (the garage name made filesystem-safe)."""
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "-", str(row["garage"]))[:64].strip("-.") or "garage"
+    return f"{safe}_{int(row['test']):05d}_{row['outcome']}.mp4"
+
+
+def pick_tests(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource], n: int) -> list[dict[str, Any]]:
+    """Up to ``n`` driven tests to watch: the failures first, then the successes, each in garage and test
+    order (infeasible tests were never driven: nothing to watch)."""
+    order = {s.hash: k for k, s in enumerate(sources)}
+    driven = sorted((r for r in rows if r["outcome"] != "infeasible" and r["garage_hash"] in order),
+                    key=lambda r: (r["outcome"] not in _FAILED, order[r["garage_hash"]], int(r["test"])))
+    return driven[:n]
+
+
+def record_cruise_videos(result: CruiseResult, sources: Sequence[CruiseSource | Garage], n: int
+                         ) -> list[tuple[Path, dict[str, Any]]]:
+    """MP4s of up to ``n`` tests of ``result`` (:func:`pick_tests`) in ``OUT/videos/`` (:func:`video_name`),
+    each driven again with the run's settings (``run.json``); a video already there is kept. Returns
+    (path, tests.csv row) pairs."""
+    from garage_mj.driving.drivers import choose_action_type
+    from garage_mj.reporting.video import record_video
+
+    srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
+    by_hash = {s.hash: s for s in srcs}
+    settings = json.loads((result.out_dir / "run.json").read_text())
+    action = choose_action_type(settings["driver"], settings["action_type"], warn=False)  # the run warned
+    made = []
+    with FolderLock(result.out_dir, "garage-mj cruise"):
+        for row in pick_tests(result.rows, srcs, n):
+            path = result.out_dir / "videos" / video_name(row)
+            if not path.is_file():
+                record_video(by_hash[row["garage_hash"]], path, driver=settings["driver"], seed=settings["seed"],
+                             test=int(row["test"]), action_type=action, occupancy=settings["occupancy"],
+                             driver_kwargs=settings.get("driver_kwargs") or {}, env=settings.get("env") or {})
+            made.append((path, row))
+    return made
 
 
 def run_cruise(*args: Any, **kwargs: Any) -> CruiseResult:
