@@ -43,7 +43,8 @@ def chromium():
 
 
 def page_facts(path: Path) -> dict:
-    """Load ``path`` and report its images (loaded or not), tables and links."""
+    """Load ``path`` and report its images (loaded or not), tables (with their header and cell texts), links
+    and the text a reader sees."""
     with chromium() as driver:
         driver.get(Path(path).resolve().as_uri())
         return driver.execute_script(
@@ -52,9 +53,12 @@ def page_facts(path: Path) -> dict:
                 loaded: i.complete && i.naturalWidth > 0}));
             const tables = Array.from(document.querySelectorAll('table')).map(t => ({
                 id: t.id, rows: t.tBodies.length ? t.tBodies[0].rows.length : 0,
-                empty_cells: Array.from(t.querySelectorAll('td')).filter(td => !td.textContent.trim()).length}));
+                empty_cells: Array.from(t.querySelectorAll('td')).filter(td => !td.textContent.trim()).length,
+                head: Array.from(t.querySelectorAll('th')).map(th => th.textContent),
+                cells: t.tBodies.length ? Array.from(t.tBodies[0].rows).map(
+                    r => Array.from(r.cells).map(c => c.textContent)) : []}));
             const links = Array.from(document.querySelectorAll('a')).map(a => a.getAttribute('href'));
-            return {title: document.title, imgs, tables, links,
+            return {title: document.title, imgs, tables, links, text: document.body.innerText,
                     headings: Array.from(document.querySelectorAll('h2')).map(h => h.textContent)};
             """
         )

@@ -1,6 +1,10 @@
-"""The HTML report: self-contained, every image loads in a real browser, tables are filled."""
+"""The HTML report: self-contained, every image loads in a real browser, tables are filled, the failures'
+reasons are listed per class with links to tests.csv, videos and .xosc files that open after the folder moves,
+and numbers are written the same way everywhere."""
 
 from __future__ import annotations
+
+import shutil
 
 import matplotlib
 
@@ -8,7 +12,19 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pytest  # noqa: E402
 
-from garage_mj.reporting.report import GalleryItem, ReportData, render_html, write_report  # noqa: E402
+from garage_mj.reporting.failures import group_reasons  # noqa: E402
+from garage_mj.reporting.report import (  # noqa: E402
+    FailureItem,
+    GalleryItem,
+    ReasonGroup,
+    ReportData,
+    RunFailures,
+    count_noun,
+    fmt_difficulty,
+    fmt_percent,
+    render_html,
+    write_report,
+)
 from tests.browser import page_facts  # noqa: E402
 
 
@@ -64,3 +80,80 @@ def test_html_escapes_text(tmp_path):
     data = ReportData(title="<b>x</b>", notes=["a & b"])
     html = render_html(data, tmp_path)
     assert "&lt;b&gt;x&lt;/b&gt;" in html and "a &amp; b" in html
+
+
+def failures_sample(tmp_path) -> ReportData:
+    """A report with one driver run's failures: tests.csv, one failure with its MP4 and .xosc, one with a .xosc only."""
+    run = tmp_path / "out" / "cruise" / "vision"
+    (run / "videos").mkdir(parents=True)
+    (run / "xosc").mkdir()
+    (run / "tests.csv").write_text("garage,test,outcome\n")
+    video = run / "videos" / "abc_00001.mp4"
+    video.write_bytes(b"mp4")
+    xoscs = [run / "xosc" / "abc_00001.xosc", run / "xosc" / "abc_00003.xosc"]
+    for x in xoscs:
+        x.write_text("<OpenSCENARIO/>")
+    failures = RunFailures(
+        label="vision", action_type="continuous", tests_csv=run / "tests.csv", feasible=10,
+        counts={"collision": 3, "missed_goal": 1},
+        reasons={"collision": [ReasonGroup("hit parked_car at 0.4–1.2 m/s (parkedcar_3_hull)", 3)],
+                 "missed_goal": [ReasonGroup("stopped 1.20 m and 0.40 rad from the goal pose", 1)]},
+        shown=[FailureItem("tiny#1", 1, "collision", "hit parked_car parkedcar_3_hull at 1.2 m/s", video, xoscs[0]),
+               FailureItem("tiny#1", 3, "missed_goal", "stopped 1.20 m and 0.40 rad from the goal pose", None,
+                           xoscs[1])])
+    return ReportData(title="demo", failures=[failures])
+
+
+def test_report_lists_reasons_per_class_and_links_files_that_survive_a_move(tmp_path):
+    data = failures_sample(tmp_path)
+    write_report(data, tmp_path / "out")
+    moved = tmp_path / "moved"
+    shutil.move(tmp_path / "out", moved)  # links are relative: the folder works anywhere
+    facts = page_facts(moved / "report.html")
+    text = facts["text"]
+    assert "vision · continuous actions" in text
+    assert "4 failures in 10 feasible tests" in text
+    assert "collision (3)\n3 × hit parked_car at 0.4–1.2 m/s (parkedcar_3_hull)" in text
+    assert "missed goal (1)\n1 × stopped 1.20 m and 0.40 rad from the goal pose" in text
+    assert "the first 2 of 4 failures (all of them in tests.csv)" in text
+    assert sorted(facts["links"]) == ["cruise/vision/tests.csv", "cruise/vision/videos/abc_00001.mp4",
+                                      "cruise/vision/xosc/abc_00001.xosc", "cruise/vision/xosc/abc_00003.xosc"]
+    for link in facts["links"]:
+        assert (moved / link).is_file(), link
+    (shown,) = [t for t in facts["tables"] if t["id"] == "" and t["head"][0] == "garage"]
+    assert shown["cells"][1][-2:] == ["-", "abc_00003.xosc"]  # no video recorded: said, not a dead link
+
+
+def test_report_refuses_a_missing_failure_file(tmp_path):
+    data = failures_sample(tmp_path)
+    data.failures[0].shown[0].video.unlink()
+    with pytest.raises(FileNotFoundError, match="abc_00001.mp4"):
+        write_report(data, tmp_path / "out")
+    assert not (tmp_path / "out" / "report.html").exists()
+
+
+def test_reasons_are_grouped_per_class_with_number_ranges():
+    rows = [
+        {"outcome": "missed_goal", "hit_geom": "", "reason": "stopped 1.59 m and 0.30 rad from the goal pose"},
+        {"outcome": "missed_goal", "hit_geom": "", "reason": "stopped 1.01 m and 0.02 rad from the goal pose"},
+        {"outcome": "collision", "hit_geom": "parkedcar_36_hull", "reason": "hit parked_car parkedcar_36_hull at 0.5 m/s"},
+        {"outcome": "collision", "hit_geom": "parkedcar_48_hull", "reason": "hit parked_car parkedcar_48_hull at 1.2 m/s"},
+        {"outcome": "collision", "hit_geom": "obstacle_5", "reason": "hit obstacle obstacle_5 at 2.9 m/s"},
+        {"outcome": "deadlock", "hit_geom": "", "reason": "no progress for 8.1 s"},
+        {"outcome": "success", "hit_geom": "", "reason": "stopped at the goal (0.20 m, 0.01 rad)"},
+    ]
+    groups = group_reasons(rows)
+    assert set(groups) == {"missed_goal", "collision", "deadlock"}  # failures only
+    assert groups["missed_goal"] == [ReasonGroup("stopped 1.01–1.59 m and 0.02–0.30 rad from the goal pose", 2)]
+    # digits inside a geom name are not numbers; the geoms are named apart
+    assert groups["collision"] == [ReasonGroup("hit parked_car at 0.5–1.2 m/s (parkedcar_36_hull, parkedcar_48_hull)", 2),
+                                   ReasonGroup("hit obstacle at 2.9 m/s (obstacle_5)", 1)]
+    assert groups["deadlock"] == [ReasonGroup("no progress for 8.1 s", 1)]
+
+
+def test_numbers_are_written_one_way():
+    # summary.csv rounds a difficulty to 4 decimals; formatting that again gave 0.766 where the gallery said 0.765
+    assert fmt_difficulty(0.76549) == "0.765" and fmt_difficulty(1) == "1.000"
+    assert fmt_percent(100.0) == "100.0%" and fmt_percent(33.333) == "33.3%" and fmt_percent(None) == "n/a"
+    assert count_noun(1, "pedestrian") == "1 pedestrian" and count_noun(2, "moving car") == "2 moving cars"
+    assert count_noun(0, "clutter object") == "0 clutter objects"

@@ -7,5 +7,7 @@
 - ``experiment``: the generation experiment as ``generation/run.py`` runs it: the protocol's runs, then their figures.
 - ``video``: an MP4 of one cruise test with the camera views and the outcome.
 - ``report``: the HTML report.
+- ``failures``: a cruise run's failures as a report shows them: reasons grouped per class, the first few with an MP4
+  and their ``.xosc``.
 - ``demo``: the main job end to end on a small garage (train, library, packs, cruise, report).
 """

@@ -1,8 +1,10 @@
-"""The HTML report of a run: one self-contained page plus the PNGs it links.
+"""The HTML report of a run: one self-contained page plus the PNGs, CSVs, MP4s and ``.xosc`` files it links.
 
-No network, no scripts: inline CSS, relative links to images and asset packs, so the folder can
-be zipped, mailed or opened from any browser. The data arrives as plain records
-(:class:`ReportData`); this module only lays it out.
+No network, no scripts: inline CSS, relative links to images, asset packs and result files, so the
+folder can be moved, zipped, mailed or opened from any browser. The data arrives as plain records
+(:class:`ReportData`); this module only lays it out. Numbers a person compares are written by one
+formatter each (:func:`fmt_difficulty`, :func:`fmt_percent`, :func:`count_noun`), so a garage's
+difficulty reads the same in the gallery and in the table.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import html
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import quote
 
 from garage_mj.core.fsutil import atomic_write
 
@@ -21,14 +24,32 @@ color:#1d232a;padding:0 1rem;line-height:1.45}
 h1{font-size:1.7rem;margin-bottom:.2rem}h2{border-bottom:2px solid #e3e7ec;padding-bottom:.2rem;margin-top:2.2rem}
 .muted{color:#5d6875}.figs{display:flex;flex-wrap:wrap;gap:1rem}.figs figure{margin:0;flex:1 1 420px}
 img{max-width:100%;border:1px solid #d5dbe1;border-radius:4px;background:#fff}
-table{border-collapse:collapse;width:100%;font-size:.92rem;margin:.6rem 0}
+table{border-collapse:collapse;width:100%;font-size:.92rem;margin:.6rem 0}#cruise-table{font-size:.8rem}
+#cruise-table th,#cruise-table td{padding:.25rem .35rem}
 th,td{border:1px solid #d5dbe1;padding:.3rem .5rem;text-align:right}th{background:#f1f4f7}
 td:first-child,th:first-child{text-align:left}
 .gallery{display:grid;grid-template-columns:repeat(auto-fill,minmax(250px,1fr));gap:1rem}
 .card{border:1px solid #d5dbe1;border-radius:6px;padding:.6rem}.card img{width:100%}
 .card p{margin:.3rem 0;font-size:.88rem}.kpi{display:flex;gap:1.5rem;flex-wrap:wrap}
 .kpi div{background:#f1f4f7;border-radius:6px;padding:.5rem .9rem}.kpi b{font-size:1.25rem;display:block}
+h3{margin:1.4rem 0 .3rem}table.failures td,table.failures th{text-align:left}caption{text-align:left;color:#5d6875;padding:.2rem 0}
+ul.reasons>li{margin:.2rem 0}.wide{overflow-x:auto}
 """
+
+
+def fmt_difficulty(value: float) -> str:
+    """A garage's difficulty as every part of the report writes it (3 decimals)."""
+    return f"{float(value):.3f}"
+
+
+def fmt_percent(value: float | None) -> str:
+    """A rate in percent, e.g. ``100.0%``; ``n/a`` when there is none (no feasible test)."""
+    return "n/a" if value is None or value != value else f"{float(value):.1f}%"
+
+
+def count_noun(n: int, singular: str, plural: str | None = None) -> str:
+    """``1 pedestrian``, ``2 pedestrians``; ``plural`` for nouns that do not just add an s."""
+    return f"{n} {singular if n == 1 else (plural or singular + 's')}"
 
 
 @dataclass
@@ -43,6 +64,39 @@ class GalleryItem:
 
 
 @dataclass
+class ReasonGroup:
+    """Failures of one class sharing a reason's wording: the reason with number ranges, and how many."""
+
+    text: str
+    count: int
+
+
+@dataclass
+class FailureItem:
+    """One failing test the report shows, with its MP4 and OpenSCENARIO file when there are."""
+
+    garage: str
+    test: int
+    outcome: str
+    reason: str
+    video: Path | None = None
+    xosc: Path | None = None
+
+
+@dataclass
+class RunFailures:
+    """The failures of one cruise run (a driver, maybe with actors): counts and reasons per class, files."""
+
+    label: str  # e.g. "vision + actors"
+    action_type: str  # the action type the driver ran with
+    tests_csv: Path  # every test of the run, its outcome and reason
+    feasible: int  # feasible tests driven
+    counts: dict[str, int] = field(default_factory=dict)  # failure class -> tests
+    reasons: dict[str, list[ReasonGroup]] = field(default_factory=dict)  # failure class -> grouped reasons
+    shown: list[FailureItem] = field(default_factory=list)
+
+
+@dataclass
 class ReportData:
     title: str
     subtitle: str = ""
@@ -52,13 +106,16 @@ class ReportData:
     gallery: list[GalleryItem] = field(default_factory=list)
     cruise_columns: list[str] = field(default_factory=list)
     cruise_rows: list[list[object]] = field(default_factory=list)
+    cruise_note: str = ""  # under the table: what the columns mean
+    failures: list[RunFailures] = field(default_factory=list)
     regression_png: Path | None = None
     regression_text: str = ""
     notes: list[str] = field(default_factory=list)
 
 
 def _rel(path: Path | None, out_dir: Path) -> str:
-    return html.escape(Path(os.path.relpath(Path(path).resolve(), out_dir.resolve())).as_posix())
+    """``path`` as a link relative to ``out_dir`` (URL-quoted: a ``#`` or ``:`` in a name stays part of the path)."""
+    return html.escape(quote(Path(os.path.relpath(Path(path).resolve(), out_dir.resolve())).as_posix()))
 
 
 def _fmt(v: object) -> str:
@@ -74,6 +131,41 @@ def _figure(path: Path | None, caption: str, out_dir: Path) -> str:
         f'<figure><img src="{_rel(path, out_dir)}" alt="{html.escape(caption)}">'
         f"<figcaption class=muted>{html.escape(caption)}</figcaption></figure>"
     )
+
+
+def _link(path: Path | None, text: str, out_dir: Path) -> str:
+    return "-" if path is None else f'<a href="{_rel(path, out_dir)}">{html.escape(text)}</a>'
+
+
+def _run_failures(run: RunFailures, out_dir: Path) -> str:
+    """One driver run: failures per class with their grouped reasons, the shown tests with their files."""
+    e = html.escape
+    failed = sum(run.counts.values())
+    parts = [
+        f"<h3>{e(run.label)} &middot; {e(run.action_type)} actions</h3>",
+        f"<p>{count_noun(failed, 'failure')} in {count_noun(run.feasible, 'feasible test')} &middot; every test, "
+        f"its outcome and reason: {_link(run.tests_csv, 'tests.csv', out_dir)}</p>",
+    ]
+    if run.reasons:
+        parts.append("<ul class=reasons>")
+        for kind, groups in run.reasons.items():
+            lines = "".join(f"<li>{g.count} &times; {e(g.text)}</li>" for g in groups)
+            parts.append(f"<li><b>{e(kind.replace('_', ' '))}</b> ({run.counts.get(kind, 0)})<ul>{lines}</ul></li>")
+        parts.append("</ul>")
+    if run.shown:
+        n = len(run.shown)
+        which = (f"the first {n} of {failed} failures (all of them in tests.csv)" if failed > n
+                 else "the failure" if n == 1 else f"the {n} failures")
+        parts.append(f"<div class=wide><table class=failures><caption>{which}</caption><thead><tr><th>garage</th>"
+                     "<th>test</th><th>outcome</th><th>reason</th><th>video</th><th>OpenSCENARIO</th></tr></thead><tbody>")
+        for f in run.shown:
+            parts.append(
+                f"<tr><td>{e(f.garage)}</td><td>{f.test}</td><td>{e(f.outcome.replace('_', ' '))}</td>"
+                f"<td>{e(f.reason)}</td><td>{_link(f.video, 'MP4', out_dir)}</td>"
+                f"<td>{_link(f.xosc, f.xosc.name if f.xosc else '', out_dir)}</td></tr>"
+            )
+        parts.append("</tbody></table></div>")
+    return "\n".join(parts)
 
 
 def render_html(data: ReportData, out_dir: Path) -> str:
@@ -106,17 +198,22 @@ def render_html(data: ReportData, out_dir: Path) -> str:
                 link = f' &middot; <a href="{_rel(g.pack_dir, out_dir)}/">asset pack</a>'
             parts.append(
                 f"<div class=card>{imgs}<p><b>garage {e(str(g.garage_id))}</b>{link}</p>"
-                f"<p>difficulty {g.difficulty:.3f} &middot; coverage {g.coverage:.2f} &middot; "
+                f"<p>difficulty {fmt_difficulty(g.difficulty)} &middot; coverage {g.coverage:.2f} &middot; "
                 f"{g.stalls} stalls</p></div>"
             )
         parts.append("</div>")
     if data.cruise_rows:
-        parts.append("<h2 id=cruise>Cruise tests</h2><table id=cruise-table><thead><tr>")
+        parts.append("<h2 id=cruise>Cruise tests</h2><div class=wide><table id=cruise-table><thead><tr>")
         parts += [f"<th>{e(c)}</th>" for c in data.cruise_columns]
         parts.append("</tr></thead><tbody>")
         for row in data.cruise_rows:
             parts.append("<tr>" + "".join(f"<td>{_fmt(v)}</td>" for v in row) + "</tr>")
-        parts.append("</tbody></table>")
+        parts.append("</tbody></table></div>")
+        if data.cruise_note:
+            parts.append(f"<p class=muted>{e(data.cruise_note)}</p>")
+    if data.failures:
+        parts.append("<h2 id=failures>Failures</h2>")
+        parts += [_run_failures(f, out_dir) for f in data.failures]
     if data.regression_png is not None or data.regression_text:
         parts.append("<h2 id=regression>Success rate vs difficulty</h2>")
         if data.regression_text:
@@ -141,5 +238,9 @@ def write_report(data: ReportData, out_dir: Path, name: str = "report.html") -> 
     ]
     if missing:
         raise FileNotFoundError(f"report images missing: {', '.join(str(m) for m in missing)}")
+    links = [r.tests_csv for r in data.failures] + [p for r in data.failures for f in r.shown for p in (f.video, f.xosc)]
+    missing = [p for p in links if p is not None and not Path(p).is_file()]
+    if missing:
+        raise FileNotFoundError(f"report links missing: {', '.join(str(m) for m in missing)}")
     path = out_dir / name
     return atomic_write(path, render_html(data, out_dir))
