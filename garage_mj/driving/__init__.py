@@ -2,7 +2,7 @@
 
 - ``vehicle``: the car in MuJoCo (actuation, discrete and continuous actions).
 - ``sensors``: the front camera (depth + segmentation, offscreen).
-- ``outcomes``: how a test ends (success, collision, timeout, deadlock) and why.
+- ``outcomes``: how a test ends (success, collision, timeout, deadlock, missed_goal) and why.
 - ``actor_config``: ``ScenarioConfig``, how many adverse events (pedestrians, moving cars, clutter) a test gets.
 - ``actors``: a test's drawn ``Scenario`` and the car's swept path (``Corridor``) actors are checked on.
 - ``actor_placement``: ``draw_scenario``, the actors' trajectories and triggers around a test's route.
