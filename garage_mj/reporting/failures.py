@@ -1,12 +1,11 @@
 """The failures of a cruise run as a report shows them: the reasons grouped per failure class, and the
-first few failing tests with an MP4 and the OpenSCENARIO file of each.
+first few failing tests with their MP4 and OpenSCENARIO file.
 
 A class's reasons are grouped by their wording with the numbers taken out, so eight "stopped 1.01 m
 ..." to "stopped 1.59 m ..." lines read as one line with the range, "stopped 1.01–1.59 m ...", and
 its count; a collision's geom name is taken out of its reason and listed apart. The tests shown
 are the first failures in garage order (the run's sources) and test index, so a re-run shows the
-same ones; their videos are recorded with the run's own settings (``run.json``: driver, seed,
-action type, occupancy, actors), so each replays the test in ``tests.csv``.
+same ones: the ones :func:`garage_mj.reporting.cruise.record_cruise_videos` records first.
 """
 
 from __future__ import annotations
@@ -17,12 +16,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from garage_mj.driving.cruise import xosc_name
-from garage_mj.driving.outcomes import FAILURES
+from garage_mj.driving.results import FAILURE_KINDS
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.reporting.report import FailureItem, ReasonGroup, RunFailures
 
-#: The failure outcomes of ``tests.csv`` (collision, timeout, deadlock, missed_goal), in the order a report lists them.
-FAILURE_KINDS = tuple(k.value for k in FAILURES)
 #: A number standing alone in a reason ("1.2 m", "8.0 s"), not a digit inside a name ("parkedcar_36_hull").
 _NUMBER = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?![\w.])")
 GEOMS_NAMED = 3  # geom names listed per reason group before "+N more"
@@ -69,30 +66,21 @@ def first_failures(rows: Sequence[dict[str, str]], sources: Sequence[CruiseSourc
     return sorted(failed, key=lambda r: (order[r["garage_hash"]], int(r["test"])))[:n]
 
 
-def video_path(run_dir: Path, source: CruiseSource, test: int) -> Path:
-    """Where a failure's MP4 goes: ``<run>/videos/<garage hash 12>_<test>.mp4`` (the .xosc's stem)."""
-    return Path(run_dir) / "videos" / f"{Path(xosc_name(source, test)).stem}.mp4"
-
-
 def run_failures(label: str, run_dir: Path, rows: Sequence[dict[str, str]], sources: Sequence[CruiseSource],
-                 shown: int = 3, videos: bool = True) -> RunFailures:
+                 shown: int = 3) -> RunFailures:
     """What the report shows of the cruise run in ``run_dir``: counts and reasons per class, and the first
-    ``shown`` failures with their ``.xosc`` (when the run wrote them) and, with ``videos``, an MP4 each
-    (recorded now unless there from an earlier call)."""
-    from garage_mj.reporting.video import record_video
+    ``shown`` failures with their ``.xosc`` (``run_cruise(..., xosc=True)`` wrote them) and their MP4
+    (:func:`garage_mj.reporting.cruise.record_cruise_videos` wrote them into ``videos/``), each when there."""
+    from garage_mj.reporting.cruise import video_name  # matplotlib: deferred, so garage-mj --help stays light
 
     run_dir = Path(run_dir)
     settings = json.loads((run_dir / "run.json").read_text())
     by_hash = {s.hash: s for s in sources}
     items = []
     for r in first_failures(rows, sources, shown):
-        src, test = by_hash[r["garage_hash"]], int(r["test"])
-        xosc = run_dir / "xosc" / xosc_name(src, test)
-        mp4 = video_path(run_dir, src, test)
-        if videos and not mp4.is_file():
-            record_video(src, mp4, driver=settings["driver"], seed=settings["seed"], test=test,
-                         action_type=settings["action_type"], occupancy=settings["occupancy"],
-                         driver_kwargs=settings.get("driver_kwargs") or None, env=settings.get("env") or None)
+        test = int(r["test"])
+        xosc = run_dir / "xosc" / xosc_name(by_hash[r["garage_hash"]], test)
+        mp4 = run_dir / "videos" / video_name(r)
         items.append(FailureItem(r["garage"], test, r["outcome"], r["reason"],
                                  mp4 if mp4.is_file() else None, xosc if xosc.is_file() else None))
     feasible = [r for r in rows if r["outcome"] != "infeasible"]
