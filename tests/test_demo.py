@@ -1,33 +1,108 @@
-"""The main job end to end at toy scale: every stage runs, the report opens in Chromium."""
+"""The main job end to end at toy scale: every stage runs, the report opens in Chromium and shows what a
+newcomer checks: each driver's action type, the failures' reasons per class with tests.csv, an MP4 and a
+.xosc of the first failures, and a garage's difficulty written the same in the gallery and the table."""
 
 from __future__ import annotations
 
+import csv
 import json
+import re
 
-from garage_mj.reporting.demo import DemoConfig, run_demo
+import cv2
+import numpy as np
+
+from garage_mj.driving.drivers import action_type_of
+from garage_mj.reporting.demo import DemoConfig, run_demo, run_folder
 from tests.browser import page_facts
+
+STILL = "tests.test_demo:StandStill"
+
+
+class StandStill:
+    """A driver that never moves: every test it drives fails (no progress), so the report has failures to show."""
+
+    action_type = "continuous"
+
+    def reset(self, info: dict) -> None:
+        pass
+
+    def act(self, obs: dict) -> np.ndarray:
+        return np.zeros(2, dtype=np.float32)
+
+
+def _rows(path) -> list[dict[str, str]]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
 
 
 def test_demo_end_to_end_report_in_chromium(tmp_path):
-    cfg = DemoConfig(timesteps=2500, train_seeds=(0, 1), garages=2, tests=1, workers=1, out=str(tmp_path / "demo"))
+    cfg = DemoConfig(timesteps=2500, train_seeds=(0, 1), garages=2, tests=1, workers=1, out=str(tmp_path / "demo"),
+                     drivers=("oracle", "vision", STILL), actor_drivers=("vision",), failure_videos=1)
     report = run_demo(cfg)
-    assert report == tmp_path / "demo" / "report.html"
+    out = tmp_path / "demo"
+    assert report == out / "report.html"
     facts = page_facts(report)
+    text = facts["text"]
     assert facts["imgs"] and all(i["loaded"] for i in facts["imgs"]), facts["imgs"]
     # convergence + heatmap + (preview + MuJoCo render) per garage + regression
-    garages = len([link for link in facts["links"] if link.startswith("packs/")])
+    packs = [link for link in facts["links"] if link.startswith("packs/")]
+    garages = len(packs)
     assert garages >= 1
     assert len(facts["imgs"]) == 2 + 2 * garages + 1
-    (table,) = facts["tables"]
+    for link in packs:
+        assert (out / link / "manifest.json").is_file()
+    (table,) = [t for t in facts["tables"] if t["id"] == "cruise-table"]
     # every driver, then the actor drivers again with adverse events (pedestrians, moving cars, clutter)
     assert table["rows"] == garages * (len(cfg.drivers) + len(cfg.actor_drivers)) and table["empty_cells"] == 0
-    text = report.read_text()
+    head = table["head"]
+    assert head[-3:] == ["deadlocks", "missed goals", "success of feasible"]
+    for row in table["cells"]:
+        cell = dict(zip(head, row))
+        assert cell["actions"] == action_type_of(cell["driver"].removesuffix(" + actors"))
+        assert re.fullmatch(r"\d+\.\d%|n/a", cell["success of feasible"]), cell
+    # a garage's difficulty reads the same in the gallery and in the table
+    gallery = dict(re.findall(r"garage (\S+) · asset pack\s+difficulty (\d\.\d{3})", text))
+    assert len(gallery) == garages
+    for row in table["cells"]:  # the gallery names a garage as the table and tests.csv do
+        assert gallery[row[0]] == row[head.index("difficulty")], row
+    # counts in words: singular where there is one
+    assert f"{garages} garage{'s' if garages > 1 else ''}, 1 cruise test per garage and driver" in text
+    assert "with actors (1 pedestrian, 1 moving car, 1 clutter object)" in text
     assert "vision + actors" in text and "collisions by what was hit" in text
-    for link in facts["links"]:
-        assert (report.parent / link / "manifest.json").is_file()
-    index = json.loads((tmp_path / "demo" / "packs" / "index.json").read_text())
+    assert "a missed goal counts as a deadlock" in text
+
+    failed_runs = 0
+    for driver, actors in [(d, False) for d in cfg.drivers] + [(d, True) for d in cfg.actor_drivers]:
+        run = f"cruise/{run_folder(driver, actors)}"
+        label = driver + (" + actors" if actors else "")
+        heading = f"\n{label} · {action_type_of(driver)} actions\n"
+        assert heading in text
+        assert f"{run}/tests.csv" in facts["links"]
+        rows = _rows(out / run / "tests.csv")
+        failures = [r for r in rows if r["outcome"] not in ("success", "infeasible")]
+        section = text.split(heading, 1)[1]
+        section = re.split(r"\n[^\n]+ · (?:continuous|discrete) actions\n", section)[0]  # up to the next run
+        for kind in {r["outcome"] for r in failures}:  # every failure class with its count and reasons
+            n = sum(r["outcome"] == kind for r in failures)
+            assert f"{kind.replace('_', ' ')} ({n})" in section, (label, kind)
+        videos = [link for link in facts["links"] if link.startswith(f"{run}/videos/")]
+        xoscs = [link for link in facts["links"] if link.startswith(f"{run}/xosc/")]
+        assert len(videos) == len(xoscs) == min(cfg.failure_videos, len(failures)), label
+        failed_runs += bool(failures)
+        for video, xosc in zip(videos, xoscs, strict=True):
+            cap = cv2.VideoCapture(str(out / video))
+            assert cap.isOpened() and cap.get(cv2.CAP_PROP_FRAME_COUNT) > 0, video
+            cap.release()
+            assert (out / xosc).read_text().lstrip().startswith("<?xml"), xosc
+            (row,) = [r for r in failures if f"{r['garage_hash'][:12]}_{int(r['test']):05d}" in xosc]
+            assert row["outcome"] in ("collision", "timeout", "deadlock", "missed_goal")
+            assert row["reason"] in text
+    assert failed_runs >= 1  # the standing driver fails every test it drives
+    index = json.loads((out / "packs" / "index.json").read_text())
     assert len(index["packs"]) == garages
-    # a second run resumes every stage and rewrites the same report
-    before = (tmp_path / "demo" / "cruise" / "vision" / "tests.csv").read_text()
+    # a second run resumes every stage (tests, videos) and rewrites the same report
+    before = (out / "cruise" / "vision" / "tests.csv").read_text()
+    mp4s = {p: p.stat().st_mtime_ns for p in out.glob("cruise/*/videos/*.mp4")}
     run_demo(cfg)
-    assert (tmp_path / "demo" / "cruise" / "vision" / "tests.csv").read_text() == before
+    assert (out / "cruise" / "vision" / "tests.csv").read_text() == before
+    assert {p: p.stat().st_mtime_ns for p in out.glob("cruise/*/videos/*.mp4")} == mp4s

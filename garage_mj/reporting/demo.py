@@ -7,6 +7,7 @@ already in the CSV are not run again. ``garage-mj demo`` and ``make demo`` call 
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -15,11 +16,21 @@ from pathlib import Path
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.results import HIT_CLASSES
+from garage_mj.driving.outcomes import PAPER_CLASS, OutcomeConfig
+from garage_mj.driving.results import FAILURE_KINDS, HIT_CLASSES
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.generation.library import Library
 from garage_mj.grid.map_io import load_map
-from garage_mj.reporting.report import GalleryItem, ReportData, write_report
+from garage_mj.reporting.failures import run_failures
+from garage_mj.reporting.report import (
+    GalleryItem,
+    ReportData,
+    RunFailures,
+    count_noun,
+    fmt_difficulty,
+    fmt_percent,
+    write_report,
+)
 
 FIGURES = "figures"
 
@@ -28,8 +39,9 @@ class DemoError(GarageMJError):
     """The demo cannot go on (training stored no usable garage)."""
 
 
-#: Action type per driver in the demo (others: discrete, the paper's actions).
-DEMO_ACTIONS = {"oracle": "continuous", "waypoint": "continuous", "vision": "discrete"}
+#: The actors of :attr:`DemoConfig.actors` in words (singular, plural).
+ACTOR_NOUNS = {"pedestrians": ("pedestrian", "pedestrians"), "moving_cars": ("moving car", "moving cars"),
+               "clutter": ("clutter object", "clutter objects")}
 
 
 @dataclass(frozen=True)
@@ -43,6 +55,7 @@ class DemoConfig:
     # adverse events (garage_mj.driving.actors): these drivers run once more with these actors per test
     actor_drivers: tuple[str, ...] = ("oracle", "vision")
     actors: dict = field(default_factory=lambda: {"pedestrians": 1, "moving_cars": 1, "clutter": 1})
+    failure_videos: int = 3  # failures shown per driver run, each with an MP4 and its .xosc
     workers: int = 2
     seed: int = 0
     out: str = "out/demo"
@@ -124,26 +137,30 @@ def run_demo(cfg: DemoConfig) -> Path:
         if not render.exists():
             _render_overview(rec.garage, render)
         gallery.append(
-            GalleryItem(rec.id, rec.difficulty, rec.coverage, rec.stalls, pack / "preview.png", render, pack)
+            GalleryItem(pack.name, rec.difficulty, rec.coverage, rec.stalls, pack / "preview.png", render, pack)
         )
     write_index(packs_dir)
 
-    columns, rows, regression_png, regression_text, kpis = _cruise(cfg, packs, out, figs)
+    cruise = _cruise(cfg, packs, out, figs)
     data = ReportData(
         title=f"garage-mj demo: {map_name}",
-        subtitle=f"DQN {cfg.timesteps} timesteps x {len(cfg.train_seeds)} seeds, "
-        f"{len(sample)} garages, {cfg.tests} cruise tests per garage and driver",
-        kpis={"usable garages": str(total), "asset packs": str(len(packs)), **kpis},
+        subtitle=f"DQN {cfg.timesteps} timesteps x {count_noun(len(cfg.train_seeds), 'seed')}, "
+        f"{count_noun(len(sample), 'garage')}, {count_noun(cfg.tests, 'cruise test')} per garage and driver",
+        kpis={"usable garages": str(total), "asset packs": str(len(packs)), **cruise.kpis},
         convergence_png=convergence,
         heatmap_png=heatmap,
         gallery=gallery,
-        cruise_columns=columns,
-        cruise_rows=rows,
-        regression_png=regression_png,
-        regression_text=regression_text,
+        cruise_columns=cruise.columns,
+        cruise_rows=cruise.rows,
+        cruise_note=cruise.note,
+        failures=cruise.failures,
+        regression_png=cruise.regression_png,
+        regression_text=cruise.regression_text,
         notes=[
             f"library: {library_path}",
             f"asset packs: {packs_dir} (index.json lists them)",
+            "cruise runs: cruise/<driver>/ (tests.csv, summary.csv, summary.json, xosc/ with every test "
+            "as OpenSCENARIO, videos/ with the failures shown above)",
             "paper (SPEC section 5): r(difficulty, success) = -0.638 over 16 garages of the 13x13 aligned map",
         ],
     )
@@ -153,51 +170,103 @@ def run_demo(cfg: DemoConfig) -> Path:
     return report
 
 
-def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path):
-    """Cruise tests with every driver; returns the report's table, regression figure and KPIs."""
-    from garage_mj.reporting.cruise import run_cruise  # matplotlib, for regression.png
+@dataclass
+class _CruisePart:
+    """What the cruise stage adds to the report."""
+
+    columns: list[str]
+    rows: list[list[object]]
+    note: str
+    failures: list[RunFailures]
+    regression_png: Path
+    regression_text: str
+    kpis: dict[str, str]
+
+
+def actors_text(actors: dict) -> str:
+    """``1 pedestrian, 2 moving cars, 1 clutter object``: the actors asked for per test, in words."""
+    return ", ".join(count_noun(int(v), *ACTOR_NOUNS.get(k, (k.replace("_", " "),))) for k, v in actors.items() if v)
+
+
+def run_folder(driver: str, actors: bool = False) -> str:
+    """The folder of a driver's cruise run under ``OUT/cruise``: its name (a ``module:Class`` spec with ``:``
+    and other characters a file name or a link would trip on as ``_``), ``_actors`` for the run with actors."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", driver)
+    return f"{name}_actors" if actors else name
+
+
+def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _CruisePart:
+    """Cruise tests with every driver, each with the action type it declares; the report's table, failures,
+    regression figure and KPIs."""
+    from garage_mj.driving.drivers import choose_action_type  # MuJoCo (the car), deferred like the runner
+    from garage_mj.reporting.cruise import record_cruise_videos, run_cruise  # matplotlib, for regression.png
 
     sources = [CruiseSource.from_pack(p) for p in packs]
-    columns = ["garage", "driver", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions",
-               "what was hit", "timeouts", "deadlocks", "success % of feasible"]
+    difficulty = {s.name: s.difficulty for s in sources}  # unrounded, as the gallery's (summary.csv rounds)
+    columns = ["garage", "driver", "actions", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions",
+               "what was hit", "timeouts", "deadlocks", "missed goals", "success of feasible"]
     rows: list[list[object]] = []
+    failures: list[RunFailures] = []
     fits: dict[str, dict] = {}
     kpis: dict[str, str] = {}
-    actors = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in cfg.actors.items() if v)
+    actors = actors_text(cfg.actors)
     runs = [(d, d, {}) for d in cfg.drivers]
     runs += [(d, f"{d} + actors", {"scenario": dict(cfg.actors)}) for d in cfg.actor_drivers if any(cfg.actors.values())]
     for driver, label, env in runs:
-        _say(f"cruise tests: driver {label}, {cfg.tests} tests x {len(sources)} garages, {cfg.workers} workers")
-        # the reference drivers steer continuously; vision drives the paper's discrete actions
-        action = DEMO_ACTIONS.get(driver, "discrete")
-        folder = driver if not env else f"{driver}_actors"
+        # the action type the driver is made for (the oracle fails most tests with another), recorded as its own
+        choice = choose_action_type(driver)
+        action = choice.action_type
+        _say(f"cruise tests: driver {label} ({action} actions), {count_noun(cfg.tests, 'test')} x "
+             f"{count_noun(len(sources), 'garage')}, {count_noun(cfg.workers, 'worker')}")
+        folder = out / "cruise" / run_folder(driver, actors=bool(env))
+        # xosc: every test as OpenSCENARIO, written as the test starts (cheap), so each failure shown links its own
         result = run_cruise(sources, cfg.tests, driver=driver, workers=cfg.workers, seed=cfg.seed,
-                            out_dir=out / "cruise" / folder, action_type=action, env=env)
+                            out_dir=folder, action_type=choice, env=env, xosc=True)
         fits[label] = result.stats
-        pct = result.stats["success_pct"]
-        kpis[f"{label} ({action}) success"] = (f"{pct:.1f}% of {result.stats['feasible']} feasible" if pct is not None
-                                    else "no feasible test")
+        kpis[f"{label} ({action} actions) success"] = (
+            f"{fmt_percent(result.stats['success_pct'])} of {result.stats['feasible']} feasible"
+            if result.stats["success_pct"] is not None else "no feasible test")
         hits = result.stats["hits"]
         kpis[f"{label}: collisions by what was hit"] = ", ".join(f"{k} {v}" for k, v in hits.items()) or "none"
         if not env:
             kpis["infeasible tests"] = str(result.stats["infeasible"])  # the same for every driver: scene only
         else:
             kpis[f"infeasible tests with actors ({actors})"] = str(result.stats["infeasible"])
+        n_failed = sum(r["outcome"] in FAILURE_KINDS for r in result.rows)
+        # MP4s of the first failures (with the run's settings, explicit action type included): failures come first
+        record_cruise_videos(result, sources, min(cfg.failure_videos, n_failed))
+        failed = run_failures(label, folder, result.rows, sources, shown=cfg.failure_videos)
+        failures.append(failed)
+        _say(f"{label}: {count_noun(sum(failed.counts.values()), 'failure')}; the report shows "
+             f"{len(failed.shown)} with an MP4 and a .xosc each")
         for r in result.summary:
             hit = ", ".join(f"{c} {r[f'hit_{c}']}" for c in HIT_CLASSES if int(r[f"hit_{c}"]))
-            rows.append([r["garage"], label, float(r["difficulty"]),
+            rows.append([r["garage"], label, action, fmt_difficulty(difficulty[r["garage"]]),
                          float(r["E[X]"]), float(r["E[Y]"]), int(r["tests"]), int(r["infeasible"]),
                          int(r["collisions"]), hit or "-", int(r["timeouts"]), int(r["deadlocks"]),
-                         "n/a" if r["success_pct"] is None else float(r["success_pct"])])
+                         int(r["missed_goals"]), fmt_percent(r["success_pct"])])
     main = "vision" if "vision" in fits else cfg.drivers[0]
     regression_png = figs / "regression.png"
-    shutil.copyfile(out / "cruise" / main / "regression.png", regression_png)
+    shutil.copyfile(out / "cruise" / run_folder(main) / "regression.png", regression_png)
     text = "; ".join(
-        f"{d}: Pearson r = {_fmt_r(f.get('r'))} over {f['garages']} garages, {f['tests']} tests"
+        f"{d}: Pearson r = {_fmt_r(f.get('r'))} over {count_noun(f['garages'], 'garage')}, "
+        f"{count_noun(f['tests'], 'test')}"
         for d, f in fits.items()
     )
     text += f". Figure: the {main} driver. Paper: r = -0.638."
-    return columns, rows, regression_png, text, kpis
+    return _CruisePart(columns, rows, _cruise_note(), failures, regression_png, text, kpis)
+
+
+def _cruise_note() -> str:
+    """What the failure columns count, and how they map onto the paper's three classes."""
+    oc = OutcomeConfig()
+    mapped = ", ".join(f"a {k.replace('_', ' ')} counts as a {v}" for k, v in PAPER_CLASS.items() if k != v)
+    return (f"Deadlocks: the car made no progress for {oc.stuck_time:g} s farther than {oc.missed_goal_radius:g} m "
+            f"from the goal, left the route by more than {oc.max_deviation:g} m or drove past the goal; missed goals: "
+            f"it stopped within {oc.missed_goal_radius:g} m of the goal but outside the parking tolerance "
+            f"({oc.goal_tolerance:g} m, {oc.goal_heading_tolerance:g} rad). In the paper's three failure classes "
+            f"(collision, timeout, deadlock) {mapped}. Success is over feasible tests; an infeasible test (no driver "
+            "of this car can reach the stall) is never driven.")
 
 
 def _fmt_r(r) -> str:
