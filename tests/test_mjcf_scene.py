@@ -1,4 +1,5 @@
-"""MJCF scene: compiles, steps 1 s with zero warnings, one parked car per stall, classes render."""
+"""MJCF scene: compiles, steps 1 s with zero warnings, one parked car per stall, classes render; empty
+stalls' cars cannot be hit or seen, markings cannot be hit, the fused scene keeps every geom."""
 
 from __future__ import annotations
 
@@ -8,12 +9,12 @@ import pytest
 
 from garage_mj.grid.map_io import load_map
 from garage_mj.grid.metrics import evaluate
-from garage_mj.scene.layout import build_layout, cover_cells, merge_intervals
+from garage_mj.scene.layout import MARKING_HEIGHT, build_layout, cover_cells, merge_intervals
 from garage_mj.scene.mjcf_scene import (
-    HIDDEN_DEPTH,
     build_scene,
     compile_scene,
     parked_car_bodies,
+    parked_car_geoms,
     parked_stalls,
     set_parked,
     write_scene,
@@ -56,18 +57,63 @@ def test_obstructed_blocks_get_their_pillars(painted_maps):
         assert {f"pillar_{k}" for k in range(want)} <= names
 
 
-def test_set_parked_moves_cars_on_the_compiled_model(painted_tiny):
-    model = compile_scene(painted_tiny)
-    data = mujoco.MjData(model)
-    bodies = parked_car_bodies(model)
-    assert parked_stalls(model) == sorted(bodies)
-    set_parked(model, data, [0, 2])
+def _probe_lands_at(garage, stall: int, occupied: list[int], fuse_static: bool) -> float:
+    """Height [m] of a 0.2 m box dropped from 2.5 m onto stall ``stall``, 1 s later."""
+    root = build_scene(garage, fuse_static=fuse_static)
+    (place,) = [p for p in build_layout(garage).parked_cars if p.stall_id == stall]
+    probe = root.worldbody.add("body", name="probe", pos=[place.x, place.y, 2.5])
+    probe.add("freejoint", name="probe")
+    probe.add("geom", name="probe", type="box", size=[0.1, 0.1, 0.1], mass=1.0)
+    model = mujoco.MjModel.from_xml_string(root.to_xml_string(), root.get_assets())
+    set_parked(model, None, occupied)
+    data = _step_one_second(model)
+    return float(data.xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "probe"), 2])
+
+
+@pytest.mark.parametrize("fuse_static", [False, True])
+def test_set_parked_hides_and_shows_cars_on_the_compiled_model(painted_tiny, fuse_static):
+    model = compile_scene(painted_tiny, fuse_static=fuse_static)
+    cars = parked_car_geoms(model)
+    assert parked_stalls(model) == sorted(cars) and len(cars) == evaluate(painted_tiny).stalls
+    set_parked(model, mujoco.MjData(model), [0, 2])
     assert parked_stalls(model) == [0, 2]
-    assert data.xpos[bodies[1], 2] == pytest.approx(-HIDDEN_DEPTH)
-    assert data.xpos[bodies[0], 2] == pytest.approx(0.0)
-    _step_one_second(model)
+    set_parked(model, None, [1])
+    assert parked_stalls(model) == [1]
     with pytest.raises(ValueError, match="no stall with id"):
         set_parked(model, None, [10_000])
+    # what a user relies on: a parked car is solid, the car of an empty stall is not there
+    assert _probe_lands_at(painted_tiny, 1, [1], fuse_static) > 1.4  # on the car's roof (1.49 m)
+    assert _probe_lands_at(painted_tiny, 1, [0, 2], fuse_static) == pytest.approx(0.1, abs=0.01)  # on the floor
+
+
+def test_fused_scene_keeps_every_geom_as_a_world_geom(painted_maps):
+    garage = painted_maps["m5_13x13_aligned"]
+    plain, fused = compile_scene(garage), compile_scene(garage, fuse_static=True)
+
+    def names(model):
+        return sorted(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in range(model.ngeom))
+
+    assert names(fused) == names(plain)
+    assert fused.nbody == 1 and plain.nbody > 100  # parked cars and pillars were bodies
+    assert np.array_equal(np.bincount(geom_classes(fused)), np.bincount(geom_classes(plain)))
+    assert parked_car_geoms(fused).keys() == parked_car_bodies(plain).keys() and parked_car_bodies(fused) == {}
+    _step_one_second(fused)
+
+
+def test_markings_are_flat_and_cannot_be_hit(painted_tiny):
+    model = compile_scene(painted_tiny, fuse_static=True)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    classes = geom_classes(model)
+    painted = np.isin(classes, [Semantic.ROAD_MARKING, Semantic.STALL_MARKING, Semantic.ENTRANCE, Semantic.EXIT])
+    assert painted.sum() >= 4
+    assert not model.geom_contype[painted].any() and not model.geom_conaffinity[painted].any()
+    for g in np.flatnonzero(painted & (model.geom_type == mujoco.mjtGeom.mjGEOM_MESH)):
+        m = model.geom_dataid[g]
+        vert = model.mesh_vert[model.mesh_vertadr[m] : model.mesh_vertadr[m] + model.mesh_vertnum[m]]
+        world = data.geom_xpos[g] + vert @ data.geom_xmat[g].reshape(3, 3).T
+        np.testing.assert_allclose(world[:, 2], MARKING_HEIGHT, atol=1e-9)  # the top faces only
+        assert model.mesh_facenum[m] == model.mesh_vertnum[m] // 2  # 2 triangles per 4 corners
 
 
 def test_parked_argument_sets_initial_occupancy(painted_tiny):
@@ -86,12 +132,17 @@ def test_overview_segmentation_shows_floor_walls_and_parked_cars(painted_tiny):
     renderer.enable_segmentation_rendering()
     renderer.update_scene(data, camera="overview")
     seg = renderer.render()
-    renderer.close()
     ids, kinds = seg[..., 0], seg[..., 1]
     classes = geom_classes(model)
     labels = np.where((ids >= 0) & (kinds == mujoco.mjtObj.mjOBJ_GEOM), classes[np.clip(ids, 0, None)], 0)
     seen = set(np.unique(labels).tolist())
     assert {Semantic.FLOOR, Semantic.WALL, Semantic.PARKED_CAR} <= seen, seen
+    set_parked(model, data, [])  # empty stalls: their cars are not drawn
+    renderer.update_scene(data, camera="overview")
+    seg = renderer.render()
+    renderer.close()
+    drawn = seg[..., 0][(seg[..., 0] >= 0) & (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM)]
+    assert Semantic.PARKED_CAR not in set(classes[drawn].tolist())
 
 
 def test_write_scene_loads_from_disk(painted_tiny, tmp_path):

@@ -90,7 +90,7 @@ def geom_class_name(template: Template, index: int) -> str:
     return f"{template.name}_geom_{gname}"
 
 
-def _resolved_geom_attributes(template: Template, geom: dict) -> dict:
+def resolved_geom_attributes(template: Template, geom: dict) -> dict:
     """A template geom's attributes with its default classes applied (as MuJoCo would)."""
     parents = {dclass: (parent, attrs) for dclass, parent, attrs in template.defaults}
     chain = []
@@ -117,7 +117,7 @@ def install(root: mjcf.RootElement, template: Template, *, z_scale: float = 1.0)
     for name, attrs in template.materials:
         root.asset.add("material", name=material_name(template, name), **attrs)
     for k, g in enumerate(template.geoms):
-        attrs = _resolved_geom_attributes(template, g)
+        attrs = resolved_geom_attributes(template, g)
         if "material" in attrs:
             attrs["material"] = material_name(template, attrs["material"])
         if z_scale != 1.0:
