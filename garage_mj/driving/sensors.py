@@ -4,12 +4,23 @@ Rendering is headless. ``MUJOCO_GL`` defaults to ``egl`` (set here if this modul
 import MuJoCo; ``garage_mj`` sets it too); when EGL cannot start, OSMesa is tried, and when
 neither works one :class:`RenderError` line names the fix.
 
+``LP_NUM_THREADS`` defaults to 1 (set here, before any GL context, unless already set): under
+software GL (Mesa llvmpipe, no GPU) a 64x64 frame is a single 64x64 tile that one rasterizer
+thread draws, and every frame wakes all of llvmpipe's threads and waits for the last one. Between
+two frames the drive env steps the physics for a millisecond and the threads fall asleep; on the
+2-core machine with other jobs running, waking them cost 0.4-1.5 ms a frame against 0.06 ms with
+one thread (issue 19). A GPU ignores the variable; set it yourself for large software renders on
+many cores.
+
 Speed (software GL renders most frames of a cruise test): the camera drives MuJoCo's renderer
 directly instead of ``mujoco.Renderer``, with one ``mjv_updateScene`` and ONE segmentation pass per
 frame, reading the ID colours and the depth buffer of the same frame (``mujoco.Renderer`` renders
 twice and maps ids in Python). Geoms whose bounding sphere lies outside the view frustum (or
 beyond ``far``) are left out of the scene before it is built, so a frame costs what the camera
 sees, not the size of the garage. Markings stay in: segmentation shows road and stall markings.
+Depth/segmentation-only cameras leave out sites (the entrance and exit markers, spheres nothing
+collides with, which segmentation labelled "nothing"): they are no part of the world a sensor sees;
+colour cameras, for people, keep them.
 RGB, when asked for, is one more ordinary pass. Depth/segmentation-only cameras also render into a
 framebuffer of exactly the image size with no multisampling and one quad per box face.
 
@@ -25,6 +36,7 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("LP_NUM_THREADS", "1")  # read by Mesa when the first GL context starts
 
 from dataclasses import dataclass  # noqa: E402
 
@@ -157,6 +169,8 @@ class Camera:
         self._scene = mujoco.MjvScene(model, maxgeom=model.ngeom + model.nsite + 100)
         self._option = mujoco.MjvOption()
         self._option.geomgroup[_HIDDEN_GROUP] = 0
+        if not cfg.rgb:  # a sensor's images: the marker spheres are no part of the world it sees
+            self._option.sitegroup[:] = 0
         self._perturb = mujoco.MjvPerturb()
         self._cam = mujoco.MjvCamera()
         self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
