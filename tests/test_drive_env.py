@@ -11,6 +11,7 @@ import garage_mj  # noqa: F401  (registers the ids)
 from garage_mj.driving.drive_env import START_OFFSET, GarageDriveEnv
 from garage_mj.driving.drivers import load_driver
 from garage_mj.scene.mjcf_scene import parked_stalls
+from garage_mj.scene.semantics import Semantic
 
 ENV_ID = "garage_mj/GarageDrive-v0"
 FULL = np.array([1.0, 0.0], dtype=np.float32)
@@ -92,6 +93,49 @@ def test_builtin_drivers_reach_the_goal_deterministically(env, driver):
     np.testing.assert_array_equal(traj, traj2)
 
 
+def test_fused_scene_shows_the_camera_what_the_plain_scene_does(painted_tiny):
+    """The env's scene (static bodies fused, empty stalls' cars hidden in place) renders the same depth and
+    segmentation as the plain scene with those cars below the floor, frame by frame along a drive."""
+    import mujoco
+
+    from garage_mj.driving.sensors import Camera
+    from garage_mj.driving.vehicle import attach_car, compile_mjcf
+    from garage_mj.scene.mjcf_scene import HIDDEN_DEPTH, build_scene, parked_car_bodies
+
+    env = GarageDriveEnv(garage=painted_tiny, action_type="continuous", occupancy=0.6)
+    root = build_scene(env.scene)
+    attach_car(root, *env._entrance)
+    plain = compile_mjcf(root)
+    assert env.model.nbody < plain.nbody and env.model.ngeom == plain.ngeom
+    datas = {"plain": mujoco.MjData(plain), "env": mujoco.MjData(env.model)}
+    cams = {"plain": Camera(plain, env.camera_config), "env": Camera(env.model, env.camera_config)}
+    driver = load_driver("waypoint")
+    obs, _ = env.reset(seed=1)
+    driver.reset(env.driver_info(1))
+    for sid, b in parked_car_bodies(plain).items():
+        plain.body_pos[b, 2] = 0.0 if sid in env.occupied else -HIDDEN_DEPTH
+    frames, seen = 0, set()
+    for step in range(400):
+        if step % 2 == 0:
+            img = {}
+            for name, model in (("plain", plain), ("env", env.model)):
+                datas[name].qpos[:] = env.data.qpos
+                mujoco.mj_forward(model, datas[name])
+                img[name] = cams[name].render(datas[name])
+            np.testing.assert_array_equal(img["env"]["segmentation"], img["plain"]["segmentation"])
+            np.testing.assert_array_equal(img["env"]["depth"], img["plain"]["depth"])
+            seen |= set(np.unique(img["env"]["segmentation"]).tolist())
+            frames += 1
+        obs, _, term, trunc, _ = env.step(driver.act(obs))
+        if term or trunc:
+            break
+    for cam in cams.values():
+        cam.close()
+    env.close()
+    assert frames > 20  # the whole drive
+    assert {Semantic.FLOOR, Semantic.ROAD_MARKING, Semantic.STALL_MARKING, Semantic.PILLAR, Semantic.PARKED_CAR} <= seen
+
+
 def test_registered_id_is_deterministic_under_a_seed(painted_tiny):
     def run():
         env = gym.make(ENV_ID, garage=painted_tiny, action_type="discrete")
@@ -127,6 +171,21 @@ def test_collision_with_a_parked_car(painted_tiny):
     assert info["outcome"] == "collision" and info["hit"] == "parked_car"
     assert rewards[-1] < 0
     env.close()
+
+
+def test_collision_with_a_pillar_of_the_fused_scene(painted_tiny):
+    import mujoco
+
+    env = gym.make(ENV_ID, garage=painted_tiny, action_type="continuous", outcome={"max_deviation": 100.0})
+    model = env.unwrapped.model
+    pillar = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "pillar_20_column")
+    assert model.geom_bodyid[pillar] == 0  # a geom of the world body now, no body of its own
+    x, y = model.geom_pos[pillar, :2]
+    env.reset(seed=0, options={"start": (x - 4.0, y, 0.0), "occupied": []})  # 4 m west of it, facing it
+    info, _, term, _ = rollout(env, lambda _: FULL)
+    env.close()
+    assert term and info["outcome"] == "collision" and info["hit"] == "pillar"
+    assert info["hit_geom"] == "pillar_20_column"
 
 
 def test_braking_forever_deadlocks(env):
