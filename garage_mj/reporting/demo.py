@@ -144,7 +144,7 @@ def run_demo(cfg: DemoConfig) -> Path:
     cruise = _cruise(cfg, packs, out, figs)
     data = ReportData(
         title=f"garage-mj demo: {map_name}",
-        subtitle=f"DQN {cfg.timesteps} timesteps x {count_noun(len(cfg.train_seeds), 'seed')}, "
+        subtitle=f"DQN {cfg.timesteps:,} timesteps x {count_noun(len(cfg.train_seeds), 'seed')}, "
         f"{count_noun(len(sample), 'garage')}, {count_noun(cfg.tests, 'cruise test')} per garage and driver",
         kpis={"usable garages": str(total), "asset packs": str(len(packs)), **cruise.kpis},
         convergence_png=convergence,
@@ -157,8 +157,9 @@ def run_demo(cfg: DemoConfig) -> Path:
         regression_png=cruise.regression_png,
         regression_text=cruise.regression_text,
         notes=[
-            f"library: {library_path}",
-            f"asset packs: {packs_dir} (index.json lists them)",
+            f"paths are relative to this report's folder ({out}): the folder can be moved",
+            f"library: {library_path.relative_to(out).as_posix()}",
+            f"asset packs: {packs_dir.relative_to(out).as_posix()}/ (index.json lists them)",
             "cruise runs: cruise/<driver>/ (tests.csv, summary.csv, summary.json, xosc/ with every test "
             "as OpenSCENARIO, videos/ with the failures shown above)",
             "paper (SPEC section 5): r(difficulty, success) = -0.638 over 16 garages of the 13x13 aligned map",
