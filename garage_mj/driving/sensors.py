@@ -250,10 +250,13 @@ class Camera:
             metres = d / (z + c)
         depth = np.minimum(metres, far).astype(np.float32)
         # segmentation: colour = scene geom index + 1 (0 = nothing); scene geom -> model geom -> class
-        rgb = self._rgb_buf[::-1].astype(np.int32)
-        segid = rgb[..., 0] | (rgb[..., 1] << 8) | (rgb[..., 2] << 16)
         scn = self._scene
         n = scn.ngeom
+        if n < 255:  # every index + 1 fits the red byte; green and blue are 0
+            segid = self._rgb_buf[::-1, :, 0]
+        else:
+            rgb = self._rgb_buf[::-1].astype(np.int32)
+            segid = rgb[..., 0] | (rgb[..., 1] << 8) | (rgb[..., 2] << 16)
         table = np.zeros(n + 2, np.uint8)  # [0] nothing, [1..n] scene geoms, [n+1] out of range
         geom = int(mujoco.mjtObj.mjOBJ_GEOM)
         ids = np.array([g.objid if g.objtype == geom else -1 for g in scn.geoms[:n]], np.int64)
