@@ -331,10 +331,11 @@ class GarageDriveEnv(gym.Env):
                 pairs = data.contact.geom[:n]
                 if hits[pairs[:, 0], pairs[:, 1]].any():
                     contacts += ego_contacts(model, data, self.car.geom_mask, self.classes)
-        x, y, yaw = self.car.pose(self.data)
+        x, y, yaw = pose = self.car.pose(self.data)
+        speed = self.car.speed(self.data)
         self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])
         self._last_xy = (x, y)
-        self.outcome = self.monitor.update(self.data.time, (x, y), self.car.speed(self.data), contacts, yaw=yaw,
+        self.outcome = self.monitor.update(self.data.time, (x, y), speed, contacts, yaw=yaw,
                                            hold=moving)
         reward = self.monitor.progress - before
         terminated = truncated = False
@@ -345,10 +346,12 @@ class GarageDriveEnv(gym.Env):
                 reward += SUCCESS_REWARD
             elif self.outcome.kind is OutcomeKind.COLLISION:
                 reward += COLLISION_PENALTY
-        return self._observe(), float(reward), terminated, truncated, self._info()
+        return self._observe(pose, speed), float(reward), terminated, truncated, self._info(pose)
 
-    def _observe(self) -> dict[str, np.ndarray]:
-        x, y, yaw = self.car.pose(self.data)
+    def _observe(self, pose: tuple[float, float, float] | None = None, speed: float | None = None
+                 ) -> dict[str, np.ndarray]:
+        """The observation of the current state (``pose`` and ``speed``: the car's, when the caller has them)."""
+        x, y, yaw = pose or self.car.pose(self.data)
         obs = self.camera.render(self.data)
         if self.image_obs:
             far = self.camera_config.far
@@ -356,7 +359,7 @@ class GarageDriveEnv(gym.Env):
             obs["segmentation"] = obs["segmentation"][..., None]
         target = self.route.point_at(self.monitor.progress + LOOKAHEAD)
         obs["waypoint"] = to_car_frame(target, x, y, yaw).astype(np.float32)
-        obs["speed"] = np.array([self.car.speed(self.data)], dtype=np.float32)
+        obs["speed"] = np.array([self.car.speed(self.data) if speed is None else speed], dtype=np.float32)
         obs["goal"] = to_car_frame(self.monitor.goal, x, y, yaw).astype(np.float32)
         obs["remaining"] = np.array([max(self.route.length - self.monitor.progress, 0.0)], dtype=np.float32)
         obs["pose"] = np.array([x, y, math.remainder(yaw, math.tau)], dtype=np.float32)
@@ -369,8 +372,8 @@ class GarageDriveEnv(gym.Env):
             obs["actors"] = rows
         return obs
 
-    def _info(self) -> dict[str, Any]:
-        x, y, yaw = self.car.pose(self.data)
+    def _info(self, pose: tuple[float, float, float] | None = None) -> dict[str, Any]:
+        x, y, yaw = pose or self.car.pose(self.data)
         info: dict[str, Any] = {
             "target_stall": self.target,
             "route_length": self.route.length,
