@@ -115,3 +115,17 @@ def test_one_pass_matches_mujoco_renderer(cull):
     np.testing.assert_allclose(img["depth"], np.minimum(ref_depth, far), rtol=1e-4, atol=1e-3)  # [m]: one quad per box face, not 4x4
     np.testing.assert_array_equal(img["segmentation"], ref_seg)
     assert {Semantic.PILLAR, Semantic.WALL, Semantic.OBSTACLE, Semantic.ROAD_MARKING} <= set(np.unique(ref_seg))
+
+
+def test_software_gl_draws_in_the_calling_thread_unless_told_otherwise():
+    import os
+    import subprocess
+    import sys
+
+    code = "import os, garage_mj.driving.sensors; print(os.environ['LP_NUM_THREADS'])"
+    env = {k: v for k, v in os.environ.items() if k != "LP_NUM_THREADS"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "0"
+    out = subprocess.run([sys.executable, "-c", code], env={**env, "LP_NUM_THREADS": "4"}, capture_output=True,
+                         text=True, check=True)
+    assert out.stdout.strip() == "4"  # the user's own setting stays

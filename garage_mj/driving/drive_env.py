@@ -64,15 +64,14 @@ def _as(cls: type, value: Any) -> Any:
     return value if isinstance(value, cls) else load_config(cls, value)
 
 
-def _hit_pairs(ego: np.ndarray, classes: np.ndarray) -> np.ndarray:
-    """(ngeom, ngeom) bool: geom pairs whose contact is a hit (an ego geom and a collidable non-ego geom).
+def _hittable(ego: np.ndarray, classes: np.ndarray) -> np.ndarray:
+    """(ngeom,) bool: the geoms whose contact with the car is a hit (collidable classes, not the car itself).
 
     One lookup per physics step tells whether :func:`~garage_mj.driving.outcomes.ego_contacts` has
-    anything to name; a Python call per step cost as much as the step itself.
+    anything to name (it still checks that the car is one side of the contact); calling it at
+    every step cost as much as the step itself, the wheels being always on the floor.
     """
-    other = np.isin(classes, [int(c) for c in COLLIDABLE]) & ~ego
-    hit = ego[:, None] & other[None, :]
-    return hit | hit.T
+    return np.isin(classes, [int(c) for c in COLLIDABLE]) & ~ego
 
 
 class GarageDriveEnv(gym.Env):
@@ -204,7 +203,7 @@ class GarageDriveEnv(gym.Env):
         self.actor_bodies = ActorBodies(self.model, self.scenario_config) if self.scenario_config.count else None
         self.car = Car(self.model, self.car_config)
         self.classes = geom_classes(self.model)
-        self._hits = _hit_pairs(self.car.geom_mask, self.classes)
+        self._hittable = _hittable(self.car.geom_mask, self.classes)
         self.camera = Camera(self.model, self.camera_config)
         self._top: Camera | None = None
         self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
@@ -323,14 +322,12 @@ class GarageDriveEnv(gym.Env):
             moving = self._move_actors(x0, y0)
         self.car.act(self.data, action, self.dt)
         contacts = []
-        model, data, hits = self.model, self.data, self._hits
+        model, data, hittable = self.model, self.data, self._hittable
         for _ in range(self.n_substeps):
             mujoco.mj_step(model, data)
-            n = data.ncon
-            if n:  # the wheels touch the floor at every step: name contacts only when one is a hit
-                pairs = data.contact.geom[:n]
-                if hits[pairs[:, 0], pairs[:, 1]].any():
-                    contacts += ego_contacts(model, data, self.car.geom_mask, self.classes)
+            # the wheels touch the floor at every step: name contacts only when one may be a hit
+            if data.ncon and hittable[data.contact.geom].any():
+                contacts += ego_contacts(model, data, self.car.geom_mask, self.classes)
         x, y, yaw = pose = self.car.pose(self.data)
         speed = self.car.speed(self.data)
         self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])

@@ -4,13 +4,14 @@ Rendering is headless. ``MUJOCO_GL`` defaults to ``egl`` (set here if this modul
 import MuJoCo; ``garage_mj`` sets it too); when EGL cannot start, OSMesa is tried, and when
 neither works one :class:`RenderError` line names the fix.
 
-``LP_NUM_THREADS`` defaults to 1 (set here, before any GL context, unless already set): under
-software GL (Mesa llvmpipe, no GPU) a 64x64 frame is a single 64x64 tile that one rasterizer
-thread draws, and every frame wakes all of llvmpipe's threads and waits for the last one. Between
-two frames the drive env steps the physics for a millisecond and the threads fall asleep; on the
-2-core machine with other jobs running, waking them cost 0.4-1.5 ms a frame against 0.06 ms with
-one thread (issue 19). A GPU ignores the variable; set it yourself for large software renders on
-many cores.
+``LP_NUM_THREADS`` defaults to 0 (set here, before any GL context, unless already set): under
+software GL (Mesa llvmpipe, no GPU) the frame is then drawn in the calling thread. A 64x64 frame
+is a single tile, so llvmpipe's rasterizer threads gain nothing, and handing each frame to them
+costs a sleep and a wake-up: between two frames the drive env steps the physics for a millisecond
+and the threads fall asleep. On the 2-core machine with other jobs running that cost 0.25-1 ms a
+frame (2 threads, the default, or 1), against a steady 0.25-0.3 ms in the calling thread; with one
+cruise worker per core it also keeps workers from competing with each other's threads (issue 19).
+A GPU ignores the variable; set it yourself for large software renders on many cores.
 
 Speed (software GL renders most frames of a cruise test): the camera drives MuJoCo's renderer
 directly instead of ``mujoco.Renderer``, with one ``mjv_updateScene`` and ONE segmentation pass per
@@ -36,7 +37,7 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
-os.environ.setdefault("LP_NUM_THREADS", "1")  # read by Mesa when the first GL context starts
+os.environ.setdefault("LP_NUM_THREADS", "0")  # read by Mesa when the first GL context starts
 
 from dataclasses import dataclass  # noqa: E402
 
@@ -180,6 +181,7 @@ class Camera:
         flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = cfg.shadows
         self._rgb_buf = np.empty((cfg.height, cfg.width, 3), np.uint8)
         self._depth_buf = np.empty((cfg.height, cfg.width), np.float32)
+        self._metres = np.empty((cfg.height, cfg.width), np.float64)  # depth in metres, computed in place
         # class per geom id, plus one slot (index ngeom) for background and non-geom objects
         self._lut = np.append(geom_classes(model), 0).astype(np.uint8)
         perspective = model.cam_projection[self.camera_id] == mujoco.mjtProjection.mjPROJ_PERSPECTIVE
@@ -241,14 +243,17 @@ class Camera:
         cfg = self.config
         # depth: undo the reversed-Z perspective projection (as mujoco.Renderer does), in float64
         near, far = np.float32(cfg.near), np.float32(cfg.far)
-        z = self._depth_buf[::-1].astype(np.float64)
+        z = self._metres
+        np.copyto(z, self._depth_buf[::-1])
         if self._scene.camera[0].orthographic:
-            metres = far - z * (far - near)
+            z *= far - near
+            np.subtract(far, z, out=z)
         else:
             c = np.float32(-0.5) * (-(far + near) / (far - near)) - np.float32(0.5)
             d = np.float32(-0.5) * (-(np.float32(2) * far * near) / (far - near))
-            metres = d / (z + c)
-        depth = np.minimum(metres, far).astype(np.float32)
+            z += c
+            np.divide(d, z, out=z)
+        depth = np.minimum(z, far, out=z).astype(np.float32)
         # segmentation: colour = scene geom index + 1 (0 = nothing); scene geom -> model geom -> class
         scn = self._scene
         n = scn.ngeom
