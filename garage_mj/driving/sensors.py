@@ -191,21 +191,21 @@ class Camera:
             half_y = np.deg2rad(float(model.cam_fovy[self.camera_id])) / 2
             half_x = np.arctan(np.tan(half_y) * cfg.width / cfg.height)
             a, b = half_x + CULL_MARGIN, half_y + CULL_MARGIN
-            # outward normals of the four side planes in camera coordinates (x right, y up, -z ahead)
+            # outward normals (columns) of the frustum's planes in camera coordinates (x right, y up,
+            # -z ahead): four sides, then near and far
             self._planes = np.array([[np.cos(a), 0, np.sin(a)], [-np.cos(a), 0, np.sin(a)],
-                                     [0, np.cos(b), np.sin(b)], [0, -np.cos(b), np.sin(b)]])
-            # planes (rbound 0) are unbounded and always drawn
-            self._radius = np.where(model.geom_rbound > 0, model.geom_rbound, np.inf)
+                                     [0, np.cos(b), np.sin(b)], [0, -np.cos(b), np.sin(b)],
+                                     [0, 0, 1], [0, 0, -1]]).T
+            # a geom is out when its centre lies farther than its bounding radius beyond a plane
+            # (the near and far planes sit near and far ahead); planes (rbound 0) are always drawn
+            r = np.where(model.geom_rbound > 0, model.geom_rbound, np.inf)
+            self._bounds = np.stack([r, r, r, r, r - cfg.near, r + cfg.far], axis=1)
 
     def _culled(self, data: mujoco.MjData) -> np.ndarray:
         """Bool per geom: its bounding sphere lies wholly outside the view frustum."""
         cid = self.camera_id
-        rel = (data.geom_xpos - data.cam_xpos[cid]) @ data.cam_xmat[cid].reshape(3, 3)  # camera coordinates
-        r = self._radius
-        ahead = -rel[:, 2]
-        out = (ahead < self.config.near - r) | (ahead - r > self.config.far)
-        out |= (rel @ self._planes.T > r[:, None]).any(axis=1)
-        return out
+        planes = data.cam_xmat[cid].reshape(3, 3) @ self._planes  # the planes' normals in world coordinates
+        return ((data.geom_xpos - data.cam_xpos[cid]) @ planes > self._bounds).any(axis=1)
 
     def _update(self, data: mujoco.MjData) -> None:
         m = self.model
