@@ -12,7 +12,8 @@ Two fixed sets (issue 19: a faster env must keep the outcomes):
 ``run`` drives them with the code this interpreter imports (point ``PYTHONPATH`` at another tree to
 record that tree) into ``OUT/vision`` and ``OUT/oracle`` (ordinary cruise folders, resumable);
 ``compare`` matches two such records test by test on (garage hash, test index) and lists every test
-whose outcome changed. ``missed_goal`` (split from ``deadlock`` by issue 19's other part) is compared
+whose outcome changed, and how many end at the same simulated time and path length (the rows' 1 ms and
+1 mm resolution) having hit the same geom. ``missed_goal`` (split from ``deadlock`` by issue 19's other part) is compared
 as ``deadlock``, so a record made before the split compares with one made after it.
 
     PYTHONPATH=/tmp/before_speed .venv/bin/python eval/parity_drive_env.py run --out /tmp/before_speed_rows
@@ -106,7 +107,9 @@ def compare_part(before: Path, after: Path) -> dict:
         return round(100 * sum(r["outcome"] == "success" for r in feas) / max(len(feas), 1), 2), len(feas)
 
     (sb, fb), (sa, fa) = success(a), success(b)
+    same_drive = sum(all(a[k][c] == b[k][c] for c in ("time", "path_length", "hit_geom")) for k in a)
     return {"tests": len(a), "changed": len(changed), "same_pct": round(100 * (len(a) - len(changed)) / len(a), 2),
+            "same_end_time_path_and_hit": same_drive,
             "before": tally(a), "after": tally(b), "success_pct_of_feasible": {"before": sb, "after": sa},
             "feasible": {"before": fb, "after": fa}, "changes": changed}
 
@@ -139,8 +142,10 @@ def main(argv: list[str] | None = None) -> int:
         if part not in result:
             continue
         p = result[part]
-        print(f"{part}: {p['tests']} tests, {p['changed']} changed ({p['same_pct']}% the same); success of feasible "
-              f"{p['success_pct_of_feasible']['before']}% -> {p['success_pct_of_feasible']['after']}%")
+        print(f"{part}: {p['tests']} tests, {p['changed']} changed ({p['same_pct']}% the same; "
+              f"{p['same_end_time_path_and_hit']} end at the same time [ms] and path length [mm], hitting the same "
+              f"geom); success of feasible {p['success_pct_of_feasible']['before']}% -> "
+              f"{p['success_pct_of_feasible']['after']}%")
         print(f"  before {p['before']}\n  after  {p['after']}")
         for ch in p["changes"]:
             print(f"  {ch['garage']} test {ch['test']}: {ch['before']} -> {ch['after']} ({ch['after_reason']})")
