@@ -138,21 +138,36 @@ class Library:
         The metrics are recomputed from the grid (:func:`garage_mj.grid.metrics.evaluate`), so what
         the library says about a garage is what the rest of garage-mj computes for it.
         """
-        m = evaluate(garage)
-        h, w = garage.shape
-        row = (
-            map, run, int(seed), int(episode), int(timestep), garage.canonical_hash(), h, w,
-            json.dumps(garage.grid.tolist()), json.dumps(garage.initial.tolist()), garage.six_stall_axis,
-            m.coverage, m.difficulty, m.stalls, m.mean_road_length, m.mean_intersection_degree,
-            datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        )
-        cur = self._con.execute(
-            "INSERT OR IGNORE INTO garages (map, run, seed, episode, timestep, hash, rows, cols, grid, "
-            "initial, six_stall_axis, coverage, difficulty, stalls, mean_road_length, "
-            "mean_intersection_degree, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            row,
-        )
+        cur = self._con.execute(_INSERT, _row(garage, map, run, seed, episode, timestep))
         return int(cur.lastrowid) if cur.rowcount == 1 and cur.lastrowid is not None else None
+
+    def credit(self, garage: Garage, *, map: str, run: str, seed: int, episode: int, timestep: int) -> int | None:
+        """:meth:`add`, except that a garage stored already from a run of the same map with a higher seed is
+        credited to this run instead (its provenance replaced, its id kept). Returns the id when the garage
+        was stored or credited, ``None`` when it stays with its run.
+
+        So a library that parallel runs fill holds the same rows whichever run met a garage first: each
+        garage is credited to the lowest seed that met it, at that run's first meeting (the protocol's rule).
+        """
+        row = _row(garage, map, run, seed, episode, timestep)
+        con = self._con
+        con.execute("BEGIN IMMEDIATE")
+        try:
+            old = con.execute("SELECT id, map, seed FROM garages WHERE hash = ?", (row[5],)).fetchone()
+            if old is None:
+                cur = con.execute(_INSERT, row)
+                got: int | None = int(cur.lastrowid) if cur.lastrowid is not None else None
+            elif old[1] == map and old[2] > int(seed):
+                con.execute("UPDATE garages SET run = ?, seed = ?, episode = ?, timestep = ?, created_at = ? "
+                            "WHERE id = ?", (run, int(seed), int(episode), int(timestep), row[-1], old[0]))
+                got = int(old[0])
+            else:
+                got = None
+            con.execute("COMMIT")
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
+        return got
 
     # -- reading ----------------------------------------------------------------------------------
     def id_of(self, garage_hash: str) -> int | None:
@@ -345,3 +360,22 @@ def _allocate(n: int, sizes: dict[int, int]) -> dict[int, int]:
             left -= take
         open_bins = [b for b in open_bins if quota[b] < sizes[b]]
     return quota
+
+
+_INSERT = (
+    "INSERT OR IGNORE INTO garages (map, run, seed, episode, timestep, hash, rows, cols, grid, initial, six_stall_axis, "
+    "coverage, difficulty, stalls, mean_road_length, mean_intersection_degree, created_at) "
+    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+)
+
+
+def _row(garage: Garage, map: str, run: str, seed: int, episode: int, timestep: int) -> tuple:
+    """The ``garages`` row of ``garage`` and its provenance (metrics recomputed), in :data:`_INSERT`'s order."""
+    m = evaluate(garage)
+    h, w = garage.shape
+    return (
+        map, run, int(seed), int(episode), int(timestep), garage.canonical_hash(), h, w,
+        json.dumps(garage.grid.tolist()), json.dumps(garage.initial.tolist()), garage.six_stall_axis,
+        m.coverage, m.difficulty, m.stalls, m.mean_road_length, m.mean_intersection_degree,
+        datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    )
