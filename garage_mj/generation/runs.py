@@ -10,7 +10,9 @@ through :class:`DQNRun`:
 - on resume, the newest complete checkpoint: the model is loaded from it and re-seeded with
   ``seed + timesteps`` (a fresh, reproducible stream), the episode log is cut back to its episodes;
   a new run builds the model with ``seed``;
-- a checkpoint every ``checkpoint_every`` timesteps, and one on Ctrl-C before the interrupt goes on.
+- a checkpoint every ``checkpoint_every`` timesteps, and one on Ctrl-C before the interrupt goes on;
+  :attr:`DQNRun.after_checkpoint`, when set, gets the files each checkpoint wrote (a run trained on
+  another machine sends them to the machine that keeps the run, :mod:`garage_mj.generation.remote`).
 
 What differs between the two (the manifest's fields, the env, the callbacks, what is saved at the
 end) stays with the caller.
@@ -67,6 +69,24 @@ def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
         if best is None or state["timesteps"] > best[1]["timesteps"]:
             best = (model, state)
     return best
+
+
+def checkpoint_files(out_dir: Path) -> list[Path]:
+    """The files of the newest complete checkpoint of a run folder (model, replay buffer if saved, counters)."""
+    found = latest_checkpoint(out_dir)
+    if found is None:
+        return []
+    model = found[0]
+    replay = model.with_name(model.stem + "_replay.pkl")
+    return [model, *([replay] if replay.exists() else []), model.with_suffix(".json")]
+
+
+def prune_checkpoints(out_dir: Path) -> None:
+    """Delete all but the newest :data:`KEEP_CHECKPOINTS` checkpoints of a run folder."""
+    states = sorted((out_dir / CHECKPOINTS).glob("step_*.json"))
+    for old in states[:-KEEP_CHECKPOINTS]:
+        for path in (old, old.with_suffix(".zip"), old.with_name(old.stem + "_replay.pkl")):
+            path.unlink(missing_ok=True)
 
 
 def truncate_log(path: Path, header_lines: int, rows: int) -> None:
@@ -127,6 +147,8 @@ class DQNRun:
         self.counter: EpisodeCounter | None = None
         self.checkpoint_fields: Callable[[], dict[str, Any]] | None = None
         self.save_replay_buffer = False
+        #: called with the files each checkpoint wrote (model, replay buffer, counters, manifest), in that order
+        self.after_checkpoint: Callable[[list[Path]], None] | None = None
         self.wall_s = self.cpu_s = 0.0  # of the last learn()
 
     def write_manifest(self) -> None:
@@ -168,19 +190,20 @@ class DQNRun:
         tmp = stem.with_name(stem.name + ".tmp.zip")
         model.save(tmp)
         os.replace(tmp, stem.with_suffix(".zip"))
+        files = [stem.with_suffix(".zip")]
         if self.save_replay_buffer:
             tmp_buf = stem.with_name(stem.name + "_replay.tmp.pkl")
             model.save_replay_buffer(tmp_buf)
             os.replace(tmp_buf, stem.with_name(stem.name + "_replay.pkl"))
+            files.append(stem.with_name(stem.name + "_replay.pkl"))
         write_json(stem.with_suffix(".json"), {"timesteps": step, "episodes": self.counter.episodes})
-        states = sorted((self.out / CHECKPOINTS).glob("step_*.json"))
-        for old in states[:-KEEP_CHECKPOINTS]:
-            for path in (old, old.with_suffix(".zip"), old.with_name(old.stem + "_replay.pkl")):
-                path.unlink(missing_ok=True)
+        prune_checkpoints(self.out)
         self.manifest.update(timesteps=step, episodes=self.counter.episodes)
         if self.checkpoint_fields is not None:
             self.manifest.update(self.checkpoint_fields())
         self.write_manifest()
+        if self.after_checkpoint is not None:
+            self.after_checkpoint([*files, stem.with_suffix(".json"), self.manifest_path])
 
     def learn(self, timesteps: int, counter: EpisodeCounter, callbacks: Sequence[BaseCallback], *,
               checkpoint_every: int, close: Sequence[Callable[[], None]] = (),

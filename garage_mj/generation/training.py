@@ -8,7 +8,15 @@ was reported. Checkpoints (model + episode/timestep counters) are written atomic
 (the lifecycle of :class:`garage_mj.generation.runs.DQNRun`).
 
 A run folder holds ``run.json`` (the manifest: map, seed, config, progress, throughput),
-``monitor.csv``, ``checkpoints/`` and, at the end, ``final_model.zip``.
+``monitor.csv``, ``checkpoints/`` and, at the end, ``final_model.zip``. The manifest's ``live``
+(timesteps, episodes, timesteps/s, time) is refreshed every :data:`HEARTBEAT_S` and at each
+checkpoint, so a progress view can tell a running run from a stopped one.
+
+A garage met in several runs of one map is credited to the lowest seed
+(:meth:`~garage_mj.generation.library.Library.credit`): parallel runs fill the same library
+whichever finishes first. A run trained on another machine (:mod:`garage_mj.generation.remote`)
+passes a ``sink`` instead of a library and ``on_files``, which gets the files each checkpoint
+writes, to send them to the machine that keeps the run.
 """
 
 from __future__ import annotations
@@ -17,10 +25,11 @@ import dataclasses
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import gymnasium as gym
 from stable_baselines3.common.callbacks import BaseCallback
@@ -32,11 +41,15 @@ from garage_mj.generation.library import Library
 from garage_mj.generation.runs import DQNRun
 from garage_mj.grid.map_io import load_map
 
+if TYPE_CHECKING:
+    from garage_mj.grid.garage import Garage
+
 MANIFEST = "run.json"
 MONITOR = "monitor.csv"
 FINAL_MODEL = "final_model.zip"
 LIBRARY = "library.sqlite"
 PROGRESS_EVERY = 256  # [timesteps] between progress-bar refreshes
+HEARTBEAT_S = 30.0  # [s] between refreshes of the manifest's ``live`` progress
 
 
 MAX_BUFFER_SIZE = 10_000_000  # [transitions] ~40 GB at ~4 KB each: beyond that the run cannot fit in memory
@@ -210,10 +223,17 @@ def make_vec_env(map: str, config: DQNConfig, monitor_path: Path | None):
 
 
 # -- callbacks ------------------------------------------------------------------------------------
-class LibraryCallback(BaseCallback):
-    """Counts episodes and commits the final garage of every usable one to the library."""
+class GarageSink(Protocol):
+    """Where a run's usable garages go: a :class:`Library`, or a stream to the machine that keeps it."""
 
-    def __init__(self, library: Library, *, map: str, run: str, seed: int, episodes: int = 0) -> None:
+    def credit(self, garage: Garage, *, map: str, run: str, seed: int, episode: int, timestep: int) -> int | None:
+        """Store ``garage`` with its provenance (:meth:`Library.credit`); the id when new here, else None."""
+
+
+class LibraryCallback(BaseCallback):
+    """Counts episodes and commits the final garage of every usable one to the library (or ``sink``)."""
+
+    def __init__(self, library: GarageSink, *, map: str, run: str, seed: int, episodes: int = 0) -> None:
         super().__init__()
         self.library, self.map, self.run, self.seed = library, map, run, seed
         self.episodes = episodes  # episodes finished so far in this run (continues on resume)
@@ -227,7 +247,7 @@ class LibraryCallback(BaseCallback):
             garage = info.get("final_garage")
             if info.get("usable") and garage is not None:
                 self.usable += 1
-                new = self.library.add(
+                new = self.library.credit(
                     garage, map=self.map, run=self.run, seed=self.seed, episode=self.episodes,
                     timestep=self.num_timesteps,
                 )
@@ -270,6 +290,20 @@ class ProgressCallback(BaseCallback):
             self.bar = None
 
 
+class LiveCallback(BaseCallback):
+    """Every :data:`HEARTBEAT_S` of wall time, ``beat()`` (which refreshes the manifest's ``live``)."""
+
+    def __init__(self, beat: Callable[[], None]) -> None:
+        super().__init__()
+        self.beat, self.last = beat, time.monotonic()
+
+    def _on_step(self) -> bool:
+        if self.n_calls % 64 == 0 and time.monotonic() - self.last >= HEARTBEAT_S:
+            self.last = time.monotonic()
+            self.beat()
+        return True
+
+
 # -- run folder -----------------------------------------------------------------------------------
 def read_manifest(out_dir: str | Path) -> dict[str, Any]:
     """The ``run.json`` of a run folder; :class:`TrainingError` if there is none."""
@@ -282,7 +316,7 @@ def read_manifest(out_dir: str | Path) -> dict[str, Any]:
         raise TrainingError(f"{path} is not valid JSON ({str(exc)[:120]}); delete the run folder and train again") from None
 
 
-def _run_id(map_name: str, seed: int, out: Path) -> str:
+def new_run_id(map_name: str, seed: int, out: Path) -> str:
     """``<map>_s<seed>_<UTC time>_<folder digest>``: unique per run folder and start."""
     import hashlib
 
@@ -305,6 +339,10 @@ def train(
     library_path: str | Path | None = None,
     progress: bool = True,
     callbacks: list[BaseCallback] | None = None,
+    *,
+    sink: GarageSink | None = None,
+    run_id: str | None = None,
+    on_files: Callable[[list[Path]], None] | None = None,
 ) -> dict[str, Any]:
     """Train DQN for ``timesteps`` in total on ``map``; returns the final manifest.
 
@@ -318,6 +356,12 @@ def train(
         library_path: where usable garages go (default ``out_dir/library.sqlite``).
         progress: show a tqdm progress bar.
         callbacks: extra SB3 callbacks (tests, instrumentation).
+        sink: where usable garages go instead of a library (``library_path`` is then not opened; the
+            manifest's ``library`` and ``garages_stored`` stay None for the keeper of the library to fill).
+        run_id: a new run's id (default :func:`new_run_id`).
+        on_files: called with the files of ``out_dir`` just written, in order: after each checkpoint
+            (``monitor.csv``, the checkpoint's model, replay buffer, counters, then ``run.json``), at each
+            ``live`` refresh (``run.json``) and at the end (``final_model.zip``, ``run.json``).
     """
     if timesteps < 1:
         raise TrainingError(f"--timesteps must be >= 1, got {timesteps}")
@@ -338,32 +382,56 @@ def train(
             raise TrainingError(f"{out} already holds a run; pass --resume to continue it or choose a new --out")
         config = config or DQNConfig()
         manifest = {
-            "run": _run_id(map_name, seed, out),
+            "run": run_id or new_run_id(map_name, seed, out),
             "map": map_name, "map_source": str(map), "seed": seed, "algo": "dqn", "config": config.to_dict(),
             "status": "running", "timesteps": 0, "episodes": 0,
         }
     run = DQNRun(out, manifest, MANIFEST, resume)
-    library_path = Path(library_path) if library_path is not None else out / LIBRARY
-    manifest.update(target_timesteps=timesteps, library=str(library_path))
+    library_path = None if sink is not None else Path(library_path) if library_path is not None else out / LIBRARY
+    manifest.update(target_timesteps=timesteps, library=None if library_path is None else str(library_path))
     if resume and run.done_steps >= timesteps and manifest.get("status") == "finished":
         return manifest
     run.restart_log(out / MONITOR, header_lines=2)
 
     venv, envs = make_vec_env(map, config, out / MONITOR)
     model = run.start_model(venv, config, seed, save_replay_buffer=config.save_replay_buffer)
-    library = Library(library_path)
-    lib_cb = LibraryCallback(library, map=map_name, run=manifest["run"], seed=seed, episodes=run.done_episodes)
+    library = Library(library_path) if library_path is not None else None
+    lib_cb = LibraryCallback(library or sink, map=map_name, run=manifest["run"], seed=seed,  # type: ignore[arg-type]
+                             episodes=run.done_episodes)
     bar = ProgressCallback(timesteps, run.done_steps, lib_cb, f"{map_name} seed {seed}", progress)
     manifest["status"] = "running"
     steps0 = model.num_timesteps
-    run.learn(timesteps, lib_cb, [bar, *(callbacks or [])], checkpoint_every=config.checkpoint_every,
-              close=(bar.close, library.close, venv.close), on_interrupt=bar.close, interrupted_status="interrupted")
+    t0 = time.perf_counter()
+
+    def live() -> dict[str, Any]:
+        wall, steps = time.perf_counter() - t0, model.num_timesteps - steps0
+        return {"live": {"timesteps": model.num_timesteps, "episodes": lib_cb.episodes,
+                         "timesteps_per_s": round(steps / wall, 1) if steps > 0 and wall > 0 else None,
+                         "updated_at": datetime.now(timezone.utc).isoformat(timespec="seconds")}}
+
+    def beat() -> None:
+        manifest.update(live())
+        run.write_manifest()
+        if on_files is not None:
+            on_files([run.manifest_path])
+
+    if on_files is not None:
+        run.after_checkpoint = lambda files: on_files([out / MONITOR, *files])
+    manifest.update(live())
+    if on_files is not None:  # where the run stands, before the first checkpoint
+        run.write_manifest()
+        on_files([run.manifest_path])
+    close = (bar.close, venv.close) + ((library.close,) if library is not None else ())
+    run.learn(timesteps, lib_cb, [bar, LiveCallback(beat), *(callbacks or [])],
+              checkpoint_every=config.checkpoint_every, close=close, on_interrupt=bar.close,
+              interrupted_status="interrupted", checkpoint_fields=live)
     wall, cpu = run.wall_s, run.cpu_s
     model.save(out / FINAL_MODEL)
     steps = model.num_timesteps - steps0
+    manifest.update(live())
     manifest.update(
         status="finished", timesteps=model.num_timesteps, episodes=lib_cb.episodes,
-        garages_stored=_count_run(library_path, manifest["run"]),
+        garages_stored=None if library_path is None else _count_run(library_path, manifest["run"]),
         last_session={
             "timesteps": steps, "wall_s": round(wall, 3),
             "timesteps_per_s": round(steps / wall, 1) if wall > 0 else None,
@@ -374,4 +442,6 @@ def train(
         },
     )
     run.write_manifest()
+    if on_files is not None:
+        on_files([out / FINAL_MODEL, run.manifest_path])
     return manifest
