@@ -26,6 +26,13 @@ Backends:
     is retried on a restarted actor up to ``max_retries`` times (Ray's actor restarts), then the
     batch stops with one :class:`BackendError` line; an exception the job itself raises is
     re-raised here as it is, without retry.
+
+:func:`stream_unordered` is for long jobs that report as they go (a DQN run sends each garage
+and checkpoint as it is made, :mod:`garage_mj.generation.remote`): the job is a generator, and
+every item it yields comes back to this process at once. On Ray each job is a task (one CPU,
+any node, at most ``workers`` at a time); a job whose worker process or node is lost is
+submitted again as the caller says (a run resumes from the newest checkpoint this process
+holds), so a lost node costs the work since that checkpoint, not the batch.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ import contextlib
 import logging
 import multiprocessing as mp
 import os
+from collections import Counter, deque
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -228,3 +236,106 @@ def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_r
                 ray.kill(actor)
             except Exception:  # noqa: BLE001  (already gone)
                 pass
+
+
+# -- streams ------------------------------------------------------------------------------------------
+def stream_unordered(func: Callable[[Any], Iterator[Any]], jobs: Sequence[Any], workers: int = 1,
+                     backend: str = "local", address: str | None = None, *,
+                     prepare: Callable[[Any], Any] | None = None, resume: Callable[[int, str], Any] | None = None,
+                     max_retries: int = 3, name: Callable[[int], str] | None = None) -> Iterator[tuple[int, Any]]:
+    """``(job index, item)`` for every item the generator ``func(prepare(job))`` yields, as soon as it is made.
+
+    ``local``: the jobs one after another in this process. ``ray``: up to ``workers`` jobs at a time,
+    each a Ray task of one CPU on any node of the cluster at ``address`` (else a private local Ray);
+    the items of all of them arrive here as they are yielded. ``prepare`` (default: none) turns a job
+    into what is sent, right before it is sent (so a job can carry what its folder holds then, and
+    only the running jobs' payloads are in memory). A job whose worker process or node is lost (not
+    one that raised) is submitted again as ``resume(index, why)`` (default: the same job), to the
+    front of the queue, up to ``max_retries`` times; then one :class:`BackendError` line, naming the
+    job as ``name(index)``. An exception the job raises is re-raised here as it is. Closing the
+    iterator early cancels the running jobs.
+    """
+    check_backend(backend, address)
+    jobs = list(jobs)
+    if workers < 1:
+        raise BackendError(f"workers must be >= 1, got {workers}")
+    if not jobs:
+        return iter(())
+    prepare = prepare or (lambda job: job)
+    if backend == "ray":
+        return _ray_stream(func, jobs, workers, address, prepare, resume, max_retries, name or (lambda i: f"job {i}"))
+    return ((i, item) for i, job in enumerate(jobs) for item in func(prepare(job)))
+
+
+def _stream_job(func: Callable[[Any], Iterator[Any]], job: Any) -> Iterator[Any]:
+    """A Ray task body: a generator function, so Ray streams its items back as they are yielded."""
+    yield from func(job)
+
+
+def _lost(ray) -> tuple[type, ...]:
+    """The Ray errors that mean the worker process or node went away (the job itself did not fail)."""
+    from ray import exceptions as e
+
+    return (e.WorkerCrashedError, e.NodeDiedError, e.ObjectLostError, e.OutOfMemoryError, e.RayActorError,
+            e.LocalRayletDiedError)
+
+
+def _ray_stream(func: Callable[[Any], Iterator[Any]], jobs: list, workers: int, address: str | None,
+                prepare: Callable[[Any], Any], resume: Callable[[int, str], Any] | None, max_retries: int,
+                name: Callable[[int], str]) -> Iterator[tuple[int, Any]]:
+    with ray_session(workers, address) as ray:
+        from ray.exceptions import RayError, RayTaskError
+
+        lost, env = _lost(ray), worker_env()
+        task = ray.remote(num_cpus=1, max_retries=0)(_stream_job).options(runtime_env={"env_vars": env})
+        fn = ray.put(func)
+        queue, running, losses = deque(enumerate(jobs)), {}, Counter()
+
+        def submit() -> None:
+            while queue and len(running) < workers:
+                index, job = queue.popleft()
+                running[task.remote(fn, prepare(job))] = index
+
+        try:
+            submit()
+            while running:
+                ready, _ = ray.wait(list(running), num_returns=1)
+                gen = ready[0]
+                index = running[gen]
+                try:
+                    item = ray.get(next(gen))
+                except StopIteration:
+                    del running[gen]
+                    submit()
+                    continue
+                except RayTaskError as exc:  # the job raised: its own exception, one line, no retry
+                    cause = getattr(exc, "cause", None)
+                    if isinstance(cause, BaseException):
+                        raise cause from None
+                    raise
+                except lost as exc:  # its process or node died: submit it again, as the caller says
+                    del running[gen]
+                    why = _first_line(exc)
+                    losses[index] += 1
+                    if losses[index] > max_retries:
+                        raise BackendError(f"ray: {name(index)} lost its worker {losses[index]} times (node or "
+                                           f"process died: {why}); finished work is saved, run again to resume") from None
+                    queue.appendleft((index, resume(index, why) if resume is not None else jobs[index]))
+                    submit()
+                    continue
+                except RayError as exc:  # the runtime env, scheduling ...: not something a retry mends
+                    raise BackendError(f"ray: {name(index)} failed: {_first_line(exc)}") from None
+                yield index, item
+        finally:
+            for gen in running:
+                try:
+                    ray.cancel(gen)
+                except Exception:  # noqa: BLE001  (already ended)
+                    pass
+
+
+def _first_line(exc: BaseException) -> str:
+    """``Type: first sentence`` of an error (Ray's run on for lines)."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    text = text.split(". ")[0][:200]
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
