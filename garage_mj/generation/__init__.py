@@ -10,4 +10,6 @@
 - ``library``: the scenario library (embedded SQLite): store, query, stratified sample, stats.
 - ``library_format``: the library file's schema, its integrity checks (header, body, rows) and the row type.
 - ``protocol``: the paper's protocol (maps x seeds x timesteps) trained into one library, resumable.
+- ``remote``: runs trained on other Ray nodes, streamed back: this process alone writes the library and run folders.
+- ``progress``: where each run of a protocol stands (new, running, resume, finished), for ``generation/run.py --status``.
 """

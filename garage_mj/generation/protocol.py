@@ -6,25 +6,30 @@ a process pool or on a Ray cluster (:mod:`garage_mj.core.backends`), each in
 ``out/runs/<map>/seed_<s>/``; a finished run is skipped and an interrupted one resumed, so the
 command can simply be started again after a crash.
 
-All runs write to one ``out/library.sqlite``: SQLite in WAL mode lets several processes insert
-at once (each insert is a tiny transaction; writers wait on a busy timeout), and the UNIQUE hash
-keeps a garage two runs both found once. The figures are drawn a stage later, by
-:func:`garage_mj.reporting.experiment.run_experiment` (runs, then figures). The runs write into
-``out`` themselves, so with Ray they must all run on machines that share it; SQLite's WAL mode
-works only between processes on one host, so train on one Ray node (the local instance, or a
-cluster of one machine) until the library writes move to this process.
+All runs fill one ``out/library.sqlite``; the UNIQUE hash keeps a garage two runs both found
+once, credited to the lower seed (:meth:`~garage_mj.generation.library.Library.credit`), so the
+library does not depend on which run met it first. Locally the pool's processes insert
+themselves (SQLite in WAL mode: tiny transactions, writers wait on a busy timeout). On Ray the
+runs train on any node of the cluster and stream their garages and checkpoints back to this
+process, which alone writes the library and the run folders (:mod:`garage_mj.generation.remote`);
+a run whose node is lost resumes from the newest checkpoint held here. Either way the same
+seeds give the same rows. One protocol at a time may use ``out`` (a :class:`FolderLock`). The
+figures are drawn a stage later, by :func:`garage_mj.reporting.experiment.run_experiment`.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from garage_mj.core.backends import check_backend, map_unordered
 from garage_mj.core.config import ConfigError, read_toml
+from garage_mj.core.fsutil import FolderLock
 from garage_mj.generation.library import Library
+from garage_mj.generation.remote import RunKeeper, run_remote
 from garage_mj.generation.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
 from garage_mj.grid.map_io import load_map
 
@@ -117,9 +122,10 @@ def run_protocol(protocol: Protocol, out: str | Path, workers: int = 1, progress
     """Train every (map, seed) of ``protocol`` not yet finished, into ``out`` (:func:`protocol_folder`).
 
     ``backend``: ``"local"`` (this process, or a spawn pool of ``workers``) or ``"ray"``
-    (``workers`` Ray actors; ``address``: a running cluster, else a private local Ray), see
-    :mod:`garage_mj.core.backends`; a run's result does not depend on where it trains.
-    Returns a summary: runs trained and skipped, the library, garages per map, each trained run's throughput.
+    (``workers`` runs at a time as Ray tasks on any node; ``address``: a running cluster, else a
+    private local Ray; this process alone writes ``out``, :mod:`garage_mj.generation.remote`); a
+    run's result does not depend on where it trains. Returns a summary: runs trained and skipped,
+    the library, garages per map, each trained run's throughput.
     """
     from tqdm import tqdm
 
@@ -131,21 +137,29 @@ def run_protocol(protocol: Protocol, out: str | Path, workers: int = 1, progress
         load_map(m)  # fail on a bad map before any run starts
     out.mkdir(parents=True, exist_ok=True)
     library = out / LIBRARY
-    Library(library).close()  # create it once, before the workers race to
-    jobs, skipped = [], []
-    for m in protocol.maps:
-        for s in protocol.seeds:
-            folder = run_dir(out, m, s)
-            (skipped if run_status(folder, protocol.timesteps) == "finished" else jobs).append((m, s, folder))
-    done: list[dict[str, Any]] = []
-    if jobs:
-        bar = tqdm(total=len(jobs), desc=f"{protocol.name}: runs", unit="run", disable=not progress)
-        bars = progress and workers == 1 and backend == "local"  # a run's own bar, in this process only
-        args = [(m, s, protocol.timesteps, str(f), str(library), protocol.dqn.to_dict(), bars) for m, s, f in jobs]
-        for result in map_unordered(_job, args, workers, backend, address):
-            done.append(result)
-            bar.update()
-        bar.close()
+    with FolderLock(out, f"generation protocol {protocol.name}"):
+        Library(library).close()  # create it once, before the workers race to
+        jobs, skipped = [], []
+        for m in protocol.maps:
+            for s in protocol.seeds:
+                folder = run_dir(out, m, s)
+                (skipped if run_status(folder, protocol.timesteps) == "finished" else jobs).append((m, s, folder))
+        done: list[dict[str, Any]] = []
+        if jobs:
+            bar = tqdm(total=len(jobs), desc=f"{protocol.name}: runs", unit="run", disable=not progress)
+            if backend == "ray":
+                keepers = [RunKeeper(f, m, s, protocol.timesteps, protocol.dqn.to_dict(), library) for m, s, f in jobs]
+                say = (lambda text: tqdm.write(text, file=sys.stderr)) if progress else None
+                results = run_remote(keepers, workers, address, say=say)
+            else:
+                bars = progress and workers == 1  # a run's own bar, in this process only
+                args = [(m, s, protocol.timesteps, str(f), str(library), protocol.dqn.to_dict(), bars)
+                        for m, s, f in jobs]
+                results = map_unordered(_job, args, workers, backend, address)
+            for result in results:
+                done.append(result)
+                bar.update()
+            bar.close()
     with Library(library) as lib:
         per_map = {m: lib.count(map=Path(m).stem) for m in protocol.maps}
     return {"trained": [(d["map"], d["seed"]) for d in done], "skipped": [(m, s) for m, s, _ in skipped],
