@@ -20,7 +20,9 @@ On the same scene and the same tests it then prints:
   the full loop is also given per CPU second of the process (less sensitive to other jobs).
 
 ``--workers 1 2``: as many probe processes at once (each its own env, started together after all
-have built their scene); their summed simulated seconds over the longest wall time. With
+have built their scene); their summed simulated seconds over the longest wall time, and each
+worker's simulated seconds per CPU second of its own (against one worker's: below 1 the workers
+slow each other down; near 1 with poor scaling the machine had no free core to give). With
 ``--baseline-tree DIR`` every round also runs the same probe on another checkout of the code
 (``PYTHONPATH=DIR``; e.g. ``git worktree add /tmp/before_speed <commit>``), interleaved with this
 tree's, so the before/after ratio is taken under the same load; medians over ``--rounds``. Probes get
@@ -159,7 +161,8 @@ def run_probes(tree: Path, args, workers: int) -> dict:
     rows = [_result(p) for p in procs]
     sim, wall = sum(r["sim_s"] for r in rows), max(r["wall_s"] for r in rows)
     return {"workers": workers, "sim_s": sim, "wall_s": wall, "full_sim_per_wall": round(sim / wall, 2),
-            "per_worker": [r["full_sim_per_wall"] for r in rows], "load_start": rows[0]["load_start"],
+            "per_worker": [r["full_sim_per_wall"] for r in rows],
+            "per_worker_cpu": [r["full_sim_per_cpu"] for r in rows], "load_start": rows[0]["load_start"],
             "load_end": max(r["load_end"] for r in rows)}
 
 
@@ -193,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
                 extra = (f"physics {r['physics_steps_per_s']} steps/s ({r['physics_sim_per_wall']}), camera "
                          f"{r['camera_frames_per_s']} frames/s ({r['camera_sim_per_wall']}), ceiling "
                          f"{r['ceiling_sim_per_wall']}, ceiling/full {r['ceiling_over_full']}") if w == 1 else \
-                    f"per worker {r['per_worker']}"
+                    f"per worker {r['per_worker']} (per CPU s {r['per_worker_cpu']})"
                 print(f"round {k + 1} {name:6s} workers {w}: full {r['full_sim_per_wall']} sim s/wall s; {extra}; "
                       f"load {r['load_start']}-{r['load_end']}", flush=True)
         rounds.append(row)
@@ -211,6 +214,10 @@ def main(argv: list[str] | None = None) -> int:
             if w != 1 and 1 in args.workers:
                 s[f"scaling_w{w}"] = round(statistics.median(
                     r[f"{name}_w{w}"]["full_sim_per_wall"] / r[f"{name}_w1"]["full_sim_per_wall"] for r in rounds), 2)
+                # per CPU second each worker got: do the workers slow each other, or does the machine lack cores?
+                s[f"cpu_rate_w{w}_over_w1"] = round(statistics.median(
+                    statistics.mean(r[f"{name}_w{w}"]["per_worker_cpu"]) / r[f"{name}_w1"]["full_sim_per_cpu"]
+                    for r in rounds), 2)
         summary[name] = s
     if "before" in trees and 1 in args.workers:
         summary["after_over_before"] = {key: round(statistics.median(
