@@ -26,6 +26,7 @@ from garage_mj.generation.library import Library
 from garage_mj.generation.progress import protocol_progress
 from garage_mj.generation.protocol import LIBRARY, load_protocol, run_dir, run_protocol
 from garage_mj.generation.remote import WORK_DIR_ENV
+from tests.test_remote import library_rows, monitor_rows
 
 ray = pytest.importorskip("ray", reason="pip install 'garage-mj[ray]' (make install does)")
 pytestmark = pytest.mark.slow
@@ -63,17 +64,6 @@ def _protocol(tmp_path: Path, seeds: list[int], timesteps: int, every: int):
     path.write_text(f"[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = {seeds}\ntimesteps = {timesteps}\n"
                     + DQN.format(every=every))
     return load_protocol(path)
-
-
-def library_rows(path: Path) -> list[tuple]:
-    """The library's rows without id and created_at, the run id without its start time and folder digest."""
-    with Library(path, create=False) as lib:
-        return sorted(tuple(v for k, v in r.to_dict().items() if k not in ("id", "created_at", "run"))
-                      + (r.run.rsplit("_", 2)[0],) for r in lib.query())
-
-
-def monitor_rows(folder: Path) -> list[str]:
-    return [line.rsplit(",", 1)[0] for line in (folder / "monitor.csv").read_text().splitlines()[2:]]
 
 
 def manifest(out: Path, seed: int) -> dict:

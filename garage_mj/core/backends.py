@@ -82,6 +82,14 @@ def worker_env() -> dict[str, str]:
     return {k: v for k, v in os.environ.items() if k in WORKER_ENV or k.startswith(WORKER_ENV_PREFIX)}
 
 
+def _checked(jobs: Sequence[Any], workers: int, backend: str, address: str | None) -> list[Any]:
+    """``jobs`` as a list, once the backend, the address and the worker count are known to be valid."""
+    check_backend(backend, address)
+    if workers < 1:
+        raise BackendError(f"workers must be >= 1, got {workers}")
+    return list(jobs)
+
+
 def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 1, backend: str = "local",
                   address: str | None = None, *, max_retries: int = 3) -> Iterator[Any]:
     """``func(job)`` for every job, yielded as each ends (in no fixed order).
@@ -90,10 +98,7 @@ def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], workers: int 
     package installed) and ``workers`` the number of processes (local pool size or Ray actors).
     Closing the iterator early (an exception, Ctrl-C) stops the workers; what was yielded stays done.
     """
-    check_backend(backend, address)
-    jobs = list(jobs)
-    if workers < 1:
-        raise BackendError(f"workers must be >= 1, got {workers}")
+    jobs = _checked(jobs, workers, backend, address)
     if not jobs:
         return iter(())
     if backend == "ray":
@@ -255,10 +260,7 @@ def stream_unordered(func: Callable[[Any], Iterator[Any]], jobs: Sequence[Any], 
     job as ``name(index)``. An exception the job raises is re-raised here as it is. Closing the
     iterator early cancels the running jobs.
     """
-    check_backend(backend, address)
-    jobs = list(jobs)
-    if workers < 1:
-        raise BackendError(f"workers must be >= 1, got {workers}")
+    jobs = _checked(jobs, workers, backend, address)
     if not jobs:
         return iter(())
     prepare = prepare or (lambda job: job)
