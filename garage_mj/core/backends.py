@@ -225,10 +225,7 @@ def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_r
             try:
                 result = ray.get(ref)
             except RayTaskError as exc:  # the job raised: its own exception, one line, no retry
-                cause = getattr(exc, "cause", None)
-                if isinstance(cause, BaseException):
-                    raise cause from None
-                raise
+                _raise_own(exc)
             except RayActorError as exc:  # its process or node died, more than max_retries times
                 first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                 raise BackendError(f"ray: job {index} lost its worker {max_retries + 1} times (node or process "
@@ -311,10 +308,7 @@ def _ray_stream(func: Callable[[Any], Iterator[Any]], jobs: list, workers: int, 
                     submit()
                     continue
                 except RayTaskError as exc:  # the job raised: its own exception, one line, no retry
-                    cause = getattr(exc, "cause", None)
-                    if isinstance(cause, BaseException):
-                        raise cause from None
-                    raise
+                    _raise_own(exc)
                 except lost as exc:  # its process or node died: submit it again, as the caller says
                     del running[gen]
                     why = _first_line(exc)
@@ -334,6 +328,14 @@ def _ray_stream(func: Callable[[Any], Iterator[Any]], jobs: list, workers: int, 
                     ray.cancel(gen)
                 except Exception:  # noqa: BLE001  (already ended)
                     pass
+
+
+def _raise_own(exc: BaseException) -> None:
+    """Raise the job's own exception behind Ray's ``RayTaskError`` (the wrapper itself if it carries none)."""
+    cause = getattr(exc, "cause", None)
+    if isinstance(cause, BaseException):
+        raise cause from None
+    raise exc
 
 
 def _first_line(exc: BaseException) -> str:
