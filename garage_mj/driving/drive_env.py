@@ -20,6 +20,12 @@ along the route, so it is wholly inside the garage.
 Outcomes are the environment's (:class:`~garage_mj.driving.outcomes.OutcomeMonitor`): ``success`` and
 ``collision``/``deadlock``/``missed_goal`` terminate, ``timeout`` truncates. The reward is route progress [m]
 per step, plus :data:`SUCCESS_REWARD` or :data:`COLLISION_PENALTY` at the end.
+
+The observation: ``depth`` and ``segmentation`` (the front camera), ``waypoint`` (the route point
+:data:`LOOKAHEAD` metres ahead, car frame), ``speed`` [m/s], ``remaining`` (route left to the goal
+[m]) and ``steer`` (the road-wheel angle over full lock, in [-1, 1]: what the car itself knows,
+like its speed); privileged for reference drivers: ``goal`` (car frame), ``pose`` (world frame)
+and, with actors, ``actors``.
 """
 
 from __future__ import annotations
@@ -172,6 +178,7 @@ class GarageDriveEnv(gym.Env):
             "speed": spaces.Box(-MAX_SPEED, MAX_SPEED, (1,), np.float32),
             "goal": spaces.Box(-MAX_EXTENT, MAX_EXTENT, (2,), np.float32),
             "remaining": spaces.Box(0.0, MAX_EXTENT, (1,), np.float32),
+            "steer": spaces.Box(-1.0, 1.0, (1,), np.float32),
             "pose": spaces.Box(np.array([-MAX_EXTENT, -MAX_EXTENT, -np.pi], np.float32),
                                np.array([MAX_EXTENT, MAX_EXTENT, np.pi], np.float32), dtype=np.float32),
         }
@@ -359,6 +366,7 @@ class GarageDriveEnv(gym.Env):
         obs["speed"] = np.array([self.car.speed(self.data) if speed is None else speed], dtype=np.float32)
         obs["goal"] = to_car_frame(self.monitor.goal, x, y, yaw).astype(np.float32)
         obs["remaining"] = np.array([max(self.route.length - self.monitor.progress, 0.0)], dtype=np.float32)
+        obs["steer"] = np.array([self.car.steer_angle / self.car_config.max_steer], dtype=np.float32)
         obs["pose"] = np.array([x, y, math.remainder(yaw, math.tau)], dtype=np.float32)
         if self.scenario_config.count:
             rows = np.zeros((self.scenario_config.count, 4), dtype=np.float32)

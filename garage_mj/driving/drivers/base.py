@@ -25,7 +25,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from garage_mj.core.config import load_config
-from garage_mj.driving.vehicle import DiscreteAction
+from garage_mj.driving.vehicle import DISCRETE_COMMANDS, DiscreteAction
 from garage_mj.scene.car import CarGeometry, car_geometry
 
 
@@ -123,8 +123,38 @@ class BaseDriver:
         self._queue.append((float(np.clip(throttle, -1, 1)), float(np.clip(steer, -1, 1))))
         throttle, steer = self._queue.popleft()
         if self.discrete:
-            return discretize(throttle, steer)
+            return self.to_discrete(throttle, steer, obs)
         return np.array([throttle, steer], dtype=np.float32)
+
+    def to_discrete(self, throttle: float, steer: float, obs: dict[str, Any]) -> int:
+        """The paper action for ``(throttle, steer)``: :func:`discretize` (drivers may know better)."""
+        return discretize(throttle, steer)
+
+    def track_discrete(self, throttle: float, steer: float, obs: dict[str, Any]) -> int:
+        """The paper action whose next-step effect comes closest to ``(throttle, steer)``.
+
+        Knows how the car answers a discrete action (:data:`~garage_mj.driving.vehicle.DISCRETE_COMMANDS`):
+        a turn moves the road wheels one rate-limited step toward full lock and holds the cruise
+        speed; accelerate and brake move them one step back toward straight and change the speed.
+        Reads the road-wheel angle from ``obs["steer"]`` (fraction of full lock); picks the action
+        minimising (steer error in steps)^2 + (pedal error)^2. Without ``steer``: :func:`discretize`.
+        """
+        if "steer" not in obs:
+            return discretize(throttle, steer)
+        car = self.car
+        now = float(np.asarray(obs["steer"]).reshape(-1)[0]) * car.max_steer
+        want = steer * car.max_steer
+        step = max(car.steer_rate * self.dt, 1e-6)
+
+        def toward(target: float) -> float:
+            return now + min(max(target - now, -step), step)
+
+        best, best_cost = int(DiscreteAction.ACCELERATE), math.inf
+        for action, (u, s) in DISCRETE_COMMANDS.items():
+            cost = ((toward(s * car.max_steer) - want) / step) ** 2 + (u - throttle) ** 2
+            if cost < best_cost - 1e-9:
+                best, best_cost = int(action), cost
+        return best
 
     # -- shared control laws ------------------------------------------------------------------
     def pursuit_curvature(self, target) -> float:

@@ -73,6 +73,10 @@ class OracleDriver(BaseDriver):
         self.v_limit = self._speed_profile()
         self._actor_blocks(info.get("actors") or [])
 
+    def to_discrete(self, throttle: float, steer: float, obs: dict[str, Any]) -> int:
+        """With the paper's actions it knows the car's answer to each (:meth:`track_discrete`)."""
+        return self.track_discrete(throttle, steer, obs)
+
     def _actor_blocks(self, actors: list) -> None:
         """Per moving actor that comes near the path: its sample times and, per time, which path poses
         the rest of its trajectory from then on blocks (computed once here, read each step)."""

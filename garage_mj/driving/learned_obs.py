@@ -1,0 +1,59 @@
+"""What a learned driver sees: the unprivileged observation, one function for training and driving.
+
+A learned driver acts from the front camera and what the car itself knows, never from the test's
+plan or the world frame: no ``pose``, no ``goal``, no ``actors``. From a drive env's observation
+(:class:`~garage_mj.driving.drive_env.GarageDriveEnv`, depth in metres) :func:`learned_observation`
+makes a dict for stable-baselines3's ``MultiInputPolicy``:
+
+- ``image``: (2, H, W) uint8, channel first: depth clipped to :data:`DEPTH_RANGE` metres and scaled
+  to 0..255, and the segmentation class ids spread over 0..255 (:data:`SEG_SCALE` per class);
+- ``vector``: (5,) float32: the route waypoint :data:`~garage_mj.driving.drive_env.LOOKAHEAD` metres
+  ahead in the car frame (x, y over the lookahead), the speed over the car's top speed, the route
+  left to the goal (metres over :data:`REMAINING_RANGE`, capped at 1) and the road-wheel angle
+  (fraction of full lock).
+
+The trainer (:mod:`garage_mj.driving.train_driver`) and the ``learned`` driver both call it, so a
+model sees at test time exactly what it saw in training.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from garage_mj.driving.drive_env import LOOKAHEAD
+from garage_mj.scene.semantics import Semantic
+
+DEPTH_RANGE = 20.0  # [m] depth beyond this reads as this (a garage's far wall rarely matters)
+SEG_SCALE = 255 // max(Semantic)  # segmentation id -> pixel value
+REMAINING_RANGE = 10.0  # [m] route left to the goal, read up to this (it matters for stopping)
+SPEED_RANGE = 4.0  # [m/s] the car's top speed in a garage (CarConfig.max_speed)
+VECTOR_KEYS = ("waypoint_x", "waypoint_y", "speed", "remaining", "steer")
+
+
+def learned_space(height: int, width: int) -> spaces.Dict:
+    """The observation space of :func:`learned_observation` for an ``height`` x ``width`` camera."""
+    return spaces.Dict({
+        "image": spaces.Box(0, 255, (2, height, width), np.uint8),
+        "vector": spaces.Box(-np.inf, np.inf, (len(VECTOR_KEYS),), np.float32),
+    })
+
+
+def learned_observation(obs: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The unprivileged observation from a drive env's (depth in metres, ``image_obs=False``)."""
+    depth = np.asarray(obs["depth"], dtype=np.float32)
+    if depth.ndim != 2:
+        raise ValueError(f"learned_observation needs depth as (H, W) metres (GarageDriveEnv(image_obs=False)), "
+                         f"got shape {depth.shape}")
+    image = np.empty((2, *depth.shape), dtype=np.uint8)
+    image[0] = np.rint(np.clip(depth, 0.0, DEPTH_RANGE) * (255.0 / DEPTH_RANGE))  # a new array: obs untouched
+    np.multiply(np.asarray(obs["segmentation"], dtype=np.uint8), SEG_SCALE, out=image[1])
+    wx, wy = (float(v) for v in np.asarray(obs["waypoint"]).reshape(-1)[:2])
+    speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
+    remaining = float(np.asarray(obs["remaining"]).reshape(-1)[0])
+    steer = float(np.asarray(obs["steer"]).reshape(-1)[0]) if "steer" in obs else 0.0
+    vector = np.array([wx / LOOKAHEAD, wy / LOOKAHEAD, speed / SPEED_RANGE,
+                       min(remaining / REMAINING_RANGE, 1.0), steer], dtype=np.float32)
+    return {"image": image, "vector": vector}
