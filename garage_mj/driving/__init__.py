@@ -10,6 +10,7 @@
 - ``drive_env``: ``GarageDrive-v0``, one garage, one test per episode.
 - ``drivers``: the built-in drivers (``oracle``, ``waypoint``, ``vision``) and user drivers.
 - ``sources``: what a cruise run tests (``CruiseSource``), its settings and each test's seed.
+- ``garage_set``: ``GarageSet``, the garages a learned driver trains or is tested on, and where they came from.
 - ``episode``: one cruise test driven to its row, with the scene and driver a process keeps.
 - ``regression``: Pearson r and the regression of success on difficulty, the paper's table (numpy).
 - ``results``: a cruise run's folder: ``run.json``, ``tests.csv`` read back and repaired, the summaries.
