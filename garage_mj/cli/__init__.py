@@ -11,6 +11,7 @@
 - ``show``: draw one garage as text or PNG.
 - ``cruise``: batch cruise tests of a driver.
 - ``hunt``: search for garages that break a driver.
+- ``train-driver``: train a learned cruise driver over many garages (``train_driver``).
 
 A module in :data:`COMMANDS` exposes ``register(subparsers)``, which adds its parser and sets
 ``func`` to a handler ``(args) -> int``. Errors a user can cause derive from
@@ -33,7 +34,7 @@ from garage_mj.core import __version__
 from garage_mj.core.errors import GarageMJError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ["maps", "demo", "export", "check", "train", "generate", "library", "plot", "show", "cruise", "hunt"]
+COMMANDS = ["maps", "demo", "export", "check", "train", "generate", "library", "plot", "show", "cruise", "hunt", "train_driver"]
 
 
 class UserError(GarageMJError):

@@ -10,6 +10,9 @@
 - ``drive_env``: ``GarageDrive-v0``, one garage, one test per episode.
 - ``drivers``: the built-in drivers (``oracle``, ``waypoint``, ``vision``) and user drivers.
 - ``sources``: what a cruise run tests (``CruiseSource``), its settings and each test's seed.
+- ``learned_obs``: what a learned driver sees (camera, waypoint, speed, route left, steering; nothing privileged).
+- ``fleet_env``: ``FleetDriveEnv``, one garage of a set per episode, with the oracle's action as a label.
+- ``train_driver``: ``train-driver``, DQN on the unprivileged observation, warm-started by DAgger.
 - ``garage_set``: ``GarageSet``, the garages a learned driver trains or is tested on, and where they came from.
 - ``episode``: one cruise test driven to its row, with the scene and driver a process keeps.
 - ``regression``: Pearson r and the regression of success on difficulty, the paper's table (numpy).

@@ -1,0 +1,108 @@
+"""``garage-mj train-driver``: train a learned cruise driver (SB3 DQN, DAgger warm start) over garages."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from garage_mj.cli import UserError
+from garage_mj.cli._common import non_negative_int, positive_int, seed, user_errors
+from garage_mj.core.config import load_config, read_toml
+from garage_mj.core.fsutil import FolderLock
+from garage_mj.driving.garage_set import load_garage_set
+from garage_mj.driving.train_driver import DriverTrainConfig, train_driver
+
+CURRICULA = ("uniform", "difficulty", "adversarial")
+
+
+def _band(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO:HI (e.g. 0.3:0.7), got {text!r}") from None
+    if not 0.0 <= lo <= hi <= 1.0:
+        raise argparse.ArgumentTypeError(f"need 0 <= LO <= HI <= 1, got {text!r}")
+    return lo, hi
+
+
+def _seeds(text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated run seeds (e.g. 0,1,2), got {text!r}") from None
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "train-driver",
+        help="train a learned cruise driver (DQN on camera depth + segmentation) over many garages",
+        description=(
+            "Train a stable-baselines3 DQN (MultiInputPolicy: a CNN over the front camera's depth and "
+            "segmentation, an MLP over the next route waypoint, speed, route left and steering angle; the "
+            "paper's 4 actions) over a set of garages, one drawn per episode. Training starts by imitation "
+            "of the privileged oracle (DAgger: the model drives, the oracle labels every state it visits), "
+            "then optionally fine-tunes with DQN on the env's reward (--rl-timesteps). The model never "
+            "sees the route plan, its pose or the goal in the world frame. The run folder gets run.json, "
+            "curve.csv (validation success per iteration), garages.json, checkpoints/ and model.zip; an "
+            "interrupted run continues with --resume. Drive with it: --driver learned:OUT/model.zip."
+        ),
+        epilog=("GARAGES is a library file (.sqlite, with --map/--difficulty/--run-seeds/-n), a garages JSON "
+                "(library export-json, or a run's garages.json), a folder of asset packs, or a shipped map name "
+                "(painted by the scripted painter, -n garages).\n"
+                "example: garage-mj train-driver runs/lib.sqlite --map m5_13x13_aligned --run-seeds 0,1,2 -n 200 "
+                "--validation runs/lib.sqlite --validation-run-seeds 3 --out runs/driver_m5"),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("garages", metavar="GARAGES", help="where the training garages come from (see below)")
+    p.add_argument("--map", help="keep only this map's garages (library)")
+    p.add_argument("--difficulty", type=_band, metavar="LO:HI", help="keep only garages in this difficulty band")
+    p.add_argument("--run-seeds", type=_seeds, metavar="K,K", help="keep only garages of these generation runs' seeds")
+    p.add_argument("-n", type=positive_int, metavar="N", help="a seeded sample of N garages (default: all; a map: 32)")
+    p.add_argument("--validation", metavar="GARAGES", help="garages of the validation curve (default: the training ones)")
+    p.add_argument("--validation-run-seeds", type=_seeds, metavar="K,K", help="run seeds of the validation garages")
+    p.add_argument("--validation-n", type=positive_int, default=20, metavar="N", help="validation garages (default 20)")
+    p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out after its last finished iteration")
+    p.add_argument("--config", type=Path, help="TOML of DriverTrainConfig keys (unknown keys are an error)")
+    p.add_argument("--iterations", type=positive_int, help="DAgger iterations (default 8)")
+    p.add_argument("--steps", type=positive_int, help="env steps driven per iteration (default 6000)")
+    p.add_argument("--curriculum", choices=CURRICULA, help="how garages are drawn (default uniform)")
+    p.add_argument("--rl-timesteps", type=non_negative_int, help="DQN fine-tuning timesteps after imitation (default 0)")
+    p.add_argument("--workers", type=positive_int, help="worker processes driving (default 2)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the run (default 0)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+@user_errors
+def run(args: argparse.Namespace) -> int:
+    data = read_toml(args.config) if args.config is not None else {}
+    for key, value in (("iterations", args.iterations), ("steps_per_iteration", args.steps),
+                       ("curriculum", args.curriculum), ("rl_timesteps", args.rl_timesteps),
+                       ("n_envs", args.workers)):
+        if value is not None:
+            data[key] = value
+    try:
+        config = load_config(DriverTrainConfig, data)
+    except ValueError as exc:
+        raise UserError(f"driver training config: {exc}") from None
+    garages = load_garage_set(args.garages, map=args.map, difficulty=args.difficulty, run_seeds=args.run_seeds,
+                              n=args.n, seed=args.seed)
+    validation = None
+    if args.validation is not None:
+        validation = load_garage_set(args.validation, map=args.map, run_seeds=args.validation_run_seeds,
+                                     n=args.validation_n, seed=args.seed + 1)
+        overlap = {s.hash for s in garages} & {s.hash for s in validation}
+        if overlap:
+            print(f"note: {len(overlap)} validation garage(s) are also training garages")
+    print(f"training on {len(garages)} garages ({garages.origin}); validating on "
+          f"{len(validation) if validation is not None else len(garages)}")
+    with FolderLock(args.out, "garage-mj train-driver"):
+        model = train_driver(garages, args.out, validation=validation, config=config, seed=args.seed,
+                             resume=args.resume, progress=not args.no_progress)
+    state = json.loads((args.out / "run.json").read_text())["state"]
+    last = state["curve"][-1] if state["curve"] else {}
+    print(f"model -> {model} ({state['iterations_done']} iterations, {state['wall_s'] / 60:.1f} min; "
+          f"last validation success {last.get('val_success', '-')}); drive it with --driver learned:{model}")
+    return 0

@@ -1,0 +1,167 @@
+"""FleetDriveEnv: cruise tests over a set of garages, one garage per episode, for training a driver.
+
+Each ``reset`` draws, from the env's seeded generator, a garage of the set (uniformly, or by
+:meth:`FleetDriveEnv.set_weights`, which a curriculum or an adversary moves during training) and a
+test seed, and resets that garage's :class:`~garage_mj.driving.drive_env.GarageDriveEnv` to it
+(the paper's discrete actions; a test whose target stall cannot be reached is drawn again). The same seed gives the
+same sequence of garages and tests. Scenes are kept in a cache of ``cache_size`` envs (least
+recently used closed first), so a reset compiles a MuJoCo model only when it meets a garage not
+in the cache; a garage without a drivable test in :data:`DRAWS` draws is dropped with a warning.
+
+The observation is the unprivileged one (:func:`~garage_mj.driving.learned_obs.learned_observation`):
+camera depth and segmentation, the next route waypoint, speed, the route left and the road-wheel
+angle. With ``expert=True`` each ``info`` also carries ``expert_action``: what the privileged
+``oracle`` (:class:`~garage_mj.driving.drivers.oracle.OracleDriver`, with the paper's actions) would
+do in the state just observed, the label that imitation learning (DAgger) trains on. The expert
+reads the privileged state, the learner never does.
+"""
+
+from __future__ import annotations
+
+import collections
+import warnings
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from garage_mj.driving.drive_env import GarageDriveEnv
+from garage_mj.driving.learned_obs import learned_observation, learned_space
+from garage_mj.driving.sensors import CameraConfig
+from garage_mj.driving.sources import CruiseSource
+from garage_mj.driving.vehicle import DiscreteAction
+
+DRAWS = 20  # test draws per reset before a garage is taken as one without a drivable test
+
+
+class FleetDriveEnv(gym.Env):
+    """Drive one test of a garage drawn per episode from ``garages`` (module docstring).
+
+    Args:
+        garages: the garages (:class:`~garage_mj.driving.sources.CruiseSource`, e.g. a
+            :class:`~garage_mj.driving.garage_set.GarageSet`).
+        weights: draw probabilities per garage (normalised); None: uniform.
+        cache_size: how many garages' scenes are kept compiled.
+        expert: put the oracle's action for each observed state in ``info["expert_action"]``.
+        env_kwargs: more :class:`GarageDriveEnv` keyword arguments (``occupancy``, ``camera``,
+            ``scenario``, ...); ``action_type`` is always discrete and ``image_obs`` off.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, garages: Sequence[CruiseSource], weights: Sequence[float] | None = None,
+                 cache_size: int = 8, expert: bool = False, env_kwargs: dict[str, Any] | None = None) -> None:
+        self.sources = list(garages)
+        if not self.sources:
+            raise ValueError("FleetDriveEnv needs at least one garage")
+        if cache_size < 1:
+            raise ValueError(f"cache_size must be >= 1, got {cache_size}")
+        self.env_kwargs = dict(env_kwargs or {})
+        for key in ("action_type", "image_obs", "infeasible", "garage"):
+            if key in self.env_kwargs:
+                raise ValueError(f"FleetDriveEnv sets {key!r} itself; leave it out of env_kwargs")
+        camera = self.env_kwargs.get("camera")
+        cam = camera if isinstance(camera, CameraConfig) else CameraConfig(**(camera or {}))
+        self.observation_space = learned_space(cam.height, cam.width)
+        self.action_space = spaces.Discrete(len(DiscreteAction))
+        self.cache_size = int(cache_size)
+        self.expert = bool(expert)
+        self._envs: collections.OrderedDict[int, GarageDriveEnv] = collections.OrderedDict()
+        self._dead: set[int] = set()
+        self._weights = np.ones(len(self.sources)) / len(self.sources)
+        if weights is not None:
+            self.set_weights(weights)
+        self._oracle = None
+        self.env: GarageDriveEnv | None = None
+        self.index = -1
+        self.test_seed = 0
+
+    def set_weights(self, weights: Sequence[float]) -> None:
+        """Draw garage ``k`` with probability ``weights[k] / sum(weights)`` from the next reset on."""
+        w = np.asarray(weights, dtype=float)
+        if w.shape != (len(self.sources),) or not np.all(np.isfinite(w)) or (w < 0).any() or w.sum() <= 0:
+            raise ValueError(f"weights must be {len(self.sources)} non-negative numbers with a positive sum")
+        self._weights = w / w.sum()
+
+    def _env_for(self, k: int) -> GarageDriveEnv | None:
+        """Garage ``k``'s env from the cache (built when missing); None when no stall of it can be reached."""
+        if k in self._envs:
+            self._envs.move_to_end(k)
+            return self._envs[k]
+        src = self.sources[k]
+        try:
+            # "report": stalls are planned when drawn, not all at build (a 200-stall garage: 0.2 s, not 9 s)
+            env = GarageDriveEnv(garage=src.garage, action_type="discrete", infeasible="report", **self.env_kwargs)
+        except ValueError as exc:
+            warnings.warn(f"{src.name}: left out of the draw ({exc})", stacklevel=3)
+            self._dead.add(k)
+            return None
+        self._envs[k] = env
+        while len(self._envs) > self.cache_size:
+            self._envs.popitem(last=False)[1].close()
+        return env
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Draw a garage and a test; ``options`` may fix ``garage`` (index) and ``test_seed``."""
+        super().reset(seed=seed)
+        options = options or {}
+        while True:
+            w = self._weights.copy()
+            if self._dead:
+                w[list(self._dead)] = 0.0
+                if w.sum() <= 0:
+                    raise ValueError("no garage of the set has a reachable stall")
+                w /= w.sum()
+            k = int(options["garage"]) if "garage" in options else int(self.np_random.choice(len(w), p=w))
+            env = self._env_for(k)
+            if env is not None:
+                for _ in range(DRAWS):  # a test whose target stall cannot be reached is drawn again
+                    test_seed = int(options.get("test_seed", self.np_random.integers(2**31 - 1)))
+                    obs, info = env.reset(seed=test_seed)
+                    if info["feasible"]:
+                        break
+                else:
+                    warnings.warn(f"{self.sources[k].name}: left out of the draw (no feasible test in {DRAWS} draws)",
+                                  stacklevel=2)
+                    self._dead.add(k)
+                    env = None
+            if env is not None:
+                break
+            if "garage" in options:
+                raise ValueError(f"garage {k} ({self.sources[k].name}) has no test that can be driven")
+        self.env, self.index, self.test_seed = env, k, test_seed
+        if self.expert:
+            from garage_mj.driving.drivers.oracle import OracleDriver
+
+            if self._oracle is None:
+                self._oracle = OracleDriver()
+            self._oracle.reset(env.driver_info(test_seed))
+        return self._out(obs, info)
+
+    def _out(self, obs: dict[str, Any], info: dict[str, Any]):
+        info = dict(info, garage=self.sources[self.index].name, garage_index=self.index, test_seed=self.test_seed)
+        if self.expert:
+            info["expert_action"] = int(self._oracle.act(obs))
+        self._raw = obs
+        return learned_observation(obs), info
+
+    def step(self, action):
+        if self.env is None:
+            raise RuntimeError("call reset() before step()")
+        obs, reward, terminated, truncated, info = self.env.step(int(action))
+        out, info = self._out(obs, info)
+        return out, reward, terminated, truncated, info
+
+    def driver_info(self) -> dict[str, Any]:
+        """The current test's driver info (:meth:`GarageDriveEnv.driver_info`)."""
+        if self.env is None:
+            raise RuntimeError("call reset() before driver_info()")
+        return self.env.driver_info(self.test_seed)
+
+    def close(self) -> None:
+        for env in self._envs.values():
+            env.close()
+        self._envs.clear()
+        self.env = None

@@ -1,0 +1,341 @@
+"""Train a learned cruise driver: SB3 DQN on the unprivileged observation, warm-started by DAgger.
+
+The model is a stable-baselines3 ``DQN`` with ``MultiInputPolicy`` (a CNN over the camera's depth
+and segmentation, an MLP over the vector: :mod:`garage_mj.driving.learned_obs`) and the paper's
+four discrete actions. It is trained over a set of garages (:class:`FleetDriveEnv`, one garage per
+episode) in two stages:
+
+1. **Imitation (DAgger).** Deep RL from scratch on camera images is out of reach of a 2-core CPU,
+   so the Q-network is first trained as a classifier of the privileged ``oracle``'s action (the
+   oracle reads the plan and the exact pose; the model sees only its own observation). Iteration
+   0 drives with the oracle; iteration ``i`` lets the model drive with probability
+   ``1 - beta0 * beta_decay**i`` per step while the oracle labels every state it visits (Ross et
+   al., 2011), so the model learns to recover from its own mistakes. After each iteration the
+   network is trained ``epochs`` passes over all states so far (cross-entropy on the Q-values'
+   softmax, so the greedy action is the oracle's) and validated on held-out garages.
+2. **DQN fine-tuning** (``rl_timesteps``, default 0): ``model.learn`` on the env's reward
+   (route progress, success bonus, collision penalty), starting from the imitated network.
+
+What it draws garages by (``curriculum``): ``uniform``; ``difficulty`` (iteration ``i`` of ``n``
+draws from the easiest ``(i + 1) / n`` of the set, by the library's difficulty); or
+``adversarial`` (before each iteration after the first, the garages where the current model
+failed most in its last iteration's own drives are drawn more: weight ``1 + 4 * failure rate``).
+
+The run folder (resumable: every iteration is checkpointed, an interrupted run continues from
+the last finished one, with the same result):
+
+- ``run.json``: config, garages' origin, progress, the validation curve and timings;
+- ``garages.json`` and ``validation_garages.json``: the sets trained and validated on;
+- ``curve.csv``: per iteration: states, loss, agreement with the oracle, validation success;
+- ``data/iter_NNN.npz``: the states and labels of each iteration; ``checkpoints/iter_NNN.zip``;
+- ``model.zip``: the final model (``--driver learned:RUN/model.zip``).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garage_mj.core.config import load_config
+from garage_mj.core.errors import GarageMJError
+from garage_mj.driving.sources import CruiseSource, cruise_seed
+
+MANIFEST = "run.json"
+CURVE = "curve.csv"
+MODEL = "model.zip"
+CURRICULA = ("uniform", "difficulty", "adversarial")
+CURVE_FIELDS = ("iteration", "states", "beta", "loss", "agreement", "own_drive_success", "val_success",
+                "val_collision", "val_timeout", "val_other", "wall_s")
+
+
+class TrainDriverError(GarageMJError):
+    """A driver training run cannot start or resume (bad folder, config that differs from the run's)."""
+
+
+@dataclass(frozen=True)
+class DriverTrainConfig:
+    """How a learned driver is trained (TOML-loadable, unknown keys rejected)."""
+
+    iterations: int = 8  # DAgger iterations
+    steps_per_iteration: int = 6000  # [env steps] driven (and labelled) per iteration
+    beta0: float = 1.0  # share of steps the oracle drives in iteration 0 ...
+    beta_decay: float = 0.0  # ... and beta0 * beta_decay**i in iteration i (0: the model drives from iteration 1)
+    epochs: int = 3  # passes over all states so far, per iteration
+    batch_size: int = 128
+    learning_rate: float = 5e-4
+    n_envs: int = 2  # worker processes driving
+    val_tests: int = 40  # validation tests per iteration (the curve)
+    curriculum: str = "uniform"
+    rl_timesteps: int = 0  # DQN fine-tuning after imitation
+    occupancy: float = 0.5  # share of non-target stalls with a parked car
+    torch_threads: int = 2
+
+    def __post_init__(self) -> None:
+        if self.curriculum not in CURRICULA:
+            raise ValueError(f"curriculum must be one of {', '.join(CURRICULA)}, got {self.curriculum!r}")
+        for name in ("iterations", "steps_per_iteration", "epochs", "batch_size", "n_envs"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not 0.0 <= self.beta0 <= 1.0 or not 0.0 <= self.beta_decay <= 1.0:
+            raise ValueError("beta0 and beta_decay must be in [0, 1]")
+
+
+def _weights(cfg: DriverTrainConfig, sources: list[CruiseSource], iteration: int,
+             failures: np.ndarray, drives: np.ndarray) -> np.ndarray:
+    """Draw weights of the training garages for ``iteration`` (module docstring, ``curriculum``)."""
+    n = len(sources)
+    if cfg.curriculum == "difficulty":
+        order = np.argsort([s.difficulty for s in sources], kind="stable")
+        keep = max(1, math.ceil(n * (iteration + 1) / cfg.iterations))
+        w = np.zeros(n)
+        w[order[:keep]] = 1.0
+        return w
+    if cfg.curriculum == "adversarial" and drives.sum() > 0:
+        rate = np.divide(failures, drives, out=np.zeros(n), where=drives > 0)
+        return 1.0 + 4.0 * rate
+    return np.ones(n)
+
+
+def _make_venv(sources: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any], expert: bool):
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    from garage_mj.driving.fleet_env import FleetDriveEnv
+
+    def make():
+        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs)
+
+    if n_envs == 1:
+        return DummyVecEnv([make])
+    return SubprocVecEnv([make] * n_envs, start_method="forkserver")
+
+
+def _collect(model, venv, steps: int, beta: float, seed: int, weights: np.ndarray, n_garages: int):
+    """Drive ``steps`` env steps (oracle with probability ``beta`` per step, else the model); the states,
+    the oracle's labels, and per garage the model-driven episodes and their failures."""
+    n = venv.num_envs
+    venv.env_method("set_weights", weights)
+    venv.seed(seed)
+    obs = venv.reset()
+    labels = np.array([i["expert_action"] for i in venv.reset_infos])
+    rng = np.random.default_rng(seed)
+    images, vectors, acts = [], [], []
+    own = np.zeros(n, dtype=bool)  # the current episode saw a model-driven step
+    drives, failures = np.zeros(n_garages), np.zeros(n_garages)
+    outcomes: list[tuple[bool, str]] = []
+    for _ in range(math.ceil(steps / n)):
+        images.append(obs["image"].copy())
+        vectors.append(obs["vector"].copy())
+        acts.append(labels.copy())
+        mine, _ = model.predict(obs, deterministic=True)
+        use_model = rng.random(n) >= beta
+        own |= use_model
+        actions = np.where(use_model, mine, labels)
+        obs, _, dones, infos = venv.step(actions)
+        labels = np.array([i["expert_action"] for i in infos])
+        for e in np.flatnonzero(dones):
+            k = infos[e]["garage_index"]
+            outcomes.append((bool(own[e]), infos[e]["outcome"]))
+            if own[e]:
+                drives[k] += 1
+                failures[k] += infos[e]["outcome"] != "success"
+            labels[e] = venv.reset_infos[e]["expert_action"]
+            own[e] = False
+    return (np.concatenate(images), np.concatenate(vectors), np.concatenate(acts).astype(np.int64),
+            drives, failures, outcomes)
+
+
+def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg: DriverTrainConfig,
+         seed: int) -> tuple[float, float]:
+    """``epochs`` passes of cross-entropy on the Q-network over the states; (mean loss, agreement) of the last."""
+    import torch
+
+    torch.manual_seed(seed)
+    q_net = model.policy.q_net
+    q_net.train()
+    opt = torch.optim.Adam(q_net.parameters(), lr=cfg.learning_rate)
+    rng = np.random.default_rng(seed)
+    n = len(labels)
+    loss_sum = agree = 0.0
+    for _ in range(cfg.epochs):
+        order = rng.permutation(n)
+        loss_sum = agree = 0.0
+        for lo in range(0, n, cfg.batch_size):
+            idx = np.sort(order[lo: lo + cfg.batch_size])
+            obs = {"image": torch.as_tensor(images[idx]), "vector": torch.as_tensor(vectors[idx])}
+            y = torch.as_tensor(labels[idx])
+            q = q_net(obs)
+            loss = torch.nn.functional.cross_entropy(q, y)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            loss_sum += loss.item() * len(idx)
+            agree += float((q.argmax(1) == y).sum())
+    q_net.eval()
+    model.policy.q_net_target.load_state_dict(q_net.state_dict())
+    return loss_sum / n, agree / n
+
+
+def validate(model, sources: list[CruiseSource], tests: int, seed: int,
+             env_kwargs: dict[str, Any] | None = None) -> dict[str, int]:
+    """Outcome counts of ``tests`` cruise tests of ``model`` (an SB3 model) on ``sources``, dealt round-robin
+    over the garages, each seeded by :func:`~garage_mj.driving.sources.cruise_seed` as in a cruise run
+    (``infeasible`` counts the tests no driver could do; they are not driven)."""
+    from garage_mj.driving.drive_env import GarageDriveEnv
+    from garage_mj.driving.learned_obs import learned_observation
+
+    counts: dict[str, int] = {}
+    for g, src in enumerate(sources[:tests]):
+        env = GarageDriveEnv(garage=src.garage, action_type="discrete", infeasible="report", **(env_kwargs or {}))
+        try:
+            for idx in range(len(range(g, tests, len(sources)))):
+                obs, info = env.reset(seed=cruise_seed(seed, src.hash, idx))
+                done = info.get("outcome") == "infeasible"  # decided from the scene: never driven
+                while not done:
+                    action, _ = model.predict(learned_observation(obs), deterministic=True)
+                    obs, _, term, trunc, info = env.step(int(action))
+                    done = term or trunc
+                counts[info["outcome"]] = counts.get(info["outcome"], 0) + 1
+        finally:
+            env.close()
+    return counts
+
+
+def _write_curve(path: Path, rows: list[dict[str, Any]]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=CURVE_FIELDS)
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, path)
+
+
+def _write_json(path: Path, data: Any) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1) + "\n")
+    os.replace(tmp, path)
+
+
+def train_driver(garages, out_dir: str | Path, *, validation=None, config: DriverTrainConfig | dict | None = None,
+                 seed: int = 0, resume: bool = True, progress: bool = True,
+                 env_kwargs: dict[str, Any] | None = None) -> Path:
+    """Train a learned driver on ``garages`` (a :class:`~garage_mj.driving.garage_set.GarageSet`) into
+    ``out_dir`` (module docstring); ``validation``: the garages of the curve (default: the training
+    ones). Returns the final model's path. Same seed and config, same model, interrupted or not."""
+    import torch
+    from stable_baselines3 import DQN
+
+    cfg = config if isinstance(config, DriverTrainConfig) else load_config(DriverTrainConfig, config)
+    out = Path(out_dir)
+    sources = list(garages)
+    val_sources = list(validation) if validation is not None else sources
+    if not sources:
+        raise TrainDriverError("no garages to train on: check the garage set's filters")
+    env_kwargs = dict(env_kwargs or {})
+    env_kwargs.setdefault("occupancy", cfg.occupancy)
+    manifest = {"kind": "garage-mj driver", "algorithm": "DQN (MultiInputPolicy), DAgger warm start",
+                "seed": seed, "config": dataclasses.asdict(cfg), "env": env_kwargs,
+                "garages": getattr(garages, "origin", f"{len(sources)} garages"),
+                "garage_hashes": [s.hash for s in sources],
+                "validation": getattr(validation, "origin", "the training garages") if validation is not None
+                else "the training garages"}
+    state: dict[str, Any] = {"iterations_done": 0, "curve": [], "wall_s": 0.0}
+    if (out / MANIFEST).exists():
+        try:
+            old = json.loads((out / MANIFEST).read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise TrainDriverError(f"{out / MANIFEST} is not readable JSON ({exc}); remove the folder or use another --out") from None
+        if not resume:
+            raise TrainDriverError(f"{out} already holds a driver run; pass --resume to continue it or use another --out")
+        for key in ("seed", "config", "env", "garage_hashes"):
+            if old.get(key) != json.loads(json.dumps(manifest[key])):
+                raise TrainDriverError(f"{out} holds a run with another {key}; use another --out, or the same settings to resume")
+        state = old.get("state", state)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "data").mkdir(exist_ok=True)
+    (out / "checkpoints").mkdir(exist_ok=True)
+    for name, group in (("garages.json", garages), ("validation_garages.json", validation)):
+        if group is not None and hasattr(group, "to_json") and not (out / name).exists():
+            group.to_json(out / name)
+
+    torch.set_num_threads(cfg.torch_threads)
+    venv = _make_venv(sources, cfg.n_envs, env_kwargs, expert=True)
+    try:
+        done = state["iterations_done"]
+        if done:
+            model = DQN.load(out / "checkpoints" / f"iter_{done - 1:03d}.zip", env=venv, device="cpu")
+        else:
+            model = DQN("MultiInputPolicy", venv, seed=seed, device="cpu", verbose=0, buffer_size=1,
+                        learning_starts=0)
+        shards = [np.load(out / "data" / f"iter_{i:03d}.npz") for i in range(done)]
+        images = [s["image"] for s in shards]
+        vectors = [s["vector"] for s in shards]
+        labels = [s["label"] for s in shards]
+        failures = np.asarray(state.get("failures", np.zeros(len(sources))), dtype=float)
+        drives = np.asarray(state.get("drives", np.zeros(len(sources))), dtype=float)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=cfg.iterations, initial=done, desc="DAgger", unit="iter")
+        for it in range(done, cfg.iterations):
+            t0 = time.perf_counter()
+            beta = cfg.beta0 * (cfg.beta_decay ** it) if it else cfg.beta0
+            weights = _weights(cfg, sources, it, failures, drives)
+            im, vec, lab, drives, failures, outcomes = _collect(model, venv, cfg.steps_per_iteration, beta,
+                                                                 seed * 1_000 + it, weights, len(sources))
+            tmp = out / "data" / f"iter_{it:03d}.tmp.npz"
+            np.savez(tmp, image=im, vector=vec, label=lab)
+            os.replace(tmp, out / "data" / f"iter_{it:03d}.npz")
+            images.append(im)
+            vectors.append(vec)
+            labels.append(lab)
+            loss, agreement = _fit(model, np.concatenate(images), np.concatenate(vectors), np.concatenate(labels),
+                                   cfg, seed * 1_000 + it)
+            ckpt = out / "checkpoints" / f"iter_{it:03d}.zip"
+            model.save(ckpt.with_name(ckpt.stem + ".tmp.zip"))
+            os.replace(ckpt.with_name(ckpt.stem + ".tmp.zip"), ckpt)
+            val = validate(model, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
+            feasible = sum(v for k, v in val.items() if k != "infeasible")
+            own = [o for m, o in outcomes if m]
+            row = {"iteration": it, "states": int(sum(len(x) for x in labels)), "beta": round(beta, 4),
+                   "loss": round(loss, 4), "agreement": round(agreement, 4),
+                   "own_drive_success": round(own.count("success") / len(own), 4) if own else "",
+                   "val_success": round(val.get("success", 0) / max(feasible, 1), 4) if feasible else "",
+                   "val_collision": val.get("collision", 0), "val_timeout": val.get("timeout", 0),
+                   "val_other": sum(v for k, v in val.items() if k not in ("success", "collision", "timeout", "infeasible")),
+                   "wall_s": round(time.perf_counter() - t0, 1)}
+            state = {"iterations_done": it + 1, "curve": [*state["curve"], row],
+                     "wall_s": state["wall_s"] + row["wall_s"], "failures": failures.tolist(),
+                     "drives": drives.tolist()}
+            _write_curve(out / CURVE, state["curve"])
+            _write_json(out / MANIFEST, {**manifest, "state": state})
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(val=row["val_success"], agree=row["agreement"])
+        if bar is not None:
+            bar.close()
+        last = out / "checkpoints" / f"iter_{cfg.iterations - 1:03d}.zip"
+        if cfg.rl_timesteps > 0 and not (out / MODEL).exists():
+            venv.env_method("set_weights", np.ones(len(sources)))
+            model = DQN.load(last, env=venv, device="cpu", exploration_initial_eps=0.05,
+                             exploration_final_eps=0.05, learning_starts=1_000, buffer_size=50_000)
+            model.learn(cfg.rl_timesteps, progress_bar=progress, reset_num_timesteps=True)
+            model.save(out / "model.tmp.zip")
+            os.replace(out / "model.tmp.zip", out / MODEL)
+        elif not (out / MODEL).exists():
+            model = DQN.load(last, device="cpu")
+            model.save(out / "model.tmp.zip", exclude=["replay_buffer"])
+            os.replace(out / "model.tmp.zip", out / MODEL)
+    finally:
+        venv.close()
+    return out / MODEL
+

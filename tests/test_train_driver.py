@@ -1,0 +1,110 @@
+"""Training a learned driver: the unprivileged observation, the fleet env, train-driver end to end and resume."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from garage_mj.driving.learned_obs import learned_observation, learned_space
+from garage_mj.driving.sources import painted_sources
+
+TINY = dict(iterations=2, steps_per_iteration=60, epochs=1, batch_size=32, n_envs=1, val_tests=1)
+
+
+@pytest.fixture(scope="module")
+def tiny_sources():
+    return painted_sources("tiny_7x11", 2, seed=0)
+
+
+def test_learned_observation_reads_nothing_privileged():
+    rng = np.random.default_rng(0)
+    obs = {"depth": rng.uniform(0, 60, (64, 64)).astype(np.float32),
+           "segmentation": rng.integers(0, 14, (64, 64)).astype(np.uint8),
+           "waypoint": np.array([4.0, -1.0], np.float32), "speed": np.array([2.0], np.float32),
+           "remaining": np.array([25.0], np.float32), "steer": np.array([0.5], np.float32),
+           "goal": np.array([3.0, 3.0], np.float32), "pose": np.array([1.0, 2.0, 0.3], np.float32),
+           "actors": np.zeros((3, 4), np.float32)}
+    depth_before = obs["depth"].copy()
+    out = learned_observation(obs)
+    assert set(out) == {"image", "vector"}
+    assert learned_space(64, 64).contains(out)
+    np.testing.assert_array_equal(obs["depth"], depth_before)  # the env's observation is not changed
+    moved = dict(obs, goal=np.array([-9.0, 9.0], np.float32), pose=np.array([50.0, -5.0, 2.0], np.float32),
+                 actors=np.ones((3, 4), np.float32))
+    other = learned_observation(moved)
+    for key in out:
+        np.testing.assert_array_equal(out[key], other[key])
+    # what it does read changes it
+    assert not np.array_equal(learned_observation(dict(obs, steer=np.array([-0.5], np.float32)))["vector"], out["vector"])
+    assert out["image"][0].max() == 255  # depth beyond the range saturates
+    assert out["vector"][3] == 1.0  # route left capped
+
+
+def test_fleet_env_is_seeded_and_unprivileged(tiny_sources):
+    from garage_mj.driving.fleet_env import FleetDriveEnv
+
+    def run(seed):
+        env = FleetDriveEnv(tiny_sources, expert=True, cache_size=1)
+        seen = []
+        obs, info = env.reset(seed=seed)
+        for _ in range(3):
+            assert set(obs) == {"image", "vector"} and env.observation_space.contains(obs)
+            assert info["expert_action"] in range(4)
+            seen.append((info["garage_index"], info["test_seed"], obs["vector"].tobytes()))
+            for _ in range(5):
+                obs, _, term, trunc, info = env.step(info["expert_action"])
+            obs, info = env.reset()
+        env.close()
+        return seen
+
+    assert run(3) == run(3)
+    assert len({g for g, _, _ in run(3)} | {g for g, _, _ in run(4)}) >= 1
+    env = FleetDriveEnv(tiny_sources, weights=[0.0, 1.0])
+    assert {env.reset(seed=s)[1]["garage_index"] for s in range(4)} == {1}
+    with pytest.raises(ValueError, match="weights"):
+        env.set_weights([1.0])
+    env.close()
+
+
+def _params(path):
+    with zipfile.ZipFile(path) as z:
+        return z.read("policy.pth")
+
+
+def test_train_driver_runs_resumes_and_repeats(tmp_path, tiny_sources, monkeypatch):
+    from garage_mj.driving import train_driver as td
+
+    a = td.train_driver(tiny_sources, tmp_path / "a", config=TINY, seed=1, progress=False)
+    manifest = json.loads((tmp_path / "a" / "run.json").read_text())
+    assert manifest["state"]["iterations_done"] == 2
+    curve = (tmp_path / "a" / "curve.csv").read_text().splitlines()
+    assert len(curve) == 3 and curve[0].startswith("iteration,states")
+    assert a.name == "model.zip" and a.stat().st_size < 20e6
+
+    calls = {"n": 0}
+    real = td.validate
+
+    def interrupted(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(td, "validate", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        td.train_driver(tiny_sources, tmp_path / "b", config=TINY, seed=1, progress=False)
+    assert json.loads((tmp_path / "b" / "run.json").read_text())["state"]["iterations_done"] == 1
+    monkeypatch.setattr(td, "validate", real)
+    with pytest.raises(td.TrainDriverError, match="another config"):
+        td.train_driver(tiny_sources, tmp_path / "b", config=dict(TINY, epochs=2), seed=1, progress=False)
+    with pytest.raises(td.TrainDriverError, match="--resume"):
+        td.train_driver(tiny_sources, tmp_path / "b", config=TINY, seed=1, progress=False, resume=False)
+    b = td.train_driver(tiny_sources, tmp_path / "b", config=TINY, seed=1, progress=False)
+    assert _params(a) == _params(b)  # interrupted and resumed = uninterrupted
+    def no_time(lines):  # wall_s (last column) differs between runs; every figure before it may not
+        return [line.rsplit(",", 1)[0] for line in lines]
+
+    assert no_time((tmp_path / "b" / "curve.csv").read_text().splitlines()) == no_time(curve)
