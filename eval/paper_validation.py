@@ -34,9 +34,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--library", type=Path, help="library to sample garages from (default: paint them)")
     p.add_argument("--scale", type=float, default=1.0, help="fraction of the 50 garages and 50 tests (default 1)")
     p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--driver", default="vision", help="built-in driver or module:Class (default vision)")
+    p.add_argument("--driver", default="vision",
+                   help="built-in driver (oracle, waypoint, vision, learned), learned:PATH (a model zip of "
+                        "garage-mj train-driver) or module:Class (default vision)")
     p.add_argument("--action-type", choices=("discrete", "continuous"), default="discrete",
-                   help="default discrete: the paper's protocol (the built-in drivers' own is continuous)")
+                   help="default discrete: the paper's protocol (the hand-written built-ins' own is continuous, "
+                        "learned's discrete)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=Path("runs/paper_validation"))
     args = p.parse_args(argv)

@@ -46,8 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sample", type=positive_int, metavar="N",
                    help="with --library: N garages stratified by difficulty (seeded by --seed)")
     p.add_argument("--tests", type=positive_int, default=50, help="tests per garage (default 50)")
-    p.add_argument("--driver", help="built-in driver (oracle, waypoint, vision) or module:Class (default vision; "
-                                    "with --scenario-file: the one the file records)")
+    p.add_argument("--driver", help="built-in driver (oracle, waypoint, vision; learned: the shipped deep-RL "
+                                    "model), learned:PATH (a model zip of garage-mj train-driver) or module:Class "
+                                    "(default vision; with --scenario-file: the one the file records)")
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local: this process or a process pool (default); ray: --workers Ray actors, on a private "
@@ -57,9 +58,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=seed, default=0, help="run seed; test seeds derive from it (default 0)")
     p.add_argument("--out", type=Path, default=Path("cruise"), help="output folder (default ./cruise)")
     p.add_argument("--action-type", choices=("discrete", "continuous"), default=None,
-                   help="the paper's 4 actions or [throttle, steer] (default: the driver's own; the built-ins "
-                        "are made for continuous, a module:Class without an action_type attribute is taken as "
-                        "discrete); another one than the driver's own is warned about")
+                   help="the paper's 4 actions or [throttle, steer] (default: the driver's own; the hand-written "
+                        "built-ins are made for continuous, learned for discrete, a module:Class without an "
+                        "action_type attribute is taken as discrete); another one than the driver's own is "
+                        "warned about")
     p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
     p.add_argument("--videos", type=video_count, default=0, metavar="N",
                    help="after the tests, MP4s of N of them (failures first, then successes, in garage and test "

@@ -24,7 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--map", help="start from garages painted on this shipped map (name) or map file")
     src.add_argument("--library", type=Path, metavar="FILE", help="start from garages drawn from this library")
     p.add_argument("--library-map", metavar="NAME", help="with --library: only garages of this map")
-    p.add_argument("--driver", default="vision", help="built-in driver (oracle, waypoint, vision) or module:Class")
+    p.add_argument("--driver", default="vision",
+                   help="built-in driver (oracle, waypoint, vision; learned: the shipped deep-RL model), "
+                        "learned:PATH (a model zip of garage-mj train-driver) or module:Class (default vision)")
     p.add_argument("--budget", type=positive_int, default=1000, help="cruise tests to spend in all (default 1000)")
     p.add_argument("--tests", type=positive_int, default=5, help="tests per garage per evaluation (default 5)")
     p.add_argument("--population", type=positive_int, default=20, help="garages per generation (default 20)")
@@ -34,9 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-videos", action="store_true", help="skip the MP4s")
     p.add_argument("--seed", type=seed, default=0, help="hunt seed: start garages, mutations, test seeds")
     p.add_argument("--action-type", choices=("discrete", "continuous"), default=None,
-                   help="the paper's 4 actions or [throttle, steer] (default: the driver's own; the built-ins are "
-                        "made for continuous, a module:Class without an action_type attribute is taken as "
-                        "discrete); another one than the driver's own is warned about")
+                   help="the paper's 4 actions or [throttle, steer] (default: the driver's own; the hand-written "
+                        "built-ins are made for continuous, learned for discrete, a module:Class without an "
+                        "action_type attribute is taken as discrete); another one than the driver's own is warned about")
     p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
     p.add_argument("--pedestrians", type=int, metavar="N", help="actors per test, as garage-mj cruise")
     p.add_argument("--moving-cars", type=int, metavar="M")

@@ -3,10 +3,15 @@
 Usage: ``driver = load_driver("waypoint", noise={"steer_std": 0.05})``, then per test
 ``driver.reset({"seed": 0, "action_type": "continuous"})`` and per step ``driver.act(obs)``.
 
+The hand-written built-ins are in :data:`DRIVERS` (``oracle``, ``waypoint``, ``vision``); the learned
+one is ``learned`` (the shipped deep-RL model, :mod:`garage_mj.driving.drivers.learned`) or
+``learned:PATH`` (a model zip of ``garage-mj train-driver``). The ``learned:`` prefix wins over
+``module:Class``, so a spec string (what cruise settings store) names model and driver alike.
+
 Each driver class declares the action type it is made for in a class attribute ``action_type``
-(``"continuous"``: ``[throttle, steer]``, or ``"discrete"``: the paper's 4 actions). The built-ins
-steer continuously (:class:`BaseDriver`'s default); a user class without the attribute is taken as
-``"discrete"``, the paper's actions. Cruise and hunt run a driver with its own type unless told
+(``"continuous"``: ``[throttle, steer]``, or ``"discrete"``: the paper's 4 actions). The hand-written
+built-ins steer continuously (:class:`BaseDriver`'s default), ``learned`` uses the paper's actions;
+a user class without the attribute is taken as ``"discrete"``, the paper's actions. Cruise and hunt run a driver with its own type unless told
 otherwise (:func:`choose_action_type`), and warn when told otherwise.
 """
 
@@ -27,15 +32,19 @@ from garage_mj.driving.drivers.base import (
     discretize,
 )
 
-#: Built-in drivers: name -> "module:Class".
+#: Hand-written built-in drivers: name -> "module:Class".
 DRIVERS: dict[str, str] = {
     "oracle": "garage_mj.driving.drivers.oracle:OracleDriver",
     "waypoint": "garage_mj.driving.drivers.waypoint:WaypointDriver",
     "vision": "garage_mj.driving.drivers.vision:VisionDriver",
 }
+#: The learned built-in: ``learned`` (the shipped model) or ``learned:PATH`` (a model zip).
+LEARNED = "learned"
+LEARNED_DRIVER = "garage_mj.driving.drivers.learned:LearnedDriver"
 
 __all__ = [
     "DRIVERS",
+    "LEARNED",
     "BaseDriver",
     "CameraGeometry",
     "CarGeometry",
@@ -49,6 +58,7 @@ __all__ = [
     "action_type_of",
     "choose_action_type",
     "discretize",
+    "learned_model",
     "load_driver",
     "resolve_driver",
 ]
@@ -63,13 +73,29 @@ class DriverError(GarageMJError, ValueError):
     """A driver name or ``module:Class`` spec that cannot be loaded; the message says why."""
 
 
+def learned_model(spec: str) -> str | None:
+    """The model path of a ``learned:PATH`` spec; ``""`` for ``learned`` (the shipped model); None for
+    any other spec. Raises :class:`DriverError` for ``learned:`` with no path."""
+    if spec == LEARNED:
+        return ""
+    prefix = LEARNED + ":"
+    if not spec.startswith(prefix):
+        return None
+    path = spec[len(prefix):]
+    if not path.strip():
+        raise DriverError(f"driver {spec!r}: give the model after the colon, learned:PATH (or just learned "
+                          "for the shipped model)")
+    return path
+
+
 def resolve_driver(spec: str) -> type:
-    """The driver class for a built-in name or a ``module:Class`` spec."""
-    target = DRIVERS.get(spec, spec)
+    """The driver class for a built-in name, ``learned[:PATH]`` or a ``module:Class`` spec."""
+    target = LEARNED_DRIVER if learned_model(spec) is not None else DRIVERS.get(spec, spec)
     module_name, sep, class_name = target.partition(":")
     if not sep or not module_name or not class_name:
         raise DriverError(
-            f"unknown driver {spec!r}: use a built-in ({', '.join(DRIVERS)}) or module:Class for your own"
+            f"unknown driver {spec!r}: use a built-in ({', '.join(DRIVERS)}, {LEARNED} or {LEARNED}:PATH) "
+            "or module:Class for your own"
         )
     try:
         module = importlib.import_module(module_name)
@@ -84,8 +110,15 @@ def resolve_driver(spec: str) -> type:
 
 
 def load_driver(spec: str, **kwargs: Any) -> Driver:
-    """An instance of driver ``spec`` (built-in name or ``module:Class``), built with ``kwargs``."""
+    """An instance of driver ``spec`` (built-in name, ``learned[:PATH]`` or ``module:Class``), built
+    with ``kwargs``; ``learned:PATH`` passes ``model=PATH``."""
     cls = resolve_driver(spec)
+    path = learned_model(spec)
+    if path:
+        if "model" in kwargs:
+            raise DriverError(f"driver {spec!r} names its model; give learned (and model=...) or learned:PATH, "
+                              "not both")
+        kwargs = {**kwargs, "model": path}
     try:
         return cls(**kwargs)
     except TypeError as exc:
@@ -97,7 +130,7 @@ class ActionTypeWarning(UserWarning):
 
 
 def action_type_of(spec: str) -> str:
-    """The action type driver ``spec`` (built-in name or ``module:Class``) is made for: its class's
+    """The action type driver ``spec`` (built-in name, ``learned[:PATH]`` or ``module:Class``) is made for: its class's
     ``action_type`` attribute, ``"discrete"`` (the paper's actions) when it has none."""
     cls = resolve_driver(spec)
     kind = getattr(cls, "action_type", UNDECLARED_ACTION_TYPE)

@@ -1,0 +1,157 @@
+"""``learned``: a deep-RL driver, a stable-baselines3 model acting from the unprivileged observation.
+
+The model (a DQN or PPO ``.zip`` saved by ``garage-mj train-driver``, ``MultiInputPolicy`` over
+:func:`~garage_mj.driving.learned_obs.learned_space`) sees what
+:func:`~garage_mj.driving.learned_obs.learned_observation` makes of the drive env's observation
+(camera depth and segmentation, the next route waypoint, speed, route left, steer) and picks one of
+the paper's 4 actions by argmax, so the same test gives the same drive. ``--driver learned`` runs
+the shipped model ``models/drivers/<DEFAULT_MODEL>.zip``; ``--driver learned:PATH`` another one.
+
+A process loads each model file once (:func:`load_model`, keyed by path and modification time),
+so a cruise worker that drives many tests reads the zip and imports torch once.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garage_mj.driving.drivers import DriverError
+from garage_mj.driving.learned_obs import learned_observation, learned_space
+from garage_mj.driving.vehicle import DISCRETE_COMMANDS, DiscreteAction
+
+DRIVER_MODELS = "drivers"  # the folder of models/ that holds the shipped driver models
+DEFAULT_MODEL = "cruise_m5"  # models/drivers/<DEFAULT_MODEL>.zip: what ``--driver learned`` runs
+N_ACTIONS = len(DiscreteAction)  # the paper's 4 actions
+#: The SB3 algorithm that loads a zip, by the module of the policy class its ``data`` records.
+ALGORITHMS = {"stable_baselines3.dqn.policies": "DQN", "stable_baselines3.common.policies": "PPO"}
+#: Intra-op torch threads while the model picks an action (set around each call, then given back, so
+#: the host process keeps its own setting). One: a cruise worker is one process per core, and one
+#: 64x64 frame through NatureCNN gains nothing from more: measured per act on the 2-core machine
+#: with others' training on it, 1 thread 0.40-0.65 ms, 2 threads 5-70 ms (a thread waits for a busy
+#: core); ``vision`` takes 0.2-0.4 ms, an env step 0.7-1.2 ms.
+TORCH_THREADS = 1
+_MODEL_CACHE_SIZE = 4  # models a process keeps loaded (a retrained file is a new entry)
+_MODELS: dict[tuple[str, int, int], Any] = {}
+
+
+def default_model() -> Path:
+    """The shipped model ``--driver learned`` runs: ``models/drivers/<DEFAULT_MODEL>.zip`` in the package."""
+    return Path(str(resources.files("garage_mj.models").joinpath(DRIVER_MODELS, f"{DEFAULT_MODEL}.zip")))
+
+
+def _no_model(path: Path, why: str = "") -> DriverError:
+    return DriverError(f"no learned driver model at {path}{why}: train one with `garage-mj train-driver` "
+                       "(see README) or give learned:PATH")
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(f"{type(exc).__name__}: {exc}".split())
+
+
+def _algorithm(path: Path) -> str:
+    """``"DQN"`` or ``"PPO"``: which SB3 class saved ``path``, read from the zip's ``data`` JSON."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            data = json.loads(z.read("data"))
+        module = data["policy_class"]["__module__"]
+    except (OSError, zipfile.BadZipFile, KeyError, TypeError, ValueError) as exc:
+        raise _no_model(path, f" (not a stable-baselines3 model zip: {_one_line(exc)})") from None
+    if module not in ALGORITHMS:
+        raise DriverError(f"learned driver model {path}: its policy is from {module}; the learned driver runs "
+                          f"DQN or PPO models ({', '.join(sorted(ALGORITHMS.values()))}) from `garage-mj train-driver`")
+    return ALGORITHMS[module]
+
+
+def load_model(path: str | Path) -> Any:
+    """The SB3 model at ``path`` on the CPU, loaded once per process and file version.
+
+    Checks that it acts with the paper's 4 actions; a missing, unreadable or corrupt file, or
+    another action space, is a one-line :class:`DriverError` naming the file and the fix.
+    """
+    path = Path(path).expanduser()
+    try:
+        stat = path.resolve().stat()
+    except OSError:
+        raise _no_model(path) from None
+    if not path.is_file():
+        raise _no_model(path, " (not a file)")
+    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key in _MODELS:
+        return _MODELS[key]
+    algo = _algorithm(path)
+    import stable_baselines3  # heavy (torch): only when a learned driver is built
+
+    try:
+        model = getattr(stable_baselines3, algo).load(path, device="cpu")
+    except Exception as exc:  # torch/pickle/zip errors of a damaged file: name the file, keep one line
+        raise _no_model(path, f" (cannot load it as {algo}: {_one_line(exc)})") from None
+    space = model.action_space
+    if type(space).__name__ != "Discrete" or int(space.n) != N_ACTIONS or int(getattr(space, "start", 0)) != 0:
+        raise DriverError(f"learned driver model {path}: its actions are {space}, the paper's are Discrete({N_ACTIONS}); "
+                          "train it on a discrete GarageDriveEnv (garage-mj train-driver)")
+    while len(_MODELS) >= _MODEL_CACHE_SIZE:
+        _MODELS.pop(next(iter(_MODELS)))
+    _MODELS[key] = model
+    return model
+
+
+def _space_difference(got, want) -> str | None:
+    """What differs between a model's observation space ``got`` and the driver's ``want`` (None: same)."""
+    if type(got).__name__ != "Dict" or set(got.spaces) != set(want.spaces):
+        keys = sorted(got.spaces) if hasattr(got, "spaces") else got
+        return f"it observes {keys}, a learned driver {sorted(want.spaces)}"
+    for name, w in want.spaces.items():
+        g = got.spaces[name]
+        if g.shape != w.shape or g.dtype != w.dtype:
+            return f"its {name!r} is {g.shape} {g.dtype}, the camera gives {w.shape} {w.dtype}"
+        if not (np.array_equal(g.low, w.low) and np.array_equal(g.high, w.high)):
+            return f"its {name!r} bounds differ from learned_space's"
+    return None
+
+
+class LearnedDriver:
+    """A trained SB3 model driving with the paper's 4 actions, deterministically (argmax)."""
+
+    action_type = "discrete"  # the paper's actions (see garage_mj.driving.drivers)
+
+    def __init__(self, model: str | Path | None = None) -> None:
+        self.path = default_model() if model is None else Path(model).expanduser()
+        self.model = load_model(self.path)
+        self.discrete = True
+        self._checked: tuple[int, ...] | None = None  # the camera shape the model was checked against
+
+    def reset(self, info: dict[str, Any]) -> None:
+        """Start a test. Nothing is random (argmax); with continuous actions the chosen action's
+        ``[throttle, steer]`` command is sent (:data:`~garage_mj.driving.vehicle.DISCRETE_COMMANDS`)."""
+        self.discrete = info.get("action_type", "discrete") == "discrete"
+
+    def _check(self, shape: tuple[int, ...]) -> None:
+        why = _space_difference(self.model.observation_space, learned_space(*shape))
+        if why:
+            raise DriverError(f"learned driver model {self.path} does not fit this camera ({shape[0]}x{shape[1]}): "
+                              f"{why}; drive with the camera it was trained on or train one for this camera")
+        self._checked = shape
+
+    def act(self, obs: dict[str, Any]):
+        """The model's action for ``obs`` (a drive env observation, depth in metres)."""
+        o = learned_observation(obs)
+        if self._checked != o["image"].shape[1:]:
+            self._check(o["image"].shape[1:])
+        import torch  # loaded with the model already: a dict lookup
+
+        threads = torch.get_num_threads()
+        torch.set_num_threads(TORCH_THREADS)  # ~0.2 us a swap
+        try:
+            action, _ = self.model.predict(o, deterministic=True)
+        finally:
+            torch.set_num_threads(threads)
+        action = int(np.asarray(action).reshape(-1)[0])
+        if self.discrete:
+            return action
+        return np.array(DISCRETE_COMMANDS[DiscreteAction(action)], dtype=np.float32)

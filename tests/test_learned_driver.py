@@ -1,0 +1,280 @@
+"""The ``learned`` driver: specs, loading a model zip (once), clear errors, driving a tiny garage, determinism."""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium import spaces
+
+from garage_mj.driving.drive_env import GarageDriveEnv
+from garage_mj.driving.drivers import (
+    DRIVERS,
+    DriverError,
+    action_type_of,
+    choose_action_type,
+    load_driver,
+    resolve_driver,
+)
+from garage_mj.driving.drivers import learned as learned_mod
+from garage_mj.driving.drivers.learned import DEFAULT_MODEL, LearnedDriver, default_model
+from garage_mj.driving.learned_obs import VECTOR_KEYS, learned_space
+from garage_mj.driving.outcomes import OutcomeKind
+from garage_mj.driving.vehicle import DISCRETE_COMMANDS, DiscreteAction
+from garage_mj.reporting.cruise import run_cruise
+
+REPO = Path(__file__).resolve().parents[1]
+FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
+NO_MODEL = r"no learned driver model at {}.*: train one with `garage-mj train-driver` \(see README\) or give learned:PATH"
+
+
+class SpaceEnv(gym.Env):
+    """A do-nothing env with given spaces: enough to build (not train) an SB3 model."""
+
+    def __init__(self, observation_space, action_space):
+        self.observation_space, self.action_space = observation_space, action_space
+
+    def reset(self, seed=None, options=None):
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        return self.observation_space.sample(), 0.0, False, False, {}
+
+
+def save_model(path: Path, algo: str = "DQN", size: int = 64, actions: int = 4, seed: int = 0) -> Path:
+    """An untrained ``MultiInputPolicy`` model on ``learned_space(size, size)`` saved at ``path``."""
+    import stable_baselines3
+
+    env = SpaceEnv(learned_space(size, size), spaces.Discrete(actions))
+    extra = {"buffer_size": 64, "learning_starts": 8} if algo == "DQN" else {"n_steps": 8, "batch_size": 8}
+    getattr(stable_baselines3, algo)("MultiInputPolicy", env, seed=seed, device="cpu", **extra).save(path)
+    return path
+
+
+def wire_steering(path: Path, gain: float = 10.0, slow: float = 0.3) -> Path:
+    """Rewire the saved DQN at ``path`` into a bang-bang waypoint follower that reads only ``vector``.
+
+    Q(accelerate) = 0.5 + 20 relu(slow - speed), Q(left) = gain relu(waypoint_y), Q(right) =
+    gain relu(-waypoint_y), Q(brake) = 20 relu(0.1 - remaining) (all of the vector's scaled
+    entries): its actions vary with what the car sees, unlike an untrained net's near-constant one.
+    """
+    import torch
+    from stable_baselines3 import DQN
+
+    model = DQN.load(path, device="cpu")
+    extractor = model.policy.q_net.features_extractor
+    start = 0  # where "vector" begins in the extractor's concatenated features
+    for key, sub in extractor.extractors.items():
+        if key == "vector":
+            break
+        start += int(sub(torch.zeros((1, *model.observation_space[key].shape))).shape[1])
+    wy, speed, left = (start + VECTOR_KEYS.index(k) for k in ("waypoint_y", "speed", "remaining"))
+    A = DiscreteAction
+    for net in (model.policy.q_net, model.policy.q_net_target):
+        l1, l2, l3 = (m for m in net.q_net if isinstance(m, torch.nn.Linear))
+        with torch.no_grad():
+            for layer in (l1, l2, l3):
+                layer.weight.zero_()
+                layer.bias.zero_()
+            l1.weight[0, wy], l1.weight[1, wy], l1.bias[2] = 1.0, -1.0, 1.0
+            l1.weight[3, left], l1.bias[3], l1.weight[4, speed], l1.bias[4] = -1.0, 0.1, -1.0, slow
+            for i in range(5):
+                l2.weight[i, i] = 1.0
+            l3.weight[A.TURN_LEFT, 0] = l3.weight[A.TURN_RIGHT, 1] = gain
+            l3.weight[A.ACCELERATE, 2], l3.weight[A.BRAKE, 3], l3.weight[A.ACCELERATE, 4] = 0.5, 20.0, 20.0
+    model.save(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def dqn_zip(tmp_path_factory) -> Path:
+    return save_model(tmp_path_factory.mktemp("learned") / "dqn.zip")
+
+
+@pytest.fixture(scope="module")
+def steering_zip(tmp_path_factory) -> Path:
+    return wire_steering(save_model(tmp_path_factory.mktemp("learned") / "steering.zip"))
+
+
+def frame(waypoint=(4.0, 0.0), speed: float = 1.0, remaining: float = 12.0) -> dict:
+    """A drive env observation of an empty 64x64 view."""
+    return {"depth": np.full((64, 64), 5.0, np.float32), "segmentation": np.zeros((64, 64), np.uint8),
+            "waypoint": np.array(waypoint, np.float32), "speed": np.array([speed], np.float32),
+            "remaining": np.array([remaining], np.float32), "steer": np.array([0.0], np.float32)}
+
+
+@pytest.fixture(scope="module")
+def tiny_env(painted_tiny):
+    env = GarageDriveEnv(garage=painted_tiny, action_type="discrete", outcome=FAST["outcome"])
+    yield env
+    env.close()
+
+
+def drive(env, driver, seed: int) -> tuple[dict, list[int]]:
+    """One test driven to its end; (final info, the actions taken)."""
+    obs, info = env.reset(seed=seed)
+    driver.reset(env.driver_info(seed))
+    actions = []
+    while True:
+        action = driver.act(obs)
+        actions.append(action)
+        obs, _, term, trunc, info = env.step(action)
+        if term or trunc:
+            return info, actions
+
+
+def test_specs_name_the_learned_driver_and_its_model(dqn_zip):
+    assert "learned" not in DRIVERS  # hand-written ones only: learned takes a model
+    assert resolve_driver("learned") is LearnedDriver
+    assert resolve_driver(f"learned:{dqn_zip}") is LearnedDriver
+    assert action_type_of("learned") == "discrete"
+    assert action_type_of("learned:/no/such/model.zip") == "discrete"  # known without reading the file
+    choice = choose_action_type(f"learned:{dqn_zip}")
+    assert (choice.action_type, choice.source) == ("discrete", "driver")
+    driver = load_driver(f"learned:{dqn_zip}")
+    assert isinstance(driver, LearnedDriver) and driver.path == dqn_zip
+    with pytest.raises(DriverError, match=r"give the model after the colon, learned:PATH"):
+        resolve_driver("learned:")
+    with pytest.raises(DriverError, match=r"names its model"):
+        load_driver(f"learned:{dqn_zip}", model=dqn_zip)
+    with pytest.raises(DriverError, match=r"unknown driver 'learn'.*vision, learned or learned:PATH\) or module:Class"):
+        resolve_driver("learn")
+
+
+def test_the_model_acts_on_the_unprivileged_observation(steering_zip):
+    driver = load_driver(f"learned:{steering_zip}")
+    driver.reset({"seed": 0, "action_type": "discrete"})
+    assert driver.act(frame(waypoint=(4.0, 1.0))) == DiscreteAction.TURN_LEFT  # y left in the car frame
+    assert driver.act(frame(waypoint=(4.0, -1.0))) == DiscreteAction.TURN_RIGHT
+    assert driver.act(frame(waypoint=(4.0, 0.0))) == DiscreteAction.ACCELERATE
+    assert driver.act(frame(waypoint=(4.0, 0.0), speed=2.0, remaining=0.2)) == DiscreteAction.BRAKE
+
+
+@pytest.mark.parametrize("seed", [2, 4])
+def test_drives_a_tiny_garage_to_an_outcome_deterministically(steering_zip, tiny_env, seed):
+    info, actions = drive(tiny_env, load_driver(f"learned:{steering_zip}"), seed=seed)
+    assert info["outcome"] in {k.value for k in OutcomeKind} and info["outcome"] != "infeasible"
+    assert all(type(a) is int for a in actions) and len(set(actions)) >= 3  # it steers by what it sees
+    again_info, again = drive(tiny_env, load_driver(f"learned:{steering_zip}"), seed=seed)
+    assert again == actions
+    assert (again_info["outcome"], again_info["time"], again_info["hit"]) == (
+        info["outcome"], info["time"], info["hit"])
+
+
+def test_a_process_loads_a_model_file_once_and_again_when_it_changes(tmp_path):
+    path = save_model(tmp_path / "m.zip", seed=1)
+    first, second = LearnedDriver(path), load_driver(f"learned:{path}")
+    assert first.model is second.model
+    save_model(path, seed=2)  # retrained in place: a new file version
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
+    assert LearnedDriver(path).model is not first.model
+
+
+def test_a_ppo_model_drives_too_and_the_hosts_torch_threads_stay(tmp_path):
+    import torch
+
+    driver = LearnedDriver(save_model(tmp_path / "ppo.zip", algo="PPO"))
+    driver.reset({"seed": 0, "action_type": "discrete"})
+    threads = torch.get_num_threads()
+    torch.set_num_threads(3)
+    try:
+        assert driver.act(frame()) in range(4)
+        assert torch.get_num_threads() == 3  # one thread only while the model acts
+    finally:
+        torch.set_num_threads(threads)
+
+
+def test_continuous_actions_get_the_chosen_actions_command(steering_zip):
+    driver = LearnedDriver(steering_zip)
+    driver.reset({"seed": 0, "action_type": "continuous"})
+    command = driver.act(frame(waypoint=(4.0, 1.0)))
+    assert command.dtype == np.float32 and tuple(command) == DISCRETE_COMMANDS[DiscreteAction.TURN_LEFT]
+
+
+def test_a_model_for_another_camera_is_one_clear_line(tmp_path, tiny_env):
+    path = save_model(tmp_path / "small.zip", size=48)
+    driver = load_driver(f"learned:{path}")  # loads: the camera is known at the first frame
+    with pytest.raises(DriverError) as err:
+        drive(tiny_env, driver, seed=3)
+    msg = str(err.value)
+    assert msg.startswith(f"learned driver model {path} does not fit this camera (64x64): its 'image' is "
+                          "(2, 48, 48) uint8, the camera gives (2, 64, 64) uint8;") and "\n" not in msg
+
+
+def test_a_model_with_other_actions_is_refused(tmp_path):
+    path = save_model(tmp_path / "three.zip", actions=3)
+    with pytest.raises(DriverError, match=rf"{path}: its actions are Discrete\(3\), the paper's are Discrete\(4\)"):
+        load_driver(f"learned:{path}")
+
+
+def test_missing_or_corrupt_models_name_the_file_and_the_fix(tmp_path, dqn_zip):
+    missing = tmp_path / "missing.zip"
+    with pytest.raises(DriverError, match=NO_MODEL.format(missing)):
+        load_driver(f"learned:{missing}")
+    garbage = tmp_path / "garbage.zip"
+    garbage.write_bytes(b"not a zip at all")
+    with pytest.raises(DriverError, match=NO_MODEL.format(garbage)) as err:
+        load_driver(f"learned:{garbage}")
+    assert "not a stable-baselines3 model zip: BadZipFile" in str(err.value) and "\n" not in str(err.value)
+    broken = tmp_path / "broken.zip"  # a real zip whose weights are damaged
+    with zipfile.ZipFile(dqn_zip) as src, zipfile.ZipFile(broken, "w") as dst:
+        for name in src.namelist():
+            dst.writestr(name, b"\x00damaged" if name == "policy.pth" else src.read(name))
+    with pytest.raises(DriverError, match=NO_MODEL.format(broken)) as err:
+        load_driver(f"learned:{broken}")
+    assert "(cannot load it as DQN: " in str(err.value) and "\n" not in str(err.value)
+    other = tmp_path / "other.zip"  # an SB3 zip of an algorithm the driver does not run
+    with zipfile.ZipFile(dqn_zip) as src, zipfile.ZipFile(other, "w") as dst:
+        for name in src.namelist():
+            data = src.read(name)
+            if name == "data":
+                meta = json.loads(data)
+                meta["policy_class"]["__module__"] = "sb3_contrib.qrdqn.policies"
+                data = json.dumps(meta).encode()
+            dst.writestr(name, data)
+    with pytest.raises(DriverError, match=r"its policy is from sb3_contrib.qrdqn.policies; the learned driver runs "
+                                          r"DQN or PPO"):
+        load_driver(f"learned:{other}")
+
+
+def test_learned_alone_runs_the_shipped_model(tmp_path, monkeypatch, dqn_zip):
+    assert default_model() == REPO / "models" / "drivers" / f"{DEFAULT_MODEL}.zip"
+    shipped = tmp_path / "drivers" / f"{DEFAULT_MODEL}.zip"
+    monkeypatch.setattr(learned_mod, "default_model", lambda: shipped)
+    with pytest.raises(DriverError, match=NO_MODEL.format(shipped)):
+        load_driver("learned")
+    shipped.parent.mkdir()
+    shipped.write_bytes(dqn_zip.read_bytes())
+    driver = load_driver("learned")
+    assert driver.path == shipped and driver.model.action_space == spaces.Discrete(4)
+
+
+def test_cruise_records_the_spec_and_builds_the_driver_from_it(dqn_zip, painted_tiny, tmp_path):
+    spec = f"learned:{dqn_zip}"
+    res = run_cruise([painted_tiny], 2, spec, out_dir=tmp_path / "c", env=FAST, progress=False)
+    assert res.tests_run == 2
+    settings = json.loads((tmp_path / "c" / "run.json").read_text())
+    assert settings["driver"] == spec and settings["action_type"] == "discrete"
+    rows = (tmp_path / "c" / "tests.csv").read_text().splitlines()[1:]
+    assert len(rows) == 2 and all(spec in row for row in rows)
+
+
+def test_cli_cruise_with_a_missing_model_is_one_line(painted_tiny, tmp_path, capsys):
+    from garage_mj.cli import main
+    from garage_mj.generation.library import Library
+
+    library = tmp_path / "lib.sqlite"
+    with Library(library) as lib:
+        lib.add(painted_tiny, map="tiny_7x11", run="test", seed=0, episode=0, timestep=0)
+    missing = tmp_path / "nope.zip"
+    assert main(["cruise", "--library", str(library), "--tests", "1", "--driver", f"learned:{missing}",
+                 "--out", str(tmp_path / "c"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"garage-mj cruise: error: no learned driver model at {missing}: train one with "
+                   "`garage-mj train-driver` (see README) or give learned:PATH")
