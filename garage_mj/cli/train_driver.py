@@ -65,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out after its last finished iteration")
     p.add_argument("--config", type=Path, help="TOML of DriverTrainConfig keys (unknown keys are an error)")
-    p.add_argument("--iterations", type=positive_int, help="DAgger iterations (default 8)")
+    p.add_argument("--iterations", type=positive_int, help="DAgger iterations (default 6)")
     p.add_argument("--steps", type=positive_int, help="env steps driven per iteration (default 6000)")
     p.add_argument("--curriculum", choices=CURRICULA, help="how garages are drawn (default uniform)")
     p.add_argument("--rl-timesteps", type=non_negative_int, help="DQN fine-tuning timesteps after imitation (default 0)")
