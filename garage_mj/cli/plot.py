@@ -1,4 +1,4 @@
-"""``garage-mj plot convergence|heatmap``: the generation stage's figures as PNG files."""
+"""``garage-mj plot convergence|heatmap|driver``: the generation stage's figures and a learned driver's curve."""
 
 from __future__ import annotations
 
@@ -32,6 +32,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--map", required=True, help="map name as stored (see 'garage-mj library stats')")
     h.add_argument("--out", type=Path, help="PNG file (default: heatmap_MAP.png)")
     h.set_defaults(func=_heatmap)
+    d = psub.add_parser(
+        "driver",
+        help="a learned driver's training curve: validation success and agreement with the oracle per iteration",
+        description="Reads curve.csv of each run folder written by 'garage-mj train-driver'.",
+    )
+    d.add_argument("runs", nargs="+", type=Path, metavar="RUN", help="train-driver run folders (or their curve.csv)")
+    d.add_argument("--out", type=Path, default=Path("driver_curve.png"), help="PNG file (default: driver_curve.png)")
+    d.set_defaults(func=_driver)
 
 
 @user_errors
@@ -56,4 +64,13 @@ def _heatmap(args: argparse.Namespace) -> int:
         raise UserError(f"{args.library} has no garage of map {args.map!r}; maps in it: {', '.join(maps) or 'none'}")
     out = heatmap(points, args.out or Path(f"heatmap_{args.map}.png"), title=args.map)
     print(f"heatmap of {len(points)} garage(s) of {args.map} -> {out}")
+    return 0
+
+
+@user_errors
+def _driver(args: argparse.Namespace) -> int:
+    from garage_mj.reporting.plots import driver_curve
+
+    out = driver_curve(args.runs, args.out)
+    print(f"training curve of {len(args.runs)} run(s) -> {out}")
     return 0

@@ -135,10 +135,12 @@ def _collect(model, venv, steps: int, beta: float, seed: int, weights: np.ndarra
         images.append(obs["image"].copy())
         vectors.append(obs["vector"].copy())
         acts.append(labels.copy())
-        mine, _ = model.predict(obs, deterministic=True)
         use_model = rng.random(n) >= beta
         own |= use_model
-        actions = np.where(use_model, mine, labels)
+        actions = labels
+        if use_model.any():  # one forward pass on one thread: the workers have the cores
+            mine, _ = model.predict(obs, deterministic=True)
+            actions = np.where(use_model, mine, labels)
         obs, _, dones, infos = venv.step(actions)
         labels = np.array([i["expert_action"] for i in infos])
         for e in np.flatnonzero(dones):
@@ -290,6 +292,7 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             t0 = time.perf_counter()
             beta = cfg.beta0 * (cfg.beta_decay ** it) if it else cfg.beta0
             weights = _weights(cfg, sources, it, failures, drives)
+            torch.set_num_threads(1)
             im, vec, lab, drives, failures, outcomes = _collect(model, venv, cfg.steps_per_iteration, beta,
                                                                  seed * 1_000 + it, weights, len(sources))
             tmp = out / "data" / f"iter_{it:03d}.tmp.npz"
@@ -298,11 +301,13 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             images.append(im)
             vectors.append(vec)
             labels.append(lab)
+            torch.set_num_threads(cfg.torch_threads)
             loss, agreement = _fit(model, np.concatenate(images), np.concatenate(vectors), np.concatenate(labels),
                                    cfg, seed * 1_000 + it)
             ckpt = out / "checkpoints" / f"iter_{it:03d}.zip"
             model.save(ckpt.with_name(ckpt.stem + ".tmp.zip"))
             os.replace(ckpt.with_name(ckpt.stem + ".tmp.zip"), ckpt)
+            torch.set_num_threads(1)
             val = validate(model, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
             feasible = sum(v for k, v in val.items() if k != "infeasible")
             own = [o for m, o in outcomes if m]

@@ -3,6 +3,8 @@
 - :func:`convergence`: return vs episode, mean over the seeds of a map with a 95% confidence
   band (paper Fig. "Convergence curves"), one panel per map, read from the runs' monitor logs.
 - :func:`heatmap`: difficulty (x) vs coverage (y) in 0.1 bins, count per cell (paper Fig. "Heatmap").
+- :func:`driver_curve`: a learned driver's training curve (``garage-mj train-driver``'s ``curve.csv``):
+  validation success and agreement with the oracle per DAgger iteration, over the states seen.
 - :func:`garage_png`: a top-down picture of one garage, a colour per block code, a legend and the
   road graph (tiles and segments) drawn over it.
 """
@@ -120,6 +122,43 @@ def convergence(runs: Sequence[str | Path], out: str | Path, smooth: int = 1) ->
         ax.set_ylabel("return" + (f" ({smooth}-episode mean)" if smooth > 1 else ""))
         ax.grid(alpha=0.3)
         ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    return _save(fig, out)
+
+
+# -- driver training ------------------------------------------------------------------------------
+def driver_curve(runs: Sequence[str | Path], out: str | Path) -> Path:
+    """Validation success (solid) and agreement with the oracle (dashed) per iteration, vs the states
+    trained on, one line pair per ``train-driver`` run folder (or its ``curve.csv``); writes ``out``."""
+    import csv
+
+    if not runs:
+        raise PlotError("no runs given; pass run folders written by garage-mj train-driver")
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    for k, run in enumerate(runs):
+        path = Path(run)
+        path = path / "curve.csv" if path.is_dir() else path
+        try:
+            with path.open(newline="") as f:
+                rows = list(csv.DictReader(f))
+        except OSError as exc:
+            raise PlotError(f"{path}: cannot read the training curve ({exc.strerror}); is it a train-driver run?") from None
+        rows = [r for r in rows if r.get("val_success") not in (None, "")]
+        if not rows:
+            raise PlotError(f"{path}: no finished iteration with a validation figure yet")
+        states = [int(r["states"]) for r in rows]
+        colour = f"C{k % 10}"
+        label = path.parent.name
+        ax.plot(states, [100 * float(r["val_success"]) for r in rows], "-o", color=colour, lw=1.4, ms=4,
+                label=f"{label}: validation success")
+        ax.plot(states, [100 * float(r["agreement"]) for r in rows], "--", color=colour, lw=1.0,
+                label=f"{label}: agreement with the oracle")
+    ax.set_xlabel("states trained on (oracle-labelled)")
+    ax.set_ylabel("%")
+    ax.set_ylim(0, 102)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize=7)
+    ax.set_title("learned driver: DAgger iterations")
     fig.tight_layout()
     return _save(fig, out)
 
