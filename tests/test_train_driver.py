@@ -108,3 +108,33 @@ def test_train_driver_runs_resumes_and_repeats(tmp_path, tiny_sources, monkeypat
         return [line.rsplit(",", 1)[0] for line in lines]
 
     assert no_time((tmp_path / "b" / "curve.csv").read_text().splitlines()) == no_time(curve)
+
+
+def test_train_driver_command_and_the_model_drives(tmp_path, capsys):
+    from garage_mj.cli import main
+    from garage_mj.driving.drive_env import GarageDriveEnv
+    from garage_mj.driving.drivers import load_driver
+
+    config = tmp_path / "driver.toml"
+    config.write_text("epochs = 1\nbatch_size = 32\nval_tests = 1\n")
+    out = tmp_path / "run"
+    argv = ["train-driver", "tiny_7x11", "-n", "2", "--iterations", "1", "--steps", "40", "--workers", "1",
+            "--config", str(config), "--out", str(out), "--no-progress"]
+    assert main(argv) == 0
+    assert "drive it with --driver learned:" in capsys.readouterr().out
+    assert json.loads((out / "garages.json").read_text())["garages"]
+    assert main(argv) == 2  # an existing run is not overwritten
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--resume" in err[0]
+    assert main([*argv, "--resume"]) == 0  # resumed after its end: nothing to do, the model stays
+
+    driver = load_driver(f"learned:{out / 'model.zip'}")
+    env = GarageDriveEnv(garage=painted_sources("tiny_7x11", 1, seed=0)[0].garage, action_type="discrete")
+    obs, info = env.reset(seed=0)
+    driver.reset(env.driver_info(0))
+    for _ in range(2000):
+        obs, _, term, trunc, info = env.step(driver.act(obs))
+        if term or trunc:
+            break
+    env.close()
+    assert info.get("outcome") in {"success", "collision", "timeout", "deadlock", "missed_goal"}

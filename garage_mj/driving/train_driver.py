@@ -22,7 +22,7 @@ draws from the easiest ``(i + 1) / n`` of the set, by the library's difficulty);
 failed most in its last iteration's own drives are drawn more: weight ``1 + 4 * failure rate``).
 
 The run folder (resumable: every iteration is checkpointed, an interrupted run continues from
-the last finished one, with the same result):
+the last finished one, with the same result; resuming with more ``iterations`` extends a run):
 
 - ``run.json``: config, garages' origin, progress, the validation curve and timings;
 - ``garages.json`` and ``validation_garages.json``: the sets trained and validated on;
@@ -258,9 +258,16 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
         if not resume:
             raise TrainDriverError(f"{out} already holds a driver run; pass --resume to continue it or use another --out")
         for key in ("seed", "config", "env", "garage_hashes"):
-            if old.get(key) != json.loads(json.dumps(manifest[key])):
+            mine, theirs = json.loads(json.dumps(manifest[key])), old.get(key)
+            if key == "config" and isinstance(theirs, dict):  # more iterations extend a run
+                mine, theirs = {**mine, "iterations": 0}, {**theirs, "iterations": 0}
+            if mine != theirs:
                 raise TrainDriverError(f"{out} holds a run with another {key}; use another --out, or the same settings to resume")
         state = old.get("state", state)
+        if state["iterations_done"] > cfg.iterations:
+            raise TrainDriverError(f"{out} has already run {state['iterations_done']} iterations; ask for at least as many")
+        if state["iterations_done"] < cfg.iterations:
+            (out / MODEL).unlink(missing_ok=True)  # extended: the final model comes from the last iteration
     out.mkdir(parents=True, exist_ok=True)
     (out / "data").mkdir(exist_ok=True)
     (out / "checkpoints").mkdir(exist_ok=True)
