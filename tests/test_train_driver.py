@@ -138,3 +138,18 @@ def test_train_driver_command_and_the_model_drives(tmp_path, capsys):
             break
     env.close()
     assert info.get("outcome") in {"success", "collision", "timeout", "deadlock", "missed_goal"}
+
+
+def test_hunt_curriculum_trains_on_the_garages_its_hunt_found(tmp_path, tiny_sources):
+    import csv
+
+    from garage_mj.driving.train_driver import train_driver
+
+    cfg = dict(TINY, iterations=2, curriculum="hunt", hunt_budget=16)
+    train_driver(tiny_sources, tmp_path / "h", config=cfg, seed=0, progress=False)
+    state = json.loads((tmp_path / "h" / "run.json").read_text())["state"]
+    with (tmp_path / "h" / "hunt" / "iter_001" / "failures.csv").open(newline="") as f:
+        failing = [r for r in csv.DictReader(f) if int(r["failures"]) > 0]
+    hunted = state.get("hunted", {}).get("1", [])
+    assert len(hunted) == min(len(failing), cfg.get("hunt_keep", 8))
+    assert set(hunted) <= {r["garage_hash"] for r in failing}

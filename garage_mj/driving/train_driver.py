@@ -18,8 +18,13 @@ episode) in two stages:
 
 What it draws garages by (``curriculum``): ``uniform``; ``difficulty`` (iteration ``i`` of ``n``
 draws from the easiest ``(i + 1) / n`` of the set, by the library's difficulty); or
-``adversarial`` (before each iteration after the first, the garages where the current model
-failed most in its last iteration's own drives are drawn more: weight ``1 + 4 * failure rate``).
+``adversarial`` (failure-prioritised replay: before each iteration after the first, the garages
+where the current model failed most in its last iteration's own drives are drawn more: weight
+``1 + 4 * failure rate``); or ``hunt`` (unsupervised environment design with the testbed's own
+adversary: before each iteration after the first, :func:`~garage_mj.driving.hunt.hunt` spends
+``hunt_budget`` cruise tests searching, by mutating painted garages of the training set's map, for
+garages where the current model fails; the ``hunt_keep`` worst it found join the set and get
+``hunt_share`` of the draws of that iteration; the hunts are in ``hunt/iter_NNN``).
 
 The run folder (resumable: every iteration is checkpointed, an interrupted run continues from
 the last finished one, with the same result; resuming with more ``iterations`` extends a run):
@@ -52,7 +57,7 @@ from garage_mj.driving.sources import CruiseSource, cruise_seed
 MANIFEST = "run.json"
 CURVE = "curve.csv"
 MODEL = "model.zip"
-CURRICULA = ("uniform", "difficulty", "adversarial")
+CURRICULA = ("uniform", "difficulty", "adversarial", "hunt")
 CURVE_FIELDS = ("iteration", "states", "beta", "loss", "agreement", "own_drive_success", "val_success",
                 "val_collision", "val_timeout", "val_other", "wall_s")
 
@@ -78,6 +83,9 @@ class DriverTrainConfig:
     rl_timesteps: int = 0  # DQN fine-tuning after imitation
     occupancy: float = 0.5  # share of non-target stalls with a parked car
     torch_threads: int = 2
+    hunt_budget: int = 40  # [cruise tests] per iteration the hunt spends (curriculum "hunt")
+    hunt_keep: int = 8  # hunted garages (with a failure, worst first) added per iteration
+    hunt_share: float = 0.5  # share of an iteration's draws that go to the hunted garages
     # the network: SB3's NatureCNN over the image to cnn_features, concatenated with the vector, then net_arch.
     # A narrow image feature keeps the 5 route/speed numbers from being drowned by 256 image features
     # (with 256: 94% agreement with the oracle but 35-50% validation success)
@@ -108,6 +116,24 @@ def _weights(cfg: DriverTrainConfig, sources: list[CruiseSource], iteration: int
         rate = np.divide(failures, drives, out=np.zeros(n), where=drives > 0)
         return 1.0 + 4.0 * rate
     return np.ones(n)
+
+
+def _hunted(out: Path, it: int, sources: list[CruiseSource], cfg: DriverTrainConfig, seed: int,
+            env_kwargs: dict[str, Any]) -> list[CruiseSource]:
+    """The garages a hunt against iteration ``it - 1``'s model found it failing on (worst first)."""
+    from collections import Counter
+
+    from garage_mj.driving.garage_set import garage_map
+    from garage_mj.driving.hunt import HuntConfig, hunt
+
+    map_name = Counter(garage_map(s) for s in sources).most_common(1)[0][0]
+    model = (out / "checkpoints" / f"iter_{it - 1:03d}.zip").resolve()
+    hunt_cfg = HuntConfig(budget=cfg.hunt_budget, tests=2, population=8, elites=2, worst=0)
+    env = {k: v for k, v in env_kwargs.items() if k != "occupancy"}
+    result = hunt(f"learned:{model}", out / "hunt" / f"iter_{it:03d}", map=map_name, config=hunt_cfg,
+                  seed=seed * 1_000 + it, action_type="discrete", occupancy=env_kwargs.get("occupancy", 0.5),
+                  env=env, workers=cfg.n_envs, progress=False)
+    return [s.source for s in result.ranked if s.failures][: cfg.hunt_keep]
 
 
 def _make_venv(sources: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any], expert: bool):
@@ -307,8 +333,18 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             beta = cfg.beta0 * (cfg.beta_decay ** it) if it else cfg.beta0
             weights = _weights(cfg, sources, it, failures, drives)
             torch.set_num_threads(1)
+            hunted: list[CruiseSource] = []
+            if cfg.curriculum == "hunt" and it >= 1:
+                hunted = _hunted(out, it, sources, cfg, seed, env_kwargs)
+                if hunted:
+                    venv.close()
+                    venv = _make_venv(sources + hunted, cfg.n_envs, env_kwargs, expert=True)
+                    weights = np.array([(1 - cfg.hunt_share) / len(sources)] * len(sources)
+                                       + [cfg.hunt_share / len(hunted)] * len(hunted))
+            pool = venv.get_attr("sources", [0])[0]
             im, vec, lab, drives, failures, outcomes = _collect(model, venv, cfg.steps_per_iteration, beta,
-                                                                 seed * 1_000 + it, weights, len(sources))
+                                                                 seed * 1_000 + it, weights, len(pool))
+            drives, failures = drives[: len(sources)], failures[: len(sources)]
             tmp = out / "data" / f"iter_{it:03d}.tmp.npz"
             np.savez(tmp, image=im, vector=vec, label=lab)
             os.replace(tmp, out / "data" / f"iter_{it:03d}.npz")
@@ -334,7 +370,8 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
                    "wall_s": round(time.perf_counter() - t0, 1)}
             state = {"iterations_done": it + 1, "curve": [*state["curve"], row],
                      "wall_s": state["wall_s"] + row["wall_s"], "failures": failures.tolist(),
-                     "drives": drives.tolist()}
+                     "drives": drives.tolist(),
+                     "hunted": {**state.get("hunted", {}), **({str(it): [h.hash for h in hunted]} if hunted else {})}}
             _write_curve(out / CURVE, state["curve"])
             _write_json(out / MANIFEST, {**manifest, "state": state})
             if bar is not None:
