@@ -11,9 +11,7 @@ from garage_mj.cli._common import non_negative_int, positive_int, seed, user_err
 from garage_mj.core.config import load_config, read_toml
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
-from garage_mj.driving.train_driver import DriverTrainConfig, train_driver
-
-CURRICULA = ("uniform", "difficulty", "adversarial")
+from garage_mj.driving.train_driver import CURRICULA, DriverTrainConfig, train_driver
 
 
 def _band(text: str) -> tuple[float, float]:
@@ -67,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, help="TOML of DriverTrainConfig keys (unknown keys are an error)")
     p.add_argument("--iterations", type=positive_int, help="DAgger iterations (default 6)")
     p.add_argument("--steps", type=positive_int, help="env steps driven per iteration (default 6000)")
-    p.add_argument("--curriculum", choices=CURRICULA, help="how garages are drawn (default uniform)")
+    p.add_argument("--curriculum", choices=CURRICULA, help="how garages are drawn: uniform (default), difficulty (easy to hard), adversarial (failure-prioritised replay), hunt (garages hunt finds the model failing on)")
     p.add_argument("--rl-timesteps", type=non_negative_int, help="DQN fine-tuning timesteps after imitation (default 0)")
     p.add_argument("--workers", type=positive_int, help="worker processes driving (default 2)")
     p.add_argument("--seed", type=seed, default=0, help="random seed of the run (default 0)")
