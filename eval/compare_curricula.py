@@ -20,11 +20,12 @@ run folder). What the curricula draw (:mod:`garage_mj.driving.train_driver`):
 - ``uniform``: every training garage equally often;
 - ``difficulty``: iteration ``i`` of ``n`` draws from the easiest ``(i + 1) / n`` of the set, by the
   library's difficulty (easy to hard);
-- ``adversarial``: after the first iteration, the garages where the model itself failed most in its
-  last iteration's drives are drawn more (weight ``1 + 4 * failure rate``). It re-weights the same
-  training garages; it does not make new ones with ``garage-mj hunt``. Iteration 0 is driven by the
-  oracle alone (``beta0`` 1), so the model's own failures first steer the draw in iteration 2: with
-  2 iterations ``adversarial`` trains exactly as ``uniform``.
+- ``hunt`` (the issue's adversarial arm, unsupervised environment design): before each iteration
+  after the first, ``garage-mj hunt`` against the current model searches mutated garages of the
+  set's map for ones it fails on; the worst join the draw with half its weight;
+- ``adversarial`` (not in the default comparison): failure-prioritised replay; the garages where the
+  model itself failed most in its last iteration's drives are drawn more (weight
+  ``1 + 4 * failure rate``); it re-weights the same training garages and makes no new ones.
 
 Training garages: ``--garages`` (default ``models/drivers/cruise_m5_garages.json``, the shipped
 model's set): a garage-set JSON, a library ``.sqlite`` filtered by ``--map``/``--run-seeds``/``-n``
@@ -63,6 +64,8 @@ from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write
 from garage_mj.driving.garage_set import GarageSet, load_garage_set
 from garage_mj.driving.train_driver import CURRICULA, MANIFEST, MODEL, DriverTrainConfig
+
+COMPARED = ("uniform", "difficulty", "hunt")  # the (a), (b) and (c)
 
 try:  # run as a script: eval/ is on sys.path
     import bench_learned as bench
@@ -417,8 +420,8 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--set-seed", type=int, default=0, help="seed of the garage samples, the same for every run "
                    "(default 0; validation: +1)")
     g.add_argument("--curricula", type=lambda t: bench._names(t, list(CURRICULA), "curriculum"),
-                   default=list(CURRICULA),
-                   help=f"curricula to compare (default {','.join(CURRICULA)})")
+                   default=list(COMPARED),
+                   help=f"curricula to compare, of {','.join(CURRICULA)} (default {','.join(COMPARED)})")
     g.add_argument("--seeds", type=_seeds, default=list(SEEDS), help="training seeds (default 0,1,2)")
     g.add_argument("--iterations", type=bench._positive, default=ITERATIONS,
                    help=f"DAgger iterations (default {ITERATIONS})")
