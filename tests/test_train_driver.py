@@ -40,7 +40,7 @@ def test_learned_observation_reads_nothing_privileged():
     # what it does read changes it
     assert not np.array_equal(learned_observation(dict(obs, steer=np.array([-0.5], np.float32)))["vector"], out["vector"])
     assert out["image"][0].max() == 255  # depth beyond the range saturates
-    assert out["vector"][3] == 1.0  # route left capped
+    assert out["vector"][3] == out["vector"][5] == 1.0  # route left capped, at both scales
 
 
 def test_fleet_env_is_seeded_and_unprivileged(tiny_sources):

@@ -7,10 +7,12 @@ makes a dict for stable-baselines3's ``MultiInputPolicy``:
 
 - ``image``: (2, H, W) uint8, channel first: depth clipped to :data:`DEPTH_RANGE` metres and scaled
   to 0..255, and the segmentation class ids spread over 0..255 (:data:`SEG_SCALE` per class);
-- ``vector``: (5,) float32: the route waypoint :data:`~garage_mj.driving.drive_env.LOOKAHEAD` metres
+- ``vector``: (6,) float32: the route waypoint :data:`~garage_mj.driving.drive_env.LOOKAHEAD` metres
   ahead in the car frame (x, y over the lookahead), the speed over the car's top speed, the route
-  left to the goal (metres over :data:`REMAINING_RANGE`, capped at 1) and the road-wheel angle
-  (fraction of full lock).
+  left to the goal (metres over :data:`REMAINING_RANGE`, capped at 1), the road-wheel angle
+  (fraction of full lock) and the route left again over :data:`NEAR_RANGE` (capped at 1): the last
+  metres at a finer scale, where the car must stop within a metre of the goal (without it a
+  DAgger-trained model's failures were mostly stops 1 m short of or past the goal).
 
 The trainer (:mod:`garage_mj.driving.train_driver`) and the ``learned`` driver both call it, so a
 model sees at test time exactly what it saw in training.
@@ -29,8 +31,9 @@ from garage_mj.scene.semantics import Semantic
 DEPTH_RANGE = 20.0  # [m] depth beyond this reads as this (a garage's far wall rarely matters)
 SEG_SCALE = 255 // max(Semantic)  # segmentation id -> pixel value
 REMAINING_RANGE = 10.0  # [m] route left to the goal, read up to this (it matters for stopping)
+NEAR_RANGE = 2.0  # [m] the route left read again at a finer scale, for the stop
 SPEED_RANGE = 4.0  # [m/s] the car's top speed in a garage (CarConfig.max_speed)
-VECTOR_KEYS = ("waypoint_x", "waypoint_y", "speed", "remaining", "steer")
+VECTOR_KEYS = ("waypoint_x", "waypoint_y", "speed", "remaining", "steer", "near_goal")
 
 
 def learned_space(height: int, width: int) -> spaces.Dict:
@@ -55,5 +58,6 @@ def learned_observation(obs: dict[str, Any]) -> dict[str, np.ndarray]:
     remaining = float(np.asarray(obs["remaining"]).reshape(-1)[0])
     steer = float(np.asarray(obs["steer"]).reshape(-1)[0]) if "steer" in obs else 0.0
     vector = np.array([wx / LOOKAHEAD, wy / LOOKAHEAD, speed / SPEED_RANGE,
-                       min(remaining / REMAINING_RANGE, 1.0), steer], dtype=np.float32)
+                       min(remaining / REMAINING_RANGE, 1.0), steer, min(remaining / NEAR_RANGE, 1.0)],
+                      dtype=np.float32)
     return {"image": image, "vector": vector}
