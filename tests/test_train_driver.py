@@ -153,3 +153,15 @@ def test_hunt_curriculum_trains_on_the_garages_its_hunt_found(tmp_path, tiny_sou
     hunted = state.get("hunted", {}).get("1", [])
     assert len(hunted) == min(len(failing), cfg.get("hunt_keep", 8))
     assert set(hunted) <= {r["garage_hash"] for r in failing}
+
+
+def test_dqn_fine_tuning_after_imitation(tmp_path, tiny_sources):
+    from garage_mj.driving.train_driver import train_driver
+
+    model = train_driver(tiny_sources, tmp_path / "rl", config=dict(TINY, iterations=1, rl_timesteps=300), seed=0,
+                         progress=False)
+    rl = json.loads((tmp_path / "rl" / "run.json").read_text())["state"]["rl"]
+    assert rl["timesteps"] == 300 and sum(rl["val"].values()) >= 1
+    episodes = (tmp_path / "rl" / "rl_monitor.csv").read_text().splitlines()[2:]
+    assert episodes and model.exists()
+    assert _params(model) != _params(tmp_path / "rl" / "checkpoints" / "iter_000.zip")  # DQN changed the network

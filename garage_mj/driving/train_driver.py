@@ -14,7 +14,9 @@ episode) in two stages:
    network is trained ``epochs`` passes over all states so far (cross-entropy on the Q-values'
    softmax, so the greedy action is the oracle's) and validated on held-out garages.
 2. **DQN fine-tuning** (``rl_timesteps``, default 0): ``model.learn`` on the env's reward
-   (route progress, success bonus, collision penalty), starting from the imitated network.
+   (route progress, success bonus, collision penalty), starting from the imitated network, with
+   5% exploration; episodes in ``rl_monitor.csv``, validation after it in ``run.json``. This stage
+   is not checkpointed: interrupted, it starts again from the last imitation iteration.
 
 What it draws garages by (``curriculum``): ``uniform``; ``difficulty`` (iteration ``i`` of ``n``
 draws from the easiest ``(i + 1) / n`` of the set, by the library's difficulty); or
@@ -57,6 +59,7 @@ from garage_mj.driving.sources import CruiseSource, cruise_seed
 MANIFEST = "run.json"
 CURVE = "curve.csv"
 MODEL = "model.zip"
+RL_MONITOR = "rl_monitor.csv"
 CURRICULA = ("uniform", "difficulty", "adversarial", "hunt")
 CURVE_FIELDS = ("iteration", "states", "beta", "loss", "agreement", "own_drive_success", "val_success",
                 "val_collision", "val_timeout", "val_other", "wall_s")
@@ -381,12 +384,24 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             bar.close()
         last = out / "checkpoints" / f"iter_{cfg.iterations - 1:03d}.zip"
         if cfg.rl_timesteps > 0 and not (out / MODEL).exists():
-            venv.env_method("set_weights", np.ones(len(sources)))
-            model = DQN.load(last, env=venv, device="cpu", exploration_initial_eps=0.05,
-                             exploration_final_eps=0.05, learning_starts=1_000, buffer_size=50_000)
+            from stable_baselines3.common.vec_env import VecMonitor
+
+            venv.close()
+            venv = VecMonitor(_make_venv(sources, cfg.n_envs, env_kwargs, expert=False), str(out / RL_MONITOR))
+            venv.seed(seed * 1_000 + cfg.iterations)
+            torch.set_num_threads(cfg.torch_threads)
+            model = DQN.load(last, env=venv, device="cpu", exploration_initial_eps=0.05, exploration_final_eps=0.05,
+                             exploration_fraction=1.0, learning_starts=min(1_000, cfg.rl_timesteps // 2),
+                             buffer_size=50_000, batch_size=64, learning_rate=1e-4, target_update_interval=1_000)
+            model.set_random_seed(seed + cfg.iterations)
             model.learn(cfg.rl_timesteps, progress_bar=progress, reset_num_timesteps=True)
             model.save(out / "model.tmp.zip")
             os.replace(out / "model.tmp.zip", out / MODEL)
+            val = validate(model, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
+            feasible = sum(v for k, v in val.items() if k != "infeasible")
+            state["rl"] = {"timesteps": cfg.rl_timesteps, "val": val,
+                           "val_success": round(val.get("success", 0) / feasible, 4) if feasible else None}
+            _write_json(out / MANIFEST, {**manifest, "state": state})
         elif not (out / MODEL).exists():
             model = DQN.load(last, device="cpu")
             model.save(out / "model.tmp.zip", exclude=["replay_buffer"])
