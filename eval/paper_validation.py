@@ -40,6 +40,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--action-type", choices=("discrete", "continuous"), default="discrete",
                    help="default discrete: the paper's protocol (the hand-written built-ins' own is continuous, "
                         "learned's discrete)")
+    p.add_argument("--run-seeds", type=lambda t: [int(v) for v in t.split(",")], metavar="K,K",
+                   help="with --library: only garages of the DQN runs with these seeds (e.g. those a learned "
+                        "driver did not train on; sampled the same way, stratified by difficulty)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=Path("runs/paper_validation"))
     args = p.parse_args(argv)
@@ -47,11 +50,19 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--scale must be in (0, 1], got {args.scale}")
     n_garages = max(2, round(GARAGES * args.scale))
     n_tests = max(2, round(TESTS * args.scale))
-    if args.library is not None:
+    if args.run_seeds is not None and args.library is None:
+        p.error("--run-seeds needs --library")
+    if args.library is not None and args.run_seeds is not None:
+        from garage_mj.driving.garage_set import GarageSet
+
+        sources = list(GarageSet.from_library(args.library, map=MAP, run_seeds=args.run_seeds, n=n_garages,
+                                              seed=args.seed))
+    elif args.library is not None:
         from garage_mj.generation.library import Library
 
         with Library(args.library, create=False) as lib:
             sources = [CruiseSource.from_record(r) for r in lib.sample(n_garages, args.seed, map=MAP)]
+    if args.library is not None:
         if len(sources) < 2:
             print(f"{args.library} holds fewer than 2 garages of {MAP}", file=sys.stderr)
             return 2
