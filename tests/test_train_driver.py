@@ -83,6 +83,11 @@ def test_train_driver_runs_resumes_and_repeats(tmp_path, tiny_sources, monkeypat
     curve = (tmp_path / "a" / "curve.csv").read_text().splitlines()
     assert len(curve) == 3 and curve[0].startswith("iteration,states")
     assert a.name == "model.zip" and a.stat().st_size < 20e6
+    chosen = manifest["state"]["selected_iteration"]  # the best validation success, the later of equals
+    rows = [r.split(",") for r in curve[1:]]
+    best = max((float(r[6]), int(r[0])) for r in rows)[1]
+    assert chosen == best
+    assert _params(a) == _params(tmp_path / "a" / "checkpoints" / f"iter_{chosen:03d}.zip")
 
     calls = {"n": 0}
     real = td.validate

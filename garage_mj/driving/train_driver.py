@@ -35,7 +35,9 @@ the last finished one, with the same result; resuming with more ``iterations`` e
 - ``garages.json`` and ``validation_garages.json``: the sets trained and validated on;
 - ``curve.csv``: per iteration: states, loss, agreement with the oracle, validation success;
 - ``data/iter_NNN.npz``: the states and labels of each iteration; ``checkpoints/iter_NNN.zip``;
-- ``model.zip``: the final model (``--driver learned:RUN/model.zip``).
+- ``model.zip``: the final model (``--driver learned:RUN/model.zip``): the iteration with the best
+  validation success (the later of equals; ``run.json``'s ``selected_iteration``), then the DQN
+  stage if any. Validation garages are not test garages: test on others (``eval/bench_learned.py``).
 """
 
 from __future__ import annotations
@@ -119,6 +121,13 @@ def _weights(cfg: DriverTrainConfig, sources: list[CruiseSource], iteration: int
         rate = np.divide(failures, drives, out=np.zeros(n), where=drives > 0)
         return 1.0 + 4.0 * rate
     return np.ones(n)
+
+
+def _selected(curve: list[dict[str, Any]]) -> int:
+    """The iteration whose model becomes ``model.zip``: the best validation success, the later of equals
+    (the last iteration when there is no validation)."""
+    scored = [(float(r["val_success"]), int(r["iteration"])) for r in curve if r.get("val_success") not in ("", None)]
+    return max(scored)[1] if scored else int(curve[-1]["iteration"])
 
 
 def _hunted(out: Path, it: int, sources: list[CruiseSource], cfg: DriverTrainConfig, seed: int,
@@ -382,7 +391,10 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
                 bar.set_postfix(val=row["val_success"], agree=row["agreement"])
         if bar is not None:
             bar.close()
-        last = out / "checkpoints" / f"iter_{cfg.iterations - 1:03d}.zip"
+        chosen = _selected(state["curve"])
+        state["selected_iteration"] = chosen
+        _write_json(out / MANIFEST, {**manifest, "state": state})
+        last = out / "checkpoints" / f"iter_{chosen:03d}.zip"
         if cfg.rl_timesteps > 0 and not (out / MODEL).exists():
             from stable_baselines3.common.vec_env import VecMonitor
 
