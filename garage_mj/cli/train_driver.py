@@ -100,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
         model = train_driver(garages, args.out, validation=validation, config=config, seed=args.seed,
                              resume=args.resume, progress=not args.no_progress)
     state = json.loads((args.out / "run.json").read_text())["state"]
-    last = state["curve"][-1] if state["curve"] else {}
-    print(f"model -> {model} ({state['iterations_done']} iterations, {state['wall_s'] / 60:.1f} min; "
-          f"last validation success {last.get('val_success', '-')}); drive it with --driver learned:{model}")
+    chosen = state.get("selected_iteration")
+    row = next((r for r in state["curve"] if r["iteration"] == chosen), {})
+    print(f"model -> {model} (iteration {chosen} of {state['iterations_done']}, validation success "
+          f"{row.get('val_success', '-')}; {state['wall_s'] / 60:.1f} min); drive it with --driver learned:{model}")
     return 0
