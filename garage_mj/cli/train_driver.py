@@ -59,7 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-n", type=positive_int, metavar="N", help="a seeded sample of N garages (default: all; a map: 32)")
     p.add_argument("--validation", metavar="GARAGES", help="garages of the validation curve (default: the training ones)")
     p.add_argument("--validation-run-seeds", type=_seeds, metavar="K,K", help="run seeds of the validation garages")
-    p.add_argument("--validation-n", type=positive_int, default=20, metavar="N", help="validation garages (default 20)")
+    p.add_argument("--validation-n", type=positive_int, metavar="N",
+                   help="validation garages drawn from a library or painted (default 20)")
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out after its last finished iteration")
     p.add_argument("--config", type=Path, help="TOML of DriverTrainConfig keys (unknown keys are an error)")
@@ -89,8 +90,12 @@ def run(args: argparse.Namespace) -> int:
                               n=args.n, seed=args.seed)
     validation = None
     if args.validation is not None:
-        validation = load_garage_set(args.validation, map=args.map, run_seeds=args.validation_run_seeds,
-                                     n=args.validation_n, seed=args.seed + 1)
+        spec = args.validation
+        from_library = spec.endswith(".sqlite")
+        drawn = from_library or not (Path(spec).exists() or spec.endswith(".json"))  # a library or a painted map
+        n = args.validation_n if args.validation_n is not None else (20 if drawn else None)
+        validation = load_garage_set(spec, map=args.map if from_library else None,
+                                     run_seeds=args.validation_run_seeds, n=n, seed=args.seed + 1)
         overlap = {s.hash for s in garages} & {s.hash for s in validation}
         if overlap:
             print(f"note: {len(overlap)} validation garage(s) are also training garages")
