@@ -51,7 +51,7 @@ class DemoConfig:
     train_seeds: tuple[int, ...] = (0, 1, 2)  # the convergence band (95% CI) needs several seeds
     garages: int = 8  # garages sampled from the library, stratified by difficulty
     tests: int = 5  # cruise tests per garage and driver
-    drivers: tuple[str, ...] = ("oracle", "waypoint", "vision")
+    drivers: tuple[str, ...] = ("oracle", "waypoint", "vision", "learned")  # learned: models/drivers/cruise_m5.zip
     # adverse events (garage_mj.driving.actors): these drivers run once more with these actors per test
     actor_drivers: tuple[str, ...] = ("oracle", "vision")
     actors: dict = field(default_factory=lambda: {"pedestrians": 1, "moving_cars": 1, "clutter": 1})
