@@ -303,3 +303,23 @@ def test_the_shipped_model_drives_a_tiny_garage_and_repeats_itself(painted_tiny)
         env.close()
     assert sum(outcome == "success" for outcome, _ in runs) >= 5
     assert all(len(set(actions)) >= 3 for _, actions in runs if len(actions) > 50)  # it steers and brakes
+
+
+def test_the_fast_greedy_step_picks_what_sb3_predict_picks(painted_tiny):
+    """``LearnedDriver.act`` calls the policy directly; on real frames it must agree with ``model.predict``."""
+    from garage_mj.driving.learned_obs import learned_observation
+
+    driver = load_driver("learned")
+    env = GarageDriveEnv(garage=painted_tiny, action_type="discrete")
+    obs, _ = env.reset(seed=3)
+    driver.reset(env.driver_info(3))
+    try:
+        for _ in range(60):
+            action = driver.act(obs)
+            expected, _ = driver.model.predict(learned_observation(obs), deterministic=True)
+            assert action == int(expected)
+            obs, _, term, trunc, _ = env.step(action)
+            if term or trunc:
+                break
+    finally:
+        env.close()
