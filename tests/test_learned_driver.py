@@ -105,7 +105,8 @@ def frame(waypoint=(4.0, 0.0), speed: float = 1.0, remaining: float = 12.0) -> d
     """A drive env observation of an empty 64x64 view."""
     return {"depth": np.full((64, 64), 5.0, np.float32), "segmentation": np.zeros((64, 64), np.uint8),
             "waypoint": np.array(waypoint, np.float32), "speed": np.array([speed], np.float32),
-            "remaining": np.array([remaining], np.float32), "steer": np.array([0.0], np.float32)}
+            "remaining": np.array([remaining], np.float32), "steer": np.array([0.0], np.float32),
+            "goal": np.array([remaining, 0.0], np.float32)}
 
 
 @pytest.fixture(scope="module")

@@ -32,15 +32,17 @@ def test_learned_observation_reads_nothing_privileged():
     assert set(out) == {"image", "vector"}
     assert learned_space(64, 64).contains(out)
     np.testing.assert_array_equal(obs["depth"], depth_before)  # the env's observation is not changed
-    moved = dict(obs, goal=np.array([-9.0, 9.0], np.float32), pose=np.array([50.0, -5.0, 2.0], np.float32),
-                 actors=np.ones((3, 4), np.float32))
+    moved = dict(obs, pose=np.array([50.0, -5.0, 2.0], np.float32), actors=np.ones((3, 4), np.float32))
     other = learned_observation(moved)
     for key in out:
         np.testing.assert_array_equal(out[key], other[key])
     # what it does read changes it
-    assert not np.array_equal(learned_observation(dict(obs, steer=np.array([-0.5], np.float32)))["vector"], out["vector"])
+    for key, value in (("steer", [-0.5]), ("goal", [-0.5, 0.2])):  # the car-frame goal is read, unlike the pose
+        assert not np.array_equal(learned_observation(dict(obs, **{key: np.array(value, np.float32)}))["vector"],
+                                  out["vector"])
     assert out["image"][0].max() == 255  # depth beyond the range saturates
     assert out["vector"][3] == out["vector"][5] == 1.0  # route left capped, at both scales
+    assert out["vector"][6] == 1.0 and out["vector"][7] == 1.0  # goal 3 m ahead and left: clipped at 2 m
 
 
 def test_fleet_env_is_seeded_and_unprivileged(tiny_sources):
