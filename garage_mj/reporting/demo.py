@@ -214,7 +214,7 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
     runs = [(d, d, {}) for d in cfg.drivers]
     runs += [(d, f"{d} + actors", {"scenario": dict(cfg.actors)}) for d in cfg.actor_drivers if any(cfg.actors.values())]
     for driver, label, env in runs:
-        # the action type the driver is made for (the oracle fails most tests with another), recorded as its own
+        # the action type the driver is made for (a continuous driver rounded to 4 actions fails far more), recorded as its own
         choice = choose_action_type(driver)
         action = choice.action_type
         _say(f"cruise tests: driver {label} ({action} actions), {count_noun(cfg.tests, 'test')} x "

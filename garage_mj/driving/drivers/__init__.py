@@ -165,7 +165,7 @@ class ActionChoice:
             return None
         if self.declared == "continuous":
             why = ("its [throttle, steer] commands are rounded to the paper's 4 actions, which costs precision "
-                   "(the oracle fails most feasible tests that way)")
+                   "(the waypoint driver succeeds in 24% of feasible tests that way, 99% with its own)")
         else:
             why = ("the env tells it to send [throttle, steer] commands, which a driver made for the paper's 4 "
                    "actions may not do")
