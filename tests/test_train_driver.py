@@ -172,3 +172,20 @@ def test_dqn_fine_tuning_after_imitation(tmp_path, tiny_sources):
     episodes = (tmp_path / "rl" / "rl_monitor.csv").read_text().splitlines()[2:]
     assert episodes and model.exists()
     assert _params(model) != _params(tmp_path / "rl" / "checkpoints" / "iter_000.zip")  # DQN changed the network
+
+
+def test_train_driver_with_actors_labels_the_oracles_yield(tmp_path):
+    from garage_mj.cli import main
+    from garage_mj.driving.fleet_env import FleetDriveEnv
+
+    config = tmp_path / "driver.toml"
+    config.write_text("epochs = 1\nbatch_size = 32\nval_tests = 1\n")
+    out = tmp_path / "run"
+    assert main(["train-driver", "tiny_7x11", "-n", "1", "--iterations", "1", "--steps", "30", "--workers", "1",
+                 "--pedestrians", "1", "--config", str(config), "--out", str(out), "--no-progress"]) == 0
+    env_kwargs = json.loads((out / "run.json").read_text())["env"]
+    assert env_kwargs["scenario"]["pedestrians"] == 1
+    env = FleetDriveEnv(painted_sources("tiny_7x11", 1, seed=0), expert=True, env_kwargs=env_kwargs)
+    obs, info = env.reset(seed=0)
+    assert set(obs) == {"image", "vector"} and info["actors"]["pedestrian"] == 1  # the actor exists, unobserved
+    env.close()

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import non_negative_int, positive_int, seed, user_errors
+from garage_mj.cli.cruise import scenario
 from garage_mj.core.config import load_config, read_toml
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
@@ -69,6 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--curriculum", choices=CURRICULA, help="how garages are drawn: uniform (default), difficulty (easy to hard), adversarial (failure-prioritised replay), hunt (garages hunt finds the model failing on)")
     p.add_argument("--rl-timesteps", type=non_negative_int, help="DQN fine-tuning timesteps after imitation (default 0)")
     p.add_argument("--workers", type=positive_int, help="worker processes driving (default 2)")
+    act = p.add_argument_group("adverse events while training (the oracle yields to them, the model sees them "
+                               "only in its camera)")
+    act.add_argument("--pedestrians", type=non_negative_int, metavar="N", help="pedestrians per episode, as cruise")
+    act.add_argument("--moving-cars", type=non_negative_int, metavar="M", help="moving cars per episode, as cruise")
+    act.add_argument("--clutter", type=non_negative_int, metavar="K", help="clutter objects per episode, as cruise")
+    act.add_argument("--scenario", type=Path, metavar="FILE.toml", help="ScenarioConfig fields, as garage-mj cruise")
     p.add_argument("--seed", type=seed, default=0, help="random seed of the run (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -101,9 +108,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {len(overlap)} validation garage(s) are also training garages")
     print(f"training on {len(garages)} garages ({garages.origin}); validating on "
           f"{len(validation) if validation is not None else len(garages)}")
+    scen = scenario(args)
     with FolderLock(args.out, "garage-mj train-driver"):
         model = train_driver(garages, args.out, validation=validation, config=config, seed=args.seed,
-                             resume=args.resume, progress=not args.no_progress)
+                             resume=args.resume, progress=not args.no_progress,
+                             env_kwargs=None if scen is None else {"scenario": scen})
     state = json.loads((args.out / "run.json").read_text())["state"]
     chosen = state.get("selected_iteration")
     row = next((r for r in state["curve"] if r["iteration"] == chosen), {})
