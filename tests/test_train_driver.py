@@ -172,6 +172,10 @@ def test_dqn_fine_tuning_after_imitation(tmp_path, tiny_sources):
     episodes = (tmp_path / "rl" / "rl_monitor.csv").read_text().splitlines()[2:]
     assert episodes and model.exists()
     assert _params(model) != _params(tmp_path / "rl" / "checkpoints" / "iter_000.zip")  # DQN changed the network
+    # a finished imitation run gets (or drops) a DQN stage on resume, without imitating again
+    train_driver(tiny_sources, tmp_path / "rl", config=dict(TINY, iterations=1), seed=0, progress=False)
+    assert "rl" not in json.loads((tmp_path / "rl" / "run.json").read_text())["state"]
+    assert _params(model) == _params(tmp_path / "rl" / "checkpoints" / "iter_000.zip")
 
 
 def test_train_driver_with_actors_labels_the_oracles_yield(tmp_path):

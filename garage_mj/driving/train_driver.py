@@ -29,7 +29,8 @@ garages where the current model fails; the ``hunt_keep`` worst it found join the
 ``hunt_share`` of the draws of that iteration; the hunts are in ``hunt/iter_NNN``).
 
 The run folder (resumable: every iteration is checkpointed, an interrupted run continues from
-the last finished one, with the same result; resuming with more ``iterations`` extends a run):
+the last finished one, with the same result; resuming with more ``iterations`` or another
+``rl_timesteps`` extends a run, and its ``model.zip`` is made again):
 
 - ``run.json``: config, garages' origin, progress, the validation curve and timings;
 - ``garages.json`` and ``validation_garages.json``: the sets trained and validated on;
@@ -311,15 +312,16 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             raise TrainDriverError(f"{out} already holds a driver run; pass --resume to continue it or use another --out")
         for key in ("seed", "config", "env", "garage_hashes"):
             mine, theirs = json.loads(json.dumps(manifest[key])), old.get(key)
-            if key == "config" and isinstance(theirs, dict):  # more iterations extend a run
-                mine, theirs = {**mine, "iterations": 0}, {**theirs, "iterations": 0}
+            if key == "config" and isinstance(theirs, dict):  # more iterations or a DQN stage extend a run
+                extend = {"iterations": 0, "rl_timesteps": 0}
+                mine, theirs = {**mine, **extend}, {**theirs, **extend}
             if mine != theirs:
                 raise TrainDriverError(f"{out} holds a run with another {key}; use another --out, or the same settings to resume")
         state = old.get("state", state)
         if state["iterations_done"] > cfg.iterations:
             raise TrainDriverError(f"{out} has already run {state['iterations_done']} iterations; ask for at least as many")
-        if state["iterations_done"] < cfg.iterations:
-            (out / MODEL).unlink(missing_ok=True)  # extended: the final model comes from the last iteration
+        if state["iterations_done"] < cfg.iterations or (state.get("rl") or {}).get("timesteps", 0) != cfg.rl_timesteps:
+            (out / MODEL).unlink(missing_ok=True)  # extended: the final model is made again
     out.mkdir(parents=True, exist_ok=True)
     (out / "data").mkdir(exist_ok=True)
     (out / "checkpoints").mkdir(exist_ok=True)
@@ -427,6 +429,8 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             model = DQN.load(last, device="cpu")
             model.save(out / "model.tmp.zip", exclude=["replay_buffer"])
             os.replace(out / "model.tmp.zip", out / MODEL)
+            if state.pop("rl", None) is not None:  # a DQN stage asked for before and not now
+                _write_json(out / MANIFEST, {**manifest, "state": state})
     finally:
         venv.close()
     return out / MODEL
