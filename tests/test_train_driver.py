@@ -166,7 +166,7 @@ def test_dqn_fine_tuning_after_imitation(tmp_path, tiny_sources):
     from garage_mj.driving.train_driver import train_driver
 
     model = train_driver(tiny_sources, tmp_path / "rl", config=dict(TINY, iterations=1, rl_timesteps=300), seed=0,
-                         progress=False)
+                         progress=True)  # the bars of both stages
     rl = json.loads((tmp_path / "rl" / "run.json").read_text())["state"]["rl"]
     assert rl["timesteps"] == 300 and sum(rl["val"].values()) >= 1
     episodes = (tmp_path / "rl" / "rl_monitor.csv").read_text().splitlines()[2:]

@@ -129,6 +129,25 @@ def _weights(cfg: DriverTrainConfig, sources: list[CruiseSource], iteration: int
     return np.ones(n)
 
 
+def _progress_bar(total: int):
+    """A tqdm bar over the DQN stage's timesteps (SB3's own needs ``rich``, which is not a dependency)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    class Bar(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(total=total, desc="DQN", unit="step")
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.training_env.num_envs)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return Bar()
+
+
 def _selected(curve: list[dict[str, Any]]) -> int:
     """The iteration whose model becomes ``model.zip``: the best validation success, the later of equals
     (the last iteration when there is no validation)."""
@@ -417,7 +436,8 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
                              exploration_fraction=1.0, learning_starts=min(1_000, cfg.rl_timesteps // 2),
                              buffer_size=50_000, batch_size=64, learning_rate=1e-4, target_update_interval=1_000)
             model.set_random_seed(seed + cfg.iterations)
-            model.learn(cfg.rl_timesteps, progress_bar=progress, reset_num_timesteps=True)
+            model.learn(cfg.rl_timesteps, callback=_progress_bar(cfg.rl_timesteps) if progress else None,
+                        reset_num_timesteps=True)
             model.save(out / "model.tmp.zip")
             os.replace(out / "model.tmp.zip", out / MODEL)
             val = validate(model, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
