@@ -144,8 +144,7 @@ def _start(ray, workers: int, address: str | None, env: dict[str, str]) -> bool:
                      object_store_memory=128 * 1024**2, _system_config=_LOCAL_CONFIG, **quiet)
     except Exception as exc:  # ConnectionError, TimeoutError, RuntimeError ... from Ray's start-up
         where = f"the Ray cluster at {address}" if address else "a local Ray instance"
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        raise BackendError(f"cannot start or reach {where}: {type(exc).__name__}: {first}") from None
+        raise BackendError(f"cannot start or reach {where}: {_first_line(exc)}") from None
     return True
 
 
@@ -227,9 +226,8 @@ def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_r
             except RayTaskError as exc:  # the job raised: its own exception, one line, no retry
                 _raise_own(exc)
             except RayActorError as exc:  # its process or node died, more than max_retries times
-                first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                 raise BackendError(f"ray: job {index} lost its worker {max_retries + 1} times (node or process "
-                                   f"died: {first}); finished jobs are saved, run again to resume") from None
+                                   f"died: {_first_line(exc)}); finished jobs are saved, run again to resume") from None
             submit(a)
             yield result
     finally:
