@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import json
 import math
 import os
@@ -57,9 +58,12 @@ import numpy as np
 
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
+from garage_mj.core.fsutil import atomic_write
+from garage_mj.driving.cruise import run_test
+from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
 from garage_mj.driving.hunt import HuntConfig, hunt
-from garage_mj.driving.sources import CruiseSource, cruise_seed
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 
 MANIFEST = "run.json"
 CURVE = "curve.csv"
@@ -258,44 +262,49 @@ def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg
     return loss_sum / n, agree / n
 
 
-def validate(model, sources: list[CruiseSource], tests: int, seed: int,
+def validate(model_path: str | Path, sources: list[CruiseSource], tests: int, seed: int,
              env_kwargs: dict[str, Any] | None = None) -> dict[str, int]:
-    """Outcome counts of ``tests`` cruise tests of ``model`` (an SB3 model) on ``sources``, dealt round-robin
-    over the garages, each seeded by :func:`~garage_mj.driving.sources.cruise_seed` as in a cruise run
-    (``infeasible`` counts the tests no driver could do; they are not driven)."""
-    from garage_mj.driving.drive_env import GarageDriveEnv
-    from garage_mj.driving.learned_obs import learned_observation
-
+    """Outcome counts of ``tests`` cruise tests of the model saved at ``model_path`` on ``sources``, dealt
+    round-robin over the garages: test ``k`` of a garage is cruise test ``k`` (:func:`~garage_mj.driving.cruise.run_test`
+    with the driver ``learned:PATH``, as ``garage-mj cruise`` would drive it; ``infeasible`` counts the
+    tests no driver could do, which are not driven)."""
+    env = dict(env_kwargs or {})
+    settings = CruiseSettings(driver=f"learned:{Path(model_path).resolve()}", seed=seed, action_type="discrete",
+                              occupancy=env.pop("occupancy", CruiseSettings.occupancy), env=env)
     counts: dict[str, int] = {}
-    for g, src in enumerate(sources[:tests]):
-        env = GarageDriveEnv(garage=src.garage, action_type="discrete", infeasible="report", **(env_kwargs or {}))
-        try:
-            for idx in range(len(range(g, tests, len(sources)))):
-                obs, info = env.reset(seed=cruise_seed(seed, src.hash, idx))
-                done = info.get("outcome") == "infeasible"  # decided from the scene: never driven
-                while not done:
-                    action, _ = model.predict(learned_observation(obs), deterministic=True)
-                    obs, _, term, trunc, info = env.step(int(action))
-                    done = term or trunc
-                counts[info["outcome"]] = counts.get(info["outcome"], 0) + 1
-        finally:
-            env.close()
+    try:
+        for g, src in enumerate(sources[:tests]):
+            for index in range(len(range(g, tests, len(sources)))):  # this garage's share of the tests
+                outcome = run_test(src, index, settings)["outcome"]
+                counts[outcome] = counts.get(outcome, 0) + 1
+    finally:
+        close_cached_env()
     return counts
 
 
-def _write_curve(path: Path, rows: list[dict[str, Any]]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=CURVE_FIELDS)
-        w.writeheader()
-        w.writerows(rows)
+def _success(counts: dict[str, int]) -> float | None:
+    """Success over the feasible tests of ``validate``'s counts (None: no feasible test)."""
+    feasible = sum(v for k, v in counts.items() if k != "infeasible")
+    return round(counts.get("success", 0) / feasible, 4) if feasible else None
+
+
+def _save(model, path: Path, **kwargs: Any) -> None:
+    """``model.save`` to ``path`` atomically (a temporary zip beside it, then renamed)."""
+    tmp = path.with_name(path.stem + ".tmp.zip")
+    model.save(tmp, **kwargs)
     os.replace(tmp, path)
+
+
+def _write_curve(path: Path, rows: list[dict[str, Any]]) -> None:
+    text = io.StringIO()
+    w = csv.DictWriter(text, fieldnames=CURVE_FIELDS)
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write(path, text.getvalue())
 
 
 def _write_json(path: Path, data: Any) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1) + "\n")
-    os.replace(tmp, path)
+    atomic_write(path, json.dumps(data, indent=1) + "\n")
 
 
 def train_driver(garages, out_dir: str | Path, *, validation=None, config: DriverTrainConfig | dict | None = None,
@@ -349,7 +358,8 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             group.to_json(out / name)
 
     torch.set_num_threads(cfg.torch_threads)
-    venv = _make_venv(sources, cfg.n_envs, env_kwargs, expert=True)
+    pool = sources  # the garages the worker envs draw from (the hunt adds some per iteration)
+    venv = _make_venv(pool, cfg.n_envs, env_kwargs, expert=True)
     try:
         done = state["iterations_done"]
         if done:
@@ -379,11 +389,13 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             if cfg.curriculum == "hunt" and it >= 1:
                 hunted = _hunted(out, it, sources, cfg, seed, env_kwargs)
                 if hunted:
-                    venv.close()
-                    venv = _make_venv(sources + hunted, cfg.n_envs, env_kwargs, expert=True)
                     weights = np.array([(1 - cfg.hunt_share) / len(sources)] * len(sources)
                                        + [cfg.hunt_share / len(hunted)] * len(hunted))
-            pool = venv.get_attr("sources", [0])[0]
+            draw = sources + hunted if hunted else sources
+            if draw is not pool:  # the workers hold other garages than this iteration draws from
+                pool = draw
+                venv.close()
+                venv = _make_venv(pool, cfg.n_envs, env_kwargs, expert=True)
             im, vec, lab, drives, failures, outcomes = _collect(model, venv, cfg.steps_per_iteration, beta,
                                                                  seed * 1_000 + it, weights, len(pool))
             drives, failures = drives[: len(sources)], failures[: len(sources)]
@@ -397,16 +409,14 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             loss, agreement = _fit(model, np.concatenate(images), np.concatenate(vectors), np.concatenate(labels),
                                    cfg, seed * 1_000 + it)
             ckpt = out / "checkpoints" / f"iter_{it:03d}.zip"
-            model.save(ckpt.with_name(ckpt.stem + ".tmp.zip"))
-            os.replace(ckpt.with_name(ckpt.stem + ".tmp.zip"), ckpt)
-            torch.set_num_threads(1)
-            val = validate(model, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
-            feasible = sum(v for k, v in val.items() if k != "infeasible")
+            _save(model, ckpt)
+            val = validate(ckpt, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
+            success = _success(val)
             own = [o for m, o in outcomes if m]
             row = {"iteration": it, "states": int(sum(len(x) for x in labels)), "beta": round(beta, 4),
                    "loss": round(loss, 4), "agreement": round(agreement, 4),
                    "own_drive_success": round(own.count("success") / len(own), 4) if own else "",
-                   "val_success": round(val.get("success", 0) / max(feasible, 1), 4) if feasible else "",
+                   "val_success": "" if success is None else success,
                    "val_collision": val.get("collision", 0), "val_timeout": val.get("timeout", 0),
                    "val_other": sum(v for k, v in val.items() if k not in ("success", "collision", "timeout", "infeasible")),
                    "wall_s": round(time.perf_counter() - t0, 1)}
@@ -438,17 +448,12 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             model.set_random_seed(seed + cfg.iterations)
             model.learn(cfg.rl_timesteps, callback=_progress_bar(cfg.rl_timesteps) if progress else None,
                         reset_num_timesteps=True)
-            model.save(out / "model.tmp.zip")
-            os.replace(out / "model.tmp.zip", out / MODEL)
-            val = validate(model, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
-            feasible = sum(v for k, v in val.items() if k != "infeasible")
-            state["rl"] = {"timesteps": cfg.rl_timesteps, "val": val,
-                           "val_success": round(val.get("success", 0) / feasible, 4) if feasible else None}
+            _save(model, out / MODEL)
+            val = validate(out / MODEL, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
+            state["rl"] = {"timesteps": cfg.rl_timesteps, "val": val, "val_success": _success(val)}
             _write_json(out / MANIFEST, {**manifest, "state": state})
         elif not (out / MODEL).exists():
-            model = DQN.load(last, device="cpu")
-            model.save(out / "model.tmp.zip", exclude=["replay_buffer"])
-            os.replace(out / "model.tmp.zip", out / MODEL)
+            _save(DQN.load(last, device="cpu"), out / MODEL, exclude=["replay_buffer"])
             if state.pop("rl", None) is not None:  # a DQN stage asked for before and not now
                 _write_json(out / MANIFEST, {**manifest, "state": state})
     finally:
