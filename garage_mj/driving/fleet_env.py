@@ -144,7 +144,6 @@ class FleetDriveEnv(gym.Env):
         info = dict(info, garage=self.sources[self.index].name, garage_index=self.index, test_seed=self.test_seed)
         if self.expert:
             info["expert_action"] = int(self._oracle.act(obs))
-        self._raw = obs
         return learned_observation(obs), info
 
     def step(self, action):
