@@ -83,12 +83,15 @@ def add_filters(p: argparse.ArgumentParser) -> None:
 
 def filters(args: argparse.Namespace) -> dict:
     """The filter keyword arguments of :meth:`Library.query` from parsed ``args``."""
-    out = {"map": args.map, "difficulty": args.difficulty, "coverage": args.coverage,
-           "feasible": getattr(args, "feasible", None)}
-    for key in ("difficulty", "coverage", "feasible"):
-        rng = out[key]
-        if rng is not None:
-            if rng[0] > rng[1]:
-                raise UserError(f"--{key} {rng[0]} {rng[1]}: LO is above HI")
-            out[key] = tuple(rng)
-    return out
+    return {"map": args.map, "difficulty": checked_range(args.difficulty, "difficulty"),
+            "coverage": checked_range(args.coverage, "coverage"),
+            "feasible": checked_range(getattr(args, "feasible", None), "feasible")}
+
+
+def checked_range(rng: list[float] | None, flag: str) -> tuple[float, float] | None:
+    """A parsed ``--FLAG LO HI`` as a tuple (None when not given); LO above HI is a :class:`UserError`."""
+    if rng is None:
+        return None
+    if rng[0] > rng[1]:
+        raise UserError(f"--{flag} {rng[0]} {rng[1]}: LO is above HI")
+    return tuple(rng)

@@ -7,22 +7,12 @@ import json
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import non_negative_int, positive_int, seed, user_errors
+from garage_mj.cli._common import checked_range, non_negative_int, positive_int, seed, unit_range, user_errors
 from garage_mj.cli.cruise import scenario
 from garage_mj.core.config import load_config, read_toml
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.train_driver import CURRICULA, DriverTrainConfig, train_driver
-
-
-def _band(text: str) -> tuple[float, float]:
-    try:
-        lo, hi = (float(v) for v in text.split(":"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected LO:HI (e.g. 0.3:0.7), got {text!r}") from None
-    if not 0.0 <= lo <= hi <= 1.0:
-        raise argparse.ArgumentTypeError(f"need 0 <= LO <= HI <= 1, got {text!r}")
-    return lo, hi
 
 
 def _seeds(text: str) -> list[int]:
@@ -55,7 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("garages", metavar="GARAGES", help="where the training garages come from (see below)")
     p.add_argument("--map", help="keep only this map's garages (library)")
-    p.add_argument("--difficulty", type=_band, metavar="LO:HI", help="keep only garages in this difficulty band")
+    p.add_argument("--difficulty", nargs=2, type=unit_range, metavar=("LO", "HI"),
+                   help="keep only garages with difficulty in [LO, HI] (0-1), as the library filters")
     p.add_argument("--run-seeds", type=_seeds, metavar="K,K", help="keep only garages of these generation runs' seeds")
     p.add_argument("-n", type=positive_int, metavar="N", help="a seeded sample of N garages (default: all; a map: 32)")
     p.add_argument("--validation", metavar="GARAGES", help="garages of the validation curve (default: the training ones)")
@@ -93,8 +84,8 @@ def run(args: argparse.Namespace) -> int:
         config = load_config(DriverTrainConfig, data)
     except ValueError as exc:
         raise UserError(f"driver training config: {exc}") from None
-    garages = load_garage_set(args.garages, map=args.map, difficulty=args.difficulty, run_seeds=args.run_seeds,
-                              n=args.n, seed=args.seed)
+    garages = load_garage_set(args.garages, map=args.map, difficulty=checked_range(args.difficulty, "difficulty"),
+                              run_seeds=args.run_seeds, n=args.n, seed=args.seed)
     validation = None
     if args.validation is not None:
         spec = args.validation
