@@ -47,6 +47,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from garage_mj.cli._common import positive_int
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.actor_config import load_scenario_config
@@ -320,16 +321,6 @@ def _names(text: str, known: Sequence[str] | None, what: str) -> list[str]:
     return names
 
 
-def _positive(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        v = 0
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a whole number >= 1")
-    return v
-
-
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--make-sets", type=Path, metavar="LIBRARY",
@@ -343,10 +334,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--drivers", type=lambda t: _names(t, None, "driver"), default=list(DRIVERS),
                    help=f"driver names (built-ins), each run into OUT/<set>/<scenario>/<driver>/ (default {','.join(DRIVERS)})")
     p.add_argument("--model", type=Path, metavar="PATH", help="a train-driver model zip: learned means learned:PATH")
-    p.add_argument("--tests", type=_positive, default=4, help="tests per garage (default 4)")
-    p.add_argument("--garages", type=_positive, default=None, metavar="N",
+    p.add_argument("--tests", type=positive_int, default=4, help="tests per garage (default 4)")
+    p.add_argument("--garages", type=positive_int, default=None, metavar="N",
                    help="only the first N garages of each set (default all)")
-    p.add_argument("--workers", type=_positive, default=2, help="worker processes per run (default 2)")
+    p.add_argument("--workers", type=positive_int, default=2, help="worker processes per run (default 2)")
     p.add_argument("--seed", type=int, default=0, help="run seed, the same for every driver (default 0)")
     p.add_argument("--out", type=Path, default=Path("runs/bench_learned"),
                    help="root of the run folders OUT/<set>/<scenario>/<driver>/ (default runs/bench_learned)")

@@ -59,6 +59,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from garage_mj.cli._common import positive_int, seed_list
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write
@@ -394,16 +395,6 @@ def markdown(report: dict[str, Any]) -> str:
 
 
 # -- the command --------------------------------------------------------------------------------------
-def _seeds(text: str) -> list[int]:
-    try:
-        seeds = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        seeds = []
-    if not seeds or len(set(seeds)) != len(seeds) or min(seeds) < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give comma-separated seeds >= 0 without repeats (e.g. 0,1,2)")
-    return seeds
-
-
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("training")
@@ -411,34 +402,34 @@ def parser() -> argparse.ArgumentParser:
                    help="training garages: a garage-set .json, a library .sqlite (with --map/--run-seeds/-n), a "
                         "pack folder or a map name (default models/drivers/cruise_m5_garages.json)")
     g.add_argument("--map", help="library: keep only this map's garages")
-    g.add_argument("--run-seeds", type=_seeds, metavar="K,K", help="library: keep only these generation runs' seeds")
-    g.add_argument("-n", type=bench._positive, metavar="N", help="library or map: N garages (seeded by --set-seed)")
+    g.add_argument("--run-seeds", type=seed_list, metavar="K,K", help="library: keep only these generation runs' seeds")
+    g.add_argument("-n", type=positive_int, metavar="N", help="library or map: N garages (seeded by --set-seed)")
     g.add_argument("--validation", metavar="GARAGES",
                    help="validation garages, as --garages (default models/drivers/cruise_m5_validation.json)")
-    g.add_argument("--validation-run-seeds", type=_seeds, metavar="K,K", help="library: the validation runs' seeds")
-    g.add_argument("--validation-n", type=bench._positive, metavar="N", help="library or map: N validation garages")
+    g.add_argument("--validation-run-seeds", type=seed_list, metavar="K,K", help="library: the validation runs' seeds")
+    g.add_argument("--validation-n", type=positive_int, metavar="N", help="library or map: N validation garages")
     g.add_argument("--set-seed", type=int, default=0, help="seed of the garage samples, the same for every run "
                    "(default 0; validation: +1)")
     g.add_argument("--curricula", type=lambda t: bench._names(t, list(CURRICULA), "curriculum"),
                    default=list(COMPARED),
                    help=f"curricula to compare, of {','.join(CURRICULA)} (default {','.join(COMPARED)})")
-    g.add_argument("--seeds", type=_seeds, default=list(SEEDS), help="training seeds (default 0,1,2)")
-    g.add_argument("--iterations", type=bench._positive, default=ITERATIONS,
+    g.add_argument("--seeds", type=seed_list, default=list(SEEDS), help="training seeds (default 0,1,2)")
+    g.add_argument("--iterations", type=positive_int, default=ITERATIONS,
                    help=f"DAgger iterations (default {ITERATIONS})")
-    g.add_argument("--steps", type=bench._positive, default=STEPS, help=f"env steps per iteration (default {STEPS})")
+    g.add_argument("--steps", type=positive_int, default=STEPS, help=f"env steps per iteration (default {STEPS})")
     g.add_argument("--val-tests", type=int, default=None, metavar="N",
                    help="validation tests per iteration (default DriverTrainConfig's)")
     e = p.add_argument_group("evaluation")
     e.add_argument("--sets", type=lambda t: bench._names(t, None, "set"), default=list(bench.HELDOUT),
                    help=f"held-out set names or garage-set .json files (default {','.join(bench.HELDOUT)})")
-    e.add_argument("--garages-per-set", type=bench._positive, default=None, metavar="N",
+    e.add_argument("--garages-per-set", type=positive_int, default=None, metavar="N",
                    help="only the first N garages of each held-out set (default all)")
     e.add_argument("--scenarios", type=lambda t: bench._names(t, list(bench.SCENARIOS), "scenario"),
                    default=list(bench.SCENARIOS),
                    help="static, actors (1 pedestrian + 1 moving car + 1 clutter per test); default both")
-    e.add_argument("--tests", type=bench._positive, default=4, help="tests per garage (default 4)")
+    e.add_argument("--tests", type=positive_int, default=4, help="tests per garage (default 4)")
     e.add_argument("--eval-seed", type=int, default=0, help="run seed of the held-out tests (default 0)")
-    p.add_argument("--workers", type=bench._positive, default=2,
+    p.add_argument("--workers", type=positive_int, default=2,
                    help="worker processes, training and cruise (default 2)")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT,
                    help="root of the run folders OUT/<curriculum>_s<seed>/ and OUT/eval/ "

@@ -20,6 +20,7 @@ import sys
 import time
 from pathlib import Path
 
+from garage_mj.cli._common import seed_list
 from garage_mj.driving.regression import PAPER_R
 from garage_mj.driving.sources import CruiseSource, painted_sources
 from garage_mj.reporting.cruise import run_cruise
@@ -40,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--action-type", choices=("discrete", "continuous"), default="discrete",
                    help="default discrete: the paper's protocol (the hand-written built-ins' own is continuous, "
                         "learned's discrete)")
-    p.add_argument("--run-seeds", type=lambda t: [int(v) for v in t.split(",")], metavar="K,K",
+    p.add_argument("--run-seeds", type=seed_list, metavar="K,K",
                    help="with --library: only garages of the DQN runs with these seeds (e.g. those a learned "
                         "driver did not train on; sampled the same way, stratified by difficulty)")
     p.add_argument("--seed", type=int, default=0)

@@ -68,6 +68,17 @@ def seed(text: str) -> int:
     return n
 
 
+def seed_list(text: str) -> list[int]:
+    """argparse type: comma-separated seeds (e.g. generation runs' ``0,1,2``), each >= 0, without repeats."""
+    try:
+        seeds = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        seeds = []
+    if not seeds or len(set(seeds)) != len(seeds) or min(seeds) < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give comma-separated seeds >= 0 without repeats (e.g. 0,1,2)")
+    return seeds
+
+
 def add_filters(p: argparse.ArgumentParser) -> None:
     """The library filters: --map, --difficulty LO HI, --coverage LO HI, --limit N."""
     p.add_argument("--map", help="only garages of this map (name as stored, e.g. tiny_7x11)")

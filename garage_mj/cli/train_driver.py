@@ -7,19 +7,20 @@ import json
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import checked_range, non_negative_int, positive_int, seed, unit_range, user_errors
+from garage_mj.cli._common import (
+    checked_range,
+    non_negative_int,
+    positive_int,
+    seed,
+    seed_list,
+    unit_range,
+    user_errors,
+)
 from garage_mj.cli.cruise import scenario
 from garage_mj.core.config import load_config, read_toml
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.train_driver import CURRICULA, DriverTrainConfig, train_driver
-
-
-def _seeds(text: str) -> list[int]:
-    try:
-        return [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated run seeds (e.g. 0,1,2), got {text!r}") from None
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -47,10 +48,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--map", help="keep only this map's garages (library)")
     p.add_argument("--difficulty", nargs=2, type=unit_range, metavar=("LO", "HI"),
                    help="keep only garages with difficulty in [LO, HI] (0-1), as the library filters")
-    p.add_argument("--run-seeds", type=_seeds, metavar="K,K", help="keep only garages of these generation runs' seeds")
+    p.add_argument("--run-seeds", type=seed_list, metavar="K,K", help="keep only garages of these generation runs' seeds")
     p.add_argument("-n", type=positive_int, metavar="N", help="a seeded sample of N garages (default: all; a map: 32)")
     p.add_argument("--validation", metavar="GARAGES", help="garages of the validation curve (default: the training ones)")
-    p.add_argument("--validation-run-seeds", type=_seeds, metavar="K,K", help="run seeds of the validation garages")
+    p.add_argument("--validation-run-seeds", type=seed_list, metavar="K,K", help="run seeds of the validation garages")
     p.add_argument("--validation-n", type=positive_int, metavar="N",
                    help="validation garages drawn from a library or painted (default 20)")
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
