@@ -32,7 +32,7 @@ import numpy as np
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_error
 from garage_mj.driving.sources import CruiseSource, painted_sources
-from garage_mj.generation.library import DIFFICULTY_BIN, Library, _allocate
+from garage_mj.generation.library import Library, stratified_ids
 from garage_mj.generation.library_format import GarageRecord, LibraryError
 from garage_mj.grid.garage import Garage, MapError
 from garage_mj.grid.map_io import list_maps, load_map
@@ -380,17 +380,9 @@ def _no_match(lib: Library, path: Path, map: str | None, difficulty: tuple[float
 
 def _stratified(records: list[GarageRecord], n: int, seed: int) -> list[GarageRecord]:
     """``n`` of ``records`` (sorted by id) drawn as :meth:`Library.sample` draws them, sorted by id."""
-    rng = np.random.default_rng(seed)
-    bins: dict[int, list[GarageRecord]] = {}
-    n_bins = round(1 / DIFFICULTY_BIN)
-    for r in records:
-        bins.setdefault(min(int(r.difficulty / DIFFICULTY_BIN), n_bins - 1), []).append(r)
-    quota = _allocate(n, {b: len(rs) for b, rs in bins.items()})
-    chosen = []
-    for b in sorted(bins):
-        rs = bins[b]
-        chosen += [rs[i] for i in rng.choice(len(rs), size=quota[b], replace=False)]
-    return sorted(chosen, key=lambda r: r.id)
+    by_id = {r.id: r for r in records}
+    chosen = stratified_ids([(r.id, r.difficulty) for r in records], n, np.random.default_rng(seed))
+    return [by_id[i] for i in sorted(chosen)]
 
 
 def _entry_garage(path: Path, i: int, d: Any, name: str) -> Garage:

@@ -316,15 +316,7 @@ class Library:
         elif stratify is None:
             chosen = [rows[i][0] for i in rng.choice(len(rows), size=n, replace=False)]
         else:
-            bins: dict[int, list[int]] = {}
-            n_bins = round(1 / DIFFICULTY_BIN)
-            for id_, d in rows:
-                bins.setdefault(min(int(d / DIFFICULTY_BIN), n_bins - 1), []).append(id_)
-            quota = _allocate(n, {b: len(ids) for b, ids in bins.items()})
-            chosen = []
-            for b in sorted(bins):
-                ids = bins[b]
-                chosen += [ids[i] for i in rng.choice(len(ids), size=quota[b], replace=False)]
+            chosen = stratified_ids(rows, n, rng)
         return [self.get(i) for i in sorted(chosen)]
 
     def stats(self) -> dict[str, Any]:
@@ -345,6 +337,22 @@ class Library:
             }
         out["maps"] = per_map
         return out
+
+
+def stratified_ids(rows: list[tuple[int, float]], n: int, rng: np.random.Generator) -> list[int]:
+    """``n`` of the ids of ``rows`` (``(id, difficulty)``, in id order) spread over difficulty bins of
+    :data:`DIFFICULTY_BIN`: a bin with too few gives all it has and the rest go to the others
+    (:meth:`Library.sample`'s draw)."""
+    bins: dict[int, list[int]] = {}
+    n_bins = round(1 / DIFFICULTY_BIN)
+    for id_, d in rows:
+        bins.setdefault(min(int(d / DIFFICULTY_BIN), n_bins - 1), []).append(id_)
+    quota = _allocate(n, {b: len(ids) for b, ids in bins.items()})
+    chosen = []
+    for b in sorted(bins):
+        ids = bins[b]
+        chosen += [ids[i] for i in rng.choice(len(ids), size=quota[b], replace=False)]
+    return chosen
 
 
 def _allocate(n: int, sizes: dict[int, int]) -> dict[int, int]:
