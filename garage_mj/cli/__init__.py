@@ -12,6 +12,7 @@
 - ``cruise``: batch cruise tests of a driver.
 - ``hunt``: search for garages that break a driver.
 - ``train-driver``: train a learned cruise driver over many garages (``train_driver``).
+- ``difficulty``: fit, score and compute the route-aware difficulty.
 
 A module in :data:`COMMANDS` exposes ``register(subparsers)``, which adds its parser and sets
 ``func`` to a handler ``(args) -> int``. Errors a user can cause derive from
@@ -34,7 +35,8 @@ from garage_mj.core import __version__
 from garage_mj.core.errors import GarageMJError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ["maps", "demo", "export", "check", "train", "generate", "library", "plot", "show", "cruise", "hunt", "train_driver"]
+COMMANDS = ["maps", "demo", "export", "check", "train", "generate", "library", "plot", "show", "cruise", "hunt", "train_driver",
+            "difficulty"]
 
 
 class UserError(GarageMJError):

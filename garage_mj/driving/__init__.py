@@ -15,7 +15,8 @@
 - ``train_driver``: ``train-driver``, DQN on the unprivileged observation, warm-started by DAgger.
 - ``garage_set``: ``GarageSet``, the garages a learned driver trains or is tested on, and where they came from.
 - ``episode``: one cruise test driven to its row, with the scene and driver a process keeps.
-- ``regression``: Pearson r and the regression of success on difficulty, the paper's table (numpy).
+- ``regression``: Pearson r and the regression of success on difficulty, the paper's table; bootstrap r, AUC.
+- ``difficulty_fit``: fit and score the route-aware difficulty on recorded cruise outcomes.
 - ``results``: a cruise run's folder: ``run.json``, ``tests.csv`` read back and repaired, the summaries.
 - ``cruise``: batch cruise tests over packs or library garages, resumable.
 - ``replay``: a cruise test driven again from its OpenSCENARIO file (``replay_xosc``).

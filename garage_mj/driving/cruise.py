@@ -8,7 +8,7 @@ arrive grouped by garage, so a scene is built at most once per worker and garage
 
 Outputs in ``out_dir`` (:mod:`garage_mj.driving.results`): ``tests.csv`` (one row per test,
 appended and flushed as each test ends, so a crash or Ctrl-C loses nothing and a re-run skips
-what is there), ``summary.csv`` (the paper's table columns per garage), ``summary.json`` (Pearson
+what is there), ``summary.csv`` (the paper's table columns per garage), ``garages.json`` (the run's garages), ``summary.json`` (Pearson
 r and the linear regression of success rate on difficulty), and ``run.json`` (the settings; a
 re-run with other settings is refused). Both JSON files record the action type used and where it
 came from (``action_type_from``: ``"driver"``, the driver's own, or ``"--action-type"``, given). ``regression.png`` is the reporting stage's
@@ -29,10 +29,13 @@ from typing import TYPE_CHECKING, Any
 from garage_mj.core.backends import check_backend, map_unordered
 from garage_mj.core.fsutil import FolderLock, clean_temp, ensure_dir
 from garage_mj.driving.episode import cached_env, close_cached_env, drive_test
+from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.replay import write_test_xosc
 from garage_mj.driving.results import TEST_COLUMNS, check_settings, read_tests, write_csv, write_outputs
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
+
+GARAGES_FILE = "garages.json"  # the run's garages (GarageSet.to_json), for reading its tests back later
 
 if TYPE_CHECKING:
     from garage_mj.driving.drivers import ActionChoice
@@ -161,12 +164,29 @@ def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
             for s in srcs]
 
 
+def _write_garages(out: Path, srcs: Sequence[CruiseSource]) -> None:
+    """Keep the run's garages in ``out/garages.json`` (those of earlier calls into ``out`` too), so that
+    its tests can be read back with their garages (``garage-mj difficulty fit``)."""
+    path = out / GARAGES_FILE
+    have: list[CruiseSource] = []
+    if path.is_file():
+        try:
+            have = list(GarageSet.from_json(path))
+        except GarageSetError:
+            pass  # damaged: written anew from this call's garages
+    known = {s.hash for s in have}
+    new = [s for s in srcs if s.hash not in known]
+    if new or not path.is_file():
+        GarageSet(tuple(have + new), f"cruise run {out}").to_json(path)
+
+
 def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Path, settings: CruiseSettings,
                 choice: ActionChoice, max_tests: int | None, progress: bool, xosc: bool = False, backend: str = "local",
                 address: str | None = None) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
     clean_temp(out)  # temp files of a killed run's atomic writes
     check_settings(out, settings, choice.source)
+    _write_garages(out, srcs)
     csv_path = out / "tests.csv"
     rows = read_tests(csv_path)
     done = {(r["garage_hash"], int(r["test"])) for r in rows}

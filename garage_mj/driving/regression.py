@@ -64,3 +64,29 @@ def paper_regression() -> Regression:
     """The regression over the paper's table (r = -0.638)."""
     table = np.array(PAPER_TABLE)
     return regression(table[:, 2], table[:, 3])
+
+
+def bootstrap_r(x: Sequence[float], y: Sequence[float], seed: int = 0, resamples: int = 2000,
+                level: float = 0.95) -> tuple[float, float]:
+    """Percentile bootstrap interval of Pearson r over the (x, y) pairs (SciPy; pairs resampled together)."""
+    from scipy.stats import bootstrap
+
+    a, b = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if a.size < 3:
+        return math.nan, math.nan
+    res = bootstrap((a, b), lambda u, v: pearson(u, v), paired=True, vectorized=False, n_resamples=resamples,
+                    confidence_level=level, method="percentile", rng=np.random.default_rng(seed))
+    lo, hi = res.confidence_interval
+    return float(lo), float(hi)
+
+
+def auc(score: Sequence[float], positive: Sequence[bool]) -> float:
+    """Area under the ROC curve of ``score`` for ``positive`` (ties count half): the Mann-Whitney U / (n+ n-)."""
+    from scipy.stats import rankdata
+
+    s, pos = np.asarray(score, dtype=float), np.asarray(positive, dtype=bool)
+    n1, n0 = int(pos.sum()), int((~pos).sum())
+    if n1 == 0 or n0 == 0:
+        return math.nan
+    ranks = rankdata(s)
+    return float((ranks[pos].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))

@@ -14,6 +14,8 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 - ``routing``: the ego car's forward routes on the road network matrix, filleted into turns it can steer.
 - ``clearance``: obstacles as rectangles, the car's footprint and its swept clearance along a path.
 - ``drivable``: the planned test to each stall (goal, route, checks) and a garage's drivability.
+- ``route_features``: what a test asks of a driver, from its planned route (turns, curvature, clearance, ...).
+- ``route_difficulty``: the route-aware difficulty, a monotone logistic model of failure on route features.
 - ``car``: the ego car's model file and geometry (outline, axles, steering limit).
 - ``layout``: the garage as named, classified boxes and model placements (pure, no MuJoCo).
 - ``templates``: the models of ``models/`` as stamps for scene builders.

@@ -74,6 +74,8 @@ class TestPlan:
     max_curvature: float = math.nan  # [1/m] largest |curvature| on the route
     lane_offset: float = math.nan  # [m] goal to the nearest lane centre line
     pullback: float = 0.0  # [m] how far the goal moved back from the stall's projection
+    drive_from: int = 0  # index of the start pose on the path (START_OFFSET along it)
+    clearances: np.ndarray | None = None  # (N - drive_from,) [m] swept clearance per pose, start to goal
 
     @property
     def length(self) -> float:
@@ -242,7 +244,7 @@ class DrivePlanner:
         max_k = float(np.abs(kap[: g + 1]).max())
         common = dict(centre=centre[: g + 1], rear=rear[: g + 1], heading=hdg[: g + 1], curvature=kap[: g + 1],
                       goal=goal, stall_side=side, clearance=float(clear[k]), clearance_to=names[k],
-                      max_curvature=max_k, lane_offset=offset, pullback=pull)
+                      max_curvature=max_k, lane_offset=offset, pullback=pull, drive_from=i0, clearances=clear)
         if max_k > self.kappa_limit + 1e-6:
             return TestPlan(stall.id, False, f"route curvature {max_k:.3f} 1/m above the car's {self.kappa_limit:.3f}",
                             **common)

@@ -1,0 +1,103 @@
+"""``garage-mj difficulty``: fit the route-aware difficulty on cruise results, score it, compute it for garages."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from garage_mj.cli import UserError
+from garage_mj.cli._common import user_errors
+from garage_mj.core.fsutil import atomic_write
+from garage_mj.driving.difficulty_fit import fit_runs, garage_route, score, test_records
+from garage_mj.scene.route_difficulty import load_route_model
+from garage_mj.scene.route_features import FEATURES
+
+FIT_EPILOG = """\
+RESULTS are cruise run folders (garage-mj cruise --out): their tests.csv and garages.json. Runs of an
+older garage-mj have no garages.json: pass --library, the library their garages came from.
+
+examples:
+  garage-mj cruise --library lib.sqlite --sample 40 --tests 20 --driver mypkg.drivers:MyDriver --out runs/mine
+  garage-mj difficulty fit runs/mine --out my_route_difficulty.json
+  garage-mj difficulty score runs/other --model my_route_difficulty.json
+  garage-mj library ls --library lib.sqlite --route-difficulty 0.4 0.6
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "difficulty",
+        help="the route-aware difficulty: fit it on your driver's cruise results, score it, compute it",
+        description=(
+            "The route-aware difficulty of a garage is the expected failure rate of a cruise test, predicted "
+            "from the planned route alone (length, turns, tightest curvature, swept clearance, stalls passed, "
+            "junctions, goal side): a logistic regression with non-negative weights on those features, averaged "
+            "over the garage's feasible target stalls. The shipped model (models/difficulty/route.json) is fitted "
+            "on the built-in vision and waypoint drivers; 'fit' refits it on any driver's results."
+        ),
+        epilog=FIT_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    s = p.add_subparsers(dest="difficulty_command", metavar="ACTION", required=True)
+    f = s.add_parser("fit", help="fit a route difficulty model on cruise results",
+                     description="Fit a route difficulty model on the feasible tests of cruise runs and write it "
+                                 "(JSON) with its fitting data beside it (<OUT stem>.fit.csv); prints the weights "
+                                 "and the in-sample figures.",
+                     epilog=FIT_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    f.add_argument("results", nargs="+", type=Path, metavar="RESULTS", help="cruise run folders")
+    f.add_argument("--out", type=Path, required=True, help="model file to write (.json)")
+    f.add_argument("--library", type=Path, help="library of the runs' garages (runs without garages.json)")
+    f.add_argument("--features", help="comma-separated route features to use (default: all)")
+    f.set_defaults(func=run_fit)
+    c = s.add_parser("score", help="how well a route difficulty predicts other cruise results",
+                     description="Per driver in RESULTS: per-garage Pearson r between success %% and the route "
+                                 "difficulty (the expectation over each garage's feasible stalls) and the paper's "
+                                 "difficulty, with 95%% bootstrap intervals, and the per-test AUC of each as a "
+                                 "failure predictor.")
+    c.add_argument("results", nargs="+", type=Path, metavar="RESULTS", help="cruise run folders")
+    c.add_argument("--model", type=Path, help="model file (default: the shipped one)")
+    c.add_argument("--library", type=Path, help="library of the runs' garages (runs without garages.json)")
+    c.add_argument("--json", type=Path, help="also write the figures here")
+    c.set_defaults(func=run_score)
+
+
+def _print_score(score: dict) -> None:
+    for driver, d in score.items():
+        print(f"{driver}: {d['garages']} garages, {d['tests']} tests, success {d['success_pct']}%")
+        for name, key in (("route difficulty", "route"), ("paper's difficulty", "paper")):
+            m = d[key]
+            lo, hi = m["r_ci95"]
+            ci = f" [{lo:.3f}, {hi:.3f}]" if lo is not None else ""
+            r = "n/a" if m["r"] is None else f"{m['r']:.3f}"
+            a = "n/a" if m["auc"] is None else f"{m['auc']:.3f}"
+            print(f"  {name:<19} per-garage r = {r}{ci}   per-test AUC = {a}")
+
+
+@user_errors
+def run_fit(args: argparse.Namespace) -> int:
+    feats = FEATURES
+    if args.features:
+        feats = tuple(x.strip() for x in args.features.split(",") if x.strip())
+        bad = [x for x in feats if x not in FEATURES]
+        if bad:
+            raise UserError(f"unknown route features {bad}; choose among {', '.join(FEATURES)}")
+    model, records = fit_runs(args.results, args.out, args.library, feats)
+    print(model.describe())
+    print(f"fitted on {model.fit['tests']} tests ({model.fit['failures']} failures) of {model.fit['garages']} garages, "
+          f"drivers {', '.join(model.fit['drivers'])}; in sample:")
+    _print_score(model.fit["in_sample"])
+    print(f"wrote {args.out} and {args.out.with_suffix('.fit.csv')}")
+    return 0
+
+
+@user_errors
+def run_score(args: argparse.Namespace) -> int:
+    model = load_route_model(args.model)
+    records = test_records(args.results, args.library, progress=True)
+    result = score(model, records, garage_route=garage_route(model, args.results, args.library))
+    _print_score(result)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(args.json, json.dumps(result, indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0

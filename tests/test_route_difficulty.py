@@ -1,0 +1,141 @@
+"""The route-aware difficulty: route features of planned tests, the monotone model, its file, fit and score."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from garage_mj.cli import main
+from garage_mj.scene.drivable import drive_planner
+from garage_mj.scene.garage_scene import GarageScene
+from garage_mj.scene.route_difficulty import RouteModelError, fit, load_route_model, route_difficulty
+from garage_mj.scene.route_features import CLEAR_CAP, FEATURES, garage_features, mean_features, plan_features
+
+
+@pytest.fixture(scope="module")
+def tiny_features(painted_tiny):
+    return garage_features(GarageScene(painted_tiny))
+
+
+def test_route_features_describe_the_planned_route(painted_tiny, tiny_features):
+    planner = drive_planner(GarageScene(painted_tiny))
+    feasible = {p.stall: p for p in planner.plans() if p.feasible}
+    assert set(k for k, v in tiny_features.items() if v is not None) == set(feasible)
+    for sid, f in tiny_features.items():
+        if f is None:
+            continue
+        assert set(f) == set(FEATURES)
+        assert f["left_turns"] + f["right_turns"] == f["turns"]
+        assert 0.0 <= f["heading_change"] <= f["turns"] * math.pi / 2 + 1e-6
+        assert 0.0 <= f["tightness"] <= 1.0
+        assert 0.0 <= f["squeeze"] <= CLEAR_CAP and f["turn_squeeze"] <= f["squeeze"] + 1e-9
+        assert f["length"] == pytest.approx(feasible[sid].length - _start_length(feasible[sid]), abs=0.05)
+        if f["turns"] == 0:  # a straight drive: no heading change, no curvature
+            assert f["heading_change"] == 0.0 and f["tightness"] == 0.0
+        assert f["goal_left"] == (feasible[sid].stall_side == "left")
+    assert any(f and f["turns"] >= 2 for f in tiny_features.values())
+    assert any(f and f["turns"] == 0 for f in tiny_features.values())
+    means = mean_features(tiny_features)
+    assert means["length"] == pytest.approx(np.mean([f["length"] for f in tiny_features.values() if f]))
+
+
+def _start_length(plan) -> float:
+    """Length of the planned centre path before the start pose."""
+    c = plan.centre[: plan.drive_from + 1]
+    return float(np.linalg.norm(np.diff(c, axis=0), axis=1).sum())
+
+
+def test_route_features_refuse_an_infeasible_plan(painted_tiny):
+    from garage_mj.scene.drivable import TestPlan
+
+    with pytest.raises(ValueError, match="no feasible route"):
+        plan_features(drive_planner(GarageScene(painted_tiny)), TestPlan(3, False, "blocked"))
+
+
+def _synthetic(n: int = 400, seed: int = 0):
+    """Tests whose failure depends on length and squeeze only."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for _ in range(n):
+        row = {k: float(rng.random()) for k in FEATURES}
+        row["length"] = float(rng.uniform(5, 150))
+        rows.append(row)
+    z = -3.0 + 0.04 * np.array([r["length"] for r in rows]) + 2.0 * np.array([r["squeeze"] for r in rows])
+    failed = rng.random(n) < 1 / (1 + np.exp(-z))
+    return rows, failed
+
+
+def test_fit_is_monotone_and_finds_what_makes_tests_fail(tmp_path):
+    rows, failed = _synthetic()
+    model = fit(rows, failed)
+    assert all(w >= 0 for w in model.weights)
+    top = [name for name, _ in model.coefficients()[:2]]
+    assert set(top) == {"length", "squeeze"}
+    # monotone: making any feature larger never makes a test easier
+    base = dict(rows[0])
+    p0 = model.test_probability(base)
+    for k in FEATURES:
+        assert model.test_probability({**base, k: base[k] + 1.0}) >= p0 - 1e-12
+    # the file gives back the same model
+    model.save(tmp_path / "m.json")
+    again = load_route_model(tmp_path / "m.json")
+    assert np.allclose(again.test_probability(rows), model.test_probability(rows))
+    with pytest.raises(ValueError, match="same outcome"):
+        fit(rows, [True] * len(rows))
+
+
+@pytest.mark.parametrize("content, match", [
+    (None, "does not exist"),
+    ("{not json", "not valid JSON"),
+    ('{"format": "something else"}', "not a route difficulty model"),
+    ('{"format": "garage-mj route difficulty", "version": 99}', "version 99"),
+])
+def test_a_bad_model_file_is_one_clear_error(tmp_path, content, match):
+    path = tmp_path / "model.json"
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(RouteModelError, match=match) as err:
+        load_route_model(path)
+    assert "\n" not in str(err.value) and str(path) in str(err.value)
+
+
+def test_a_negative_weight_is_refused(tmp_path):
+    rows, failed = _synthetic(100)
+    d = fit(rows, failed).to_dict()
+    d["weights"][0] = -1.0
+    (tmp_path / "m.json").write_text(json.dumps(d))
+    with pytest.raises(RouteModelError, match="damaged"):
+        load_route_model(tmp_path / "m.json")
+
+
+def test_shipped_model_rates_a_garage(painted_tiny, tiny_features):
+    model = load_route_model()
+    d = route_difficulty(painted_tiny, model)
+    assert 0.0 < d < 1.0
+    assert d == pytest.approx(model.of_features(tiny_features))
+    assert model.fit["drivers"] and model.fit["tests"] > 100
+
+
+@pytest.mark.filterwarnings("ignore::garage_mj.driving.drivers.ActionTypeWarning")
+def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage, capsys):
+    from garage_mj.reporting.cruise import run_cruise
+
+    run = tmp_path / "run"
+    run_cruise([painted_tiny, junction_garage], 8, "waypoint", 1, 0, run, action_type="discrete", progress=False)
+    assert (run / "garages.json").is_file()
+    out = tmp_path / "mine.json"
+    assert main(["difficulty", "fit", str(run), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "route difficulty = P(fail)" in text and "per-garage r" in text
+    model = load_route_model(out)
+    assert model.fit["drivers"] == ["waypoint"] and model.fit["garages"] == 2
+    assert (tmp_path / "mine.fit.csv").read_text().startswith("run,driver,garage")
+    assert main(["difficulty", "score", str(run), "--model", str(out), "--json", str(tmp_path / "s.json")]) == 0
+    score = json.loads((tmp_path / "s.json").read_text())
+    assert score["waypoint"]["garages"] == 2 and 0.0 <= score["waypoint"]["route"]["auc"] <= 1.0
+    # a folder that is not a cruise run: one line naming it
+    assert main(["difficulty", "fit", str(tmp_path), "--out", str(out)]) == 2
+    assert "holds no tests.csv" in capsys.readouterr().err
