@@ -21,6 +21,7 @@ fitting data; the shipped one is ``models/difficulty/route.json``, fitted by
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Sequence
@@ -73,6 +74,12 @@ class RouteDifficulty:
         """A garage's route difficulty from :func:`~garage_mj.scene.route_features.garage_features` (NaN: no feasible stall)."""
         rows = [f for f in per_stall.values() if f is not None]
         return float(np.mean(self.test_probability(rows))) if rows else math.nan
+
+    @property
+    def key(self) -> str:
+        """12 hex digits naming the fitted parameters: stored values are only ever read back for the same model."""
+        params = [list(self.features), list(self.mean), list(self.scale), list(self.weights), self.intercept]
+        return hashlib.sha256(json.dumps(params).encode()).hexdigest()[:12]
 
     def coefficients(self) -> list[tuple[str, float]]:
         """(feature, weight) largest first: what makes a route hard, per standard deviation."""
