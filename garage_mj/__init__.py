@@ -10,6 +10,8 @@ One subpackage per pipeline stage; each imports only from the stages before it
 - ``export``: writers only: OpenDRIVE, OpenSCENARIO, meshes, preview, asset packs, validators.
 - ``driving``: car, sensors, outcomes, actors, the drive env, drivers, cruise tests, hunt.
 - ``reporting``: plots, analysis, video, the HTML report, the demo.
+- ``testing``: garage-mj in a user's test suite: garages for tests, cruise tests of a driver class with
+  an assertion that lists each failure (the ``pytest_garage_mj`` plugin's machinery).
 - ``cli``: the ``garage-mj`` command line, thin, on top.
 
 This module keeps the public API (``load_map``, ``evaluate``, ``Garage``, ...) and registers the

@@ -1,7 +1,7 @@
 """The package is shaped like the pipeline: imports flow downstream only, and no two files import each other.
 
 The stages, in pipeline order: ``core`` < ``grid`` < ``generation`` < ``scene`` < ``export`` <
-``driving`` < ``reporting`` < ``cli``; ``garage_mj/__init__.py`` and ``__main__.py`` sit on top.
+``driving`` < ``reporting`` < ``testing`` < ``cli``; ``garage_mj/__init__.py`` and ``__main__.py`` sit on top.
 A module may import its own stage and the stages before it. An import inside a function
 (deferred) must only keep start-up light: its target, or what it imports at module level, pulls
 in a heavy third-party package (``HEAVY``); a deferred import of a light module only hides a
@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "garage_mj"
-STAGES = ("core", "grid", "generation", "scene", "export", "driving", "reporting", "cli")
+STAGES = ("core", "grid", "generation", "scene", "export", "driving", "reporting", "testing", "cli")
 TOP = len(STAGES)  # garage_mj/__init__.py and __main__.py: the public API over every stage
 #: Third-party packages slow enough to import that a module may defer importing what pulls them in.
 HEAVY = frozenset({"torch", "stable_baselines3", "matplotlib", "mujoco", "dm_control", "ray", "trimesh",

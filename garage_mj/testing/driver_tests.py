@@ -1,0 +1,221 @@
+"""Cruise tests of a driver class from a user's own test suite: run them, read the table, assert on it.
+
+:func:`run_driver_tests` runs ``tests`` cruise tests of a driver on each garage through the cruise
+runner (:func:`garage_mj.driving.cruise.run_cruise`: the same seeds, outcomes and ``tests.csv`` as
+``garage-mj cruise``) and returns :class:`DriverTests`, the results table.
+:meth:`DriverTests.assert_success` fails with a message a person can act on: how many feasible tests
+failed and how (reasons grouped per class, :mod:`garage_mj.reporting.failures`), then each failed test
+with its outcome and reason, the MP4 of the first few (:func:`garage_mj.reporting.cruise.record_cruise_videos`,
+as ``garage-mj cruise --videos``) and its ``.xosc`` (the runner's ``xosc=True``, as ``garage-mj cruise
+--xosc``). Both are made only once a test has failed, so a passing suite pays for neither.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from garage_mj.core.errors import GarageMJError
+from garage_mj.driving.cruise import CruiseResult, run_cruise
+from garage_mj.driving.results import FAILURE_KINDS
+from garage_mj.driving.sources import CruiseSource
+from garage_mj.reporting.failures import run_failures
+from garage_mj.testing.garages import TINY_MAP, cruise_sources
+
+DEFAULT_TESTS = 3  # cruise tests per garage
+DEFAULT_VIDEOS = 5  # failed tests recorded as MP4 when an assertion fails
+LISTED = 20  # failed tests listed one by one in a message (the rest are in tests.csv)
+TABLE_COLUMNS = ("garage", "difficulty", "tests", "infeasible", "successes", "collisions", "timeouts", "deadlocks",
+                 "missed_goals", "success_pct")
+
+
+class DriverTestError(GarageMJError):
+    """A driver that cruise tests cannot run (not a class importable by name); the message says the fix."""
+
+
+def driver_spec(driver: type | str) -> str:
+    """The ``module:Class`` spec the cruise runner loads ``driver`` by (a string is returned as it is).
+
+    Worker processes and the ``.xosc`` replay import the class by that name, so it must be defined at
+    the top level of its module (a test file is fine: pytest imports it as a module).
+    """
+    if isinstance(driver, str):
+        return driver
+    if not isinstance(driver, type):
+        raise DriverTestError(f"driver {driver!r}: give the driver class (or a 'module:Class' string), not an "
+                              "instance; the runner builds one per worker with driver_kwargs")
+    module, name = driver.__module__, driver.__qualname__
+    if "." in name:  # defined in a function (<locals>) or nested in a class
+        raise DriverTestError(f"driver {name}: define the class at the top level of its module, not inside a "
+                              "function or class; workers and the .xosc replay import it as module:Class")
+    if getattr(sys.modules.get(module), name, None) is not driver:
+        raise DriverTestError(f"driver {name}: {module}.{name} is not this class; define it at the top level of "
+                              "an importable module")
+    return f"{module}:{name}"
+
+
+def run_driver_tests(
+    driver: type | str,
+    garages: Any = TINY_MAP,
+    tests: int = DEFAULT_TESTS,
+    *,
+    out_dir: str | Path,
+    workers: int = 1,
+    seed: int = 0,
+    per_map: int = 1,
+    action_type: str | None = None,
+    occupancy: float = 0.5,
+    driver_kwargs: dict[str, Any] | None = None,
+    env: dict[str, Any] | None = None,
+) -> DriverTests:
+    """Run ``tests`` cruise tests of ``driver`` on every garage of ``garages``; the results table.
+
+    ``driver``: a class with ``reset(info)`` and ``act(obs)`` (README "Your own driver"), or a spec
+    (``waypoint``, ``module:Class``); built with ``driver_kwargs``. ``garages``: map names or map files
+    (``per_map`` painted garages each), pack folders, a library file, ``Garage`` objects or library
+    records (:func:`garage_mj.testing.garages.cruise_sources`). ``out_dir`` receives what ``garage-mj
+    cruise --out`` does; a second call into it resumes (same settings) or is refused (other settings).
+    Test seeds derive from (``seed``, garage, test index), so results do not depend on ``workers``.
+    """
+    spec = driver_spec(driver)
+    sources = cruise_sources(garages, per_map, seed)
+    call = {"sources": sources, "tests": tests, "driver": spec, "workers": workers, "seed": seed,
+            "out_dir": out_dir, "action_type": action_type, "occupancy": occupancy,
+            "driver_kwargs": driver_kwargs, "env": env, "progress": False}
+    return DriverTests(run_cruise(**call), tuple(sources), call)
+
+
+def _replay_command(spec: str) -> str:
+    """The command that drives a test's ``.xosc`` again with driver ``spec`` (which it records)."""
+    module = sys.modules.get(spec.partition(":")[0]) if ":" in spec else None
+    where = getattr(module, "__file__", None)
+    if where is None or spec.partition(":")[0].startswith("garage_mj."):
+        return "garage-mj cruise --scenario-file FILE.xosc --out DIR"
+    root = Path(where).resolve().parents[spec.partition(":")[0].count(".")]  # where the module is importable from
+    return f"PYTHONPATH={root} garage-mj cruise --scenario-file FILE.xosc --out DIR"
+
+
+def _pct(x: float | None) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:g}%"
+
+
+@dataclass(frozen=True)
+class DriverTests:
+    """The cruise tests of one driver: every test's row (``rows``, as ``tests.csv``), the per-garage table
+    (``summary``, as ``summary.csv``) and the run's figures (``stats``, as ``summary.json``)."""
+
+    result: CruiseResult
+    sources: tuple[CruiseSource, ...]
+    _call: dict[str, Any] = field(repr=False, compare=False)
+
+    @property
+    def out_dir(self) -> Path:
+        return self.result.out_dir
+
+    @property
+    def driver(self) -> str:
+        return self._call["driver"]
+
+    @property
+    def rows(self) -> list[dict[str, str]]:
+        return self.result.rows
+
+    @property
+    def summary(self) -> list[dict[str, Any]]:
+        return self.result.summary
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        return self.result.stats
+
+    @property
+    def feasible(self) -> list[dict[str, str]]:
+        """The tests that were driven (an infeasible test is decided from the scene, never driven)."""
+        return [r for r in self.rows if r["outcome"] != "infeasible"]
+
+    @property
+    def failures(self) -> list[dict[str, str]]:
+        """The driven tests that ended in collision, timeout, deadlock or missed_goal."""
+        return [r for r in self.rows if r["outcome"] in FAILURE_KINDS]
+
+    @property
+    def success_rate(self) -> float | None:
+        """Successes over feasible tests, in [0, 1]; None when no test was feasible."""
+        driven = self.feasible
+        return sum(r["outcome"] == "success" for r in driven) / len(driven) if driven else None
+
+    def table(self) -> str:
+        """The per-garage table as text (columns of :data:`TABLE_COLUMNS`)."""
+        lines = [[c if c != "success_pct" else "success" for c in TABLE_COLUMNS]]
+        for r in self.summary:
+            lines.append([_pct(r[c]) if c == "success_pct" else str(r[c]) for c in TABLE_COLUMNS])
+        widths = [max(len(row[i]) for row in lines) for i in range(len(TABLE_COLUMNS))]
+        return "\n".join("  ".join(v.ljust(w) if i == 0 else v.rjust(w) for i, (v, w) in enumerate(zip(row, widths)))
+                         for row in lines)
+
+    def __str__(self) -> str:
+        return f"cruise tests of {self.driver} ({self.out_dir / 'tests.csv'}):\n{self.table()}"
+
+    def _record_failures(self, videos: int) -> None:
+        """The ``.xosc`` of every test and the MP4 of the first ``videos`` failures, into ``out_dir``."""
+        from garage_mj.driving.drivers import ActionTypeWarning
+        from garage_mj.reporting.cruise import record_cruise_videos  # matplotlib, cv2
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ActionTypeWarning)  # the first run warned already
+            run_cruise(**{**self._call, "xosc": True})  # the tests are done: this only writes their .xosc
+        if videos > 0:
+            record_cruise_videos(self.result, self.sources, min(videos, len(self.failures)))
+
+    def failure_report(self, min_success: float = 1.0, videos: int = DEFAULT_VIDEOS) -> str | None:
+        """Why these tests miss ``min_success`` (successes over feasible tests), or None when they meet it.
+
+        When they miss it, writes the ``.xosc`` of every test and the MP4s of the first ``videos``
+        failed tests into ``out_dir`` first, and names them in the message.
+        """
+        if not 0.0 <= min_success <= 1.0:
+            raise ValueError(f"min_success must be in [0, 1] (a share of feasible tests), got {min_success}")
+        rate, n, failed = self.success_rate, len(self.feasible), self.failures
+        infeasible = len(self.rows) - n
+        garages = len({r["garage_hash"] for r in self.rows})
+        head = f"cruise tests of {self.driver} on {garages} garage(s), {len(self.rows)} test(s)"
+        if rate is None:
+            return (f"{head}: none was feasible ({infeasible} infeasible: no forward route to the target stall "
+                    f"clears the car), so nothing was driven; test more garages or more tests per garage "
+                    f"(rows in {self.out_dir / 'tests.csv'})")
+        if rate >= min_success - 1e-12:
+            return None
+        self._record_failures(videos)
+        report = run_failures(self.driver, self.out_dir, self.rows, self.sources, shown=min(len(failed), LISTED))
+        lines = [f"{head}: {len(failed)} of {n} feasible test(s) failed, success {rate:.1%} "
+                 f"(required {min_success:.0%}; {infeasible} infeasible, excluded)"]
+        for kind, count in report.counts.items():
+            lines.append(f"  {kind} {count}: " + "; ".join(f"{g.text} (x{g.count})" for g in report.reasons[kind]))
+        hits = {(r["garage"], int(r["test"])): r["hit"] for r in failed}
+        lines.append(f"failed tests (the first {min(videos, len(failed))} with an MP4; replay one with "
+                     f"{_replay_command(self.driver)}):")
+        for item in report.shown:
+            hit = hits.get((item.garage, item.test))
+            lines.append(f"  {item.garage} test {item.test}: {item.outcome}{f' ({hit})' if hit else ''}: "
+                         f"{item.reason}")
+            if item.video is not None:
+                lines.append(f"    video: {item.video}")
+            if item.xosc is not None:
+                lines.append(f"    xosc:  {item.xosc}")
+        if len(failed) > len(report.shown):
+            lines.append(f"  ... and {len(failed) - len(report.shown)} more")
+        lines.append(f"every test: {self.out_dir / 'tests.csv'}")
+        return "\n".join(lines)
+
+    def assert_success(self, min_success: float = 1.0, videos: int = DEFAULT_VIDEOS) -> DriverTests:
+        """Fail (``AssertionError``) unless at least ``min_success`` of the feasible tests succeeded (all by
+        default); the message is :meth:`failure_report`. Returns ``self``, to chain."""
+        __tracebackhide__ = True  # pytest shows the caller's line, not this one
+        message = self.failure_report(min_success, videos)
+        if message is not None:
+            raise AssertionError(message)
+        return self

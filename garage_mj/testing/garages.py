@@ -1,0 +1,111 @@
+"""The garages a user's tests run on, made deterministically, and what a ``garages`` argument may name.
+
+The pytest plugin's fixtures hand these out: :func:`tiny_garage` (``tiny_7x11`` painted by the
+scripted painter, no training), :func:`painted_garages` (a few distinct garages of a map),
+:func:`write_library` (an SQLite scenario library of them) and :func:`write_packs` (their asset
+packs). :func:`cruise_sources` turns what a test names into the garages a cruise run tests: a map
+name or map file (painted garages of it), an asset pack folder or a folder of packs, a library file
+(every garage in it, verified), a :class:`~garage_mj.grid.garage.Garage`, a library record or a
+:class:`~garage_mj.driving.sources.CruiseSource`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from garage_mj.driving.sources import CruiseSource, painted_sources
+from garage_mj.generation.library import Library
+from garage_mj.generation.library_format import GarageRecord, LibraryError
+from garage_mj.grid.garage import Garage
+
+TINY_MAP = "tiny_7x11"
+TINY_SEED = 1  # the painter's seed of the tiny_7x11 fixture (the project's own tests paint the same garage)
+LIBRARY_GARAGES = 3  # garages in the library fixture (and the packs fixture)
+LIBRARY_RUN = "pytest"  # the library's provenance column for the garages written here
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def tiny_garage(seed: int = TINY_SEED) -> Garage:
+    """``tiny_7x11`` painted by the scripted painter with ``seed``: usable, the same every run."""
+    from garage_mj.grid.painters import paint_garage  # gymnasium
+
+    return paint_garage(TINY_MAP, seed=seed)
+
+
+def painted_garages(map: str = TINY_MAP, count: int = LIBRARY_GARAGES, seed: int = 0) -> list[Garage]:
+    """``count`` distinct usable garages of ``map`` (a shipped map's name or a map file), spread over
+    difficulty (:func:`garage_mj.driving.sources.painted_sources`)."""
+    return [s.garage for s in painted_sources(map, count, seed)]
+
+
+def write_library(path: str | Path, garages: Iterable[Garage]) -> Path:
+    """An SQLite scenario library at ``path`` holding ``garages`` (run :data:`LIBRARY_RUN`, seed = position)."""
+    path = Path(path)
+    with Library(path) as lib:
+        for k, g in enumerate(garages):
+            lib.add(g, map=g.name or "garage", run=LIBRARY_RUN, seed=k, episode=0, timestep=0)
+    return path
+
+
+def write_packs(garages: Iterable[Garage], out_dir: str | Path) -> Path:
+    """Asset packs of ``garages`` in ``out_dir`` (one folder each and ``index.json``); returns ``out_dir``."""
+    from garage_mj.export.pack import export_packs  # MuJoCo, trimesh
+
+    export_packs(list(garages), out_dir, progress=False)
+    return Path(out_dir)
+
+
+def _is_library(path: Path) -> bool:
+    with path.open("rb") as f:
+        return f.read(len(_SQLITE_MAGIC)) == _SQLITE_MAGIC
+
+
+def _from_path(path: Path) -> list[CruiseSource]:
+    """The garages of a pack folder, a folder of packs or a library file (``None``: not one of those)."""
+    if path.is_dir():
+        if (path / "manifest.json").is_file():
+            return [CruiseSource.from_pack(path)]
+        packs = sorted(d for d in path.iterdir() if (d / "manifest.json").is_file())
+        if not packs:
+            from garage_mj.export.pack import PackError  # MuJoCo, trimesh
+
+            raise PackError(f"{path}: no asset packs in this folder; export some with garage-mj export "
+                            "(or use the garage_packs fixture)")
+        return [CruiseSource.from_pack(d) for d in packs]
+    with Library(path, create=False) as lib:
+        records = lib.verified(lib.query())  # hash and metrics recomputed: an altered row is refused by id
+    if not records:
+        raise LibraryError(f"{path}: the library holds no garages; add some with garage-mj train or generate")
+    return [CruiseSource.from_record(r) for r in records]
+
+
+def _sources_of(item: Any, per_map: int, seed: int) -> list[CruiseSource]:
+    if isinstance(item, CruiseSource):
+        return [item]
+    if isinstance(item, Garage):
+        return [CruiseSource.from_garage(item)]
+    if isinstance(item, GarageRecord):
+        return [CruiseSource.from_record(item)]
+    if isinstance(item, (str, Path)):
+        path = Path(item)
+        if path.is_dir() or (path.is_file() and _is_library(path)):
+            return _from_path(path)
+        return painted_sources(str(item), per_map, seed)  # a map name or map file; MapError names a bad one
+    raise TypeError(f"garages: cannot test {type(item).__name__} {item!r}; give map names, map files, pack "
+                    "folders, a library file, Garage objects or library records")
+
+
+def cruise_sources(garages: Any, per_map: int = 1, seed: int = 0) -> list[CruiseSource]:
+    """The garages a cruise run tests, from one item or a list of items (see the module docstring).
+
+    A map gives ``per_map`` painted garages of it (drawn with ``seed``, spread over difficulty).
+    """
+    if per_map < 1:
+        raise ValueError(f"per_map must be >= 1, got {per_map}")
+    items: Sequence[Any] = [garages] if isinstance(garages, (str, Path, Garage, CruiseSource, GarageRecord)) \
+        else list(garages)
+    if not items:
+        raise ValueError("garages: the list is empty; name at least one map, pack or garage")
+    return [s for item in items for s in _sources_of(item, per_map, seed)]
