@@ -50,7 +50,7 @@ bench: install
 	$(PY) eval/bench_env.py
 
 lint: install
-	$(VENV)/bin/ruff check garage_mj tests eval generation
+	$(VENV)/bin/ruff check garage_mj tests eval generation pytest_garage_mj.py docs/pytest_example
 
 clean:
 	rm -rf $(VENV) $(QC_VENV) build *.egg-info .pytest_cache
