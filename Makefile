@@ -10,11 +10,17 @@ QC_VENV := .venv-qc
 QC_STAMP := $(QC_VENV)/.installed
 QC_OPENDRIVE := asam-qc-opendrive==1.0.0
 QC_OPENSCENARIO := asam-qc-openscenarioxml==1.0.0
+# Blender as a Python module reads garage.fbx back in the FBX tests (garage_mj/export/validate.py), an
+# independent reader of what Assimp writes. bpy 5.0 needs CPython 3.11 and pins numpy < 2, so it gets its own
+# virtualenv: a 375 MB download, 970 MB installed, about 20 s.
+BLENDER_VENV := .venv-blender
+BLENDER_STAMP := $(BLENDER_VENV)/.installed
+BPY := bpy==5.0.1
 export MUJOCO_GL ?= egl
 
 .PHONY: install browser test demo bench lint clean
 
-install: $(STAMP) $(QC_STAMP)
+install: $(STAMP) $(QC_STAMP) $(BLENDER_STAMP)
 
 # torch first, pinned to the CPU build, so nothing later pulls the multi-GB CUDA wheels.
 # Then the package with its test tools and Ray core (--backend ray; tests/test_ray_backend.py).
@@ -32,6 +38,11 @@ $(QC_STAMP): Makefile
 	test -x $(QC_VENV)/bin/python || $(PYTHON) -m venv $(QC_VENV)
 	$(QC_VENV)/bin/python -m pip install -q $(QC_OPENDRIVE) $(QC_OPENSCENARIO)
 	touch $(QC_STAMP)
+
+$(BLENDER_STAMP): Makefile
+	test -x $(BLENDER_VENV)/bin/python || $(PYTHON) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install -q $(BPY) || echo "warning: no $(BPY) wheel for this Python (CPython 3.11 only); the FBX read-back tests will fail with a hint"
+	touch $(BLENDER_STAMP)
 
 # Headless Chromium + ChromeDriver (Debian packages) for the report test; installed once when missing.
 browser:
@@ -53,4 +64,4 @@ lint: install
 	$(VENV)/bin/ruff check garage_mj tests eval generation pytest_garage_mj.py docs/pytest_example
 
 clean:
-	rm -rf $(VENV) $(QC_VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) $(QC_VENV) $(BLENDER_VENV) build *.egg-info .pytest_cache

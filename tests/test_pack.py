@@ -34,7 +34,7 @@ def test_round_trip(painted_tiny, tmp_path):
     m = pack.manifest
     assert m["garage_hash"] == painted_tiny.canonical_hash()
     assert m["metrics"]["stalls"] == evaluate(painted_tiny).stalls
-    assert set(m["versions"]) == {"garage-mj", "mujoco", "dm-control", "trimesh"}
+    assert set(m["versions"]) == {"garage-mj", "mujoco", "dm-control", "trimesh", "cmeel-assimp"}
     model = mujoco.MjModel.from_xml_path(str(pack.file("scene.xml")))
     assert len(parked_car_bodies(model)) == m["metrics"]["stalls"]
     assert "parkedcar" in {g.visual.material.name for g in trimesh.load(pack.file("garage.glb")).geometry.values()}

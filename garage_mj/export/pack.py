@@ -1,8 +1,15 @@
 """Asset packs: one folder per garage with every export and a manifest of hashes.
 
 A pack folder ``<name>_<hash12>/`` holds ``garage.json``, ``garage.xodr`` (OpenDRIVE 1.8),
-``scene.xml`` (MJCF, + assets), ``garage.glb``, ``garage.obj`` + ``garage.mtl``, ``preview.png``
-and ``manifest.json`` (sha256 of every file, metrics, garage hash, tool versions, creation time).
+``scene.xml`` (MJCF, + assets), ``garage.glb``, ``garage.obj`` + ``garage.mtl``, ``garage.fbx``
+(:mod:`garage_mj.export.fbx`), ``preview.png`` and ``manifest.json`` (sha256 of every file,
+metrics, garage hash, tool versions, creation time).
+
+``garage.fbx`` needs Assimp (PyPI ``cmeel-assimp``, a dependency on Linux and macOS). Where it
+cannot be loaded the pack is written without it and says so: the manifest's ``skipped`` maps
+``garage.fbx`` to the reason, ``garage-mj export`` prints that reason once, and a later export
+with Assimp rebuilds such a pack. A pack that neither lists nor skips a file of
+:data:`PACK_FILES` is incomplete.
 
 Writes are atomic: a pack is built in a hidden temp folder beside its final path, then renamed
 into place, so a crash never leaves a half pack at the final path. Re-running skips a complete
@@ -29,6 +36,7 @@ from tqdm import tqdm
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir, make_temp_dir
+from garage_mj.export.fbx import FBX_NAME, fbx_problem, write_fbx
 from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import write_preview
 from garage_mj.export.xodr import write_xodr
@@ -42,8 +50,11 @@ MANIFEST = "manifest.json"
 INDEX = "index.json"
 PACK_FORMAT = 1
 #: Files every pack holds besides the manifest (scene assets, if any, are listed in the manifest).
-PACK_FILES = ("garage.json", "garage.xodr", SCENE_XML, "garage.glb", "garage.obj", "garage.mtl", "preview.png")
-_TOOLS = ("garage-mj", "mujoco", "dm-control", "trimesh")
+PACK_FILES = ("garage.json", "garage.xodr", SCENE_XML, "garage.glb", "garage.obj", "garage.mtl", FBX_NAME,
+              "preview.png")
+#: Files a pack may be written without, with the reason in the manifest's ``skipped`` table.
+OPTIONAL_FILES = (FBX_NAME,)
+_TOOLS = ("garage-mj", "mujoco", "dm-control", "trimesh", "cmeel-assimp")
 
 
 class PackError(GarageMJError):
@@ -123,8 +134,11 @@ def _check(path: Path) -> tuple[str | None, dict]:
         return f"{MANIFEST} has no 'files' table of name -> sha256", {}
     if not isinstance(manifest.get("garage_hash"), str):
         return f"{MANIFEST} has no garage_hash", {}
+    skipped = manifest.get("skipped", {})
+    if not isinstance(skipped, dict) or not set(skipped) <= set(OPTIONAL_FILES):
+        return f"{MANIFEST} skips files a pack must hold: {sorted(skipped)[:5]}", {}
     for name in PACK_FILES:
-        if name not in files:
+        if name not in files and name not in skipped:
             return f"{name} not in the manifest", {}
     for name, digest in files.items():
         problem = _member_problem(path, name)
@@ -158,18 +172,28 @@ def load_pack(path: str | Path) -> Pack:
     return Pack(path, manifest)
 
 
-def _write_files(scene: GarageScene, tmp: Path) -> None:
-    """Every file of a pack, all drawn from one :class:`GarageScene` (each part derived once)."""
+def _write_files(scene: GarageScene, tmp: Path) -> dict[str, str]:
+    """Every file of a pack, all drawn from one :class:`GarageScene` (each part derived once).
+
+    Returns the files left out, each with the reason (``garage.fbx`` without Assimp).
+    """
     (tmp / "garage.json").write_text(scene.garage.to_json())
     write_xodr(scene, tmp / "garage.xodr")
     write_scene(scene, tmp)
     meshes = garage_meshes(scene)
     write_glb(meshes, tmp / "garage.glb")
     write_obj(meshes, tmp / "garage.obj")
+    skipped = {}
+    problem = fbx_problem()
+    if problem is None:
+        write_fbx(meshes, tmp / FBX_NAME)
+    else:
+        skipped[FBX_NAME] = problem
     write_preview(scene, tmp / "preview.png")
+    return skipped
 
 
-def _manifest(scene: GarageScene, tmp: Path) -> dict:
+def _manifest(scene: GarageScene, tmp: Path, skipped: dict[str, str]) -> dict:
     garage = scene.garage
     files = {
         p.relative_to(tmp).as_posix(): _sha256(p) for p in sorted(tmp.rglob("*")) if p.is_file()
@@ -182,6 +206,7 @@ def _manifest(scene: GarageScene, tmp: Path) -> dict:
         "metrics": evaluate(garage).to_dict(),
         "drivability": drivability(scene),  # for models/car: feasible stalls, clearance, curvature
         "files": files,
+        "skipped": skipped,
         "versions": _versions(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
@@ -190,19 +215,22 @@ def _manifest(scene: GarageScene, tmp: Path) -> dict:
 def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False) -> Path:
     """Write ``garage``'s pack under ``out_dir``; returns the pack folder.
 
-    Skips a complete pack unless ``force``; a partial or broken one is rebuilt. Atomic: files go
+    Skips a complete pack unless ``force``; a partial or broken one is rebuilt, and so is one
+    written without ``garage.fbx`` once Assimp is there. Atomic: files go
     to a temp folder beside the target first, then one rename publishes the pack.
     """
     validate_garage(garage)
     out_dir = ensure_dir(out_dir, "--out")
     final = out_dir / pack_name(garage)
-    if not force and _problem(final) is None:
-        return final
+    if not force:
+        problem, manifest = _check(final)
+        if problem is None and not (manifest.get("skipped") and fbx_problem() is None):
+            return final  # complete, and nothing it skipped could be written now
     tmp = make_temp_dir(out_dir, f".{final.name}.", ".tmp")
     try:
         scene = GarageScene(garage)
-        _write_files(scene, tmp)
-        manifest = _manifest(scene, tmp)
+        skipped = _write_files(scene, tmp)
+        manifest = _manifest(scene, tmp, skipped)
         atomic_write(tmp / MANIFEST, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
         if final.is_symlink() or final.is_file():
             final.unlink()

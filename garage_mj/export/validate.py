@@ -1,4 +1,4 @@
-"""Validate ``garage.xodr`` files with real OpenDRIVE tools: CARLA's parser and the ASAM checker.
+"""Validate exported files with real tools: CARLA's parser, the ASAM checkers, Blender's FBX importer.
 
 - :func:`check_carla` loads the text with ``carla.Map`` (the ``carla`` wheel, extra ``[carla]``)
   in a child process, counts waypoints per road and follows ``waypoint.next`` from the
@@ -9,6 +9,10 @@
 - :func:`check_xosc` runs the ASAM OpenSCENARIO XML checker bundle (``asam-qc-openscenarioxml``,
   command ``qc_openscenario``, same virtualenv) on a ``.xosc`` (schema of its version,
   references, parameters, data types) and counts the issues the same way.
+- :func:`check_fbx_batch` reads each pack's ``garage.fbx`` (written by Assimp) with an independent
+  reader, Blender's own FBX importer (``bpy`` from its own virtualenv ``.venv-blender``: it pins
+  numpy < 2), and compares it with ``garage.glb``: same classes and materials, triangle counts
+  and world bounding boxes.
 
 All take batches (one child process per batch) because starting the tools costs more than
 checking a file. ``make install`` installs the tools.
@@ -36,8 +40,11 @@ _SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd
 
 QC_ENV = "GARAGE_MJ_QC_OPENDRIVE"  # optional path to a qc_opendrive executable
 QC_XOSC_ENV = "GARAGE_MJ_QC_OPENSCENARIO"  # optional path to a qc_openscenario executable
+BLENDER_ENV = "GARAGE_MJ_BLENDER_PYTHON"  # optional path to a Python with Blender's bpy module
+BLENDER_PACKAGE = "bpy==5.0.1"  # Blender as a Python module, CPython 3.11 only (Makefile: .venv-blender)
 _REPO = Path(__file__).resolve().parents[2]
 _PROBE = Path(__file__).with_name("carla_probe.py")
+_BLENDER_PROBE = Path(__file__).with_name("blender_probe.py")
 _QC_DRIVER = "import sys\nfrom qc_opendrive import main\nfor c in sys.argv[1:]:\n    sys.argv = ['qc_opendrive', '-c', c]\n    main.main()\n"
 _QC_XOSC_DRIVER = _QC_DRIVER.replace("qc_opendrive", "qc_openscenario")
 
@@ -246,3 +253,109 @@ def check_xosc_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> lis
 def check_xosc(xosc_path: str | Path) -> QcReport:
     """Run the ASAM OpenSCENARIO XML checker bundle on one ``.xosc``; its issues (zero for a good file)."""
     return check_xosc_batch([xosc_path])[0]
+
+
+# -- Blender: FBX read back ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class FbxObject:
+    """One mesh object as Blender imported it: materials, triangles and world bounding box [m]."""
+
+    name: str
+    materials: tuple[str, ...]
+    triangles: int
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class FbxReport:
+    """What Blender's FBX importer made of one file: its mesh objects by name, or why it failed."""
+
+    path: Path
+    reader: str
+    objects: dict[str, FbxObject]
+    error: str | None = None
+    settings: dict[str, int | float] = field(default_factory=dict)  # GlobalSettings: axes, UnitScaleFactor
+    version: int = 0  # FBX version, e.g. 7500
+
+
+def blender_python() -> Path:
+    """A Python with Blender's ``bpy``: $GARAGE_MJ_BLENDER_PYTHON or the repo's ``.venv-blender``."""
+    for cand in (os.environ.get(BLENDER_ENV), _REPO / ".venv-blender" / "bin" / "python"):
+        if cand and Path(cand).is_file():
+            return Path(cand)
+    raise ToolMissing(f"Blender's Python module (bpy) is not installed; run `make install` (it puts "
+                      f"{BLENDER_PACKAGE} in .venv-blender) or set {BLENDER_ENV} to a Python that has bpy")
+
+
+def read_fbx_batch(paths: Sequence[str | Path], timeout: float = 300.0) -> list[FbxReport]:
+    """Import each FBX with Blender's own importer in one child process (Blender's start-up dominates)."""
+    python = blender_python()
+    with tempfile.TemporaryDirectory(prefix="garage_fbx_") as tmp:
+        result = Path(tmp) / "result.json"
+        proc = subprocess.run([str(python), str(_BLENDER_PROBE), str(result), *map(str, paths)],
+                              capture_output=True, text=True, timeout=timeout)
+        if proc.returncode != 0 or not result.is_file():
+            raise ToolFailed(f"Blender's FBX importer failed (exit code {proc.returncode}): "
+                             f"{proc.stderr.strip()[-600:] or 'no message'}")
+        out = json.loads(result.read_text())
+    return [
+        FbxReport(
+            Path(r["path"]), r.get("reader", "Blender"),
+            {name: FbxObject(name, tuple(o["materials"]), o["triangles"], tuple(o["lo"]), tuple(o["hi"]))
+             for name, o in r.get("objects", {}).items()},
+            r.get("error"),
+            r.get("global_settings", {}),
+            r.get("version", 0),
+        )
+        for r in out
+    ]
+
+
+def fbx_problems(report: FbxReport, glb: str | Path, names: dict[str, str] | None = None,
+                 atol: float = 1e-3) -> list[str]:
+    """How ``report`` (an FBX read by Blender) differs from ``glb``: axes, classes, materials, triangles, boxes.
+
+    The file's axes and unit must be :data:`garage_mj.export.fbx.GLOBAL_SETTINGS`. Each GLB node (a semantic class) must be one FBX object, named ``names.get(class, class)``,
+    with that class's one material, the same triangle count and the same world bounding box
+    (the GLB's y-up frame taken back to z up) within ``atol`` metres. Empty when they agree.
+    """
+    import numpy as np
+    import trimesh
+
+    from garage_mj.export.fbx import GLOBAL_SETTINGS, Y_UP_TO_Z_UP
+
+    if report.error:
+        return [f"Blender could not import {report.path.name}: {report.error}"]
+    problems = [f"GlobalSettings {key} is {report.settings.get(key)}, not {value}"
+                for key, value in GLOBAL_SETTINGS.items() if report.settings.get(key) != value]
+    names = names or {}
+    scene = trimesh.load(glb, force="scene")
+    expected = {}
+    for node in scene.graph.nodes_geometry:
+        transform, geom = scene.graph[node]
+        mesh = scene.geometry[geom]
+        points = trimesh.transform_points(mesh.vertices, Y_UP_TO_Z_UP @ transform)
+        expected[names.get(node, node)] = (mesh.visual.material.name, len(mesh.faces), points.min(0), points.max(0))
+    if set(report.objects) != set(expected):
+        problems.append(f"objects {sorted(report.objects)} are not the GLB's classes {sorted(expected)}")
+    for name in sorted(set(report.objects) & set(expected)):
+        obj, (material, triangles, lo, hi) = report.objects[name], expected[name]
+        if obj.materials != (material,):
+            problems.append(f"{name}: materials {list(obj.materials)}, GLB {material!r}")
+        if obj.triangles != triangles:
+            problems.append(f"{name}: {obj.triangles} triangles, GLB {triangles}")
+        if not (np.allclose(obj.lo, lo, atol=atol) and np.allclose(obj.hi, hi, atol=atol)):
+            problems.append(f"{name}: box {np.round(obj.lo, 3).tolist()}-{np.round(obj.hi, 3).tolist()} m, "
+                            f"GLB {np.round(lo, 3).tolist()}-{np.round(hi, 3).tolist()} m")
+    return problems
+
+
+def check_fbx_batch(packs: Sequence[str | Path], timeout: float = 300.0) -> dict[Path, list[str]]:
+    """Read every pack's ``garage.fbx`` with Blender and compare it with its ``garage.glb``.
+
+    Returns each pack folder's problems (:func:`fbx_problems`; empty when the FBX matches).
+    """
+    packs = [Path(p) for p in packs]
+    reports = read_fbx_batch([p / "garage.fbx" for p in packs], timeout)
+    return {p: fbx_problems(r, p / "garage.glb") for p, r in zip(packs, reports)}
