@@ -1,13 +1,18 @@
-"""``garage-mj export``: asset packs (OpenDRIVE, MJCF, GLB/OBJ, preview) for garages.
+"""``garage-mj export``: asset packs (OpenDRIVE, MJCF, GLB/OBJ/FBX, preview) and CARLA import packages.
 
 ``--garage garage.json`` exports one garage; ``--library FILE`` exports the library's garages
 that pass the filters. Packs land in ``--out DIR`` (one folder each, plus ``index.json``);
-complete packs are skipped, partial ones repaired.
+complete packs are skipped, partial ones repaired. ``--carla-package DIR`` (with or without
+``--out``) lays the same garages out as a package for CARLA's ``make import``
+(:mod:`garage_mj.export.carla_package`). Without Assimp (no wheel for the platform) packs are
+written without ``garage.fbx`` and one line says so; a CARLA package is refused.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 from pathlib import Path
 
 from garage_mj.cli import UserError
@@ -18,9 +23,10 @@ from garage_mj.grid.garage import Garage
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "export",
-        help="export garages as asset packs (xodr, MJCF, GLB/OBJ, preview)",
+        help="export garages as asset packs (xodr, MJCF, GLB/OBJ/FBX, preview) and CARLA import packages",
         description="Write one asset pack folder per garage under --out, plus index.json. "
-        "Re-running skips complete packs and repairs partial ones.",
+        "Re-running skips complete packs and repairs partial ones. --carla-package DIR lays the "
+        "garages out for CARLA's map import: copy DIR into CARLA's Import/ folder and run `make import`.",
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--garage", type=Path, metavar="FILE", help="a garage JSON file (Garage.to_json)")
@@ -31,7 +37,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--feasible", type=float, nargs=2, metavar=("LO", "HI"),
                    help="library filter: share of stalls with a feasible cruise test (garage-mj check --store)")
     p.add_argument("--limit", type=int, help="library filter: at most N garages")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the packs")
+    p.add_argument("--out", type=Path, metavar="DIR", help="folder for the asset packs")
+    p.add_argument("--carla-package", type=Path, metavar="DIR",
+                   help="also (or only) write a CARLA import package here: DIR/DIR.json and one <map>.fbx + "
+                   "<map>.xodr folder per garage; the folder's name is the package name")
     p.add_argument("--force", action="store_true", help="rebuild packs that are already complete")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -60,8 +69,12 @@ def _from_library(args: argparse.Namespace) -> list:
 
 
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.export.pack import export_packs
+    if args.out is None and args.carla_package is None:
+        raise UserError("give --out DIR (asset packs), --carla-package DIR (a CARLA import package), or both")
+    if args.carla_package is not None:
+        from garage_mj.export.carla_package import check_target
 
+        check_target(args.carla_package)  # a bad folder is refused before any work
     if args.garage is not None:
         if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.feasible, args.limit)):
             raise UserError("--map, --difficulty, --coverage, --feasible and --limit filter a --library, not a --garage")
@@ -72,8 +85,22 @@ def run(args: argparse.Namespace) -> int:
         garages = [Garage.from_json(text, source=str(args.garage), usable=True)]
     else:
         garages = _from_library(args)
-    paths = export_packs(garages, args.out, force=args.force, progress=not args.quiet, total=len(garages))
-    for path in paths:
-        print(path)
-    print(f"{len(paths)} pack(s) in {args.out} (index: {args.out / 'index.json'})")
+    if args.out is not None:
+        from garage_mj.export.fbx import FBX_NAME, fbx_problem
+        from garage_mj.export.pack import export_packs
+
+        problem = fbx_problem()
+        if problem is not None:
+            print(f"{FBX_NAME} left out of the packs: {problem}", file=sys.stderr)
+        paths = export_packs(garages, args.out, force=args.force, progress=not args.quiet, total=len(garages))
+        for path in paths:
+            print(path)
+        print(f"{len(paths)} pack(s) in {args.out} (index: {args.out / 'index.json'})")
+    if args.carla_package is not None:
+        from garage_mj.export.carla_package import write_carla_package
+
+        description = write_carla_package(garages, args.carla_package)
+        count = len(json.loads(description.read_text())["maps"])
+        print(f"CARLA package {description.parent.name}: {count} map(s) in {args.carla_package}; copy the folder "
+              "into CARLA's Import/ folder and run `make import`")
     return 0
