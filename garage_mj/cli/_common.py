@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import functools
 from collections.abc import Callable
+from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.core.errors import GarageMJError
+from garage_mj.scene.route_difficulty import load_route_model
 
 
 def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -80,10 +82,17 @@ def seed_list(text: str) -> list[int]:
 
 
 def add_filters(p: argparse.ArgumentParser) -> None:
-    """The library filters: --map, --difficulty LO HI, --coverage LO HI, --limit N."""
+    """The library filters: --map, --difficulty LO HI, --coverage LO HI, --feasible LO HI,
+    --route-difficulty LO HI (with --route-model FILE), --limit N."""
     p.add_argument("--map", help="only garages of this map (name as stored, e.g. tiny_7x11)")
     p.add_argument("--difficulty", nargs=2, type=unit_range, metavar=("LO", "HI"),
-                   help="only difficulty in [LO, HI] (0-1)")
+                   help="only the paper's difficulty in [LO, HI] (0-1)")
+    p.add_argument("--route-difficulty", nargs=2, type=unit_range, metavar=("LO", "HI"),
+                   help="only route difficulty (expected failure rate of a cruise test) in [LO, HI] (0-1), as "
+                   "stored by 'garage-mj library rate LIBRARY'")
+    p.add_argument("--route-model", type=Path, metavar="FILE",
+                   help="route difficulty model of --route-difficulty and of the values shown (default: the shipped "
+                   "one; 'garage-mj difficulty fit' writes others)")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"),
                    help="only coverage in [LO, HI] (0-1)")
     p.add_argument("--feasible", nargs=2, type=unit_range, metavar=("LO", "HI"),
@@ -93,10 +102,18 @@ def add_filters(p: argparse.ArgumentParser) -> None:
 
 
 def filters(args: argparse.Namespace) -> dict:
-    """The filter keyword arguments of :meth:`Library.query` from parsed ``args``."""
+    """The filter keyword arguments of :meth:`Library.query` from parsed ``args`` (``route_model``: the
+    key of ``--route-model`` or the shipped model, when ``--route-difficulty`` is given)."""
+    route = checked_range(getattr(args, "route_difficulty", None), "route-difficulty")
     return {"map": args.map, "difficulty": checked_range(args.difficulty, "difficulty"),
             "coverage": checked_range(args.coverage, "coverage"),
-            "feasible": checked_range(getattr(args, "feasible", None), "feasible")}
+            "feasible": checked_range(getattr(args, "feasible", None), "feasible"),
+            "route": route, "route_model": route_key(args) if route is not None else None}
+
+
+def route_key(args: argparse.Namespace) -> str:
+    """The key of the route difficulty model ``--route-model`` names, or of the shipped one."""
+    return load_route_model(getattr(args, "route_model", None)).key
 
 
 def checked_range(rng: list[float] | None, flag: str) -> tuple[float, float] | None:

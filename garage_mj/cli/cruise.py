@@ -118,8 +118,8 @@ def sources(args: argparse.Namespace) -> list:
     if args.packs is not None:
         if not args.packs.is_dir():
             raise UserError(f"--packs {args.packs}: no such folder; export packs with garage-mj export")
-        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.sample)):
-            raise UserError("--map/--difficulty/--coverage/--sample filter a --library, not --packs")
+        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.route_difficulty, args.sample)):
+            raise UserError("--map/--difficulty/--coverage/--route-difficulty/--sample filter a --library, not --packs")
         dirs = sorted(d for d in args.packs.iterdir() if (d / "manifest.json").is_file())
         if args.limit is not None:
             dirs = dirs[: args.limit]
@@ -130,8 +130,7 @@ def sources(args: argparse.Namespace) -> list:
         with Library(args.library, create=False) as lib:
             f = filters(args)
             if args.sample is not None:
-                records = lib.sample(args.sample, args.seed, map=f["map"], difficulty=f["difficulty"],
-                                     coverage=f["coverage"], feasible=f["feasible"])
+                records = lib.sample(args.sample, args.seed, **f)
                 records = records[: args.limit] if args.limit is not None else records
             else:
                 records = lib.query(limit=args.limit, **f)

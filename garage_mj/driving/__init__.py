@@ -17,6 +17,7 @@
 - ``episode``: one cruise test driven to its row, with the scene and driver a process keeps.
 - ``regression``: Pearson r and the regression of success on difficulty, the paper's table; bootstrap r, AUC.
 - ``difficulty_fit``: fit and score the route-aware difficulty on recorded cruise outcomes.
+- ``route_rating``: the route difficulty of many garages, computed once each and kept (a library's, a cruise run's).
 - ``results``: a cruise run's folder: ``run.json``, ``tests.csv`` read back and repaired, the summaries.
 - ``cruise``: batch cruise tests over packs or library garages, resumable.
 - ``replay``: a cruise test driven again from its OpenSCENARIO file (``replay_xosc``).

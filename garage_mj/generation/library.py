@@ -10,12 +10,20 @@ the 100-byte header must carry the SQLite magic, the garage-mj application id an
 version this code knows. A foreign, corrupt or newer file raises :class:`LibraryError` naming
 the file and the fix, and nothing on disk changes (the check reads bytes, then opens the file
 ``immutable``, which writes nothing).
+
+Beside ``garages`` a library may hold the side table ``route_difficulty`` (a number per garage and
+route difficulty model, the model named by its 12-hex key): ``garage-mj library rate`` computes the
+values in the later stages and stores them here (:meth:`Library.set_route_difficulty`); this module
+only stores and filters numbers. A library without the table (an older one) opens, lists and gets
+rated as any other; filtering it on the route difficulty asks for ``garage-mj library rate`` first.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
+from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -27,6 +35,7 @@ from garage_mj.generation.library_format import (
     COLUMNS,
     DRIVABILITY_SCHEMA,
     KINDS,
+    ROUTE_SCHEMA,
     SCHEMA,
     SCHEMA_VERSION,
     GarageRecord,
@@ -222,9 +231,61 @@ class Library:
         keys = ("car", "feasible_share", "feasible_stalls", "stalls", "min_clearance", "max_curvature", "checked_at")
         return None if row is None else dict(zip(keys, row))
 
+    # -- route difficulty (garage-mj library rate) -------------------------------------------------
+    def has_route_difficulty(self) -> bool:
+        """Whether ``garage-mj library rate`` has stored route difficulties here (under any model)."""
+        row = self._con.execute("SELECT name FROM sqlite_master WHERE type = 'table' AND name = 'route_difficulty'")
+        return row.fetchone() is not None
+
+    def set_route_difficulty(self, id: int, model: str, value: float) -> None:
+        """Store garage ``id``'s route difficulty under the model with key ``model`` (NaN: no feasible stall).
+
+        Each value is its own transaction, so a rating killed midway keeps every value stored before.
+        """
+        self._con.execute(ROUTE_SCHEMA)
+        v = float(value)
+        self._con.execute("INSERT OR REPLACE INTO route_difficulty VALUES (?, ?, ?, ?)",
+                          (int(id), _model_key(model), None if math.isnan(v) else v,
+                           datetime.now(timezone.utc).isoformat(timespec="seconds")))
+
+    def route_difficulties(self, ids: Iterable[int], model: str) -> dict[int, float]:
+        """id -> route difficulty under ``model`` of those of ``ids`` rated under it (NaN: no feasible stall).
+
+        An id missing from the result is not rated under ``model`` yet.
+        """
+        key = _model_key(model)
+        ids = [int(i) for i in ids]
+        if not ids or not self.has_route_difficulty():
+            return {}
+        out: dict[int, float] = {}
+        for k in range(0, len(ids), _BATCH):
+            chunk = ids[k:k + _BATCH]
+            rows = self._con.execute(
+                f"SELECT garage_id, value FROM route_difficulty WHERE model = ? AND garage_id IN "
+                f"({', '.join('?' * len(chunk))})", [key, *chunk])
+            out.update((int(i), math.nan if v is None else float(v)) for i, v in rows)
+        return out
+
+    def unrated(self, model: str, map: str | None = None, run: str | None = None, limit: int | None = None
+                ) -> list[int]:
+        """Ids (oldest first) of the garages of ``map`` and ``run`` (None: all) not rated under ``model`` yet."""
+        key = _model_key(model)
+        where, params = self._where(map, None, None, run)
+        if self.has_route_difficulty():
+            where += (" AND " if where else " WHERE ") + (
+                "id NOT IN (SELECT garage_id FROM route_difficulty WHERE model = ?)")
+            params.append(key)
+        sql = f"SELECT id FROM garages{where} ORDER BY id"
+        if limit is not None:
+            if limit < 0:
+                raise ValueError(f"limit must be >= 0, got {limit}")
+            sql += f" LIMIT {int(limit)}"
+        return [int(r[0]) for r in self._con.execute(sql, params)]
+
     def _where(
         self, map: str | None, difficulty: tuple[float, float] | None, coverage: tuple[float, float] | None,
         run: str | None = None, feasible: tuple[float, float] | None = None,
+        route: tuple[float, float] | None = None, route_model: str | None = None,
     ) -> tuple[str, list[Any]]:
         clauses, params = [], []
         if feasible is not None:
@@ -249,7 +310,39 @@ class Library:
                     raise ValueError(f"{col} range ({lo}, {hi}) is empty; give LO <= HI")
                 clauses.append(f"{col} BETWEEN ? AND ?")
                 params += [float(lo), float(hi)]
+        if route is not None:
+            clause, more = self._route_clause(route, route_model, clauses, params)
+            clauses.append(clause)
+            params += more
         return (" WHERE " + " AND ".join(clauses)) if clauses else "", params
+
+    def _route_clause(self, route: tuple[float, float], model: str | None, clauses: list[str], params: list[Any]
+                      ) -> tuple[str, list[Any]]:
+        """The route difficulty range as a clause; :class:`LibraryError` when a garage matching the other
+        filters (``clauses``) is not rated under ``model`` yet (a filter must not drop it silently)."""
+        lo, hi = route
+        if lo > hi:
+            raise ValueError(f"route difficulty range ({lo}, {hi}) is empty; give LO <= HI")
+        if model is None:
+            raise ValueError("a route difficulty range needs route_model, the key of the model its values are rated "
+                             "with (RouteDifficulty.key)")
+        key = _model_key(model)
+        other = (" WHERE " + " AND ".join(clauses)) if clauses else ""
+        if self.has_route_difficulty():
+            joiner = " AND " if other else " WHERE "
+            missing = self._con.execute(
+                f"SELECT count(*) FROM garages{other}{joiner}id NOT IN "
+                "(SELECT garage_id FROM route_difficulty WHERE model = ?)", [*params, key]).fetchone()[0]
+        else:
+            missing = self._con.execute(f"SELECT count(*) FROM garages{other}", params).fetchone()[0]
+        if missing:
+            raise LibraryError(f"{self.path}: {missing} garage(s) matching the filters have no route difficulty under "
+                               f"model {key} yet; run 'garage-mj library rate {self.path}' first (with --model FILE "
+                               "for a model other than the shipped one)")
+        if not self.has_route_difficulty():
+            return "0", []  # no garage matches the other filters: none matches
+        return ("id IN (SELECT garage_id FROM route_difficulty WHERE model = ? AND value BETWEEN ? AND ?)",
+                [key, float(lo), float(hi)])
 
     def query(
         self,
@@ -259,13 +352,18 @@ class Library:
         limit: int | None = None,
         run: str | None = None,
         feasible: tuple[float, float] | None = None,
+        route: tuple[float, float] | None = None,
+        route_model: str | None = None,
     ) -> list[GarageRecord]:
         """Records matching every given filter (ranges are inclusive), oldest first.
 
         ``feasible`` filters on the share of stalls with a feasible cruise test, as stored by
-        ``garage-mj check --library FILE --store``.
+        ``garage-mj check --library FILE --store``; ``route`` on the route difficulty under the
+        model with key ``route_model``, as stored by ``garage-mj library rate`` (a garage rated
+        without a feasible stall has none and never matches; one not rated yet is a
+        :class:`LibraryError`).
         """
-        where, params = self._where(map, difficulty, coverage, run, feasible)
+        where, params = self._where(map, difficulty, coverage, run, feasible, route, route_model)
         sql = f"SELECT {COLUMNS} FROM garages{where} ORDER BY id"
         if limit is not None:
             if limit < 0:
@@ -273,15 +371,24 @@ class Library:
             sql += f" LIMIT {int(limit)}"
         return [record_from_row(r, self.path) for r in self._con.execute(sql, params)]
 
-    def count(self, map: str | None = None, run: str | None = None) -> int:
-        where, params = self._where(map, None, None, run)
+    def count(self, map: str | None = None, run: str | None = None, route: tuple[float, float] | None = None,
+              route_model: str | None = None) -> int:
+        where, params = self._where(map, None, None, run, route=route, route_model=route_model)
         return int(self._con.execute(f"SELECT count(*) FROM garages{where}", params).fetchone()[0])
 
-    def points(self, map: str | None = None) -> np.ndarray:
-        """An N x 2 array of (difficulty, coverage), for the heatmaps."""
+    def points(self, map: str | None = None, route_model: str | None = None) -> np.ndarray:
+        """An N x 2 array of (difficulty, coverage), for the heatmaps: the paper's difficulty, or with
+        ``route_model`` the route difficulty under that model (garages without a feasible stall left out;
+        :class:`LibraryError` when a garage of ``map`` is not rated under it yet)."""
         self._check_numbers()
-        where, params = self._where(map, None, None)
-        rows = self._con.execute(f"SELECT difficulty, coverage FROM garages{where} ORDER BY id", params).fetchall()
+        if route_model is None:
+            where, params = self._where(map, None, None)
+            x = "difficulty"
+        else:
+            where, params = self._where(map, None, None, route=(0.0, 1.0), route_model=route_model)
+            x = "(SELECT value FROM route_difficulty WHERE garage_id = garages.id AND model = ?)"
+            params = [_model_key(route_model), *params]
+        rows = self._con.execute(f"SELECT {x}, coverage FROM garages{where} ORDER BY id", params).fetchall()
         return np.array(rows, dtype=float).reshape(-1, 2)
 
     def maps(self) -> list[str]:
@@ -296,19 +403,22 @@ class Library:
         difficulty: tuple[float, float] | None = None,
         coverage: tuple[float, float] | None = None,
         feasible: tuple[float, float] | None = None,
+        route: tuple[float, float] | None = None,
+        route_model: str | None = None,
     ) -> list[GarageRecord]:
         """``n`` distinct records drawn with ``seed`` (all of them when fewer match), sorted by id.
 
         ``stratify="difficulty"`` spreads the draw evenly over difficulty bins of width
         :data:`DIFFICULTY_BIN` (a bin with too few garages gives all it has and the rest go to
         the others), so rare hard or easy garages are not drowned out; ``None`` draws uniformly.
+        The filters are :meth:`query`'s.
         """
         if n < 0:
             raise ValueError(f"n must be >= 0, got {n}")
         if stratify not in (None, "difficulty"):
             raise ValueError(f"stratify must be 'difficulty' or None, got {stratify!r}")
         self._check_numbers()
-        where, params = self._where(map, difficulty, coverage, feasible=feasible)
+        where, params = self._where(map, difficulty, coverage, feasible=feasible, route=route, route_model=route_model)
         rows = self._con.execute(f"SELECT id, difficulty FROM garages{where} ORDER BY id", params).fetchall()
         rng = np.random.default_rng(seed)
         if n >= len(rows):
@@ -319,8 +429,12 @@ class Library:
             chosen = stratified_ids(rows, n, rng)
         return [self.get(i) for i in sorted(chosen)]
 
-    def stats(self) -> dict[str, Any]:
-        """Per-map counts and the range and mean of the metrics, plus the runs that fed it."""
+    def stats(self, route_model: str | None = None) -> dict[str, Any]:
+        """Per-map counts and the range and mean of the metrics, plus the runs that fed it.
+
+        With ``route_model``, a map with garages rated under that model also gets ``route_difficulty``:
+        the model key, how many are rated, how many of them have a value (a feasible stall) and its range.
+        """
         self._check_numbers()
         out: dict[str, Any] = {"path": str(self.path), "schema_version": SCHEMA_VERSION, "total": self.count()}
         per_map = {}
@@ -335,8 +449,27 @@ class Library:
                 "coverage": {"min": row[6], "mean": row[7], "max": row[8]},
                 "stalls": {"mean": row[9], "max": row[10]},
             }
+        if route_model is not None and self.has_route_difficulty():
+            key = _model_key(route_model)
+            for row in self._con.execute(
+                "SELECT g.map, count(*), count(r.value), min(r.value), avg(r.value), max(r.value) FROM garages g "
+                "JOIN route_difficulty r ON r.garage_id = g.id AND r.model = ? GROUP BY g.map ORDER BY g.map", (key,)
+            ):
+                if row[0] in per_map:
+                    per_map[row[0]]["route_difficulty"] = {"model": key, "rated": row[1], "with_value": row[2],
+                                                           "min": row[3], "mean": row[4], "max": row[5]}
         out["maps"] = per_map
         return out
+
+
+_BATCH = 500  # ids per IN (...) query (SQLite allows at least 999 parameters)
+
+
+def _model_key(model: str) -> str:
+    """A route difficulty model's key as stored (``RouteDifficulty.key``); a ValueError if it is not one."""
+    if not isinstance(model, str) or not model.strip():
+        raise ValueError(f"a route difficulty model key is a non-empty string (RouteDifficulty.key), not {model!r}")
+    return model.strip()
 
 
 def stratified_ids(rows: list[tuple[int, float]], n: int, rng: np.random.Generator) -> list[int]:

@@ -2,7 +2,9 @@
 
 The file is SQLite with the garage-mj application id and a schema version in its header
 (:data:`APPLICATION_ID`, :data:`SCHEMA_VERSION`), the table ``garages`` (:data:`SCHEMA`) and,
-once ``garage-mj check --store`` ran, ``drivability`` (:data:`DRIVABILITY_SCHEMA`).
+once ``garage-mj check --store`` ran, ``drivability`` (:data:`DRIVABILITY_SCHEMA`), and once
+``garage-mj library rate`` ran, ``route_difficulty`` (:data:`ROUTE_SCHEMA`). Both are optional side
+tables: a library without them is complete (no schema bump; older readers ignore them).
 
 Three checks stand between a damaged or foreign file and the rest of garage-mj:
 :func:`check_header` reads the 100-byte header without SQLite (magic, application id, schema
@@ -69,6 +71,19 @@ CREATE TABLE IF NOT EXISTS drivability (
     min_clearance REAL,
     max_curvature REAL,
     checked_at TEXT NOT NULL
+)
+"""
+#: Optional table written by ``garage-mj library rate``: the route difficulty of a garage
+#: (:mod:`garage_mj.scene.route_difficulty`) under one fitted model, named by its 12-hex ``key``.
+#: ``value`` is NULL for a garage rated without a feasible stall (no route to rate); a garage
+#: without a row for a model is not rated under it yet.
+ROUTE_SCHEMA = """
+CREATE TABLE IF NOT EXISTS route_difficulty (
+    garage_id INTEGER NOT NULL REFERENCES garages (id),
+    model TEXT NOT NULL,
+    value REAL,
+    rated_at TEXT NOT NULL,
+    PRIMARY KEY (garage_id, model)
 )
 """
 COLUMNS = (

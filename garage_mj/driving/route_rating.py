@@ -1,0 +1,120 @@
+"""The route difficulty of many garages, computed once each and kept: a library's, and a cruise run's.
+
+:func:`rate_library` (``garage-mj library rate``) computes the route difficulty
+(:func:`garage_mj.scene.route_difficulty.route_difficulty`) of every garage of a library not rated
+under a model yet and stores each value as it comes (:meth:`Library.set_route_difficulty`, the
+library's ``route_difficulty`` side table), over a process pool
+(:func:`garage_mj.core.backends.map_unordered`): a kill loses only the garages in flight, a re-run
+rates the rest, and the values do not depend on the worker count (the computation has no randomness).
+
+:func:`cruise_route_difficulty` gives a cruise run the route difficulty of its garages for
+``summary.csv``: computed in the parent once per garage and kept in the run folder
+(``route_difficulty.json``, per model key and garage hash), so a re-run reads it back.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from garage_mj.core.backends import map_unordered
+from garage_mj.core.fsutil import atomic_write
+from garage_mj.generation.library import Library
+from garage_mj.scene.route_difficulty import RouteDifficulty, load_route_model, route_difficulty
+
+if TYPE_CHECKING:
+    from garage_mj.driving.sources import CruiseSource
+    from garage_mj.grid.garage import Garage
+
+#: A cruise run's cache of its garages' route difficulty, beside ``summary.csv``.
+CACHE_FILE = "route_difficulty.json"
+CACHE_FORMAT = "garage-mj route difficulty cache"
+
+
+def route_model(model: RouteDifficulty | str | Path | None = None) -> RouteDifficulty:
+    """``model`` itself, the model file it names, or the shipped model when None."""
+    return model if isinstance(model, RouteDifficulty) else load_route_model(model)
+
+
+def _rate(job: tuple[int, Garage, RouteDifficulty]) -> tuple[int, float]:
+    """One garage's route difficulty, in a worker: (library id, value; NaN without a feasible stall)."""
+    id_, garage, model = job
+    return id_, route_difficulty(garage, model)
+
+
+@dataclass(frozen=True)
+class RatingResult:
+    """What :func:`rate_library` did."""
+
+    model_key: str
+    rated: int  # garages rated by this call
+    left: int  # garages (of the map) still without a value under the model (a --limit left them)
+    seconds: float  # wall time of the rating
+    workers: int
+
+    @property
+    def seconds_per_garage(self) -> float | None:
+        return self.seconds / self.rated if self.rated else None
+
+
+def rate_library(path: str | Path, model: RouteDifficulty | str | Path | None = None, map: str | None = None,
+                 workers: int = 1, limit: int | None = None, progress: bool = True) -> RatingResult:
+    """Rate every garage of the library ``path`` (of ``map``; at most ``limit``) not rated under ``model``.
+
+    ``model``: a :class:`RouteDifficulty`, a model file, or None for the shipped one. Each value is
+    stored as its garage ends (the library's own short transaction), so the rating is resumable.
+    """
+    from tqdm import tqdm
+
+    m = route_model(model)
+    key = m.key
+    with Library(path, create=False, readonly=False) as lib:
+        ids = lib.unrated(key, map=map, limit=limit)
+        jobs = [(i, lib.get(i).garage, m) for i in ids]
+        start = time.perf_counter()
+        with tqdm(total=len(jobs), desc="route difficulty", unit="garage", disable=not progress) as bar:
+            for id_, value in map_unordered(_rate, jobs, workers):
+                lib.set_route_difficulty(id_, key, value)
+                bar.update()
+        seconds = time.perf_counter() - start
+        left = len(lib.unrated(key, map=map))
+    return RatingResult(key, len(jobs), left, seconds, workers)
+
+
+# -- a cruise run's garages -----------------------------------------------------------------------------
+def _read_cache(path: Path) -> dict[str, dict[str, Any]]:
+    """model key -> {garage hash: value or None}; an unreadable or foreign file is treated as empty."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        return {}
+    if not isinstance(data, dict) or data.get("format") != CACHE_FORMAT or not isinstance(data.get("models"), dict):
+        return {}
+    return {k: v for k, v in data["models"].items() if isinstance(v, dict)}
+
+
+def cruise_route_difficulty(out_dir: str | Path, sources: Sequence[CruiseSource],
+                            model: RouteDifficulty | str | Path | None = None) -> dict[str, float]:
+    """garage hash -> route difficulty under ``model`` (NaN: no feasible stall) of every source; values
+    not in the run folder's ``route_difficulty.json`` yet are computed here and added to it."""
+    m = route_model(model)
+    path = Path(out_dir) / CACHE_FILE
+    cache = _read_cache(path)
+    mine = cache.setdefault(m.key, {})
+    out: dict[str, float] = {}
+    new = False
+    for s in sources:
+        v = mine.get(s.hash, "missing")
+        if v == "missing" or not (v is None or isinstance(v, (int, float))):
+            value = route_difficulty(s.garage, m)
+            mine[s.hash] = v = None if math.isnan(value) else round(value, 6)
+            new = True
+        out[s.hash] = math.nan if v is None else float(v)
+    if new:
+        atomic_write(path, json.dumps({"format": CACHE_FORMAT, "models": cache}, indent=1, sort_keys=True) + "\n")
+    return out

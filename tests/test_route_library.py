@@ -1,0 +1,165 @@
+"""The route difficulty in the library: the side table, its filter, rating (resumable), old libraries, the CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+import sqlite3
+
+import pytest
+
+from garage_mj.cli import main
+from garage_mj.driving import route_rating
+from garage_mj.driving.route_rating import rate_library
+from garage_mj.generation.library import SCHEMA_VERSION, Library, LibraryError
+from garage_mj.grid.painters import paint_garage
+from garage_mj.scene.route_difficulty import fit, load_route_model, route_difficulty
+from tests.test_route_difficulty import _synthetic
+
+
+@pytest.fixture(scope="module")
+def garages():
+    """Four distinct usable tiny garages."""
+    out, seen = [], set()
+    for seed in range(20):
+        g = paint_garage("tiny_7x11", seed=seed)
+        if g.canonical_hash() not in seen:
+            seen.add(g.canonical_hash())
+            out.append(g)
+        if len(out) == 4:
+            return out
+    raise AssertionError("the painter gave fewer than 4 distinct tiny garages")
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return load_route_model()
+
+
+def _library(path, garages) -> list[int]:
+    with Library(path) as lib:
+        return [lib.add(g, map="tiny_7x11", run="r", seed=0, episode=i, timestep=i) for i, g in enumerate(garages)]
+
+
+def test_side_table_stores_reads_and_filters(tmp_path, garages):
+    path = tmp_path / "library.sqlite"
+    ids = _library(path, garages)
+    with Library(path) as lib:
+        assert not lib.has_route_difficulty() and lib.unrated("k1") == ids
+        lib.set_route_difficulty(ids[0], "k1", 0.25)
+        lib.set_route_difficulty(ids[1], "k1", math.nan)  # rated: no feasible stall
+        assert lib.unrated("k1") == ids[2:] and lib.unrated("k2") == ids
+        got = lib.route_difficulties(ids, "k1")
+        assert got[ids[0]] == 0.25 and math.isnan(got[ids[1]]) and set(got) == set(ids[:2])
+        # an unrated garage among those the other filters keep: refused with the file and the fix
+        with pytest.raises(LibraryError, match=rf"{path}.*2 garage\(s\).*garage-mj library rate {path}"):
+            lib.query(route=(0.0, 1.0), route_model="k1")
+        lib.set_route_difficulty(ids[2], "k1", 0.75)
+        lib.set_route_difficulty(ids[3], "k1", 0.5)
+        lib.set_route_difficulty(ids[3], "k1", 0.55)  # rated again: replaced
+        assert [r.id for r in lib.query(route=(0.5, 1.0), route_model="k1")] == ids[2:]
+        assert lib.count(route=(0.0, 0.3), route_model="k1") == 1  # the no-feasible-stall garage never matches
+        assert [r.id for r in lib.sample(10, 0, route=(0.2, 0.6), route_model="k1")] == [ids[0], ids[3]]
+        assert lib.points(route_model="k1").tolist() == [
+            [v, lib.get(i).coverage] for i, v in ((ids[0], 0.25), (ids[2], 0.75), (ids[3], 0.55))]
+        st = lib.stats(route_model="k1")["maps"]["tiny_7x11"]["route_difficulty"]
+        assert (st["rated"], st["with_value"], st["min"], st["max"]) == (4, 3, 0.25, 0.75)
+        assert "route_difficulty" not in lib.stats(route_model="k2")["maps"]["tiny_7x11"]
+        with pytest.raises(LibraryError, match="no route difficulty under model k2"):
+            lib.count(route=(0.0, 1.0), route_model="k2")
+        with pytest.raises(ValueError, match="needs route_model"):
+            lib.query(route=(0.0, 1.0))
+        assert lib.query(map="other", route=(0.0, 1.0), route_model="k2") == []  # nothing to rate: nothing matches
+
+
+def test_an_old_library_without_the_table_opens_lists_and_gets_rated(tmp_path, garages, shipped, capsys):
+    path = tmp_path / "library.sqlite"
+    ids = _library(path, garages[:2])  # what an older garage-mj wrote: garages only
+    with Library(path, create=False) as lib:  # read-only, as the browsing commands open it
+        assert not lib.has_route_difficulty() and lib.route_difficulties(ids, shipped.key) == {}
+        with pytest.raises(LibraryError, match="garage-mj library rate"):
+            lib.query(route=(0.0, 1.0), route_model=shipped.key)
+    assert main(["library", "ls", str(path)]) == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert rows[0].split()[5:7] == ["diff", "route"] and all(r.split()[6] == "-" for r in rows[1:3])
+    assert main(["library", "ls", str(path), "--route-difficulty", "0", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and f"garage-mj library rate {path}" in err
+    assert main(["library", "rate", str(path), "--quiet"]) == 0
+    assert "rated 2 garage(s)" in capsys.readouterr().out
+    con = sqlite3.connect(path)
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION  # no schema bump
+    con.close()
+    with Library(path, create=False) as lib:
+        got = lib.route_difficulties(ids, shipped.key)
+    assert got == {i: pytest.approx(route_difficulty(g, shipped), abs=1e-12) for i, g in zip(ids, garages[:2])}
+    assert main(["library", "ls", str(path), "--route-difficulty", "0", "1"]) == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert [r.split()[6] for r in rows[1:3]] == [f"{got[i]:.3f}" for i in ids]
+
+
+def test_rating_is_resumable_and_the_same_whatever_the_workers(tmp_path, garages, shipped, monkeypatch, capsys):
+    path = tmp_path / "library.sqlite"
+    ids = _library(path, garages)
+    real, calls = route_rating._rate, []
+
+    def killed_on_the_third(job):
+        calls.append(job[0])
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # a Ctrl-C or kill while the third garage is rated
+        return real(job)
+
+    monkeypatch.setattr(route_rating, "_rate", killed_on_the_third)
+    with pytest.raises(KeyboardInterrupt):
+        rate_library(path, progress=False)
+    monkeypatch.setattr(route_rating, "_rate", real)
+    with Library(path, create=False) as lib:
+        assert set(lib.route_difficulties(ids, shipped.key)) == set(ids[:2])  # both values before the kill kept
+    assert main(["library", "rate", str(path), "--limit", "1", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "rated 1 garage(s)" in out and "s per garage" in out and "1 left" in out
+    assert main(["library", "rate", str(path), "--quiet"]) == 0
+    assert "rated 1 garage(s)" in capsys.readouterr().out
+    assert main(["library", "rate", str(path), "--quiet"]) == 0  # nothing left
+    assert "rated 0 garage(s)" in capsys.readouterr().out
+    with Library(path, create=False) as lib:
+        one = lib.route_difficulties(ids, shipped.key)
+    # the same values from two workers in a fresh library
+    other = tmp_path / "two.sqlite"
+    _library(other, garages)
+    res = rate_library(other, shipped, workers=2, progress=False)
+    assert (res.rated, res.left, res.model_key) == (4, 0, shipped.key)
+    with Library(other, create=False) as lib:
+        assert lib.route_difficulties(ids, shipped.key) == one
+
+
+def test_cli_shows_route_difficulty_beside_the_papers(tmp_path, garages, shipped, capsys):
+    path = tmp_path / "library.sqlite"
+    ids = _library(path, garages[:3])
+    mine = tmp_path / "mine.json"
+    fit(*_synthetic()).save(mine)
+    assert main(["library", "rate", str(path), "--map", "tiny_7x11", "--limit", "2", "--quiet"]) == 0
+    assert main(["library", "rate", str(path), "--model", str(mine), "--quiet"]) == 0
+    capsys.readouterr()
+    with Library(path, create=False) as lib:
+        ours = lib.route_difficulties(ids, shipped.key)
+    assert main(["library", "show", str(path), str(ids[0])]) == 0
+    assert f"route difficulty {ours[ids[0]]:.3f} (model {shipped.key})" in capsys.readouterr().out
+    assert main(["library", "show", str(path), str(ids[2])]) == 0
+    assert "route difficulty - " in capsys.readouterr().out  # not rated under the shipped model
+    assert main(["library", "stats", str(path)]) == 0
+    lo, hi = min(ours.values()), max(ours.values())
+    assert f"route difficulty {lo:.3f}-{hi:.3f}" in capsys.readouterr().out
+    assert main(["library", "stats", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["maps"]["tiny_7x11"]["route_difficulty"]["rated"] == 2
+    dump = tmp_path / "dump.json"
+    assert main(["library", "export-json", str(path), "--out", str(dump)]) == 0
+    rows = json.loads(dump.read_text())
+    assert [r["route_difficulty"] for r in rows] == [ours[ids[0]], ours[ids[1]], None]
+    assert {r["route_model"] for r in rows} == {shipped.key}
+    # another model: its own values, filtered with --route-model
+    assert main(["library", "sample", str(path), "-n", "3", "--route-difficulty", "0", "1", "--route-model",
+                 str(mine)]) == 0
+    assert "3 garage(s)" in capsys.readouterr().out
+    assert main(["library", "rate", str(path), "--map", "nope"]) == 2
+    assert "no garage of map 'nope'" in capsys.readouterr().err
