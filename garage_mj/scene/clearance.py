@@ -74,6 +74,14 @@ def clearance(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.nd
 
     The outline of stall ``exclude_stall`` (the test's target) is not an obstacle.
     """
+    dist, nearest = nearest_obstacle(obs, car, rear, heading, exclude_stall)
+    return dist, [obs.classes[k] if k >= 0 else "" for k in nearest]
+
+
+def nearest_obstacle(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.ndarray,
+                     exclude_stall: int = -1) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose, the distance [m] of the car body to the nearest obstacle and that obstacle's index in ``obs``
+    (-1 when none lies within ``NEAR_OBSTACLE`` of the poses: distance inf)."""
     keep = obs.stall != exclude_stall if exclude_stall >= 0 else np.ones(len(obs.boxes), dtype=bool)
     boxes = obs.boxes
     # only obstacles near the path
@@ -81,7 +89,7 @@ def clearance(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.nd
     keep &= (boxes[:, 2] >= lo[0]) & (boxes[:, 0] <= hi[0]) & (boxes[:, 3] >= lo[1]) & (boxes[:, 1] <= hi[1])
     idx = np.flatnonzero(keep)
     if not len(idx):
-        return np.full(len(rear), np.inf), [""] * len(rear)
+        return np.full(len(rear), np.inf), np.full(len(rear), -1)
     boxes = boxes[idx]
     body = footprint(car, rear, heading)  # (N, 4, 2)
     # a cheap lower bound from the body's bounding circle; exact distances only where it is small
@@ -99,8 +107,7 @@ def clearance(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.nd
         exact[_overlap_pairs(cars, bx, bc)] = 0.0
         dist[n_i, m_i] = exact
     j = np.argmin(dist, axis=1)
-    names = [obs.classes[idx[k]] for k in j]
-    return dist[np.arange(len(rear)), j], names
+    return dist[np.arange(len(rear)), j], idx[j]
 
 
 def _points_to_edges(points: np.ndarray, polys: np.ndarray) -> np.ndarray:

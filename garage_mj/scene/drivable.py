@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from garage_mj.core.geometry import OPPOSITE
-from garage_mj.scene.clearance import Obstacles, clearance, footprint, scene_obstacles
+from garage_mj.scene.clearance import Obstacles, footprint, nearest_obstacle, scene_obstacles
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.routing import START_OFFSET, LaneRoutes, Node, sample
 from garage_mj.scene.world import WORLD_DIR, cell_center
@@ -122,6 +122,7 @@ class DrivePlanner:
         self.routes = LaneRoutes(self.net, self.world, self.rows, car, self.r_min)
         self._dist = self.routes.dist  # (cell, heading) -> cost of the best forward route to it
         self._obstacles: Obstacles | None = None
+        self._clear_cache: dict[bytes, tuple[float, int]] = {}  # pose -> (clearance, nearest obstacle) over all
         self._lanes: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- obstacles and the footprint (garage_mj.scene.clearance) --------------------------------------
@@ -136,8 +137,28 @@ class DrivePlanner:
         return footprint(self.car, rear, heading)
 
     def clearance(self, rear: np.ndarray, heading: np.ndarray, exclude_stall: int = -1) -> tuple[np.ndarray, list[str]]:
-        """Per pose, the distance [m] of the car body to the nearest obstacle (0 when touching), and its class."""
-        return clearance(self.obstacles(), self.car, rear, heading, exclude_stall)
+        """Per pose, the distance [m] of the car body to the nearest obstacle (0 when touching), and its class.
+
+        The routes to a garage's stalls share most of their poses (they fan out from one start), so
+        each pose's nearest obstacle over all of them is computed once and kept; only the poses whose
+        nearest obstacle is the outline of ``exclude_stall`` itself are measured again without it.
+        """
+        obs = self.obstacles()
+        keys = list(map(bytes, np.round(np.column_stack([rear, heading]) * 1e6).astype(np.int64)))
+        cache = self._clear_cache
+        miss = [i for i, k in enumerate(keys) if k not in cache]
+        if miss:
+            d, j = nearest_obstacle(obs, self.car, rear[miss], heading[miss])
+            for i, dd, jj in zip(miss, d.tolist(), j.tolist(), strict=True):
+                cache[keys[i]] = (dd, jj)
+        got = [cache[k] for k in keys]
+        dist = np.array([g[0] for g in got])
+        near = np.array([g[1] for g in got], dtype=int)
+        if exclude_stall >= 0:
+            redo = np.flatnonzero((near >= 0) & (obs.stall[np.maximum(near, 0)] == exclude_stall))
+            if len(redo):
+                dist[redo], near[redo] = nearest_obstacle(obs, self.car, rear[redo], heading[redo], exclude_stall)
+        return dist, [obs.classes[k] if k >= 0 else "" for k in near]
 
     # -- lanes of the road model ----------------------------------------------------------------
     def _lane_points(self) -> tuple[np.ndarray, np.ndarray]:

@@ -42,8 +42,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from garage_mj.scene.world import world_to_cell
-
 if TYPE_CHECKING:
     from garage_mj.scene.drivable import DrivePlanner, TestPlan
     from garage_mj.scene.garage_scene import GarageScene
@@ -82,8 +80,10 @@ def plan_features(planner: DrivePlanner, plan: TestPlan) -> dict[str, float]:
         near_turn |= (s >= s[a] - TURN_REACH) & (s <= s[b - 1] + TURN_REACH)
     # junction cells crossed
     net, rows = planner.net, planner.rows
-    cells = {world_to_cell(float(x), float(y), rows, planner.world) for x, y in centre}
-    junctions = sum(1 for c in cells if c in net.cells and len(net.cells[c].openings) >= 3)
+    b = planner.world.block
+    rc = np.unique(np.column_stack([rows - 1 - np.floor(centre[:, 1] / b), np.floor(centre[:, 0] / b)]).astype(int),
+                   axis=0)  # the cells the centre path crosses (world_to_cell)
+    junctions = sum(1 for r, c in rc.tolist() if (r, c) in net.cells and len(net.cells[(r, c)].openings) >= 3)
     return {
         "length": float(np.linalg.norm(np.diff(centre, axis=0), axis=1).sum()),
         "turns": float(len(turns)),
@@ -103,19 +103,27 @@ def plan_features(planner: DrivePlanner, plan: TestPlan) -> dict[str, float]:
 
 
 def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, target: int) -> int:
-    """Stalls other than ``target`` whose outline comes within ``PASS_REACH`` of the car's body."""
-    obs = planner.obstacles()
-    is_stall = (obs.stall >= 0) & (obs.stall != target)
-    boxes = obs.boxes[is_stall]
-    if not len(boxes):
-        return 0
-    body = planner.footprint(rear, hdg)  # (N, 4, 2)
-    lo, hi = body.min(axis=1), body.max(axis=1)  # the body's axis-aligned bounds per pose
-    # gap between the body's bounds and each box (a lower bound of their distance; exact for axis-aligned poses)
-    gx = np.maximum(np.maximum(boxes[None, :, 0] - hi[:, None, 0], lo[:, None, 0] - boxes[None, :, 2]), 0.0)
-    gy = np.maximum(np.maximum(boxes[None, :, 1] - hi[:, None, 1], lo[:, None, 1] - boxes[None, :, 3]), 0.0)
-    near = (np.hypot(gx, gy) <= PASS_REACH).any(axis=0)
-    return int(near.sum())
+    """Stalls other than ``target`` whose outline comes within ``PASS_REACH`` of the car's body.
+
+    Routes to a garage's stalls share most poses, so each pose's stalls in reach are kept on the planner.
+    """
+    cache: dict[bytes, frozenset[int]] = planner.__dict__.setdefault("_pass_cache", {})
+    keys = list(map(bytes, np.round(np.column_stack([rear, hdg]) * 1e6).astype(np.int64)))
+    miss = [i for i, k in enumerate(keys) if k not in cache]
+    if miss:
+        obs = planner.obstacles()
+        is_stall = obs.stall >= 0
+        boxes, ids = obs.boxes[is_stall], obs.stall[is_stall]
+        body = planner.footprint(rear[miss], hdg[miss])  # (N, 4, 2)
+        lo, hi = body.min(axis=1), body.max(axis=1)  # the body's axis-aligned bounds per pose
+        # gap between the body's bounds and each box (a lower bound of their distance; exact for axis-aligned poses)
+        gx = np.maximum(np.maximum(boxes[None, :, 0] - hi[:, None, 0], lo[:, None, 0] - boxes[None, :, 2]), 0.0)
+        gy = np.maximum(np.maximum(boxes[None, :, 1] - hi[:, None, 1], lo[:, None, 1] - boxes[None, :, 3]), 0.0)
+        near = np.hypot(gx, gy) <= PASS_REACH
+        for row, i in enumerate(miss):
+            cache[keys[i]] = frozenset(ids[near[row]].tolist())
+    passed = frozenset().union(*(cache[k] for k in keys))
+    return len(passed - {target})
 
 
 def garage_features(scene: GarageScene, car=None) -> dict[int, dict[str, float] | None]:

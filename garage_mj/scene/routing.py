@@ -183,11 +183,9 @@ def sample(verts: list[np.ndarray], dirs: list[np.ndarray],
 
     def line(p, q, u):
         n = max(1, math.ceil(float(np.linalg.norm(q - p)) / SAMPLE_STEP))
-        h = math.atan2(u[1], u[0])
-        for i in range(n):
-            pts.append(p + (q - p) * (i / n))
-            hdg.append(h)
-            kap.append(0.0)
+        pts.extend(p + (q - p) * (np.arange(n) / n)[:, None])
+        hdg.extend([math.atan2(u[1], u[0])] * n)
+        kap.extend([0.0] * n)
 
     cur = verts[0]
     for k, r in enumerate(radii):
