@@ -14,22 +14,38 @@ One subpackage per pipeline stage; each imports only from the stages before it
   an assertion that lists each failure (the ``pytest_garage_mj`` plugin's machinery).
 - ``cli``: the ``garage-mj`` command line, thin, on top.
 
-This module keeps the public API (``load_map``, ``evaluate``, ``Garage``, ...) and registers the
+This module keeps the public API (``load_map``, ``evaluate``, ``Garage``, ...; ``evaluate(garage,
+route=True)`` adds the route-aware difficulty to the paper's metrics) and registers the
 gymnasium ids (``garage_mj/GarageGen-v0``, ``garage_mj/GarageGenCond-v0``, ``garage_mj/GarageDrive-v0``).
 """
 
 from __future__ import annotations
 
+import dataclasses as _dataclasses
 import os as _os
+from typing import TYPE_CHECKING
 
 # MuJoCo reads MUJOCO_GL once, when it is first imported: default to headless EGL before any import.
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from garage_mj.core import __version__  # noqa: E402
+from garage_mj.core.lazy import lazy_exports
 from garage_mj.grid.blocks import Block
 from garage_mj.grid.garage import Garage, MapError
 from garage_mj.grid.map_io import list_maps, load_map
-from garage_mj.grid.metrics import GarageMetrics, difficulty, evaluate
+from garage_mj.grid.metrics import DEFAULT_DIFFICULTY, DifficultyConfig, GarageMetrics, difficulty
+from garage_mj.grid.metrics import evaluate as _evaluate_grid
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from garage_mj.scene.route_difficulty import RouteDifficulty
+
+#: The route difficulty's public names load on first use, as the stage facades' do: ``import garage_mj``
+#: imports no scene module.
+__getattr__, _LAZY = lazy_exports(__name__, {"RouteDifficulty": "scene.route_difficulty",
+                                             "load_route_model": "scene.route_difficulty",
+                                             "route_difficulty": "scene.route_difficulty"})
 
 __all__ = [
     "Block",
@@ -41,7 +57,25 @@ __all__ = [
     "evaluate",
     "list_maps",
     "load_map",
+    *_LAZY,
 ]
+
+
+def evaluate(garage: Garage, config: DifficultyConfig = DEFAULT_DIFFICULTY, *, route: bool = False,
+             model: RouteDifficulty | str | Path | None = None) -> GarageMetrics:
+    """Every metric of ``garage`` (:func:`garage_mj.grid.metrics.evaluate`: the paper's difficulty, coverage, ...).
+
+    With ``route=True`` (or a ``model``) also its route difficulty, the expected failure rate of a cruise
+    test predicted from the planned routes (:func:`garage_mj.scene.route_difficulty.route_difficulty`;
+    NaN when no stall has a feasible route), under ``model`` (a ``RouteDifficulty`` or a model file;
+    None: the shipped one). It plans every stall, so it costs ~0.1-2 s where the rest costs milliseconds.
+    """
+    metrics = _evaluate_grid(garage, config)
+    if not route and model is None:
+        return metrics
+    m = model if isinstance(model, __getattr__("RouteDifficulty")) else __getattr__("load_route_model")(model)
+    return _dataclasses.replace(metrics, route_difficulty=__getattr__("route_difficulty")(garage, m))
+
 
 #: Gymnasium id -> entry point; registered once, when the package is imported (no env module loads).
 ENV_IDS = {

@@ -163,3 +163,22 @@ def test_cli_shows_route_difficulty_beside_the_papers(tmp_path, garages, shipped
     assert "3 garage(s)" in capsys.readouterr().out
     assert main(["library", "rate", str(path), "--map", "nope"]) == 2
     assert "no garage of map 'nope'" in capsys.readouterr().err
+
+
+def test_evaluate_gains_the_route_difficulty_on_request(junction_garage, shipped, tmp_path):
+    import garage_mj
+    from garage_mj.grid.metrics import evaluate as grid_evaluate
+
+    plain = garage_mj.evaluate(junction_garage)
+    assert plain == grid_evaluate(junction_garage) and plain.route_difficulty is None
+    assert "route_difficulty" not in plain.to_dict()  # files written from the metrics stay as they were
+    rated = garage_mj.evaluate(junction_garage, route=True)
+    assert rated.route_difficulty == route_difficulty(junction_garage, shipped)
+    assert 0.0 < rated.route_difficulty < 1.0 and rated.to_dict()["route_difficulty"] == rated.route_difficulty
+    assert rated.difficulty == plain.difficulty  # the paper's difficulty is untouched
+    mine = tmp_path / "mine.json"
+    model = fit(*_synthetic())
+    model.save(mine)
+    assert garage_mj.evaluate(junction_garage, model=mine).route_difficulty == pytest.approx(
+        route_difficulty(junction_garage, model), abs=1e-12)
+    assert garage_mj.evaluate(junction_garage, model=model).route_difficulty == route_difficulty(junction_garage, model)

@@ -1,7 +1,10 @@
 """Garage metrics (SPEC section 4): coverage, difficulty, stalls and road statistics.
 
 ``difficulty(E[Y], E[X])`` is the paper's lambda with the weights of its table of 16 garages;
-``evaluate(garage)`` computes every metric the library stores and the reports show.
+``evaluate(garage)`` computes every metric the library stores and the reports show, from the grid
+alone (fast). The route-aware difficulty needs the 3D scene and its planner: the public facade
+``garage_mj.evaluate(garage, route=True)`` fills :attr:`GarageMetrics.route_difficulty` with it
+(:mod:`garage_mj.scene.route_difficulty`); this module only holds the number.
 """
 
 from __future__ import annotations
@@ -92,9 +95,17 @@ class GarageMetrics:
     segments: int
     road_cells: int
     tiles: dict[str, int]
+    # the route difficulty (expected failure rate of a cruise test, garage_mj.scene.route_difficulty): None when
+    # not computed (this module's evaluate never does; garage_mj.evaluate(garage, route=True) does), NaN when the
+    # garage has no feasible stall
+    route_difficulty: float | None = None
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The metrics as a dict; ``route_difficulty`` only when computed (so files written without it stay as they were)."""
+        d = asdict(self)
+        if d["route_difficulty"] is None:
+            del d["route_difficulty"]
+        return d
 
 
 def evaluate(garage: Garage, config: DifficultyConfig = DEFAULT_DIFFICULTY) -> GarageMetrics:
