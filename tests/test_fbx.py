@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import pytest
 
@@ -66,6 +67,14 @@ def test_a_broken_fbx_is_one_line_from_blender(packs, tmp_path):
     bad.write_bytes((packs[0] / FBX_NAME).read_bytes()[:5000])
     (problem,) = fbx_problems(read_fbx_batch([bad])[0], packs[0] / "garage.glb")
     assert problem.startswith(f"Blender could not import {FBX_NAME}: ") and "\n" not in problem
+
+
+def test_one_garage_gives_the_same_fbx_bytes_on_every_run(painted_tiny):
+    """Assimp stamps the time into the header; the writer fixes it, so pack hashes are reproducible."""
+    meshes = garage_meshes(painted_tiny)
+    first = fbx_bytes(meshes)
+    time.sleep(1.05)  # the stamp has a resolution of one second
+    assert fbx_bytes(meshes) == first
 
 
 def test_the_manifest_hashes_the_fbx(painted_tiny, tmp_path):

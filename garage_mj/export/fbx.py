@@ -18,7 +18,9 @@ How it is written: the trimesh scene is handed to Assimp (libassimp from the PyP
 ``cmeel-assimp``, Linux and macOS wheels) as an in-memory GLB in the world frame; Assimp imports
 it (generating flat normals, dropping its own unused default material) and its FBX exporter
 (``aiExportSceneToBlob``, format ``fbx``, FBX 7.5 binary) writes the file. The exporter takes
-the ``GlobalSettings`` values above from the scene's metadata, which is set for the export only.
+the ``GlobalSettings`` values above from the scene's metadata, which is set for the export only;
+the header's creation time stamp is then fixed to 1970-01-01 so that a garage's FBX is the same
+bytes on every run.
 The binding is a few C calls through :mod:`ctypes` (Assimp's C API, ``cimport.h`` and
 ``cexport.h``); no FBX byte is written here. :func:`fbx_problem` says why FBX cannot be written
 in this environment (no wheel for the platform) and how to get it.
@@ -27,6 +29,7 @@ in this environment (no wheel for the platform) and how to get it.
 from __future__ import annotations
 
 import ctypes
+import struct
 from collections.abc import Mapping
 from functools import lru_cache
 from importlib import metadata
@@ -58,6 +61,9 @@ _VALIDATE = 0x400  # aiProcess_ValidateDataStructure
 _REMOVE_REDUNDANT_MATERIALS = 0x1000  # drops the importer's unused default material
 _RRM_EXCLUDE_LIST = b"PP_RRM_EXCLUDE_LIST"  # materials that step must keep as they are
 _AI_INT32, _AI_DOUBLE = 1, 4  # aiMetadataType (metadata.h)
+#: The header's CreationTimeStamp, fixed: Assimp writes the local time there, and one garage must
+#: always give the same bytes (packs are reproducible; their hashes compare across runs).
+CREATION_TIME = {"Year": 1970, "Month": 1, "Day": 1, "Hour": 0, "Minute": 0, "Second": 0, "Millisecond": 0}
 _AI_MAXLEN = 1024  # aiString's buffer (types.h)
 
 
@@ -176,6 +182,22 @@ def _metadata(settings: Mapping[str, int | float]) -> tuple[_AiMetadata, list]:
     return _AiMetadata(n, keys, values), keep
 
 
+def _fixed_time(data: bytes) -> bytes:
+    """``data`` with :data:`CREATION_TIME` in its header's CreationTimeStamp (seven int32 fields).
+
+    Each field is a binary FBX node record whose name (length byte, name) is followed by its one
+    property, type code ``I`` and a little-endian int32; exactly one such record per field.
+    """
+    out = bytearray(data)
+    for key, value in CREATION_TIME.items():
+        tag = bytes([len(key)]) + key.encode() + b"I"
+        at = out.find(tag)
+        if at < 0 or out.find(tag, at + 1) >= 0:
+            raise FbxError(f"Assimp's FBX has no single CreationTimeStamp {key} field; cannot make it reproducible")
+        out[at + len(tag):at + len(tag) + 4] = struct.pack("<i", value)
+    return bytes(out)
+
+
 def world_scene(scene: trimesh.Scene, names: Mapping[str, str] | None = None) -> trimesh.Scene:
     """``scene`` (glTF frame, y up) in the world frame (z up), nodes renamed by ``names``.
 
@@ -222,7 +244,7 @@ def fbx_bytes(scene: trimesh.Scene, names: Mapping[str, str] | None = None) -> b
         if not blob:
             raise FbxError(f"Assimp's FBX exporter failed: {lib.aiGetErrorString().decode(errors='replace')}")
         try:
-            return ctypes.string_at(blob.contents.data, blob.contents.size)
+            return _fixed_time(ctypes.string_at(blob.contents.data, blob.contents.size))
         finally:
             lib.aiReleaseExportBlob(blob)
     finally:
