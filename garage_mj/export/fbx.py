@@ -22,7 +22,7 @@ the ``GlobalSettings`` values above from the scene's metadata, which is set for 
 the header's creation time stamp is then fixed to 1970-01-01 so that a garage's FBX is the same
 bytes on every run.
 The binding is a few C calls through :mod:`ctypes` (Assimp's C API, ``cimport.h`` and
-``cexport.h``); no FBX byte is written here. :func:`fbx_problem` says why FBX cannot be written
+``cexport.h``); Assimp writes the whole file, here only the stamp's seven numbers are set. :func:`fbx_problem` says why FBX cannot be written
 in this environment (no wheel for the platform) and how to get it.
 """
 
