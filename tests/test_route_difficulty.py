@@ -139,3 +139,28 @@ def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage
     # a folder that is not a cruise run: one line naming it
     assert main(["difficulty", "fit", str(tmp_path), "--out", str(out)]) == 2
     assert "holds no tests.csv" in capsys.readouterr().err
+
+
+def test_generate_by_route_difficulty_stores_rated_garages_in_the_band(tmp_path, capsys):
+    from garage_mj.generation.library import Library
+
+    lib = tmp_path / "lib.sqlite"
+    argv = ["generate", "--map", "tiny_7x11", "--metric", "route", "--difficulty", "0.55", "0.75", "--count", "3",
+            "--library", str(lib), "--no-progress", "--seed", "4"]
+    assert main(argv) == 0
+    assert "route difficulty" in capsys.readouterr().out
+    model = load_route_model()
+    with Library(lib, create=False) as db:
+        records = db.query()
+        values = db.route_difficulties([r.id for r in records], model.key)
+    assert len(records) == 3 and set(values) == {r.id for r in records}
+    for r in records:  # what is stored is what the shipped model says of the garage
+        assert 0.55 <= values[r.id] <= 0.75
+        assert values[r.id] == pytest.approx(route_difficulty(r.garage, model), abs=1e-9)
+    # the same seed gives the same garages
+    assert main([*argv[:-5], "--library", str(tmp_path / "again.sqlite"), "--no-progress", "--seed", "4"]) == 0
+    with Library(tmp_path / "again.sqlite", create=False) as db:
+        assert [r.hash for r in db.query()] == [r.hash for r in records]
+    assert main(["generate", "--map", "tiny_7x11", "--difficulty", "0.5", "0.6", "--count", "1", "--library",
+                 str(lib), "--route-model", str(tmp_path / "m.json")]) == 2
+    assert "--route-model needs --metric route" in capsys.readouterr().err

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 from pathlib import Path
 
 from garage_mj.cli import UserError
@@ -31,14 +32,24 @@ def register(sub: argparse._SubParsersAction) -> None:
             "map on one core), saved to --model-out (default: next to the library, "
             "<library stem>.<map name>.generator.zip) and reused by later calls; or pass a shipped "
             "generator (--model m4_13x13_offset): generators see only a window around the car, so "
-            "they run on any map."
+            "they run on any map. With --metric route the band is one of the route-aware difficulty "
+            "(garage-mj difficulty): the policy's first 16 rollouts and every search step are rated by "
+            "planning the routes to all stalls (about 0.3-0.8 s per 13x13 garage), the search climbs and "
+            "walks by that rating, and each garage stored gets its value in the library (library ls "
+            "--route-difficulty LO HI finds them)."
         ),
         epilog="example: garage-mj generate --map m5_13x13_aligned --difficulty 0.3 0.4 --count 20 "
                "--library garages.sqlite",
     )
     p.add_argument("--map", required=True, help="shipped map name (garage-mj maps list) or map file")
     p.add_argument("--difficulty", required=True, nargs=2, type=unit_range, metavar=("LO", "HI"),
-                   help="difficulty band [LO, HI] (0-1)")
+                   help="difficulty band [LO, HI] (0-1), of the --metric")
+    p.add_argument("--metric", choices=("paper", "route"), default="paper",
+                   help="paper: the paper's difficulty (road length and intersections of the grid; default); "
+                        "route: the route-aware difficulty, the expected failure rate of a cruise test predicted "
+                        "from the planned routes (garage-mj difficulty); each garage stored gets it in the library")
+    p.add_argument("--route-model", type=Path, metavar="FILE",
+                   help="with --metric route: a model of garage-mj difficulty fit (default: the shipped one)")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"), help="coverage band [LO, HI] (0-1)")
     p.add_argument("--count", required=True, type=positive_int, help="distinct garages to find")
     p.add_argument("--library", required=True, type=Path, help="library file (created if missing)")
@@ -46,7 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(default: the shipped generator of --map)")
     p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--max-episodes", type=positive_int, metavar="E",
-                   help="episode budget (default 2,000 + 200 x COUNT)")
+                   help="episode budget (default 2,000 + 200 x COUNT; with --metric route, where each search "
+                        "step is rated and counts as an episode, 100 + 20 x COUNT)")
     p.add_argument("--max-seconds", type=float, metavar="S",
                    help="stop after S seconds of rollouts and search (wall clock)")
     p.add_argument("--no-search", action="store_true",
@@ -65,6 +77,15 @@ def run(args: argparse.Namespace) -> int:
     from garage_mj.generation.conditioned import default_model_out, shipped_generator, train_for_map
     from garage_mj.generation.generator import generate
 
+    route = None
+    if args.metric == "route":
+        from garage_mj.generation.generator import RouteMetric
+        from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
+
+        rmodel = load_route_model(args.route_model)
+        route = RouteMetric(functools.partial(route_difficulty, model=rmodel), rmodel.key)
+    elif args.route_model is not None:
+        raise UserError("--route-model needs --metric route")
     for name in ("difficulty", "coverage"):
         band = getattr(args, name)
         if band is not None and band[0] > band[1]:
@@ -85,11 +106,12 @@ def run(args: argparse.Namespace) -> int:
     r = generate(args.map, tuple(args.difficulty), args.count, args.library,
                  coverage=tuple(args.coverage) if args.coverage else None, model=model, seed=args.seed,
                  max_episodes=args.max_episodes, max_seconds=args.max_seconds, progress=not args.no_progress,
-                 search=not args.no_search)
+                 search=not args.no_search, route=route)
     lo, hi = min(r.difficulties), max(r.difficulties)
     stages = f"{r.found_policy} from the policy's {r.episodes} episodes"
     if r.found_search or r.search_steps:
         stages += f", {r.found_search} from {r.search_steps} search steps"
-    print(f"{r.found} distinct garages with difficulty {lo:.3f}-{hi:.3f} ({stages}; {r.seconds:.1f} s); "
+    what = "difficulty" if route is None else "route difficulty"
+    print(f"{r.found} distinct garages with {what} {lo:.3f}-{hi:.3f} ({stages}; {r.seconds:.1f} s); "
           f"{r.stored} new in {args.library}")
     return 0

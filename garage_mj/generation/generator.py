@@ -48,6 +48,34 @@ POLICY_TIME_SHARE = 0.5  # ... and at most this share of --max-seconds
 SEARCH_STEPS_PER_EPISODE = 20  # search mutations that count as one episode of the budget (~0.1-0.3 ms each
 #                                against ~5-10 ms for a rollout episode on a 13x13 map; a replay counts as one)
 SEARCH_SEEDS = 8  # garages of the scripted painter per six-stall axis that seed the search next to the policy's
+ROUTE_POLICY_EPISODES = 16  # by route difficulty: policy episodes (each usable garage rated) before the search
+
+
+@dataclass(frozen=True)
+class RouteMetric:
+    """Generate by a route difficulty instead of the paper's: ``rate(garage)`` gives it (NaN: no feasible
+    stall), ``key`` names the model it comes from (stored with each value in the library).
+
+    The generation stage does not plan routes: the caller passes the rater
+    (``garage_mj.scene.route_difficulty.route_difficulty`` with a model, as ``garage-mj generate --metric route`` does).
+    """
+
+    rate: Callable[[Garage], float]
+    key: str
+
+
+class _Rated:
+    """A :class:`RouteMetric`'s ``rate`` with its values kept by garage hash (each garage is rated once a call)."""
+
+    def __init__(self, metric: RouteMetric) -> None:
+        self.metric = metric
+        self.values: dict[str, float] = {}
+
+    def __call__(self, garage: Garage) -> float:
+        h = garage.canonical_hash()
+        if h not in self.values:
+            self.values[h] = float(self.metric.rate(garage))
+        return self.values[h]
 
 
 @dataclass
@@ -77,8 +105,8 @@ class _Collector:
 
     def __init__(self, lib: Library, map_name: str, run: str, seed: int, difficulty: tuple[float, float],
                  coverage: tuple[float, float], count: int, result: GenerateResult, bar: Any,
-                 clock: Callable[[], float], c0: float) -> None:
-        self.lib, self.map_name, self.run, self.seed = lib, map_name, run, seed
+                 clock: Callable[[], float], c0: float, route: _Rated | None = None) -> None:
+        self.lib, self.map_name, self.run, self.seed, self.route = lib, map_name, run, seed, route
         self.difficulty, self.coverage, self.count, self.result, self.bar = difficulty, coverage, count, result, bar
         self.clock, self.c0 = clock, c0
         self.seen: set[str] = set()
@@ -89,13 +117,19 @@ class _Collector:
     def keep(self, g: Garage, m: GarageMetrics, stage: str, episode: int, timestep: int) -> bool:
         """Store ``g`` (metrics ``m``) if it is usable, new to this call and in the bands."""
         key = g.canonical_hash()
-        if key in self.seen or not m.usable or band_distance(m.difficulty, self.difficulty) > 0.0 \
-                or band_distance(m.coverage, self.coverage) > 0.0:
+        if key in self.seen or not m.usable or band_distance(m.coverage, self.coverage) > 0.0:
+            return False
+        value = m.difficulty if self.route is None else self.route(g)
+        if not value == value or band_distance(value, self.difficulty) > 0.0:  # NaN: no feasible stall
             return False
         self.seen.add(key)
         result = self.result
         new = self.lib.add(g, map=self.map_name, run=self.run + ("+search" if stage == "search" else ""),
                            seed=self.seed, episode=episode, timestep=timestep)
+        if self.route is not None:
+            stored = new if new is not None else self.lib.id_of(key)
+            if stored is not None:
+                self.lib.set_route_difficulty(stored, self.route.metric.key, value)
         result.found += 1
         if stage == "search":
             result.found_search += 1
@@ -104,7 +138,7 @@ class _Collector:
         result.stored += new is not None
         if new is not None:
             result.ids.append(new)
-        result.difficulties.append(m.difficulty)
+        result.difficulties.append(value)
         if self.bar is not None:
             self.bar.update(1)
             self.bar.set_postfix(stage=stage, episodes=result.episodes, search_steps=result.search_steps, refresh=False)
@@ -142,7 +176,9 @@ def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Gene
     the bands, episode, garage), for the search. Returns the env steps taken.
     """
     result, n_envs = collector.result, len(envs)
-    band_opts = {"difficulty": tuple(collector.difficulty), "coverage": collector.coverage}
+    # by route difficulty the policy (conditioned on the paper's) paints any usable garage: every one is rated
+    paper_band = tuple(collector.difficulty) if collector.route is None else (0.0, 1.0)
+    band_opts = {"difficulty": paper_band, "coverage": collector.coverage}
     started = 0
     eps = np.zeros(n_envs)
     episode_of = [0] * n_envs
@@ -178,7 +214,7 @@ def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Gene
             if info["usable"]:
                 g = envs[i].garage()
                 if pool is not None:
-                    dist = (band_distance(info["difficulty"], collector.difficulty)
+                    dist = (band_distance(info["difficulty"], paper_band)
                             + band_distance(info["coverage"], collector.coverage))
                     pool.append((dist, episode_of[i], g))
                 if info["in_band"] and result.found < collector.count:
@@ -199,7 +235,9 @@ def _search_stage(garage0: Garage, coverage: tuple[float, float] | None, seed: i
     replays and search steps / :data:`SEARCH_STEPS_PER_EPISODE`) or ``max_seconds``.
     """
     result = collector.result
-    climber = BandClimber(garage0, collector.difficulty, coverage, rng=np.random.default_rng([seed, 1]))
+    climber = BandClimber(garage0, collector.difficulty, coverage, rng=np.random.default_rng([seed, 1]),
+                          metric=collector.route)
+    per_episode = SEARCH_STEPS_PER_EPISODE if collector.route is None else 1  # a route rating costs an episode
     pool.sort(key=lambda e: (e[0], e[1]))  # nearest to the band first, then oldest
     for _, _, g in pool:
         result.search_seeds += climber.add(g) is not None
@@ -213,9 +251,10 @@ def _search_stage(garage0: Garage, coverage: tuple[float, float] | None, seed: i
     if collector.bar is not None:
         collector.bar.set_postfix(stage="search", episodes=result.episodes, refresh=True)
     while result.found < collector.count and (climber.climbers or climber.inside):
-        if result.episodes + result.replays + result.search_steps / SEARCH_STEPS_PER_EPISODE >= max_episodes:
+        if result.episodes + result.replays + result.search_steps / per_episode >= max_episodes:
             break
-        if max_seconds is not None and result.search_steps % 16 == 0 and collector.elapsed() >= max_seconds:
+        if max_seconds is not None and (collector.route is not None or result.search_steps % 16 == 0) \
+                and collector.elapsed() >= max_seconds:
             break
         found = climber.step()
         result.search_steps += 1
@@ -229,10 +268,10 @@ def _search_stage(garage0: Garage, coverage: tuple[float, float] | None, seed: i
 
 def _not_filled(result: GenerateResult, count: int, map_name: str, difficulty: tuple[float, float],
                 coverage: tuple[float, float] | None, search: bool, max_seconds: float | None,
-                library: str | Path) -> GenerationError:
+                library: str | Path, metric: str = "difficulty") -> GenerationError:
     """The error of a call that did not find ``count`` garages, carrying its result."""
     cov = coverage or (0.0, 1.0)
-    what = f"difficulty in [{difficulty[0]}, {difficulty[1]}]" + (
+    what = f"{metric} in [{difficulty[0]}, {difficulty[1]}]" + (
         f" and coverage in [{cov[0]}, {cov[1]}]" if coverage is not None else "")
     searched = f" and {result.search_steps} search steps" if search and result.search_steps else ""
     exc = GenerationError(
@@ -248,7 +287,7 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
              coverage: tuple[float, float] | None = None, model: str | Path | None = None, seed: int = 0,
              max_episodes: int | None = None, max_seconds: float | None = None, progress: bool = True,
              n_envs: int = GEN_ENVS, clock: Callable[[], float] = time.perf_counter,
-             search: bool = True) -> GenerateResult:
+             search: bool = True, route: RouteMetric | None = None) -> GenerateResult:
     """Store ``count`` distinct usable garages of ``map`` with difficulty (and coverage) in the bands.
 
     Stage 1 rolls out the generator; if it has not filled the band after ``POLICY_PATIENCE``
@@ -260,6 +299,11 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     ``max_seconds`` measured by ``clock`` (wall time; ``time.process_time`` for CPU time on a
     shared machine) do not find ``count``. The same seed gives the same garages (unless
     ``max_seconds`` cuts a run short).
+
+    ``route`` generates by a route difficulty instead (:class:`RouteMetric`): ``difficulty`` is then a band
+    of it; the policy's rollouts (:data:`ROUTE_POLICY_EPISODES`, not conditioned on a band) and the
+    search's steps are each rated (a step counts one episode of the budget, whose default is then
+    ``100 + 20 * count``), and every garage stored gets its value in the library.
     """
     for name, band in (("difficulty", difficulty), ("coverage", coverage)):
         if band is not None and not 0.0 <= band[0] <= band[1] <= 1.0:
@@ -269,7 +313,9 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     garage0 = load_map(map)
     path = _generator_path(map, garage0, model)
     meta = _generator_meta(path)
-    max_episodes = max_episodes if max_episodes is not None else 2_000 + 200 * count
+    if max_episodes is None:
+        max_episodes = 2_000 + 200 * count if route is None else 100 + 20 * count
+    rated = _Rated(route) if route is not None else None
     max_errors = meta.get("max_errors", 10)
     torch.set_num_threads(1)
     policy = load_policy(path)
@@ -285,17 +331,20 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     result = GenerateResult(0, 0, [], 0, 0.0, [])
     t0, cpu0, c0 = time.perf_counter(), time.process_time(), clock()
     patience = POLICY_PATIENCE[0] + POLICY_PATIENCE[1] * count if search else max_episodes
+    if rated is not None and search:
+        patience = ROUTE_POLICY_EPISODES
     policy_seconds = None if max_seconds is None else (max_seconds * POLICY_TIME_SHARE if search else max_seconds)
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=count, desc=f"{garage0.name} difficulty {difficulty[0]:.2f}-{difficulty[1]:.2f}",
+        what = "difficulty" if route is None else "route difficulty"
+        bar = tqdm(total=count, desc=f"{garage0.name} {what} {difficulty[0]:.2f}-{difficulty[1]:.2f}",
                    unit="garage", dynamic_ncols=True)
     try:
         with Library(library) as lib:
             collector = _Collector(lib, garage0.name, run, seed, difficulty, coverage or (0.0, 1.0), count, result,
-                                   bar, clock, c0)
+                                   bar, clock, c0, rated)
             steps = _policy_stage(policy, envs, rng, collector, min(max_episodes, patience), policy_seconds,
                                   usable_pool)
             if usable_pool is not None and result.found < count:
@@ -307,8 +356,9 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     result.seconds = time.perf_counter() - t0
     result.cpu_seconds = time.process_time() - cpu0
     if result.found < count:
-        raise _not_filled(result, count, garage0.name, difficulty, coverage, search, max_seconds, library)
+        raise _not_filled(result, count, garage0.name, difficulty, coverage, search, max_seconds, library,
+                          "difficulty" if route is None else "route difficulty")
     return result
 
 
-__all__ = ["GenerateResult", "GenerationError", "generate"]
+__all__ = ["GenerateResult", "GenerationError", "RouteMetric", "generate"]

@@ -23,6 +23,7 @@ band, and hands out every new road set that lands there (``garage-mj generate``'
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -205,8 +206,10 @@ class BandClimber:
     """
 
     def __init__(self, base: Garage, difficulty: tuple[float, float], coverage: tuple[float, float] | None = None,
-                 rng: np.random.Generator | None = None) -> None:
+                 rng: np.random.Generator | None = None, metric: Callable[[Garage], float] | None = None) -> None:
         self.m = _Map(base)
+        self.metric = metric  # None: the paper's difficulty of the road set; else metric(garage) climbs that
+        self._metric_cache: dict[bytes, float] = {}
         self.band = (float(difficulty[0]), float(difficulty[1]))
         self.cov_band = (0.0, 1.0) if coverage is None else (float(coverage[0]), float(coverage[1]))
         self.rng = rng if rng is not None else np.random.default_rng(0)
@@ -224,9 +227,18 @@ class BandClimber:
     def _key(self, roads: np.ndarray, axis: Axis) -> bytes:
         return axis.encode() + np.packbits(roads).tobytes()
 
-    def measure(self, roads: np.ndarray) -> tuple[float, float, float]:
-        """(difficulty, coverage, distance to the bands) of a road set."""
-        d = self.m.difficulty(roads)
+    def measure(self, roads: np.ndarray, axis: Axis = "NS") -> tuple[float, float, float]:
+        """(difficulty, coverage, distance to the bands) of a road set (``axis``: its six-stall axis, which
+        only a ``metric`` reads; NaN, a garage the metric cannot rate, lies outside every band)."""
+        if self.metric is None:
+            d = self.m.difficulty(roads)
+        else:
+            key = self._key(roads, axis)
+            if key not in self._metric_cache:
+                self._metric_cache[key] = float(self.metric(self.m.garage_of(roads, axis)))
+            d = self._metric_cache[key]
+            if d != d:  # NaN
+                return d, 0.0, float("inf")
         cov = 1.0 - _free_left(self.m, roads) / self.free0 if self.free0 else 0.0
         return d, cov, _outside(d, self.band) + _outside(cov, self.cov_band)
 
@@ -238,7 +250,9 @@ class BandClimber:
         roads = self.m.repair(garage.grid == Block.ROAD)
         if roads is None:
             return None
-        _, _, dist = self.measure(roads)
+        _, _, dist = self.measure(roads, garage.six_stall_axis)
+        if dist == float("inf"):
+            return None
         key = self._key(roads, garage.six_stall_axis)
         if dist == 0.0:
             if key not in self.seen:
@@ -281,7 +295,7 @@ class BandClimber:
             child = _mutate(self.m, child, rng)
             if child is None:
                 return None
-        d, cov, dist = self.measure(child)
+        d, cov, dist = self.measure(child, axis)
         if i >= 0 and 0.0 < dist <= dist0 and not any(np.array_equal(child, r) for _, r, _ in self.climbers):
             self.climbers[i] = (dist, child, axis)  # (no two climbers alike: they would climb the same way)
             self.climbers.sort(key=lambda e: e[0])
