@@ -9,6 +9,7 @@ from pathlib import Path
 from garage_mj.cli import UserError
 from garage_mj.cli._common import positive_int, seed, unit_range, user_errors
 from garage_mj.grid.map_io import list_maps, load_map
+from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -80,7 +81,6 @@ def run(args: argparse.Namespace) -> int:
     route = None
     if args.metric == "route":
         from garage_mj.generation.generator import RouteMetric
-        from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
 
         rmodel = load_route_model(args.route_model)
         route = RouteMetric(functools.partial(route_difficulty, model=rmodel), rmodel.key)
