@@ -44,11 +44,11 @@ def test_demo_end_to_end_report_in_chromium(tmp_path):
     facts = page_facts(report)
     text = facts["text"]
     assert facts["imgs"] and all(i["loaded"] for i in facts["imgs"]), facts["imgs"]
-    # convergence + heatmap + (preview + MuJoCo render) per garage + regression
+    # convergence + heatmap + (preview + MuJoCo render) per garage + regression on the paper's and the route difficulty
     packs = [link for link in facts["links"] if link.startswith("packs/")]
     garages = len(packs)
     assert garages >= 1
-    assert len(facts["imgs"]) == 2 + 2 * garages + 1
+    assert len(facts["imgs"]) == 2 + 2 * garages + 2
     for link in packs:
         assert (out / link / "manifest.json").is_file()
     (table,) = [t for t in facts["tables"] if t["id"] == "cruise-table"]

@@ -33,9 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "cruise", help="run cruise tests of a driver in garages and correlate success with difficulty",
         description="Run --tests cruise tests per garage with --driver in GarageDrive-v0 over a process "
-                    "pool. Writes tests.csv (appended as tests end; a re-run resumes), summary.csv, "
-                    "summary.json (Pearson r, regression) and regression.png into --out, and with --videos N "
-                    "MP4s of N tests into OUT/videos/.")
+                    "pool. Writes tests.csv (appended as tests end; a re-run resumes), summary.csv (per garage, "
+                    "the paper's difficulty and the route difficulty under --route-model beside the outcomes), "
+                    "summary.json (Pearson r and regression on each), regression.png and regression_route.png "
+                    "into --out, and with --videos N MP4s of N tests into OUT/videos/.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--packs", type=Path, metavar="DIR", help="a folder of asset packs (garage-mj export)")
     src.add_argument("--library", type=Path, metavar="FILE", help="a garage library (garage-mj train)")
@@ -192,12 +193,15 @@ def run(args: argparse.Namespace) -> int:
     with action_warnings("cruise"):
         res = run_cruise(srcs, args.tests, args.driver, args.workers, args.seed, args.out,
                          action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet, env=env,
-                         xosc=args.xosc, backend=args.backend, address=args.address)
+                         xosc=args.xosc, backend=args.backend, address=args.address,
+                         route_model=args.route_model or True)
     s = res.stats
     r = "n/a" if s["r"] is None else f"{s['r']:.3f}"
+    route_r = "n/a" if s["route_r"] is None else f"{s['route_r']:.3f}"
     print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "
           f"(excluded), success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
-          f"Pearson r(difficulty, success) = {r} (paper {s['paper_r']}); results in {res.out_dir}")
+          f"Pearson r(difficulty, success) = {r} (paper {s['paper_r']}), r(route difficulty, success) = {route_r}; "
+          f"results in {res.out_dir}")
     if args.videos:
         from garage_mj.reporting.cruise import record_cruise_videos
 

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import user_errors
+from garage_mj.cli._common import route_key, user_errors
 from garage_mj.generation.library import Library
 
 
@@ -26,11 +26,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     h = psub.add_parser(
         "heatmap",
         help="difficulty (x) vs coverage (y) of a map's garages, count per 0.1 cell",
-        description="Counts the library's garages of one map in 0.1 x 0.1 cells of difficulty and coverage.",
+        description="Counts the library's garages of one map in 0.1 x 0.1 cells of difficulty and coverage: "
+        "the paper's difficulty (--metric paper, the paper's figure) or the route difficulty (--metric route, "
+        "as stored by 'garage-mj library rate'; garages without a feasible stall have none and are left out).",
     )
     h.add_argument("--library", type=Path, required=True, help="library file (library.sqlite)")
     h.add_argument("--map", required=True, help="map name as stored (see 'garage-mj library stats')")
-    h.add_argument("--out", type=Path, help="PNG file (default: heatmap_MAP.png)")
+    h.add_argument("--out", type=Path, help="PNG file (default: heatmap_MAP.png, heatmap_route_MAP.png)")
+    h.add_argument("--metric", choices=("paper", "route"), default="paper",
+                   help="the difficulty on x: the paper's (default) or the route difficulty")
+    h.add_argument("--route-model", type=Path, metavar="FILE",
+                   help="with --metric route: the model the values were rated with (default: the shipped one)")
     h.set_defaults(func=_heatmap)
     d = psub.add_parser(
         "driver",
@@ -57,13 +63,19 @@ def _convergence(args: argparse.Namespace) -> int:
 def _heatmap(args: argparse.Namespace) -> int:
     from garage_mj.reporting.plots import heatmap
 
+    key = route_key(args) if args.metric == "route" else None
     with Library(args.library, create=False) as lib:
-        points = lib.points(args.map)
         maps = lib.maps()
+        if args.map not in maps:
+            raise UserError(f"{args.library} has no garage of map {args.map!r}; maps in it: {', '.join(maps) or 'none'}")
+        points = lib.points(args.map, route_model=key)
     if len(points) == 0:
-        raise UserError(f"{args.library} has no garage of map {args.map!r}; maps in it: {', '.join(maps) or 'none'}")
-    out = heatmap(points, args.out or Path(f"heatmap_{args.map}.png"), title=args.map)
-    print(f"heatmap of {len(points)} garage(s) of {args.map} -> {out}")
+        raise UserError(f"no garage of map {args.map!r} in {args.library} has a route difficulty (none has a feasible "
+                        "stall); plot the paper's difficulty (--metric paper)")
+    default = f"heatmap_route_{args.map}.png" if key else f"heatmap_{args.map}.png"
+    out = heatmap(points, args.out or Path(default), title=args.map, metric=args.metric)
+    what = f"route difficulty (model {key})" if key else "difficulty"
+    print(f"heatmap of {len(points)} garage(s) of {args.map}, {what} x coverage -> {out}")
     return 0
 
 

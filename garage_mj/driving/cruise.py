@@ -8,8 +8,11 @@ arrive grouped by garage, so a scene is built at most once per worker and garage
 
 Outputs in ``out_dir`` (:mod:`garage_mj.driving.results`): ``tests.csv`` (one row per test,
 appended and flushed as each test ends, so a crash or Ctrl-C loses nothing and a re-run skips
-what is there), ``summary.csv`` (the paper's table columns per garage), ``garages.json`` (the run's garages), ``summary.json`` (Pearson
-r and the linear regression of success rate on difficulty), and ``run.json`` (the settings; a
+what is there), ``summary.csv`` (the paper's table columns per garage, and each garage's route difficulty beside the
+paper's difficulty), ``garages.json`` (the run's garages), ``summary.json`` (Pearson r and the linear regression of
+success rate on the paper's difficulty and on the route difficulty), ``route_difficulty.json`` (the garages' route
+difficulty, computed once in this process and read back by a re-run, :mod:`garage_mj.driving.route_rating`), and
+``run.json`` (the settings; a
 re-run with other settings is refused). Both JSON files record the action type used and where it
 came from (``action_type_from``: ``"driver"``, the driver's own, or ``"--action-type"``, given). ``regression.png`` is the reporting stage's
 (:func:`garage_mj.reporting.cruise.run_cruise` draws it after the run).
@@ -32,6 +35,7 @@ from garage_mj.driving.episode import cached_env, close_cached_env, drive_test
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.replay import write_test_xosc
 from garage_mj.driving.results import TEST_COLUMNS, check_settings, read_tests, write_csv, write_outputs
+from garage_mj.driving.route_rating import cruise_route_difficulty, resolve_route_model
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
 
@@ -39,6 +43,7 @@ GARAGES_FILE = "garages.json"  # the run's garages (GarageSet.to_json), for read
 
 if TYPE_CHECKING:
     from garage_mj.driving.drivers import ActionChoice
+    from garage_mj.scene.route_difficulty import RouteDifficulty
 
 
 @dataclass(frozen=True)
@@ -122,6 +127,7 @@ def run_cruise(
     xosc: bool = False,
     backend: str = "local",
     address: str | None = None,
+    route_model: RouteDifficulty | str | Path | bool = True,
 ) -> CruiseResult:
     """Run ``tests`` tests on every source with ``driver``; resumable (see the module docstring).
 
@@ -135,8 +141,11 @@ def run_cruise(
     one in ``out_dir/packs/`` for it to refer to. ``backend`` runs the tests in this process or a
     spawn pool of ``workers`` (``"local"``) or on ``workers`` Ray actors (``"ray"``; ``address``: a
     running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.core.backends`;
-    tests.csv gets the same rows either way. Raises :class:`CruiseError`, ``DriverError`` (bad
-    driver), ``BackendError`` (bad backend, Ray missing) before any test.
+    tests.csv gets the same rows either way. ``route_model``: the route difficulty model of
+    ``summary.csv``'s ``route_difficulty`` column and ``summary.json``'s ``route_r`` (True: the shipped
+    one; a ``RouteDifficulty`` or a model file; False: none, the column stays empty). Raises
+    :class:`CruiseError`, ``DriverError`` (bad driver), ``BackendError`` (bad backend, Ray missing),
+    ``RouteModelError`` (a bad model file) before any test.
     """
     from garage_mj.driving.drivers import ActionChoice, choose_action_type
 
@@ -145,6 +154,7 @@ def run_cruise(
     # fails fast, in this process, with the loader's one-line message on a bad driver
     choice = action_type if isinstance(action_type, ActionChoice) else choose_action_type(driver, action_type)
     check_backend(backend, address)
+    model = None if route_model is False else resolve_route_model(None if route_model is True else route_model)
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     hashes = [s.hash for s in srcs]
     if len(set(hashes)) != len(hashes):
@@ -153,7 +163,8 @@ def run_cruise(
                               dict(driver_kwargs or {}))
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise"):  # a second run into `out` is refused, naming this one
-        return _run_locked(srcs, tests, workers, out, settings, choice, max_tests, progress, xosc, backend, address)
+        return _run_locked(srcs, tests, workers, out, settings, choice, max_tests, progress, xosc, backend, address,
+                           model)
 
 
 def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
@@ -182,7 +193,7 @@ def _write_garages(out: Path, srcs: Sequence[CruiseSource]) -> None:
 
 def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Path, settings: CruiseSettings,
                 choice: ActionChoice, max_tests: int | None, progress: bool, xosc: bool = False, backend: str = "local",
-                address: str | None = None) -> CruiseResult:
+                address: str | None = None, model: RouteDifficulty | None = None) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
     clean_temp(out)  # temp files of a killed run's atomic writes
     check_settings(out, settings, choice.source)
@@ -220,5 +231,7 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Pat
                 bar.update()
     wanted = {(s.hash, i) for s in srcs for i in range(tests)}
     mine = [r for r in rows if (r["garage_hash"], int(r["test"])) in wanted]
-    summary, stats = write_outputs(out, mine, srcs, settings, choice.source)
+    tested = {r["garage_hash"] for r in mine}
+    route = None if model is None else cruise_route_difficulty(out, [s for s in srcs if s.hash in tested], model)
+    summary, stats = write_outputs(out, mine, srcs, settings, choice.source, route, model.key if model else None)
     return CruiseResult(out, new, mine, summary, stats, choice.label)

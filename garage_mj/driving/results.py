@@ -4,9 +4,12 @@
 ends; :func:`read_tests` reads it back and repairs what a crash or a careless edit leaves, so a
 re-run skips what is there. ``run.json`` holds the settings (:func:`check_settings` refuses a
 re-run with other ones) and where the action type came from. :func:`write_outputs` summarizes the
-rows per garage (``summary.csv``, the paper's table columns) and over the run (``summary.json``:
-counts, timing, Pearson r and the regression of success rate on difficulty,
-:mod:`garage_mj.driving.regression`).
+rows per garage (``summary.csv``, the paper's table columns and ``route_difficulty`` beside
+``difficulty``) and over the run (``summary.json``: counts, timing, Pearson r and the regression of
+success rate on the paper's difficulty (``r``, ``slope``, ``intercept``, ``n``) and on the route
+difficulty (``route_r``, ``route_slope``, ``route_intercept``, ``route_n``, under ``route_model``),
+:mod:`garage_mj.driving.regression`). A garage's route difficulty is empty in ``summary.csv`` when it
+has no feasible stall or was not computed (a run without a route model, a run of an older garage-mj).
 
 Failures are counted per outcome class (:data:`FAILURE_KINDS`), ``missed_goal`` apart from
 ``deadlock``; the paper has three classes (collision, timeout, deadlock), in which a missed goal
@@ -19,6 +22,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -37,7 +41,7 @@ TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall
 #: What a collision can hit (``hit`` column): the summary counts collisions per class.
 HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
 #: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
-SUMMARY_COLUMNS = ("garage", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
+SUMMARY_COLUMNS = ("garage", "difficulty", "route_difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
                    "collisions", "timeouts", "deadlocks", "missed_goals", "success_pct",
                    *(f"hit_{c}" for c in HIT_CLASSES))
 #: The failure outcomes, as ``tests.csv`` writes them: collision, timeout, deadlock, missed_goal.
@@ -140,8 +144,11 @@ def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--ac
         atomic_write(path, json.dumps(record, indent=2) + "\n")
 
 
-def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -> list[dict[str, Any]]:
-    """One row per garage with tests: the paper's table columns."""
+def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
+              route: dict[str, float] | None = None) -> list[dict[str, Any]]:
+    """One row per garage with tests: the paper's table columns, and the garage's route difficulty from
+    ``route`` (garage hash -> value; None where there is none: not given, or NaN for no feasible stall)."""
+    route = route or {}
     out = []
     for s in sources:
         mine = [r for r in rows if r["garage_hash"] == s.hash]
@@ -151,7 +158,8 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -
         feasible = len(mine) - kinds.count("infeasible")
         hits = _hits(mine)
         out.append({
-            "garage": s.name, "difficulty": round(s.difficulty, 4), "E[X]": round(s.mean_road_length, 3),
+            "garage": s.name, "difficulty": round(s.difficulty, 4),
+            "route_difficulty": _rounded(route.get(s.hash)), "E[X]": round(s.mean_road_length, 3),
             "E[Y]": round(s.mean_intersection_degree, 3), "tests": len(mine),
             "infeasible": kinds.count("infeasible"), "feasible": feasible,
             "successes": kinds.count("success"), "collisions": kinds.count("collision"),
@@ -161,6 +169,10 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource]) -
             **{f"hit_{c}": hits.get(c, 0) for c in HIT_CLASSES},
         })
     return out
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None or math.isnan(value) else round(float(value), 4)
 
 
 def _hits(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
@@ -181,20 +193,26 @@ def paper_failures(failures: dict[str, int]) -> dict[str, int]:
 
 
 def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
-                  settings: CruiseSettings, action_from: str = "--action-type"
+                  settings: CruiseSettings, action_from: str = "--action-type",
+                  route: dict[str, float] | None = None, route_model: str | None = None,
                   ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``summary.csv`` and ``summary.json`` from the test rows (``regression.png`` is drawn from them by
-    :func:`garage_mj.reporting.cruise.cruise_figure`); ``action_from``: where the action type came from."""
-    summary = summarize(rows, sources)
+    :func:`garage_mj.reporting.cruise.cruise_figure`); ``action_from``: where the action type came from;
+    ``route``: garage hash -> route difficulty under the model with key ``route_model``."""
+    summary = summarize(rows, sources, route)
     write_csv(out / "summary.csv", SUMMARY_COLUMNS, summary)
     rated = [r for r in summary if r["success_pct"] is not None]  # garages with a feasible test
     fit = regression([r["difficulty"] for r in rated], [r["success_pct"] for r in rated])
+    on_route = [r for r in rated if r["route_difficulty"] is not None]
+    route_fit = regression([r["route_difficulty"] for r in on_route], [r["success_pct"] for r in on_route])
     driven = [r for r in rows if r["outcome"] != "infeasible"]
     walls = [float(r["wall_s"]) for r in driven]
     sims = [float(r["time"]) for r in driven]
     kinds = [r["outcome"] for r in rows]
     failures = {k: kinds.count(k) for k in FAILURE_KINDS}
-    stats = {**fit.as_dict(), "paper_r": PAPER_R, "garages": len(summary), "tests": len(rows),
+    stats = {**fit.as_dict(), "paper_r": PAPER_R,
+             **{f"route_{k}": v for k, v in route_fit.as_dict().items()}, "route_model": route_model if route else None,
+             "garages": len(summary), "tests": len(rows),
              "infeasible": kinds.count("infeasible"), "feasible": len(driven),
              "driver": settings.driver, "seed": settings.seed,
              "action_type": settings.action_type, "action_type_from": action_from,

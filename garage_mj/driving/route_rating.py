@@ -9,7 +9,8 @@ rates the rest, and the values do not depend on the worker count (the computatio
 
 :func:`cruise_route_difficulty` gives a cruise run the route difficulty of its garages for
 ``summary.csv``: computed in the parent once per garage and kept in the run folder
-(``route_difficulty.json``, per model key and garage hash), so a re-run reads it back.
+(``route_difficulty.json``, per model key and garage hash), so a re-run reads it back (and in
+memory, so the many runs of one process compute each garage once).
 """
 
 from __future__ import annotations
@@ -31,12 +32,15 @@ if TYPE_CHECKING:
     from garage_mj.driving.sources import CruiseSource
     from garage_mj.grid.garage import Garage
 
+#: (model key, garage hash) -> route difficulty computed in this process (a hunt or a test session runs many
+#: cruise runs on the same garages).
+_MEMO: dict[tuple[str, str], float] = {}
 #: A cruise run's cache of its garages' route difficulty, beside ``summary.csv``.
 CACHE_FILE = "route_difficulty.json"
 CACHE_FORMAT = "garage-mj route difficulty cache"
 
 
-def route_model(model: RouteDifficulty | str | Path | None = None) -> RouteDifficulty:
+def resolve_route_model(model: RouteDifficulty | str | Path | None = None) -> RouteDifficulty:
     """``model`` itself, the model file it names, or the shipped model when None."""
     return model if isinstance(model, RouteDifficulty) else load_route_model(model)
 
@@ -71,7 +75,7 @@ def rate_library(path: str | Path, model: RouteDifficulty | str | Path | None = 
     """
     from tqdm import tqdm
 
-    m = route_model(model)
+    m = resolve_route_model(model)
     key = m.key
     with Library(path, create=False, readonly=False) as lib:
         ids = lib.unrated(key, map=map, limit=limit)
@@ -102,7 +106,7 @@ def cruise_route_difficulty(out_dir: str | Path, sources: Sequence[CruiseSource]
                             model: RouteDifficulty | str | Path | None = None) -> dict[str, float]:
     """garage hash -> route difficulty under ``model`` (NaN: no feasible stall) of every source; values
     not in the run folder's ``route_difficulty.json`` yet are computed here and added to it."""
-    m = route_model(model)
+    m = resolve_route_model(model)
     path = Path(out_dir) / CACHE_FILE
     cache = _read_cache(path)
     mine = cache.setdefault(m.key, {})
@@ -110,8 +114,10 @@ def cruise_route_difficulty(out_dir: str | Path, sources: Sequence[CruiseSource]
     new = False
     for s in sources:
         v = mine.get(s.hash, "missing")
-        if v == "missing" or not (v is None or isinstance(v, (int, float))):
-            value = route_difficulty(s.garage, m)
+        if v == "missing" or isinstance(v, bool) or not (v is None or isinstance(v, (int, float))):
+            value = _MEMO.get((m.key, s.hash))
+            if value is None:
+                value = _MEMO[(m.key, s.hash)] = route_difficulty(s.garage, m)
             mine[s.hash] = v = None if math.isnan(value) else round(value, 6)
             new = True
         out[s.hash] = math.nan if v is None else float(v)

@@ -2,7 +2,9 @@
 
 The numbers (Pearson r, the least-squares line, the paper's table) are computed in
 :mod:`garage_mj.driving.regression`, numpy only, so the cruise runner writes them without matplotlib;
-:func:`regression_plot` draws them next to the paper's 16 garages.
+:func:`regression_plot` draws them against the paper's difficulty next to the paper's 16 garages, or
+(``metric="route"``) against the route difficulty next to the line a perfectly calibrated one would
+follow (success = 100 (1 - route difficulty): it is the expected failure rate).
 """
 
 from __future__ import annotations
@@ -21,22 +23,33 @@ import numpy as np  # noqa: E402
 from garage_mj.core.fsutil import atomic_write  # noqa: E402
 from garage_mj.driving.regression import PAPER_TABLE, paper_regression, regression  # noqa: E402
 
+#: The difficulties a figure can put on its x axis, and the axis label and default title of each.
+METRICS = {"paper": ("difficulty λ", "Success rate vs. garage difficulty"),
+           "route": ("route difficulty (expected failure rate)", "Success rate vs. route difficulty")}
+
 
 def regression_plot(
     difficulty: Sequence[float],
     success: Sequence[float],
     out: str | Path,
-    title: str = "Success rate vs. garage difficulty",
+    title: str | None = None,
     reference: bool = True,
+    metric: str = "paper",
 ) -> Path:
     """Scatter of success % against difficulty with the fitted line (paper Fig. "Linear regression").
 
-    ``reference`` adds the paper's 16 garages and line in grey for comparison.
+    ``metric``: ``"paper"`` (the paper's difficulty λ) or ``"route"`` (the route difficulty; then
+    ``difficulty`` holds route difficulties). ``reference`` adds in grey the paper's 16 garages and line
+    (paper), or the calibrated line success = 100 (1 - x) (route).
     """
+    if metric not in METRICS:
+        raise ValueError(f"metric must be one of {', '.join(METRICS)}, got {metric!r}")
     fit = regression(difficulty, success)
     fig, ax = plt.subplots(figsize=(5.5, 4.0), dpi=120)
     xs = np.linspace(0.0, 1.0, 50)
-    if reference:
+    if reference and metric == "route":
+        ax.plot(xs, 100 * (1 - xs), c="0.65", lw=1, ls="--", label="calibrated: success = 100 (1 - x)")
+    elif reference:
         ref = paper_regression()
         table = np.array(PAPER_TABLE)
         ax.scatter(table[:, 2], table[:, 3], s=18, c="0.65", marker="s", label=f"paper (r = {ref.r:.3f})")
@@ -46,7 +59,8 @@ def regression_plot(
     if not math.isnan(fit.slope):
         ax.plot(xs, fit.slope * xs + fit.intercept, c="tab:blue", lw=1.5,
                 label=f"y = {fit.slope:.1f} x + {fit.intercept:.1f}")
-    ax.set(xlabel="difficulty λ", ylabel="success rate [%]", xlim=(0, 1), ylim=(-5, 105), title=title)
+    xlabel, default_title = METRICS[metric]
+    ax.set(xlabel=xlabel, ylabel="success rate [%]", xlim=(0, 1), ylim=(-5, 105), title=title or default_title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
     out = Path(out)

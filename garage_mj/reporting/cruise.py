@@ -1,9 +1,10 @@
 """A cruise run as the command runs it: the tests (:func:`garage_mj.driving.cruise.run_cruise`), then
-what a person reads and watches of it: the regression figure (``regression.png``) and, if asked, MP4s
-of chosen tests (``videos/``).
+what a person reads and watches of it: the regression figures (``regression.png`` on the paper's
+difficulty, ``regression_route.png`` on the route difficulty) and, if asked, MP4s of chosen tests
+(``videos/``).
 
 The driving stage writes the run's numbers (``tests.csv``, ``summary.csv``, ``summary.json`` with
-Pearson r); :func:`cruise_figure` draws ``regression.png`` from those files, so it can also be
+Pearson r); :func:`cruise_figure` draws the figures from those files, so they can also be
 drawn for a run folder another job filled (the hunt's ``OUT/cruise``). :func:`record_cruise_videos`
 drives chosen tests again with the run's settings and seeds (the same test, the same outcome) into
 ``OUT/videos/<garage>_<test>_<outcome>.mp4``, failures first.
@@ -29,15 +30,31 @@ from garage_mj.reporting.analysis import regression_plot
 _FAILED = {k.value for k in FAILURES}
 
 
-def cruise_figure(out_dir: str | Path) -> Path:
-    """``regression.png`` of the cruise run in ``out_dir``: success % against difficulty per garage with a
-    feasible test (``summary.csv``), titled with the run's driver (``run.json``)."""
+#: The figure of each metric in a cruise run's folder, and the summary.csv column it reads.
+FIGURES = {"paper": ("regression.png", "difficulty"), "route": ("regression_route.png", "route_difficulty")}
+
+
+def cruise_figure(out_dir: str | Path, metric: str = "paper") -> Path | None:
+    """The regression figure of the cruise run in ``out_dir``: success % against the difficulty of each
+    garage with a feasible test (``summary.csv``), titled with the run's driver (``run.json``).
+
+    ``metric="paper"``: the paper's difficulty, ``regression.png``; ``"route"``: the route difficulty,
+    ``regression_route.png``, or None (nothing drawn) when ``summary.csv`` has no route difficulty (a run
+    of an older garage-mj, or one without a route model).
+    """
+    if metric not in FIGURES:
+        raise ValueError(f"metric must be one of {', '.join(FIGURES)}, got {metric!r}")
+    name, column = FIGURES[metric]
     out = Path(out_dir)
     with open(out / "summary.csv", newline="") as f:
-        rated = [r for r in csv.DictReader(f) if r["success_pct"] != ""]  # garages with a feasible test
+        # garages with a feasible test (and a route difficulty: one with a feasible test has one when computed)
+        rated = [r for r in csv.DictReader(f) if r["success_pct"] != "" and r.get(column, "") != ""]
+    if metric == "route" and not rated:
+        return None
     driver = json.loads((out / "run.json").read_text())["driver"]
-    return regression_plot([float(r["difficulty"]) for r in rated], [float(r["success_pct"]) for r in rated],
-                           out / "regression.png", title=f"Cruise success vs. difficulty ({driver})")
+    what = "difficulty" if metric == "paper" else "route difficulty"
+    return regression_plot([float(r[column]) for r in rated], [float(r["success_pct"]) for r in rated],
+                           out / name, title=f"Cruise success vs. {what} ({driver})", metric=metric)
 
 
 def video_name(row: dict[str, Any]) -> str:
@@ -80,7 +97,8 @@ def record_cruise_videos(result: CruiseResult, sources: Sequence[CruiseSource | 
 
 
 def run_cruise(*args: Any, **kwargs: Any) -> CruiseResult:
-    """:func:`garage_mj.driving.cruise.run_cruise` (same arguments), then :func:`cruise_figure` of its folder."""
+    """:func:`garage_mj.driving.cruise.run_cruise` (same arguments), then both :func:`cruise_figure` of its folder."""
     result = driving_cruise.run_cruise(*args, **kwargs)
-    cruise_figure(result.out_dir)
+    for metric in FIGURES:
+        cruise_figure(result.out_dir, metric)
     return result

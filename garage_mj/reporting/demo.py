@@ -155,6 +155,7 @@ def run_demo(cfg: DemoConfig) -> Path:
         cruise_note=cruise.note,
         failures=cruise.failures,
         regression_png=cruise.regression_png,
+        regression_route_png=cruise.regression_route_png,
         regression_text=cruise.regression_text,
         notes=[
             f"paths are relative to this report's folder ({out}): the folder can be moved",
@@ -163,6 +164,8 @@ def run_demo(cfg: DemoConfig) -> Path:
             "cruise runs: cruise/<driver>/ (tests.csv, summary.csv, summary.json, xosc/ with every test "
             "as OpenSCENARIO, videos/ with the failures shown above)",
             "paper (SPEC section 5): r(difficulty, success) = -0.638 over 16 garages of the 13x13 aligned map",
+            "route difficulty: the expected failure rate of a cruise test predicted from the planned routes "
+            "(garage-mj difficulty; the shipped model), beside the paper's difficulty",
         ],
     )
     report = write_report(data, out)
@@ -180,6 +183,7 @@ class _CruisePart:
     note: str
     failures: list[RunFailures]
     regression_png: Path
+    regression_route_png: Path | None
     regression_text: str
     kpis: dict[str, str]
 
@@ -204,7 +208,8 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
 
     sources = [CruiseSource.from_pack(p) for p in packs]
     difficulty = {s.name: s.difficulty for s in sources}  # unrounded, as the gallery's (summary.csv rounds)
-    columns = ["garage", "driver", "actions", "difficulty", "E[X]", "E[Y]", "tests", "infeasible", "collisions",
+    columns = ["garage", "driver", "actions", "difficulty", "route difficulty", "E[X]", "E[Y]", "tests", "infeasible",
+               "collisions",
                "what was hit", "timeouts", "deadlocks", "missed goals", "success of feasible"]
     rows: list[list[object]] = []
     failures: list[RunFailures] = []
@@ -242,20 +247,27 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
              f"{len(failed.shown)} with an MP4 and a .xosc each")
         for r in result.summary:
             hit = ", ".join(f"{c} {r[f'hit_{c}']}" for c in HIT_CLASSES if int(r[f"hit_{c}"]))
-            rows.append([r["garage"], label, action, fmt_difficulty(difficulty[r["garage"]]),
+            route = "n/a" if r["route_difficulty"] is None else fmt_difficulty(r["route_difficulty"])
+            rows.append([r["garage"], label, action, fmt_difficulty(difficulty[r["garage"]]), route,
                          float(r["E[X]"]), float(r["E[Y]"]), int(r["tests"]), int(r["infeasible"]),
                          int(r["collisions"]), hit or "-", int(r["timeouts"]), int(r["deadlocks"]),
                          int(r["missed_goals"]), fmt_percent(r["success_pct"])])
     main = "vision" if "vision" in fits else cfg.drivers[0]
     regression_png = figs / "regression.png"
     shutil.copyfile(out / "cruise" / run_folder(main) / "regression.png", regression_png)
+    regression_route_png: Path | None = figs / "regression_route.png"
+    route_figure = out / "cruise" / run_folder(main) / "regression_route.png"
+    if route_figure.is_file():  # drawn when a garage with a feasible test has a route difficulty
+        shutil.copyfile(route_figure, regression_route_png)
+    else:
+        regression_route_png = None
     text = "; ".join(
-        f"{d}: Pearson r = {_fmt_r(f.get('r'))} over {count_noun(f['garages'], 'garage')}, "
-        f"{count_noun(f['tests'], 'test')}"
+        f"{d}: Pearson r = {_fmt_r(f.get('r'))} on the paper's difficulty, {_fmt_r(f.get('route_r'))} on the route "
+        f"difficulty, over {count_noun(f['garages'], 'garage')}, {count_noun(f['tests'], 'test')}"
         for d, f in fits.items()
     )
-    text += f". Figure: the {main} driver. Paper: r = -0.638."
-    return _CruisePart(columns, rows, _cruise_note(), failures, regression_png, text, kpis)
+    text += f". Figures: the {main} driver. Paper: r = -0.638."
+    return _CruisePart(columns, rows, _cruise_note(), failures, regression_png, regression_route_png, text, kpis)
 
 
 def _cruise_note() -> str:

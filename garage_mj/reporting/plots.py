@@ -2,7 +2,8 @@
 
 - :func:`convergence`: return vs episode, mean over the seeds of a map with a 95% confidence
   band (paper Fig. "Convergence curves"), one panel per map, read from the runs' monitor logs.
-- :func:`heatmap`: difficulty (x) vs coverage (y) in 0.1 bins, count per cell (paper Fig. "Heatmap").
+- :func:`heatmap`: difficulty (x) vs coverage (y) in 0.1 bins, count per cell (paper Fig. "Heatmap");
+  the paper's difficulty, or the route difficulty (``metric="route"``).
 - :func:`driver_curve`: a learned driver's training curve (``garage-mj train-driver``'s ``curve.csv``):
   validation success and agreement with the oracle per DAgger iteration, over the states seen.
 - :func:`garage_png`: a top-down picture of one garage, a colour per block code, a legend and the
@@ -174,8 +175,15 @@ def heatmap_counts(points: np.ndarray, bin: float = BIN) -> np.ndarray:
     return counts
 
 
-def heatmap(points: np.ndarray, out: str | Path, title: str = "") -> Path:
-    """Difficulty (x) vs coverage (y) of ``points`` (N x 2: difficulty, coverage), count per 0.1 cell."""
+#: The difficulty on a heatmap's x axis: the paper's (its figure) or the route difficulty.
+HEATMAP_X = {"paper": "difficulty λ", "route": "route difficulty (expected failure rate)"}
+
+
+def heatmap(points: np.ndarray, out: str | Path, title: str = "", metric: str = "paper") -> Path:
+    """Difficulty (x) vs coverage (y) of ``points`` (N x 2: difficulty, coverage), count per 0.1 cell;
+    ``metric`` names the difficulty: ``"paper"`` (the paper's figure) or ``"route"``."""
+    if metric not in HEATMAP_X:
+        raise ValueError(f"metric must be one of {', '.join(HEATMAP_X)}, got {metric!r}")
     counts = heatmap_counts(points)
     n = counts.shape[0]
     fig, ax = plt.subplots(figsize=(5.4, 4.6))
@@ -190,7 +198,7 @@ def heatmap(points: np.ndarray, out: str | Path, title: str = "") -> Path:
     ax.set_xticks(ticks)
     ax.set_yticks(ticks)
     ax.tick_params(labelsize=7)
-    ax.set_xlabel("difficulty λ")
+    ax.set_xlabel(HEATMAP_X[metric])
     ax.set_ylabel("coverage δ")
     ax.set_title(f"{title}  (n = {len(points)})" if title else f"n = {len(points)}")
     from matplotlib.ticker import MaxNLocator

@@ -108,7 +108,8 @@ class ReportData:
     cruise_rows: list[list[object]] = field(default_factory=list)
     cruise_note: str = ""  # under the table: what the columns mean
     failures: list[RunFailures] = field(default_factory=list)
-    regression_png: Path | None = None
+    regression_png: Path | None = None  # success rate vs the paper's difficulty
+    regression_route_png: Path | None = None  # success rate vs the route difficulty
     regression_text: str = ""
     notes: list[str] = field(default_factory=list)
 
@@ -214,11 +215,15 @@ def render_html(data: ReportData, out_dir: Path) -> str:
     if data.failures:
         parts.append("<h2 id=failures>Failures</h2>")
         parts += [_run_failures(f, out_dir) for f in data.failures]
-    if data.regression_png is not None or data.regression_text:
+    if data.regression_png is not None or data.regression_route_png is not None or data.regression_text:
         parts.append("<h2 id=regression>Success rate vs difficulty</h2>")
         if data.regression_text:
             parts.append(f"<p>{e(data.regression_text)}</p>")
-        parts.append("<div class=figs>" + _figure(data.regression_png, "Linear regression of success rate on difficulty", out_dir) + "</div>")
+        parts.append("<div class=figs>"
+                     + _figure(data.regression_png, "Linear regression of success rate on the paper's difficulty", out_dir)
+                     + _figure(data.regression_route_png, "Linear regression of success rate on the route difficulty "
+                               "(dashed: a calibrated difficulty, success = 100 (1 - x))", out_dir)
+                     + "</div>")
     if data.notes:
         parts.append("<h2 id=notes>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in data.notes) + "</ul>")
     parts.append("</body></html>")
@@ -231,7 +236,7 @@ def write_report(data: ReportData, out_dir: Path, name: str = "report.html") -> 
     out_dir.mkdir(parents=True, exist_ok=True)
     missing = [
         p
-        for p in [data.convergence_png, data.heatmap_png, data.regression_png]
+        for p in [data.convergence_png, data.heatmap_png, data.regression_png, data.regression_route_png]
         + [g.preview_png for g in data.gallery]
         + [g.render_png for g in data.gallery]
         if p is not None and not Path(p).is_file()
