@@ -182,3 +182,21 @@ def test_evaluate_gains_the_route_difficulty_on_request(junction_garage, shipped
     assert garage_mj.evaluate(junction_garage, model=mine).route_difficulty == pytest.approx(
         route_difficulty(junction_garage, model), abs=1e-12)
     assert garage_mj.evaluate(junction_garage, model=model).route_difficulty == route_difficulty(junction_garage, model)
+
+
+def test_garage_set_from_library_takes_a_route_range(tmp_path, garages, shipped):
+    from garage_mj.driving.garage_set import GarageSet, GarageSetError
+
+    path = tmp_path / "library.sqlite"
+    ids = _library(path, garages)
+    with pytest.raises(GarageSetError, match="garage-mj library rate"):
+        GarageSet.from_library(path, route=(0.0, 1.0))
+    rate_library(path, progress=False)
+    with Library(path, create=False) as lib:
+        values = lib.route_difficulties(ids, shipped.key)
+    lo = sorted(values.values())[1]
+    chosen = GarageSet.from_library(path, route=(lo, 1.0))
+    assert chosen.hashes == tuple(g.canonical_hash() for i, g in zip(ids, garages) if values[i] >= lo)
+    assert f"route_difficulty={lo:g}-1@{shipped.key}" in chosen.origin
+    with pytest.raises(GarageSetError, match="route difficulty 0.99-1"):
+        GarageSet.from_library(path, route=(0.99, 1.0))

@@ -4,8 +4,8 @@ A set is an ordered, immutable tuple of :class:`~garage_mj.driving.sources.Cruis
 one-line ``origin`` that says how it was made (the library and its filters, the pack folder, the
 painted map, the JSON file), so a training run can record what it trained on. It is made from:
 
-- a library (:meth:`GarageSet.from_library`): filtered by map, difficulty and the training seed
-  of the run that found each garage, all of them or a seeded sample spread evenly over difficulty;
+- a library (:meth:`GarageSet.from_library`): filtered by map, difficulty, route difficulty and the
+  training seed of the run that found each garage, all of them or a seeded sample spread evenly over difficulty;
 - a folder of asset packs (:meth:`GarageSet.from_packs`);
 - a shipped map painted by the scripted painter (:meth:`GarageSet.from_map`);
 - a JSON file (:meth:`GarageSet.from_json`): what :meth:`GarageSet.to_json` writes, or the list
@@ -31,6 +31,7 @@ import numpy as np
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_error
+from garage_mj.driving.route_rating import resolve_route_model
 from garage_mj.driving.sources import CruiseSource, painted_sources
 from garage_mj.generation.library import Library, stratified_ids
 from garage_mj.generation.library_format import GarageRecord, LibraryError
@@ -40,6 +41,7 @@ from garage_mj.grid.map_io import list_maps, load_map
 if TYPE_CHECKING:
     from garage_mj.scene.car import CarGeometry
     from garage_mj.scene.drivable import DriveConfig
+    from garage_mj.scene.route_difficulty import RouteDifficulty
 
 #: ``format`` of the JSON :meth:`GarageSet.to_json` writes, and its version.
 SET_FORMAT = "garage-mj garage set"
@@ -107,8 +109,14 @@ class GarageSet:
         run_seeds: Iterable[int] | None = None,
         n: int | None = None,
         seed: int = 0,
+        route: tuple[float, float] | None = None,
+        route_model: RouteDifficulty | str | Path | None = None,
     ) -> GarageSet:
         """The garages of a library file that match every filter, sorted by library id.
+
+        ``route`` is an inclusive range of the route difficulty under ``route_model`` (a model or its
+        file; None: the shipped one), as ``garage-mj library rate`` stored it (garages not rated yet: a
+        :class:`GarageSetError` that says to rate them).
 
         ``difficulty`` is an inclusive range; ``run_seeds`` keeps the garages whose run's training seed
         (the ``_s<k>`` of the run name, :func:`run_seed`) is one of them. ``n`` draws a seeded sample of
@@ -123,17 +131,21 @@ class GarageSet:
             raise GarageSetError(f"library {path} {why}; pass a library.sqlite file (garage-mj train writes one)")
         if difficulty is not None:
             difficulty = _range(difficulty, "difficulty")
+        key = None
+        if route is not None:
+            route = _range(route, "route difficulty")
+            key = resolve_route_model(route_model).key
         seeds = None if run_seeds is None else sorted({int(s) for s in run_seeds})
         if seeds is not None and not seeds:
             raise GarageSetError("run_seeds is empty; give at least one training seed, or None for every run")
         _check_n(n)
         try:
             with Library(path, create=False) as lib:
-                records = lib.query(map=map, difficulty=difficulty)
+                records = lib.query(map=map, difficulty=difficulty, route=route, route_model=key)
                 if seeds is not None:
                     records = [r for r in records if run_seed(r.run) in seeds]
                 if not records:
-                    raise GarageSetError(_no_match(lib, path, map, difficulty, seeds))
+                    raise GarageSetError(_no_match(lib, path, map, difficulty, seeds, route))
         except LibraryError as exc:
             raise GarageSetError(str(exc)) from None
         total = len(records)
@@ -146,7 +158,8 @@ class GarageSet:
                                      "altered after it was stored: delete it or restore the library from a backup")
         filters = [f"map={map}" if map is not None else "",
                    "runs=" + ",".join(f"s{s}" for s in seeds) if seeds is not None else "",
-                   f"difficulty={difficulty[0]:g}-{difficulty[1]:g}" if difficulty is not None else ""]
+                   f"difficulty={difficulty[0]:g}-{difficulty[1]:g}" if difficulty is not None else "",
+                   f"route_difficulty={route[0]:g}-{route[1]:g}@{key}" if route is not None else ""]
         drawn = (f"n={len(records)} of {total}, stratified by difficulty, seed {seed}" if len(records) < total
                  else f"all {total}")
         origin = " ".join(["library", str(path), *[f for f in filters if f], f"({drawn})"])
@@ -362,10 +375,11 @@ def _is_sqlite(path: Path) -> bool:
 
 
 def _no_match(lib: Library, path: Path, map: str | None, difficulty: tuple[float, float] | None,
-              seeds: list[int] | None) -> str:
+              seeds: list[int] | None, route: tuple[float, float] | None = None) -> str:
     """One line: which filters left nothing, and what the library holds."""
     asked = [f"map={map}" if map is not None else "",
              f"difficulty {difficulty[0]:g}-{difficulty[1]:g}" if difficulty is not None else "",
+             f"route difficulty {route[0]:g}-{route[1]:g}" if route is not None else "",
              "run seeds " + ",".join(str(s) for s in seeds) if seeds is not None else ""]
     asked = [a for a in asked if a]
     if not asked:
