@@ -38,8 +38,8 @@ HELDOUT_DRIVERS = ("vision", "waypoint", "learned")
 
 
 def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, tests: int, workers: int,
-            tag: str, reuse: dict[str, Path] | None = None) -> dict[str, Path]:
-    """Run (resumably) ``tests`` discrete cruise tests of each driver on the garages; returns driver -> run folder."""
+            tag: str, reuse: dict[str, Path] | None = None, action_type: str = "discrete") -> dict[str, Path]:
+    """Run (resumably) ``tests`` cruise tests of each driver on the garages; returns driver -> run folder."""
     from garage_mj.driving.garage_set import GarageSet
     from garage_mj.reporting.cruise import run_cruise
 
@@ -54,9 +54,32 @@ def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, te
             for name in ("tests.csv", "run.json"):
                 shutil.copy(reuse[driver] / name, run / name)
         print(f"{tag}: {len(sources)} garages x {tests} tests, driver {driver} -> {run}", flush=True)
-        run_cruise(sources, tests, driver, workers, 0, run, action_type="discrete")
+        run_cruise(sources, tests, driver, workers, 0, run, action_type=action_type)
         runs[driver] = run
     return runs
+
+
+def _two_fold(records: list[dict]) -> dict:
+    """A driver-specific refit, checked out of sample: garages split in two by hash, fit on each half and
+    scored on the other; the per-garage r and AUC over both scored halves (route difficulty = mean over
+    the garage's tests)."""
+    from garage_mj.driving.difficulty_fit import garage_table
+    from garage_mj.driving.regression import auc, pearson
+    from garage_mj.scene.route_difficulty import fit
+
+    halves = [[r for r in records if int(r["garage_hash"][-1], 16) % 2 == k] for k in (0, 1)]
+    rows, probs, failed = [], [], []
+    for train, test in ((halves[0], halves[1]), (halves[1], halves[0])):
+        try:
+            m = fit(train, [r["failed"] for r in train])
+        except ValueError:
+            return {"r": None, "auc": None}
+        rows += garage_table(m, test)
+        probs += list(m.test_probability(test))
+        failed += [bool(r["failed"]) for r in test]
+    r = pearson([t["route_difficulty"] for t in rows], [t["success_pct"] for t in rows])
+    a = auc(probs, failed)
+    return {"r": round(r, 4) if r == r else None, "auc": round(a, 4) if a == a else None, "garages": len(rows)}
 
 
 def _reuse(items: list[str]) -> dict[str, Path]:
@@ -81,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--heldout-garages", type=positive_int, default=50)
     p.add_argument("--heldout-tests", type=positive_int, default=50)
     p.add_argument("--heldout-drivers", default=",".join(HELDOUT_DRIVERS))
+    p.add_argument("--heldout-continuous", default="vision", metavar="DRIVERS",
+                   help="drivers also run on the held-out garages with their own continuous actions (another "
+                        "behaviour than the fit's discrete one; '' for none; default vision)")
     p.add_argument("--reuse", nargs="*", default=[], metavar="DRIVER=DIR",
                    help="held-out runs done before with the same settings (e.g. vision=runs/paper_validation_vision)")
     p.add_argument("--workers", type=positive_int, default=2)
@@ -94,9 +120,66 @@ def main(argv: list[str] | None = None) -> int:
     if args.only in (None, "heldout"):
         collect(args.library, args.out, args.heldout_drivers.split(","), (HELDOUT_MAP,), [args.heldout_run_seed],
                 args.heldout_garages, args.heldout_tests, args.workers, "heldout", _reuse(args.reuse))
+        if args.heldout_continuous:
+            collect(args.library, args.out, args.heldout_continuous.split(","), (HELDOUT_MAP,),
+                    [args.heldout_run_seed], args.heldout_garages, args.heldout_tests, args.workers, "heldout_continuous",
+                    action_type="continuous")
     if args.only is not None:
         return 0
-    raise SystemExit("fit and report: not written yet")
+    return report(args)
+
+
+def report(args) -> int:
+    """Fit on the fit runs, score on the held-out runs, print and write the figures."""
+    import json
+    import time
+
+    from garage_mj.core.fsutil import atomic_write
+    from garage_mj.driving.difficulty_fit import fit_runs, garage_route, score, test_records
+    from garage_mj.scene.route_difficulty import load_route_model
+
+    fit_dirs = [args.out / f"fit_{d}" for d in FIT_DRIVERS]
+    model, _ = fit_runs(fit_dirs, args.out / "route.json", args.library, progress=False)
+    shipped = load_route_model()
+    print(model.describe())
+    print(f"fitted on {model.fit['tests']} tests of {model.fit['garages']} garages; "
+          f"{'the same model as' if model.key == shipped.key else 'NOT the same model as'} models/difficulty/route.json")
+    held = {d: args.out / f"heldout_{d}" for d in args.heldout_drivers.split(",")}
+    held.update({f"{d} (continuous)": args.out / f"heldout_continuous_{d}"
+                 for d in filter(None, args.heldout_continuous.split(","))})
+    held = {k: v for k, v in held.items() if (v / "tests.csv").is_file()}
+    start = time.perf_counter()
+    per_garage = garage_route(model, list(held.values()), args.library, progress=False)
+    rate_s = (time.perf_counter() - start) / max(1, len(per_garage))
+    scores, refit = {}, {}
+    for label, run in held.items():
+        records = test_records([run], args.library)
+        scores[label] = next(iter(score(model, records, garage_route=per_garage).values()))
+        refit[label] = _two_fold(records)
+    result = {"model_key": model.key, "fit": model.fit, "heldout": scores, "refit_two_fold": refit,
+              "seconds_per_garage_rating": round(rate_s, 3),
+              "protocol": {"fit_maps": list(FIT_MAPS), "fit_run_seeds": args.fit_run_seeds,
+                           "fit_per_map": args.fit_per_map, "fit_tests": args.fit_tests, "fit_drivers": list(FIT_DRIVERS),
+                           "heldout_map": HELDOUT_MAP, "heldout_run_seed": args.heldout_run_seed,
+                           "heldout_garages": args.heldout_garages, "heldout_tests": args.heldout_tests,
+                           "action_type": "discrete", "occupancy": 0.5}}
+    print("held out (garages of another training seed; per-garage route difficulty over all feasible stalls):")
+    for label, d in scores.items():
+        driver = label.split()[0]
+        tag = "held-out driver" if driver not in FIT_DRIVERS or "continuous" in label else "fit driver, held-out garages"
+        print(f"  {label} ({tag}): {d['garages']} garages x {d['tests'] // max(1, d['garages'])} tests, "
+              f"success {d['success_pct']}%")
+        for name, key in (("route", "route"), ("paper", "paper")):
+            m = d[key]
+            print(f"    {name:<5} r = {m['r']} {m['r_ci95']}  AUC = {m['auc']}")
+        f = refit[label]
+        print(f"    refit on this driver, two folds of garages (fit on one half, scored on the other): "
+              f"route r = {f['r']}, AUC = {f['auc']}")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(args.json, json.dumps(result, indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0
 
 
 if __name__ == "__main__":
