@@ -6,7 +6,7 @@
 - ``check``: drivability of a pack's or library's garages (routes, clearance).
 - ``train``: one DQN generation run.
 - ``generate``: garages on demand in a difficulty band.
-- ``library``: browse, sample and export the scenario library.
+- ``library``: browse, sample and export the scenario library; rate its garages' route difficulty.
 - ``plot``: convergence and heatmap figures.
 - ``show``: draw one garage as text or PNG.
 - ``cruise``: batch cruise tests of a driver.

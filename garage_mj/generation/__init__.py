@@ -7,7 +7,7 @@
 - ``conditioned``: the difficulty-conditioned generator: train it, find the shipped one, load it.
 - ``generator``: ``garage-mj generate``, garages on demand in a difficulty band.
 - ``search``: the band-directed hill-climb that fills bins the policy does not reach.
-- ``library``: the scenario library (embedded SQLite): store, query, stratified sample, stats.
+- ``library``: the scenario library (embedded SQLite): store, query, stratified sample, stats; stored route difficulties.
 - ``library_format``: the library file's schema, its integrity checks (header, body, rows) and the row type.
 - ``protocol``: the paper's protocol (maps x seeds x timesteps) trained into one library, resumable.
 - ``remote``: runs trained on other Ray nodes, streamed back: this process alone writes the library and run folders.
