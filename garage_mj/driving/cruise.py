@@ -143,7 +143,8 @@ def run_cruise(
     running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.core.backends`;
     tests.csv gets the same rows either way. ``route_model``: the route difficulty model of
     ``summary.csv``'s ``route_difficulty`` column and ``summary.json``'s ``route_r`` (True: the shipped
-    one; a ``RouteDifficulty`` or a model file; False: none, the column stays empty). Raises
+    one; a ``RouteDifficulty`` or a model file; False: none, the column stays empty), planned for the
+    default car and world as the model was fitted, whatever ``env`` changes. Raises
     :class:`CruiseError`, ``DriverError`` (bad driver), ``BackendError`` (bad backend, Ray missing),
     ``RouteModelError`` (a bad model file) before any test.
     """
