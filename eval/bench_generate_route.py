@@ -57,6 +57,7 @@ def bench_map(map_name: str, library: Path | None, sample: int, count: int, max_
             c0 = time.process_time()
             try:
                 r = generate(map_name, band, count, Path(tmp) / "lib.sqlite", seed=seed, max_seconds=max_cpu,
+                             max_episodes=10**9,  # the CPU time is the budget
                              clock=time.process_time, progress=False, route=metric)
             except GenerationError as exc:
                 r = exc.result

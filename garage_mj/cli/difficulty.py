@@ -21,7 +21,7 @@ examples:
   garage-mj cruise --library lib.sqlite --sample 40 --tests 20 --driver mypkg.drivers:MyDriver --out runs/mine
   garage-mj difficulty fit runs/mine --out my_route_difficulty.json
   garage-mj difficulty score runs/other --model my_route_difficulty.json
-  garage-mj library ls --library lib.sqlite --route-difficulty 0.4 0.6
+  garage-mj library ls lib.sqlite --route-difficulty 0.4 0.6
 """
 
 

@@ -58,8 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(default: the shipped generator of --map)")
     p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--max-episodes", type=positive_int, metavar="E",
-                   help="episode budget (default 2,000 + 200 x COUNT; with --metric route, where each search "
-                        "step is rated and counts as an episode, 100 + 20 x COUNT)")
+                   help="episode budget (default 2,000 + 200 x COUNT; with --metric route, where each garage "
+                        "rated counts as an episode, 100 + 20 x COUNT)")
     p.add_argument("--max-seconds", type=float, metavar="S",
                    help="stop after S seconds of rollouts and search (wall clock)")
     p.add_argument("--no-search", action="store_true",

@@ -237,7 +237,6 @@ def _search_stage(garage0: Garage, coverage: tuple[float, float] | None, seed: i
     result = collector.result
     climber = BandClimber(garage0, collector.difficulty, coverage, rng=np.random.default_rng([seed, 1]),
                           metric=collector.route)
-    per_episode = SEARCH_STEPS_PER_EPISODE if collector.route is None else 1  # a route rating costs an episode
     pool.sort(key=lambda e: (e[0], e[1]))  # nearest to the band first, then oldest
     for _, _, g in pool:
         result.search_seeds += climber.add(g) is not None
@@ -251,7 +250,11 @@ def _search_stage(garage0: Garage, coverage: tuple[float, float] | None, seed: i
     if collector.bar is not None:
         collector.bar.set_postfix(stage="search", episodes=result.episodes, refresh=True)
     while result.found < collector.count and (climber.climbers or climber.inside):
-        if result.episodes + result.replays + result.search_steps / per_episode >= max_episodes:
+        if collector.route is None:
+            spent = result.episodes + result.replays + result.search_steps / SEARCH_STEPS_PER_EPISODE
+        else:  # by route difficulty, what costs is a rating (a failed mutation or a repeat costs next to nothing)
+            spent = result.episodes + len(collector.route.values)
+        if spent >= max_episodes:
             break
         if max_seconds is not None and (collector.route is not None or result.search_steps % 16 == 0) \
                 and collector.elapsed() >= max_seconds:
@@ -302,8 +305,8 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
 
     ``route`` generates by a route difficulty instead (:class:`RouteMetric`): ``difficulty`` is then a band
     of it; the policy's rollouts (:data:`ROUTE_POLICY_EPISODES`, not conditioned on a band) and the
-    search's steps are each rated (a step counts one episode of the budget, whose default is then
-    ``100 + 20 * count``), and every garage stored gets its value in the library.
+    search's new road sets are each rated (a rating counts one episode of the budget, whose default is
+    then ``100 + 20 * count``), and every garage stored gets its value in the library.
     """
     for name, band in (("difficulty", difficulty), ("coverage", coverage)):
         if band is not None and not 0.0 <= band[0] <= band[1] <= 1.0:
