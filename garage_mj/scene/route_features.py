@@ -81,9 +81,9 @@ def plan_features(planner: DrivePlanner, plan: TestPlan) -> dict[str, float]:
     # junction cells crossed
     net, rows = planner.net, planner.rows
     b = planner.world.block
-    rc = np.unique(np.column_stack([rows - 1 - np.floor(centre[:, 1] / b), np.floor(centre[:, 0] / b)]).astype(int),
-                   axis=0)  # the cells the centre path crosses (world_to_cell)
-    junctions = sum(1 for r, c in rc.tolist() if (r, c) in net.cells and len(net.cells[(r, c)].openings) >= 3)
+    r_, c_ = (rows - 1 - np.floor(centre[:, 1] / b)).astype(int), np.floor(centre[:, 0] / b).astype(int)
+    cells = {divmod(int(code), 1 << 16) for code in np.unique((r_ << 16) + (c_ & 0xFFFF))}  # world_to_cell, once each
+    junctions = sum(1 for c in cells if c in net.cells and len(net.cells[c].openings) >= 3)
     return {
         "length": float(np.linalg.norm(np.diff(centre, axis=0), axis=1).sum()),
         "turns": float(len(turns)),
@@ -122,7 +122,7 @@ def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, tar
         near = np.hypot(gx, gy) <= PASS_REACH
         for row, i in enumerate(miss):
             cache[keys[i]] = frozenset(ids[near[row]].tolist())
-    passed = frozenset().union(*(cache[k] for k in keys))
+    passed = frozenset().union(*filter(None, map(cache.__getitem__, keys)))
     return len(passed - {target})
 
 

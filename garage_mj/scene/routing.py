@@ -179,11 +179,13 @@ class LaneRoutes:
 def sample(verts: list[np.ndarray], dirs: list[np.ndarray],
            radii: list[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rear-axle points, headings and curvatures along the filleted polyline (every ``SAMPLE_STEP``)."""
-    pts, hdg, kap = [], [], []
+    pts: list[np.ndarray] = []  # (n, 2) chunks
+    hdg: list[float] = []
+    kap: list[float] = []
 
     def line(p, q, u):
         n = max(1, math.ceil(float(np.linalg.norm(q - p)) / SAMPLE_STEP))
-        pts.extend(p + (q - p) * (np.arange(n) / n)[:, None])
+        pts.append(p + (q - p) * (np.arange(n) / n)[:, None])
         hdg.extend([math.atan2(u[1], u[0])] * n)
         kap.extend([0.0] * n)
 
@@ -196,21 +198,24 @@ def sample(verts: list[np.ndarray], dirs: list[np.ndarray],
         line(cur, t1, u1)
         left = np.array([-u1[1], u1[0]]) * math.copysign(1.0, r)
         centre = t1 + left * rad
+        cx, cy = float(centre[0]), float(centre[1])
         h0 = math.atan2(u1[1], u1[0])
         sweep = math.pi / 2
         n = max(2, math.ceil(rad * sweep / SAMPLE_STEP))
         a0 = math.atan2(t1[1] - centre[1], t1[0] - centre[0])
+        arc = []
         for i in range(n):
             a = a0 + math.copysign(sweep * i / n, r)
-            pts.append(centre + rad * np.array([math.cos(a), math.sin(a)]))
+            arc.append((cx + rad * math.cos(a), cy + rad * math.sin(a)))
             hdg.append(h0 + math.copysign(sweep * i / n, r))
-            kap.append(1.0 / r)
+        kap.extend([1.0 / r] * n)
+        pts.append(np.array(arc))
         cur = t2
     line(cur, verts[-1], dirs[-1])
-    pts.append(verts[-1])
+    pts.append(np.asarray(verts[-1], dtype=float).reshape(1, 2))
     hdg.append(math.atan2(dirs[-1][1], dirs[-1][0]))
     kap.append(0.0)
-    return np.array(pts), np.array(hdg), np.array(kap)
+    return np.concatenate(pts), np.array(hdg), np.array(kap)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> float:
