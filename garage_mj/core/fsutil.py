@@ -58,6 +58,18 @@ def make_temp_dir(parent: Path, prefix: str, suffix: str) -> Path:
     return tmp
 
 
+def swap_in_dir(tmp: Path, final: Path) -> None:
+    """Publish the finished folder ``tmp`` (a sibling of ``final``) as ``final``: an existing ``final``
+    is first moved aside into a temp folder, then dropped, so ``final`` is never half-written."""
+    if final.exists():
+        old = make_temp_dir(final.parent, f".{final.name}.", ".old")
+        final.rename(old / final.name)
+        tmp.rename(final)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        tmp.rename(final)
+
+
 def write_error(path: str | Path, exc: OSError) -> GarageMJError:
     """A one-line error for a failed write (read-only folder, disk full, name too long...)."""
     why = exc.strerror or str(exc)

@@ -43,7 +43,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import atomic_write, make_temp_dir
+from garage_mj.core.fsutil import atomic_write, make_temp_dir, swap_in_dir
 from garage_mj.export.fbx import fbx_problem, write_fbx
 from garage_mj.export.meshes import CLASS_NAMES, garage_meshes
 from garage_mj.export.pack import pack_name
@@ -139,13 +139,7 @@ def write_carla_package(garages: Iterable[Garage], out_dir: str | Path, *, use_c
                          "use_carla_materials": use_carla_materials, "xodr": f"./{name}/{name}.xodr"})
         atomic_write(tmp / f"{package}.json", json.dumps({"maps": maps, "props": []}, indent=2) + "\n")
         final = parent / package
-        if final.exists():
-            old = make_temp_dir(parent, f".{package}.", ".old")
-            final.rename(old / package)
-            tmp.rename(final)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(final)
+        swap_in_dir(tmp, final)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)

@@ -35,7 +35,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir, make_temp_dir
+from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir, make_temp_dir, swap_in_dir
 from garage_mj.export.fbx import FBX_NAME, fbx_problem, write_fbx
 from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
 from garage_mj.export.preview import write_preview
@@ -234,13 +234,7 @@ def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False) -> 
         atomic_write(tmp / MANIFEST, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
         if final.is_symlink() or final.is_file():
             final.unlink()
-        if final.exists():  # partial, broken or forced: move the old one aside, then drop it
-            old = make_temp_dir(out_dir, f".{final.name}.", ".old")
-            final.rename(old / final.name)
-            tmp.rename(final)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(final)
+        swap_in_dir(tmp, final)  # a partial, broken or forced old pack is moved aside, then dropped
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
