@@ -48,7 +48,7 @@ POLICY_TIME_SHARE = 0.5  # ... and at most this share of --max-seconds
 SEARCH_STEPS_PER_EPISODE = 20  # search mutations that count as one episode of the budget (~0.1-0.3 ms each
 #                                against ~5-10 ms for a rollout episode on a 13x13 map; a replay counts as one)
 SEARCH_SEEDS = 8  # garages of the scripted painter per six-stall axis that seed the search next to the policy's
-ROUTE_POLICY_EPISODES = 16  # by route difficulty: policy episodes (each usable garage rated) before the search
+ROUTE_POLICY_EPISODES = 20  # by route difficulty: policy episodes (each usable garage rated) before the search
 
 
 @dataclass(frozen=True)
@@ -176,9 +176,8 @@ def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Gene
     the bands, episode, garage), for the search. Returns the env steps taken.
     """
     result, n_envs = collector.result, len(envs)
-    # by route difficulty the policy (conditioned on the paper's) paints any usable garage: every one is rated
-    paper_band = tuple(collector.difficulty) if collector.route is None else (0.0, 1.0)
-    band_opts = {"difficulty": paper_band, "coverage": collector.coverage}
+    by_route = collector.route is not None
+    paper_band = tuple(collector.difficulty)
     started = 0
     eps = np.zeros(n_envs)
     episode_of = [0] * n_envs
@@ -187,7 +186,11 @@ def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Gene
 
     def start(i: int) -> None:
         nonlocal started
-        obs[i] = envs[i].reset(seed=int(rng.integers(2**31)), options=band_opts)[0]
+        # by route difficulty, episode j asks the policy for the paper's band j mod 10 (0-0.1, 0.1-0.2, ...):
+        # seeds of every kind for the search, which the two difficulties' correlation spreads over route bins
+        band = paper_band if not by_route else (started % 10 / 10, (started % 10 + 1) / 10)
+        obs[i] = envs[i].reset(seed=int(rng.integers(2**31)),
+                               options={"difficulty": band, "coverage": collector.coverage})[0]
         eps[i] = rng.uniform(*EPS_RANGE)
         episode_of[i] = started
         active[i] = True
@@ -214,10 +217,11 @@ def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Gene
             if info["usable"]:
                 g = envs[i].garage()
                 if pool is not None:
-                    dist = (band_distance(info["difficulty"], paper_band)
-                            + band_distance(info["coverage"], collector.coverage))
+                    d = collector.route(g) if by_route else info["difficulty"]  # a rating is kept: rated once
+                    dist = (band_distance(d, collector.difficulty) if d == d else float("inf")) \
+                        + band_distance(info["coverage"], collector.coverage)
                     pool.append((dist, episode_of[i], g))
-                if info["in_band"] and result.found < collector.count:
+                if (by_route or info["in_band"]) and result.found < collector.count:
                     collector.keep(g, evaluate(g), "policy", episode_of[i], steps)
             if started < episodes and result.found < collector.count:
                 start(i)
@@ -304,7 +308,8 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     ``max_seconds`` cuts a run short).
 
     ``route`` generates by a route difficulty instead (:class:`RouteMetric`): ``difficulty`` is then a band
-    of it; the policy's rollouts (:data:`ROUTE_POLICY_EPISODES`, not conditioned on a band) and the
+    of it; the policy's rollouts (:data:`ROUTE_POLICY_EPISODES`, asking in turn for each tenth of the
+    paper's difficulty, for seeds of every kind) and the
     search's new road sets are each rated (a rating counts one episode of the budget, whose default is
     then ``100 + 20 * count``), and every garage stored gets its value in the library.
     """
