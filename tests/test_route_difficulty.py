@@ -164,3 +164,17 @@ def test_generate_by_route_difficulty_stores_rated_garages_in_the_band(tmp_path,
     assert main(["generate", "--map", "tiny_7x11", "--difficulty", "0.5", "0.6", "--count", "1", "--library",
                  str(lib), "--route-model", str(tmp_path / "m.json")]) == 2
     assert "--route-model needs --metric route" in capsys.readouterr().err
+
+
+def test_difficulty_show_explains_a_garage(capsys):
+    assert main(["difficulty", "show", "tiny_7x11", "-n", "1", "--stalls", "2"]) == 0
+    out = capsys.readouterr().out
+    model = load_route_model()
+    assert model.key in out and "tiny_7x11" in out
+    line = next(ln for ln in out.splitlines() if "route difficulty" in ln and "stalls feasible" in ln)
+    value = float(line.split("route difficulty ")[1].split()[0])
+    from garage_mj.driving.sources import painted_sources
+
+    assert value == pytest.approx(route_difficulty(painted_sources("tiny_7x11", 1, 0)[0].garage, model), abs=5e-4)
+    assert "hardest target stalls" in out and out.count("tightness") >= 2
+    assert main(["difficulty", "show", "no_such_map"]) == 2

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import user_errors
+from garage_mj.cli._common import positive_int, seed, user_errors
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.difficulty_fit import fit_runs, garage_route, score, test_records
 from garage_mj.scene.route_difficulty import load_route_model
@@ -59,6 +59,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--library", type=Path, help="library of the runs' garages (runs without garages.json)")
     c.add_argument("--json", type=Path, help="also write the figures here")
     c.set_defaults(func=run_score)
+    w = s.add_parser("show", help="the route difficulty of garages, and what makes each one hard",
+                     description="Per garage: its route difficulty and the paper's, the feasible stalls, what makes "
+                                 "it hard or easy against the average fitting test (each feature's weight x its mean over "
+                                 "the stalls in standard deviations of the fitting data, largest first) and the hardest "
+                                 "target stalls.",
+                     epilog="GARAGES is a library file (with --map/-n), a garages JSON, a folder of asset packs, or a "
+                            "shipped map name (painted garages, -n of them).\n"
+                            "example: garage-mj difficulty show m5_13x13_aligned -n 2",
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    w.add_argument("garages", metavar="GARAGES", help="where the garages come from (see below)")
+    w.add_argument("--map", help="only this map's garages (library)")
+    w.add_argument("-n", type=positive_int, help="at most N garages (a seeded sample of a library; painted: N)")
+    w.add_argument("--seed", type=seed, default=0, help="seed of the sample or of the painting (default 0)")
+    w.add_argument("--model", type=Path, help="model file (default: the shipped one)")
+    w.add_argument("--stalls", type=positive_int, default=3, metavar="K", help="hardest stalls to list (default 3)")
+    w.set_defaults(func=run_show)
 
 
 def _print_score(score: dict) -> None:
@@ -100,4 +116,38 @@ def run_score(args: argparse.Namespace) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(args.json, json.dumps(result, indent=1) + "\n")
         print(f"wrote {args.json}")
+    return 0
+
+
+@user_errors
+def run_show(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from garage_mj.driving.garage_set import load_garage_set
+    from garage_mj.scene.garage_scene import GarageScene
+    from garage_mj.scene.route_features import garage_features, mean_features
+
+    model = load_route_model(args.model)
+    garages = load_garage_set(args.garages, map=args.map, n=args.n, seed=args.seed)
+    print(f"route difficulty model {model.key} ({', '.join(model.fit.get('drivers', [])) or 'its own drivers'})")
+    for src in garages:
+        per_stall = garage_features(GarageScene(src.garage))
+        feasible = {sid: f for sid, f in per_stall.items() if f is not None}
+        if not feasible:
+            print(f"{src.name}: no stall has a feasible cruise test (paper's difficulty {src.difficulty:.3f})")
+            continue
+        p = model.test_probability(list(feasible.values()))
+        means = mean_features(per_stall)
+        parts = sorted(((w * (means[k] - m) / sc, k) for k, w, m, sc in
+                        zip(model.features, model.weights, model.mean, model.scale, strict=True) if w > 0),
+                       reverse=True)
+        print(f"{src.name}: route difficulty {float(np.mean(p)):.3f} (paper's {src.difficulty:.3f}), "
+              f"{len(feasible)} of {len(per_stall)} stalls feasible")
+        print("  against the average fitting test (weight x standardized mean; + harder, - easier): "
+              + ", ".join(f"{k} {c:+.2f}" for c, k in parts))
+        order = np.argsort(-p, kind="stable")[: args.stalls]
+        ids = list(feasible)
+        print("  hardest target stalls: " + ", ".join(
+            f"{ids[i]} ({p[i]:.2f}: {feasible[ids[i]]['length']:.0f} m, {feasible[ids[i]]['turns']:.0f} turns, "
+            f"tightness {feasible[ids[i]]['tightness']:.2f})" for i in order))
     return 0
