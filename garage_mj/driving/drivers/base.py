@@ -25,7 +25,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from garage_mj.core.config import load_config
-from garage_mj.driving.vehicle import DISCRETE_COMMANDS, DiscreteAction
+from garage_mj.driving.vehicle import DISCRETE_COMMANDS, DiscreteAction, clip
 from garage_mj.scene.car import CarGeometry, car_geometry
 
 
@@ -120,7 +120,7 @@ class BaseDriver:
             throttle += float(self._rng.normal(0.0, self.noise.throttle_std))
         if self.noise.steer_std > 0:
             steer += float(self._rng.normal(0.0, self.noise.steer_std))
-        self._queue.append((float(np.clip(throttle, -1, 1)), float(np.clip(steer, -1, 1))))
+        self._queue.append((clip(throttle, -1.0, 1.0), clip(steer, -1.0, 1.0)))
         throttle, steer = self._queue.popleft()
         if self.discrete:
             return self.to_discrete(throttle, steer, obs)
@@ -166,7 +166,7 @@ class BaseDriver:
 
     def steer_for(self, curvature: float) -> float:
         """Steer command in [-1, 1] that drives ``curvature``."""
-        return float(np.clip(math.atan(self.car.wheelbase * curvature) / self.car.max_steer, -1.0, 1.0))
+        return clip(math.atan(self.car.wheelbase * curvature) / self.car.max_steer, -1.0, 1.0)
 
     @staticmethod
     def curve_speed(kappa: float, cruise_speed: float, min_speed: float, lateral_accel: float) -> float:
@@ -200,5 +200,5 @@ class BaseDriver:
         """Pedal command toward ``target_speed`` [m/s] (the car's pedal is an acceleration request)."""
         err = target_speed - speed
         if err >= 0:
-            return float(np.clip(gain * err / (self.car.max_accel * self.dt * 2), 0.0, 1.0))
-        return float(np.clip(gain * err / (self.car.max_decel * self.dt * 2), -1.0, 0.0))
+            return clip(gain * err / (self.car.max_accel * self.dt * 2), 0.0, 1.0)
+        return clip(gain * err / (self.car.max_decel * self.dt * 2), -1.0, 0.0)

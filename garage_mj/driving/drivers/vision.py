@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.driving.drivers.base import BaseDriver
+from garage_mj.driving.vehicle import clip
 from garage_mj.scene.semantics import DRIVABLE, NUM_CLASSES, Semantic
 
 _NOT_OBSTACLE = np.zeros(NUM_CLASSES, dtype=bool)
@@ -52,19 +53,30 @@ class VisionDriver(BaseDriver):
     config_class = VisionConfig
     action_type = "continuous"  # made for [throttle, steer]; discrete actions round its commands
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # what depends on the camera, car and arcs only, kept across frames (the same numbers, computed once)
+        self._rays: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._seen_to: dict[tuple, np.ndarray] = {}
+        self._fan: tuple[float, np.ndarray] = (math.nan, np.zeros(0))
+
     def obstacle_points(self, depth: np.ndarray, segmentation: np.ndarray) -> np.ndarray:
         """(N, 2) obstacle points (x forward, y left, metres) in the car frame."""
         cam, cfg = self.camera, self.config
         h, w = depth.shape
-        tan_v = math.tan(math.radians(cam.fovy) / 2)
-        tan_h = tan_v * w / h
-        u = ((np.arange(w) + 0.5) / w * 2 - 1) * tan_h  # right positive
-        v = (1 - (np.arange(h) + 0.5) / h * 2) * tan_v  # up positive (row 0 is the top)
-        c, s = math.cos(cam.pitch), math.sin(cam.pitch)
+        key = (cam, h, w)
+        if key not in self._rays:  # per camera and image size: each pixel's ray terms, computed once
+            tan_v = math.tan(math.radians(cam.fovy) / 2)
+            tan_h = tan_v * w / h
+            u = ((np.arange(w) + 0.5) / w * 2 - 1) * tan_h  # right positive
+            v = (1 - (np.arange(h) + 0.5) / h * 2) * tan_v  # up positive (row 0 is the top)
+            c, s = math.cos(cam.pitch), math.sin(cam.pitch)
+            self._rays[key] = (c + v[:, None] * s, u[None, :], v[:, None] * c - s)
+        forward, right, up = self._rays[key]
         d = depth.astype(np.float64)
-        x = cam.x + d * (c + v[:, None] * s)
-        y = -d * u[None, :]
-        z = cam.z + d * (v[:, None] * c - s)
+        x = cam.x + d * forward
+        y = -d * right
+        z = cam.z + d * up
         seg = np.clip(segmentation, 0, NUM_CLASSES - 1)
         hit = (~_NOT_OBSTACLE[seg]) | (z > cfg.obstacle_height) & (seg != int(Semantic.BACKGROUND))
         hit &= (seg != int(Semantic.EGO_CAR)) & (z < cfg.max_height) & (x < cfg.horizon + cam.x)
@@ -97,7 +109,20 @@ class VisionDriver(BaseDriver):
             first = np.where(ahead & in_band, along, np.inf).min(axis=1)
         if not seen_only:
             return np.clip(first - front, 0.0, cfg.horizon)
-        # where each arc's centre line leaves the camera's horizontal field of view
+        key = (car, self.camera, curvatures.tobytes())
+        if key not in self._seen_to:
+            if len(self._seen_to) >= 4096:  # the waypoint arc's curvature varies: keep the cache small
+                self._seen_to.clear()
+            self._seen_to[key] = self._seen_until(curvatures, straight, radius, r_abs)
+        first = np.minimum(first, self._seen_to[key] + cfg.blind_allowance)
+        return np.clip(first - front, 0.0, cfg.horizon)
+
+    def _seen_until(self, curvatures: np.ndarray, straight: np.ndarray, radius: np.ndarray,
+                    r_abs: np.ndarray) -> np.ndarray:
+        """Per arc, how far along it (rear-axle arc length [m]) its centre line stays in the camera's
+        horizontal field of view (inf: to the horizon); depends on the arcs, car and camera only."""
+        cfg, car = self.config, self.car
+        front = car.front - car.rear_axle
         cam = self.camera
         half_fov = math.atan(math.tan(math.radians(cam.fovy) / 2))  # square images: h fov = v fov
         s = np.arange(cam.x - car.rear_axle + cfg.near_blind, cfg.horizon + front, 0.25)[None, :]
@@ -105,17 +130,17 @@ class VisionDriver(BaseDriver):
         py = np.where(straight, 0.0, radius * (1 - np.cos(s / r_abs)))
         bearing = np.abs(np.arctan2(py, px - (cam.x - car.rear_axle)))
         unseen = (bearing > half_fov) | (np.where(straight, 0.0, s / r_abs) > math.pi / 2)
-        seen_to = np.where(unseen.any(axis=1), s[0, np.argmax(unseen, axis=1)], np.inf)
-        first = np.minimum(first, seen_to + cfg.blind_allowance)
-        return np.clip(first - front, 0.0, cfg.horizon)
+        return np.where(unseen.any(axis=1), s[0, np.argmax(unseen, axis=1)], np.inf)
 
     def command(self, obs: dict[str, Any]) -> tuple[float, float]:
         cfg, car = self.config, self.car
         speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
         k_goal = self.pursuit_curvature(np.asarray(obs["waypoint"], dtype=float))
         k_max = math.tan(car.max_steer) / car.wheelbase
-        k_goal = float(np.clip(k_goal, -k_max, k_max))
-        arcs = np.append(np.linspace(-k_max, k_max, cfg.candidates), k_goal)
+        k_goal = clip(k_goal, -k_max, k_max)
+        if self._fan[0] != k_max:  # the candidate arcs, from full left to full right (per car)
+            self._fan = (k_max, np.linspace(-k_max, k_max, cfg.candidates))
+        arcs = np.append(self._fan[1], k_goal)
         points = self.obstacle_points(obs["depth"], obs["segmentation"])
         clear = self.free_distance(points, arcs, seen_only=False)  # blocked by what is seen
         good = clear >= min(cfg.needed_free, clear.max())
