@@ -333,7 +333,7 @@ class GarageDriveEnv(gym.Env):
         for _ in range(self.n_substeps):
             mujoco.mj_step(model, data)
             # the wheels touch the floor at every step: name contacts only when one may be a hit
-            if data.ncon and hittable[data.contact.geom].any():
+            if data.ncon and np.count_nonzero(hittable[data.contact.geom]):
                 contacts += ego_contacts(model, data, self.car.geom_mask, self.classes)
         x, y, yaw = pose = self.car.pose(self.data)
         speed = self.car.speed(self.data)

@@ -44,16 +44,20 @@ class Route:
         """
         p = np.asarray(point, dtype=float)[:2]
         s_max = self.length if s_max is None else s_max
-        t = np.einsum("ij,ij->i", p - self.points[:-1], self._seg) / self._seg_len**2
-        s = self._cum[:-1] + np.clip(t, 0.0, 1.0) * self._seg_len
-        s = np.clip(s, s_min, s_max)
-        s = np.clip(s, self._cum[:-1], self._cum[1:])  # stay on each segment
-        foot = self.points[:-1] + ((s - self._cum[:-1]) / self._seg_len)[:, None] * self._seg
+        cum = self._cum
+        # the segments that overlap [s_min, s_max] (cum rises: one run of them); none: every segment
+        lo = int(np.searchsorted(cum[1:], s_min, side="left"))
+        hi = int(np.searchsorted(cum[:-1], s_max, side="right"))
+        if lo >= hi:
+            lo, hi = 0, len(self._seg)
+        start, end, seg, seg_len = cum[lo:hi], cum[lo + 1:hi + 1], self._seg[lo:hi], self._seg_len[lo:hi]
+        points = self.points[lo:hi]
+        t = np.einsum("ij,ij->i", p - points, seg) / seg_len**2
+        s = start + np.minimum(np.maximum(t, 0.0), 1.0) * seg_len
+        s = np.minimum(np.maximum(s, s_min), s_max)
+        s = np.minimum(np.maximum(s, start), end)  # stay on each segment
+        foot = points + ((s - start) / seg_len)[:, None] * seg
         dist = np.linalg.norm(foot - p, axis=1)
-        valid = (self._cum[1:] >= s_min) & (self._cum[:-1] <= s_max)
-        if not valid.any():
-            valid[:] = True
-        dist = np.where(valid, dist, np.inf)
         i = int(np.argmin(dist))
         return float(s[i]), float(dist[i])
 

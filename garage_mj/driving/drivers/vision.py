@@ -77,7 +77,8 @@ class VisionDriver(BaseDriver):
         x = cam.x + d * forward
         y = -d * right
         z = cam.z + d * up
-        seg = np.clip(segmentation, 0, NUM_CLASSES - 1)
+        seg = (np.minimum(segmentation, NUM_CLASSES - 1) if segmentation.dtype.kind == "u"  # labels: never below 0
+               else np.clip(segmentation, 0, NUM_CLASSES - 1))
         hit = (~_NOT_OBSTACLE[seg]) | (z > cfg.obstacle_height) & (seg != int(Semantic.BACKGROUND))
         hit &= (seg != int(Semantic.EGO_CAR)) & (z < cfg.max_height) & (x < cfg.horizon + cam.x)
         return np.stack([x[hit], y[hit]], axis=1)
@@ -108,14 +109,14 @@ class VisionDriver(BaseDriver):
             ahead = np.where(straight, xr > 0, theta > 0)
             first = np.where(ahead & in_band, along, np.inf).min(axis=1)
         if not seen_only:
-            return np.clip(first - front, 0.0, cfg.horizon)
+            return np.minimum(np.maximum(first - front, 0.0), cfg.horizon)
         key = (car, self.camera, curvatures.tobytes())
         if key not in self._seen_to:
             if len(self._seen_to) >= 4096:  # the waypoint arc's curvature varies: keep the cache small
                 self._seen_to.clear()
             self._seen_to[key] = self._seen_until(curvatures, straight, radius, r_abs)
         first = np.minimum(first, self._seen_to[key] + cfg.blind_allowance)
-        return np.clip(first - front, 0.0, cfg.horizon)
+        return np.minimum(np.maximum(first - front, 0.0), cfg.horizon)
 
     def _seen_until(self, curvatures: np.ndarray, straight: np.ndarray, radius: np.ndarray,
                     r_abs: np.ndarray) -> np.ndarray:
