@@ -10,8 +10,9 @@ from garage_mj.cli import UserError
 from garage_mj.cli._common import positive_int, seed, user_errors
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.difficulty_fit import fit_runs, garage_route, score, test_records
+from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.scene.route_difficulty import load_route_model
-from garage_mj.scene.route_features import FEATURES
+from garage_mj.scene.route_features import FEATURES, garage_features, mean_features
 
 FIT_EPILOG = """\
 RESULTS are cruise run folders (garage-mj cruise --out): their tests.csv and garages.json. Runs of an
@@ -123,9 +124,7 @@ def run_score(args: argparse.Namespace) -> int:
 def run_show(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from garage_mj.driving.garage_set import load_garage_set
     from garage_mj.scene.garage_scene import GarageScene
-    from garage_mj.scene.route_features import garage_features, mean_features
 
     model = load_route_model(args.model)
     garages = load_garage_set(args.garages, map=args.map, n=args.n, seed=args.seed)
