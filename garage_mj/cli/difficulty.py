@@ -31,11 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "difficulty",
         help="the route-aware difficulty: fit it on your driver's cruise results, score it, compute it",
         description=(
-            "The route-aware difficulty of a garage is the expected failure rate of a cruise test, predicted "
-            "from the planned route alone (length, turns, tightest curvature, swept clearance, stalls passed, "
-            "junctions, goal side): a logistic regression with non-negative weights on those features, averaged "
-            "over the garage's feasible target stalls. The shipped model (models/difficulty/route.json) is fitted "
-            "on the built-in vision and waypoint drivers; 'fit' refits it on any driver's results."
+            "The route-aware difficulty of a garage is the expected failure rate of a cruise test,\n"
+            "predicted from the planned route alone (length, turns, tightest curvature, swept clearance,\n"
+            "stalls passed, junctions, goal side): a logistic regression with non-negative weights on\n"
+            "those features, averaged over the garage's feasible target stalls. The shipped model\n"
+            "(models/difficulty/route.json) is fitted on the built-in vision and waypoint drivers with\n"
+            "discrete actions; 'fit' refits it on any driver's cruise results (see the README: it does\n"
+            "not transfer to drivers that fail differently)."
         ),
         epilog=FIT_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
