@@ -132,10 +132,9 @@ def main(argv: list[str] | None = None) -> int:
 def report(args) -> int:
     """Fit on the fit runs, score on the held-out runs, print and write the figures."""
     import json
-    import time
 
     from garage_mj.core.fsutil import atomic_write
-    from garage_mj.driving.difficulty_fit import fit_runs, garage_route, score, test_records
+    from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
     from garage_mj.scene.route_difficulty import load_route_model
 
     fit_dirs = [args.out / f"fit_{d}" for d in FIT_DRIVERS]
@@ -148,16 +147,13 @@ def report(args) -> int:
     held.update({f"{d} (continuous)": args.out / f"heldout_continuous_{d}"
                  for d in filter(None, args.heldout_continuous.split(","))})
     held = {k: v for k, v in held.items() if (v / "tests.csv").is_file()}
-    start = time.perf_counter()
-    per_garage = garage_route(model, list(held.values()), args.library, progress=False)
-    rate_s = (time.perf_counter() - start) / max(1, len(per_garage))
+    records, per_garage = load_runs(list(held.values()), args.library, model)
     scores, refit = {}, {}
     for label, run in held.items():
-        records = test_records([run], args.library)
-        scores[label] = next(iter(score(model, records, garage_route=per_garage).values()))
-        refit[label] = _two_fold(records)
+        records_of = [r for r in records if r["run"] == str(run)]
+        scores[label] = next(iter(score(model, records_of, garage_route=per_garage).values()))
+        refit[label] = _two_fold(records_of)
     result = {"model_key": model.key, "fit": model.fit, "heldout": scores, "refit_two_fold": refit,
-              "seconds_per_garage_rating": round(rate_s, 3),
               "protocol": {"fit_maps": list(FIT_MAPS), "fit_run_seeds": args.fit_run_seeds,
                            "fit_per_map": args.fit_per_map, "fit_tests": args.fit_tests, "fit_drivers": list(FIT_DRIVERS),
                            "heldout_map": HELDOUT_MAP, "heldout_run_seed": args.heldout_run_seed,

@@ -9,7 +9,7 @@ from pathlib import Path
 from garage_mj.cli import UserError
 from garage_mj.cli._common import positive_int, seed, user_errors
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.difficulty_fit import fit_runs, garage_route, score, test_records
+from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.scene.route_difficulty import load_route_model
 from garage_mj.scene.route_features import FEATURES, garage_features, mean_features
@@ -112,8 +112,8 @@ def run_fit(args: argparse.Namespace) -> int:
 @user_errors
 def run_score(args: argparse.Namespace) -> int:
     model = load_route_model(args.model)
-    records = test_records(args.results, args.library, progress=True)
-    result = score(model, records, garage_route=garage_route(model, args.results, args.library))
+    records, per_garage = load_runs(args.results, args.library, model, progress=True)
+    result = score(model, records, garage_route=per_garage)
     _print_score(result)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

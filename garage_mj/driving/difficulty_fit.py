@@ -3,7 +3,7 @@
 A cruise run folder (:mod:`garage_mj.driving.cruise`) holds ``tests.csv`` (one row per test: garage
 hash, target stall, outcome) and ``garages.json`` (its garages, :class:`~garage_mj.driving.garage_set.GarageSet`);
 runs written before ``garages.json`` existed find their garages by hash in a ``library``.
-:func:`test_records` turns the feasible tests of runs into records: the route features of the
+:func:`test_records` (:func:`load_runs`, also each garage's route difficulty) turns the feasible tests of runs into records: the route features of the
 test's planned route (:mod:`garage_mj.scene.route_features`), whether it failed, the driver and
 the paper's difficulty. :func:`fit_runs` fits a :class:`~garage_mj.scene.route_difficulty.RouteDifficulty`
 on them and writes the model with its fitting data beside it (``<model>.fit.csv``), so anyone can
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,7 +28,7 @@ from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.cruise import GARAGES_FILE
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.regression import auc, bootstrap_r, pearson
-from garage_mj.driving.results import read_tests
+from garage_mj.driving.results import read_tests, rounded
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.generation.library import Library
 from garage_mj.generation.library_format import LibraryError
@@ -75,6 +74,13 @@ def _run_tests(run: Path) -> list[dict[str, str]]:
 def test_records(runs: Sequence[str | Path], library: str | Path | None = None, progress: bool = False
                  ) -> list[dict[str, Any]]:
     """One record per feasible test of ``runs`` (cruise run folders): its route features and outcome."""
+    return load_runs(runs, library, progress=progress)[0]
+
+
+def load_runs(runs: Sequence[str | Path], library: str | Path | None = None, model: RouteDifficulty | None = None,
+              progress: bool = False) -> tuple[list[dict[str, Any]], dict[str, float]]:
+    """:func:`test_records` of ``runs``, and with ``model`` each tested garage's route difficulty (garage hash ->
+    value over all its feasible stalls; NaN: none), both from one plan per garage whatever the runs share."""
     from garage_mj.scene.drivable import drive_planner
     from garage_mj.scene.garage_scene import GarageScene
 
@@ -84,21 +90,28 @@ def test_records(runs: Sequence[str | Path], library: str | Path | None = None, 
         rows = _run_tests(run)
         sources = _run_sources(run, lib, {r["garage_hash"] for r in rows})
         for row in rows:
-            if row["feasible"] != "1":
-                continue
             src = sources.get(row["garage_hash"])
             if src is None:
+                if row["feasible"] != "1":
+                    continue
                 where = f"{run / GARAGES_FILE}" if (run / GARAGES_FILE).is_file() else str(lib)
                 raise DifficultyFitError(f"{run}: garage {row['garage']} ({row['garage_hash'][:12]}) is not in {where}; "
                                          "pass the library the run's garages came from")
             todo.append((run, row, src))
     todo.sort(key=lambda t: t[2].hash)  # one planner per garage
-    out, planner, current = [], None, None
+    out: list[dict[str, Any]] = []
+    per_garage: dict[str, float] = {}
+    planner, current = None, None
     from tqdm import tqdm
 
     for run, row, src in tqdm(todo, desc="route features", unit="test", disable=not progress):
         if src.hash != current:
-            planner, current = drive_planner(GarageScene(src.garage)), src.hash
+            scene = GarageScene(src.garage)
+            planner, current = drive_planner(scene), src.hash
+            if model is not None:  # the same planner: the tests' stalls are planned once
+                per_garage[src.hash] = model.of_features(garage_features(scene))
+        if row["feasible"] != "1":
+            continue
         plan = planner.plan(int(row["target_stall"]))
         if not plan.feasible:
             raise DifficultyFitError(f"{run}: test {row['test']} of {row['garage']} was driven but stall "
@@ -109,7 +122,7 @@ def test_records(runs: Sequence[str | Path], library: str | Path | None = None, 
                     "target_stall": int(row["target_stall"]), "outcome": row["outcome"],
                     "failed": int(row["outcome"] != "success"), "difficulty": float(row["difficulty"]),
                     **plan_features(planner, plan)})
-    return out
+    return out, per_garage
 
 
 def write_records(path: str | Path, records: Sequence[dict[str, Any]]) -> None:
@@ -180,32 +193,11 @@ def score(model: RouteDifficulty, records: Sequence[dict[str, Any]], seed: int =
         failed = [bool(r["failed"]) for r in recs]
         out[driver] = {
             "garages": len(rows), "tests": len(recs), "success_pct": round(100.0 * (1 - np.mean(failed)), 2),
-            "route": {"r": _r(pearson(route, succ)), "r_ci95": [_r(v) for v in bootstrap_r(route, succ, seed)],
-                      "auc": _r(auc(model.test_probability(recs), failed))},
-            "paper": {"r": _r(pearson(paper, succ)), "r_ci95": [_r(v) for v in bootstrap_r(paper, succ, seed)],
-                      "auc": _r(auc([r["difficulty"] for r in recs], failed))},
+            "route": {"r": rounded(pearson(route, succ)), "r_ci95": [rounded(v) for v in bootstrap_r(route, succ, seed)],
+                      "auc": rounded(auc(model.test_probability(recs), failed))},
+            "paper": {"r": rounded(pearson(paper, succ)), "r_ci95": [rounded(v) for v in bootstrap_r(paper, succ, seed)],
+                      "auc": rounded(auc([r["difficulty"] for r in recs], failed))},
         }
     return out
 
 
-def _r(v: float) -> float | None:
-    return None if v is None or not math.isfinite(v) else round(float(v), 4)
-
-
-def garage_route(model: RouteDifficulty, runs: Sequence[str | Path], library: str | Path | None = None,
-                 progress: bool = True) -> dict[str, float]:
-    """garage hash -> route difficulty (over all its feasible stalls) of every garage tested in ``runs``."""
-    from tqdm import tqdm
-
-    from garage_mj.scene.garage_scene import GarageScene
-
-    lib = Path(library) if library is not None else None
-    tested: dict[str, CruiseSource] = {}
-    for run in map(Path, runs):
-        rows = _run_tests(run)
-        sources = _run_sources(run, lib, {r["garage_hash"] for r in rows})
-        for row in rows:
-            if row["garage_hash"] in sources:
-                tested[row["garage_hash"]] = sources[row["garage_hash"]]
-    return {h: model.of_features(garage_features(GarageScene(src.garage)))
-            for h, src in tqdm(sorted(tested.items()), desc="route difficulty", unit="garage", disable=not progress)}

@@ -159,7 +159,7 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
         hits = _hits(mine)
         out.append({
             "garage": s.name, "difficulty": round(s.difficulty, 4),
-            "route_difficulty": _rounded(route.get(s.hash)), "E[X]": round(s.mean_road_length, 3),
+            "route_difficulty": rounded(route.get(s.hash)), "E[X]": round(s.mean_road_length, 3),
             "E[Y]": round(s.mean_intersection_degree, 3), "tests": len(mine),
             "infeasible": kinds.count("infeasible"), "feasible": feasible,
             "successes": kinds.count("success"), "collisions": kinds.count("collision"),
@@ -171,8 +171,9 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
     return out
 
 
-def _rounded(value: float | None) -> float | None:
-    return None if value is None or math.isnan(value) else round(float(value), 4)
+def rounded(value: float | None, digits: int = 4) -> float | None:
+    """``value`` rounded for a CSV or JSON file; None (empty) for None, NaN or an infinity."""
+    return None if value is None or not math.isfinite(value) else round(float(value), digits)
 
 
 def _hits(rows: Sequence[dict[str, Any]]) -> dict[str, int]:

@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from garage_mj.scene.car import CarGeometry
 
 __all__ = ["START_OFFSET", "DEFAULT_DRIVE", "DriveConfig", "TestPlan", "Obstacles", "DrivePlanner",
-           "drive_planner", "drivability"]
+           "drive_planner", "drivability", "pose_keys"]
 
 MIN_DRIVE = 2.0  # [m] the goal lies at least this far along the route beyond the start
 GOAL_ON_STRAIGHT = 1.0  # [m] a straight goal this much farther from the stall than a curved one still wins
@@ -144,7 +144,7 @@ class DrivePlanner:
         nearest obstacle is the outline of ``exclude_stall`` itself are measured again without it.
         """
         obs = self.obstacles()
-        keys = list(map(bytes, np.round(np.column_stack([rear, heading]) * 1e6).astype(np.int64)))
+        keys = pose_keys(rear, heading)
         cache = self._clear_cache
         miss = [i for i, k in enumerate(keys) if k not in cache]
         if miss:
@@ -276,6 +276,12 @@ class DrivePlanner:
         if offset > cfg.lane_tolerance:
             return TestPlan(stall.id, False, f"the goal lies {offset:.2f} m off the lane centre", **common)
         return TestPlan(stall.id, True, "", **common)
+
+
+def pose_keys(rear: np.ndarray, heading: np.ndarray) -> list[bytes]:
+    """A hashable key per pose (micrometres and microradians): what the per-pose caches of a garage's
+    routes, which share most of their poses, are keyed on."""
+    return list(map(bytes, np.round(np.column_stack([rear, heading]) * 1e6).astype(np.int64)))
 
 
 def _side(stall, heading: float) -> str:

@@ -38,12 +38,15 @@ quantity over a garage's tests is the mean over its feasible stalls.
 from __future__ import annotations
 
 import math
+import weakref
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from garage_mj.scene.drivable import DrivePlanner, drive_planner, pose_keys
+
 if TYPE_CHECKING:
-    from garage_mj.scene.drivable import DrivePlanner, TestPlan
+    from garage_mj.scene.drivable import TestPlan
     from garage_mj.scene.garage_scene import GarageScene
 
 FEATURES = ("length", "turns", "left_turns", "right_turns", "heading_change", "tightness", "squeeze",
@@ -52,6 +55,8 @@ CLEAR_CAP = 2.0  # [m] clearances above this count as open (the planner measures
 TIGHT = 0.75  # [m] swept clearance below which a stretch of route is tight
 TURN_REACH = 3.0  # [m] poses this close (along the route) to a turn belong to it for turn_squeeze
 PASS_REACH = 1.0  # [m] a stall outline this close to the car's body is passed
+#: per planner (one per garage and car), per pose (:func:`~garage_mj.scene.drivable.pose_keys`): the stalls in reach
+_PASSED: weakref.WeakKeyDictionary[DrivePlanner, dict[bytes, frozenset[int]]] = weakref.WeakKeyDictionary()
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -107,8 +112,8 @@ def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, tar
 
     Routes to a garage's stalls share most poses, so each pose's stalls in reach are kept on the planner.
     """
-    cache: dict[bytes, frozenset[int]] = planner.__dict__.setdefault("_pass_cache", {})
-    keys = list(map(bytes, np.round(np.column_stack([rear, hdg]) * 1e6).astype(np.int64)))
+    cache = _PASSED.setdefault(planner, {})
+    keys = pose_keys(rear, hdg)
     miss = [i for i, k in enumerate(keys) if k not in cache]
     if miss:
         obs = planner.obstacles()
@@ -128,8 +133,6 @@ def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, tar
 
 def garage_features(scene: GarageScene, car=None) -> dict[int, dict[str, float] | None]:
     """Per stall id, the :data:`FEATURES` of its test, or None when no feasible route reaches it."""
-    from garage_mj.scene.drivable import drive_planner
-
     planner = drive_planner(scene, car)
     out: dict[int, dict[str, float] | None] = {}
     for plan in planner.plans():
