@@ -337,7 +337,7 @@ def load_garage_set(
     if path.suffix == ".json":
         refuse("a JSON garage set", ())
         return GarageSet.from_json(path)
-    if path.suffix == ".sqlite" or (path.is_file() and _is_sqlite(path)):
+    if path.suffix == ".sqlite" or is_sqlite_file(path):
         return GarageSet.from_library(path, map=map, difficulty=difficulty, run_seeds=run_seeds, n=n, seed=seed)
     shipped = [m.name for m in list_maps()]
     if text in shipped:
@@ -366,7 +366,10 @@ def _range(rng: tuple[float, float], what: str) -> tuple[float, float]:
     return lo, hi
 
 
-def _is_sqlite(path: Path) -> bool:
+def is_sqlite_file(path: Path) -> bool:
+    """Whether ``path`` is a file that starts as an SQLite database (a library, whatever its suffix)."""
+    if not path.is_file():
+        return False
     try:
         with path.open("rb") as f:
             return f.read(16) == b"SQLite format 3\x00"

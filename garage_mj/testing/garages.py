@@ -15,16 +15,16 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from garage_mj.driving.garage_set import is_sqlite_file, load_garage_set
 from garage_mj.driving.sources import CruiseSource, painted_sources
 from garage_mj.generation.library import Library
-from garage_mj.generation.library_format import GarageRecord, LibraryError
+from garage_mj.generation.library_format import GarageRecord
 from garage_mj.grid.garage import Garage
 
 TINY_MAP = "tiny_7x11"
 TINY_SEED = 1  # the painter's seed of the tiny_7x11 fixture (the project's own tests paint the same garage)
 LIBRARY_GARAGES = 3  # garages in the library fixture (and the packs fixture)
 LIBRARY_RUN = "pytest"  # the library's provenance column for the garages written here
-_SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
 def tiny_garage(seed: int = TINY_SEED) -> Garage:
@@ -57,28 +57,12 @@ def write_packs(garages: Iterable[Garage], out_dir: str | Path) -> Path:
     return Path(out_dir)
 
 
-def _is_library(path: Path) -> bool:
-    with path.open("rb") as f:
-        return f.read(len(_SQLITE_MAGIC)) == _SQLITE_MAGIC
-
-
 def _from_path(path: Path) -> list[CruiseSource]:
-    """The garages of a pack folder, a folder of packs or a library file (``None``: not one of those)."""
-    if path.is_dir():
-        if (path / "manifest.json").is_file():
-            return [CruiseSource.from_pack(path)]
-        packs = sorted(d for d in path.iterdir() if (d / "manifest.json").is_file())
-        if not packs:
-            from garage_mj.export.pack import PackError  # MuJoCo, trimesh
-
-            raise PackError(f"{path}: no asset packs in this folder; export some with garage-mj export "
-                            "(or use the garage_packs fixture)")
-        return [CruiseSource.from_pack(d) for d in packs]
-    with Library(path, create=False) as lib:
-        records = lib.verified(lib.query())  # hash and metrics recomputed: an altered row is refused by id
-    if not records:
-        raise LibraryError(f"{path}: the library holds no garages; add some with garage-mj train or generate")
-    return [CruiseSource.from_record(r) for r in records]
+    """The garages of one asset pack folder, or what :func:`~garage_mj.driving.garage_set.load_garage_set` reads
+    (a folder of packs, a library file: every garage, verified)."""
+    if path.is_dir() and (path / "manifest.json").is_file():
+        return [CruiseSource.from_pack(path)]
+    return list(load_garage_set(path))
 
 
 def _sources_of(item: Any, per_map: int, seed: int) -> list[CruiseSource]:
@@ -90,7 +74,7 @@ def _sources_of(item: Any, per_map: int, seed: int) -> list[CruiseSource]:
         return [CruiseSource.from_record(item)]
     if isinstance(item, (str, Path)):
         path = Path(item)
-        if path.is_dir() or (path.is_file() and _is_library(path)):
+        if path.is_dir() or is_sqlite_file(path):
             return _from_path(path)
         return painted_sources(str(item), per_map, seed)  # a map name or map file; MapError names a bad one
     raise TypeError(f"garages: cannot test {type(item).__name__} {item!r}; give map names, map files, pack "
