@@ -8,7 +8,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import garage_mj  # noqa: F401  (registers the ids)
-from garage_mj.driving.drive_env import START_OFFSET, GarageDriveEnv
+from garage_mj.driving.drive_env import START_OFFSET, GarageDriveEnv, _hit_sensors
 from garage_mj.driving.drivers import load_driver
 from garage_mj.scene.mjcf_scene import parked_stalls
 from garage_mj.scene.semantics import Semantic
@@ -186,6 +186,39 @@ def test_collision_with_a_pillar_of_the_fused_scene(painted_tiny):
     env.close()
     assert term and info["outcome"] == "collision" and info["hit"] == "pillar"
     assert info["hit_geom"] == "pillar_20_column"
+
+
+def test_the_contact_sensors_say_hit_exactly_when_the_contact_list_does(painted_tiny):
+    """The env reads three contact-sensor counts per physics step instead of the contact list: on
+    random drives (walls, parked cars, actors) both must agree at every step."""
+    import mujoco
+
+    env = gym.make(ENV_ID, garage=painted_tiny, action_type="continuous", occupancy=1.0,
+                   scenario={"pedestrians": 1, "moving_cars": 1, "clutter": 1})
+    base = env.unwrapped
+    assert base._hit_counts is not None  # the floor is all the car touches that is no hit
+    touched, floor, own = base._hit_counts
+    model, data, ego, hittable = base.model, base.data, base.car.geom_mask, base._hittable
+    rng = np.random.default_rng(0)
+    steps = hits = 0
+    for seed in range(4):
+        env.reset(seed=seed)
+        for _ in range(60):
+            base.car.act(data, np.array([rng.uniform(0.3, 1.0), rng.uniform(-1.0, 1.0)]), base.dt)
+            base._move_actors(*base.car.pose(data)[:2])
+            for _ in range(base.n_substeps):
+                mujoco.mj_step(model, data)
+                g = data.contact.geom[: data.ncon]
+                listed = bool(np.any(ego[g[:, 0]] & hittable[g[:, 1]] | ego[g[:, 1]] & hittable[g[:, 0]]))
+                counted = bool(data.sensordata[touched] > data.sensordata[floor] + data.sensordata[own])
+                assert listed == counted, (seed, g)
+                steps, hits = steps + 1, hits + listed
+    assert hits > 100 and steps - hits > 100  # both cases were seen
+    marking = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "roadmark")
+    assert marking >= 0 and not hittable[marking]
+    model.geom_contype[marking] = model.geom_conaffinity[marking] = 1  # a touchable geom that is no hit:
+    assert _hit_sensors(model, ego, hittable) is None  # the counts cannot tell, the env reads the list
+    env.close()
 
 
 def test_braking_forever_deadlocks(env):

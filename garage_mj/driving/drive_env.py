@@ -80,6 +80,45 @@ def _hittable(ego: np.ndarray, classes: np.ndarray) -> np.ndarray:
     return np.isin(classes, [int(c) for c in COLLIDABLE]) & ~ego
 
 
+_HIT_SENSORS = ("ego_contacts", "ego_floor_contacts", "ego_self_contacts")  # contact sensors: found counts
+
+
+def _add_hit_sensors(root, car_frame) -> None:
+    """Contact sensors counting the car's contacts: with anything, with the floor, with itself.
+
+    The car hits something exactly when the first count exceeds the other two, provided the floor is
+    the only non-collidable geom the car can touch (:func:`_hit_sensors` checks that once the model
+    is compiled); MuJoCo counts them during the step, so the env reads three numbers per physics
+    step instead of the contact list.
+    """
+    floor = root.find("geom", "floor")
+    if floor is None:
+        return
+    any_, floor_, self_ = _HIT_SENSORS
+    root.sensor.add("contact", name=any_, subtree1=car_frame, data="found")
+    root.sensor.add("contact", name=floor_, subtree1=car_frame, geom2=floor, data="found")
+    root.sensor.add("contact", name=self_, subtree1=car_frame, subtree2=car_frame, data="found")
+
+
+def _hit_sensors(model: mujoco.MjModel, ego: np.ndarray, hittable: np.ndarray) -> tuple[int, int, int] | None:
+    """The sensordata addresses of :func:`_add_hit_sensors`' counts, or None when they cannot tell a hit
+    (no such sensors, or the car can touch a non-collidable geom other than the floor)."""
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, n) for n in _HIT_SENSORS]
+    floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+    if min(ids) < 0 or floor < 0:
+        return None
+    contype, conaffinity = model.geom_contype, model.geom_conaffinity
+    touch = ((contype & np.bitwise_or.reduce(conaffinity[ego])) | (conaffinity & np.bitwise_or.reduce(contype[ego]))) != 0
+    touch |= np.isin(np.arange(model.ngeom), model.pair_geom1[np.isin(model.pair_geom2, np.flatnonzero(ego))])
+    touch |= np.isin(np.arange(model.ngeom), model.pair_geom2[np.isin(model.pair_geom1, np.flatnonzero(ego))])
+    other = touch & ~ego & ~hittable
+    other[floor] = False
+    if other.any():
+        return None
+    a, f, s = (int(model.sensor_adr[i]) for i in ids)
+    return a, f, s
+
+
 class GarageDriveEnv(gym.Env):
     """Drive from the entrance to a target stall (registered as ``garage_mj/GarageDrive-v0``).
 
@@ -202,7 +241,7 @@ class GarageDriveEnv(gym.Env):
         self.scene = GarageScene(self.garage)
         root = build_scene(self.scene, fuse_static=True)  # parked cars and pillars: geoms of the world body
         self._entrance = self.scene.entrance_pose
-        attach_car(root, *self._entrance)
+        _add_hit_sensors(root, attach_car(root, *self._entrance))
         if self.scenario_config.count:
             add_actor_bodies(root, self.scenario_config)
         self.model = compile_mjcf(root)
@@ -211,6 +250,7 @@ class GarageDriveEnv(gym.Env):
         self.car = Car(self.model, self.car_config)
         self.classes = geom_classes(self.model)
         self._hittable = _hittable(self.car.geom_mask, self.classes)
+        self._hit_counts = _hit_sensors(self.model, self.car.geom_mask, self._hittable)
         self.camera = Camera(self.model, self.camera_config)
         self._top: Camera | None = None
         self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
@@ -330,11 +370,19 @@ class GarageDriveEnv(gym.Env):
         self.car.act(self.data, action, self.dt)
         contacts = []
         model, data, hittable = self.model, self.data, self._hittable
-        for _ in range(self.n_substeps):
-            mujoco.mj_step(model, data)
-            # the wheels touch the floor at every step: name contacts only when one may be a hit
-            if data.ncon and np.count_nonzero(hittable[data.contact.geom]):
-                contacts += ego_contacts(model, data, self.car.geom_mask, self.classes)
+        if self._hit_counts is not None:  # the wheels touch the floor at every step: count the rest
+            touched, floor, own = self._hit_counts
+            counts = data.sensordata
+            for _ in range(self.n_substeps):
+                mujoco.mj_step(model, data)
+                if counts[touched] > counts[floor] + counts[own]:
+                    contacts += ego_contacts(model, data, self.car.geom_mask, self.classes)
+        else:
+            for _ in range(self.n_substeps):
+                mujoco.mj_step(model, data)
+                # name contacts only when one may be a hit
+                if data.ncon and np.count_nonzero(hittable[data.contact.geom]):
+                    contacts += ego_contacts(model, data, self.car.geom_mask, self.classes)
         x, y, yaw = pose = self.car.pose(self.data)
         speed = self.car.speed(self.data)
         self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])

@@ -90,6 +90,12 @@ class VisionDriver(BaseDriver):
         outer front corner). With ``seen_only``, the part of an arc the camera cannot see counts as
         free for only ``blind_allowance`` metres, so the car creeps, not races, into the unseen.
         """
+        arcs = self._first_obstacle(points, curvatures)
+        return self._free(arcs) if seen_only else self._free_seen_or_not(arcs[0])
+
+    def _first_obstacle(self, points: np.ndarray, curvatures: np.ndarray) -> tuple[np.ndarray, ...]:
+        """``(first, curvatures, straight, radius, |radius|)``: per arc, the rear-axle arc length [m] to
+        the first obstacle in its swept band (inf: none), with the arcs' geometry as columns."""
         cfg, car = self.config, self.car
         k = curvatures[:, None]
         straight = np.abs(k) < 1e-4
@@ -108,15 +114,22 @@ class VisionDriver(BaseDriver):
             along = np.where(straight, xr, r_abs * theta)
             ahead = np.where(straight, xr > 0, theta > 0)
             first = np.where(ahead & in_band, along, np.inf).min(axis=1)
-        if not seen_only:
-            return np.minimum(np.maximum(first - front, 0.0), cfg.horizon)
-        key = (car, self.camera, curvatures.tobytes())
+        return first, curvatures, straight, radius, r_abs
+
+    def _free_seen_or_not(self, first: np.ndarray) -> np.ndarray:
+        """Free distance ahead of the bumper from the first obstacles, the unseen counted as free."""
+        front = self.car.front - self.car.rear_axle
+        return np.minimum(np.maximum(first - front, 0.0), self.config.horizon)
+
+    def _free(self, arcs: tuple[np.ndarray, ...]) -> np.ndarray:
+        """Free distance ahead of the bumper from :meth:`_first_obstacle`'s ``arcs``, bounded by the view."""
+        first, curvatures, straight, radius, r_abs = arcs
+        key = (self.car, self.camera, curvatures.tobytes())
         if key not in self._seen_to:
             if len(self._seen_to) >= 4096:  # the waypoint arc's curvature varies: keep the cache small
                 self._seen_to.clear()
             self._seen_to[key] = self._seen_until(curvatures, straight, radius, r_abs)
-        first = np.minimum(first, self._seen_to[key] + cfg.blind_allowance)
-        return np.minimum(np.maximum(first - front, 0.0), cfg.horizon)
+        return self._free_seen_or_not(np.minimum(first, self._seen_to[key] + self.config.blind_allowance))
 
     def _seen_until(self, curvatures: np.ndarray, straight: np.ndarray, radius: np.ndarray,
                     r_abs: np.ndarray) -> np.ndarray:
@@ -143,13 +156,14 @@ class VisionDriver(BaseDriver):
             self._fan = (k_max, np.linspace(-k_max, k_max, cfg.candidates))
         arcs = np.append(self._fan[1], k_goal)
         points = self.obstacle_points(obs["depth"], obs["segmentation"])
-        clear = self.free_distance(points, arcs, seen_only=False)  # blocked by what is seen
+        found = self._first_obstacle(points, arcs)
+        clear = self._free_seen_or_not(found[0])  # blocked by what is seen
         good = clear >= min(cfg.needed_free, clear.max())
         cost = np.abs(arcs - k_goal) + np.where(good, 0.0, np.inf)
         cost[-1] -= 1e-9  # ties go to the waypoint arc itself
         best = int(np.argmin(cost))
         kappa = float(arcs[best])
-        room = float(self.free_distance(points, arcs[best : best + 1])[0])  # also bounded by the view
+        room = float(self._free(tuple(a[best : best + 1] for a in found))[0])  # also bounded by the view
         v = self.curve_speed(kappa, cfg.cruise_speed, cfg.min_speed, cfg.lateral_accel)
         v = min(v, math.sqrt(2 * cfg.comfort_decel * max(room - cfg.stop_distance, 0.0)))
         v = min(v, self.approach_speed(obs, cfg.stop_decel))
