@@ -25,6 +25,10 @@ from garage_mj.scene.semantics import DRIVABLE, NUM_CLASSES, Semantic
 _NOT_OBSTACLE = np.zeros(NUM_CLASSES, dtype=bool)
 _NOT_OBSTACLE[[int(c) for c in DRIVABLE]] = True
 _NOT_OBSTACLE[[int(Semantic.BACKGROUND), int(Semantic.EGO_CAR)]] = True
+# per class, for obstacle_points: an obstacle whatever its height / one if it stands high enough
+_ALWAYS = ~_NOT_OBSTACLE
+_IF_HIGH = np.ones(NUM_CLASSES, dtype=bool)
+_IF_HIGH[[int(Semantic.BACKGROUND), int(Semantic.EGO_CAR)]] = False
 
 
 @dataclass(frozen=True)
@@ -79,8 +83,9 @@ class VisionDriver(BaseDriver):
         z = cam.z + d * up
         seg = (np.minimum(segmentation, NUM_CLASSES - 1) if segmentation.dtype.kind == "u"  # labels: never below 0
                else np.clip(segmentation, 0, NUM_CLASSES - 1))
-        hit = (~_NOT_OBSTACLE[seg]) | (z > cfg.obstacle_height) & (seg != int(Semantic.BACKGROUND))
-        hit &= (seg != int(Semantic.EGO_CAR)) & (z < cfg.max_height) & (x < cfg.horizon + cam.x)
+        # not drivable, or high enough and not background; never the ego car, the ceiling or beyond the horizon
+        hit = _ALWAYS[seg] | (z > cfg.obstacle_height) & _IF_HIGH[seg]
+        hit &= (z < cfg.max_height) & (x < cfg.horizon + cam.x)
         return np.stack([x[hit], y[hit]], axis=1)
 
     def free_distance(self, points: np.ndarray, curvatures: np.ndarray, seen_only: bool = True) -> np.ndarray:
@@ -110,10 +115,13 @@ class VisionDriver(BaseDriver):
             r = np.hypot(xr, y - radius)
             theta = np.arctan2(xr, r_abs - np.sign(radius) * y)
             r_out = np.hypot(r_abs + half, front)
-            in_band = np.where(straight, np.abs(y) < half, (r > r_abs - half) & (r < r_out))
-            along = np.where(straight, xr, r_abs * theta)
-            ahead = np.where(straight, xr > 0, theta > 0)
-            first = np.where(ahead & in_band, along, np.inf).min(axis=1)
+            blocked = (r > r_abs - half) & (r < r_out) & (theta > 0)  # in the swept band, ahead
+            along = r_abs * theta
+            rows = straight[:, 0]
+            if rows.any():  # straight arcs: the band is |y| < half, ahead is x > 0
+                blocked[rows] = (np.abs(y) < half) & (xr > 0)
+                along[rows] = xr
+            first = np.where(blocked, along, np.inf).min(axis=1)
         return first, curvatures, straight, radius, r_abs
 
     def _free_seen_or_not(self, first: np.ndarray) -> np.ndarray:
@@ -140,10 +148,13 @@ class VisionDriver(BaseDriver):
         cam = self.camera
         half_fov = math.atan(math.tan(math.radians(cam.fovy) / 2))  # square images: h fov = v fov
         s = np.arange(cam.x - car.rear_axle + cfg.near_blind, cfg.horizon + front, 0.25)[None, :]
-        px = np.where(straight, s, r_abs * np.sin(s / r_abs))
-        py = np.where(straight, 0.0, radius * (1 - np.cos(s / r_abs)))
+        turned = s / r_abs  # [rad] heading change along each arc
+        px = r_abs * np.sin(turned)
+        py = radius * (1 - np.cos(turned))
+        if straight.any():
+            px, py, turned = np.where(straight, s, px), np.where(straight, 0.0, py), np.where(straight, 0.0, turned)
         bearing = np.abs(np.arctan2(py, px - (cam.x - car.rear_axle)))
-        unseen = (bearing > half_fov) | (np.where(straight, 0.0, s / r_abs) > math.pi / 2)
+        unseen = (bearing > half_fov) | (turned > math.pi / 2)
         return np.where(unseen.any(axis=1), s[0, np.argmax(unseen, axis=1)], np.inf)
 
     def command(self, obs: dict[str, Any]) -> tuple[float, float]:
