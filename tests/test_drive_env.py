@@ -106,7 +106,8 @@ def test_fused_scene_shows_the_camera_what_the_plain_scene_does(painted_tiny):
     root = build_scene(env.scene)
     attach_car(root, *env._entrance)
     plain = compile_mjcf(root)
-    assert env.model.nbody < plain.nbody and env.model.ngeom == plain.ngeom
+    # the same geoms, plus the invisible plane the car rolls on (the slab is drawn only): the frames show it is invisible
+    assert env.model.nbody < plain.nbody and env.model.ngeom == plain.ngeom + 1
     datas = {"plain": mujoco.MjData(plain), "env": mujoco.MjData(env.model)}
     cams = {"plain": Camera(plain, env.camera_config), "env": Camera(env.model, env.camera_config)}
     driver = load_driver("waypoint")
