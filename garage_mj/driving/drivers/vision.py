@@ -165,16 +165,21 @@ class VisionDriver(BaseDriver):
         k_goal = clip(k_goal, -k_max, k_max)
         if self._fan[0] != k_max:  # the candidate arcs, from full left to full right (per car)
             self._fan = (k_max, np.linspace(-k_max, k_max, cfg.candidates))
-        arcs = np.append(self._fan[1], k_goal)
         points = self.obstacle_points(obs["depth"], obs["segmentation"])
-        found = self._first_obstacle(points, arcs)
-        clear = self._free_seen_or_not(found[0])  # blocked by what is seen
-        good = clear >= min(cfg.needed_free, clear.max())
-        cost = np.abs(arcs - k_goal) + np.where(good, 0.0, np.inf)
-        cost[-1] -= 1e-9  # ties go to the waypoint arc itself
-        best = int(np.argmin(cost))
-        kappa = float(arcs[best])
-        room = float(self._free(tuple(a[best : best + 1] for a in found))[0])  # also bounded by the view
+        # the waypoint arc first: free for needed_free, it is good whatever the others and the cheapest
+        # (cost -1e-9 below), so the other arcs would not change the choice
+        found = self._first_obstacle(points, np.array([k_goal]))
+        if self._free_seen_or_not(found[0])[0] < cfg.needed_free:
+            arcs = np.append(self._fan[1], k_goal)
+            found = self._first_obstacle(points, arcs)
+            clear = self._free_seen_or_not(found[0])  # blocked by what is seen
+            good = clear >= min(cfg.needed_free, clear.max())
+            cost = np.abs(arcs - k_goal) + np.where(good, 0.0, np.inf)
+            cost[-1] -= 1e-9  # ties go to the waypoint arc itself
+            best = int(np.argmin(cost))
+            found = tuple(a[best : best + 1] for a in found)
+        kappa = float(found[1][0])
+        room = float(self._free(found)[0])  # also bounded by the view
         v = self.curve_speed(kappa, cfg.cruise_speed, cfg.min_speed, cfg.lateral_accel)
         v = min(v, math.sqrt(2 * cfg.comfort_decel * max(room - cfg.stop_distance, 0.0)))
         v = min(v, self.approach_speed(obs, cfg.stop_decel))
