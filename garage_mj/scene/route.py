@@ -26,6 +26,8 @@ class Route:
         self._seg = seg
         self._seg_len = np.linalg.norm(seg, axis=1)
         self._cum = np.concatenate([[0.0], np.cumsum(self._seg_len)])
+        self._starts, self._ends = self._cum[:-1], self._cum[1:]  # [m] each segment's arc-length range
+        self._seg_len2 = self._seg_len**2
 
     @property
     def length(self) -> float:
@@ -44,21 +46,20 @@ class Route:
         """
         p = np.asarray(point, dtype=float)[:2]
         s_max = self.length if s_max is None else s_max
-        cum = self._cum
-        # the segments that overlap [s_min, s_max] (cum rises: one run of them); none: every segment
-        lo = int(np.searchsorted(cum[1:], s_min, side="left"))
-        hi = int(np.searchsorted(cum[:-1], s_max, side="right"))
+        # the segments that overlap [s_min, s_max] (arc length rises: one run of them); none: every segment
+        lo = int(self._ends.searchsorted(s_min, side="left"))
+        hi = int(self._starts.searchsorted(s_max, side="right"))
         if lo >= hi:
             lo, hi = 0, len(self._seg)
-        start, end, seg, seg_len = cum[lo:hi], cum[lo + 1:hi + 1], self._seg[lo:hi], self._seg_len[lo:hi]
+        start, end, seg, seg_len = self._starts[lo:hi], self._ends[lo:hi], self._seg[lo:hi], self._seg_len[lo:hi]
         points = self.points[lo:hi]
-        t = np.einsum("ij,ij->i", p - points, seg) / seg_len**2
+        t = np.einsum("ij,ij->i", p - points, seg) / self._seg_len2[lo:hi]
         s = start + np.minimum(np.maximum(t, 0.0), 1.0) * seg_len
         s = np.minimum(np.maximum(s, s_min), s_max)
         s = np.minimum(np.maximum(s, start), end)  # stay on each segment
-        foot = points + ((s - start) / seg_len)[:, None] * seg
-        dist = np.linalg.norm(foot - p, axis=1)
-        i = int(np.argmin(dist))
+        off = points + ((s - start) / seg_len)[:, None] * seg - p  # foot point - p
+        dist = np.sqrt(np.add.reduce(off * off, axis=1))  # np.linalg.norm(axis=1), without its dispatch
+        i = int(dist.argmin())
         return float(s[i]), float(dist[i])
 
     def point_at(self, s: float) -> np.ndarray:
