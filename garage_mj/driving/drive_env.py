@@ -6,7 +6,10 @@ parked car (each with probability ``occupancy``; the target stall itself is alwa
 neighbours are not kept free, as in a real garage), and the start pose noise. Parked cars of
 empty stalls neither collide nor render (:func:`~garage_mj.scene.mjcf_scene.set_parked`), so a
 reset never recompiles. The scene is compiled with its static bodies fused into the world body
-(``build_scene(fuse_static=True)``): the same geoms, a physics step in about 0.6 of the time.
+(``build_scene(fuse_static=True)``): the same geoms, a physics step in about 0.6 of the time. The
+car rolls on an invisible plane at the floor's top (:func:`_plane_floor`: a fifth off each physics
+step), and three MuJoCo contact sensors tell whether it touches anything but the floor
+(:func:`_add_hit_sensors`), so the contact list is read only when it does.
 
 The route and the goal come from the garage's :class:`~garage_mj.scene.GarageScene` planner
 (:mod:`garage_mj.scene.drivable`): right-hand lane centre lines with turns the car can steer, the
