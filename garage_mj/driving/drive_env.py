@@ -76,9 +76,10 @@ def _as(cls: type, value: Any) -> Any:
 def _hittable(ego: np.ndarray, classes: np.ndarray) -> np.ndarray:
     """(ngeom,) bool: the geoms whose contact with the car is a hit (collidable classes, not the car itself).
 
-    One lookup per physics step tells whether :func:`~garage_mj.driving.outcomes.ego_contacts` has
-    anything to name (it still checks that the car is one side of the contact); calling it at
-    every step cost as much as the step itself, the wheels being always on the floor.
+    Where the hit sensors cannot tell (:func:`_hit_sensors`), one lookup per physics step says
+    whether :func:`~garage_mj.driving.outcomes.ego_contacts` has anything to name (it still checks
+    that the car is one side of the contact); calling it at every step cost as much as the step
+    itself, the wheels being always on the floor.
     """
     return np.isin(classes, [int(c) for c in COLLIDABLE]) & ~ego
 
