@@ -134,8 +134,9 @@ def _hit_sensors(model: mujoco.MjModel, ego: np.ndarray, hittable: np.ndarray) -
         return None
     contype, conaffinity = model.geom_contype, model.geom_conaffinity
     touch = ((contype & np.bitwise_or.reduce(conaffinity[ego])) | (conaffinity & np.bitwise_or.reduce(contype[ego]))) != 0
-    touch |= np.isin(np.arange(model.ngeom), model.pair_geom1[np.isin(model.pair_geom2, np.flatnonzero(ego))])
-    touch |= np.isin(np.arange(model.ngeom), model.pair_geom2[np.isin(model.pair_geom1, np.flatnonzero(ego))])
+    ego_ids = np.flatnonzero(ego)  # explicit <pair>s with the car touch it whatever their bits
+    touch[model.pair_geom1[np.isin(model.pair_geom2, ego_ids)]] = True
+    touch[model.pair_geom2[np.isin(model.pair_geom1, ego_ids)]] = True
     other = touch & ~ego & ~hittable
     other[floor] = False
     if other.any():
