@@ -1,4 +1,4 @@
-"""Tiny hand-made arenas with the ego car, and a closed-loop test runner, for car/sensor/driver tests."""
+"""Tiny hand-made arenas with the ego car, a closed-loop test runner, and distinct painted garages, for tests."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from dm_control import mjcf
 from garage_mj.driving.outcomes import OutcomeMonitor, ego_contacts
 from garage_mj.driving.sensors import Camera, CameraConfig
 from garage_mj.driving.vehicle import Car, attach_car, compile_mjcf
+from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import geom_classes
 
@@ -73,3 +74,14 @@ def run_test(boxes, route_points, driver, seed: int = 0, action_type: str = "con
     finally:
         camera.close()
     raise AssertionError("test did not end")
+
+
+def distinct_painted(map_name: str, seeds) -> list:
+    """The scripted painter's garages of ``map_name`` for ``seeds``, repeats dropped, in seed order."""
+    out, seen = [], set()
+    for seed in seeds:
+        g = paint_garage(map_name, seed=seed)
+        if g.canonical_hash() not in seen:
+            seen.add(g.canonical_hash())
+            out.append(g)
+    return out

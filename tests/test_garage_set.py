@@ -20,9 +20,9 @@ from garage_mj.export.pack import export_pack
 from garage_mj.generation.library import Library
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.map_io import load_map
-from garage_mj.grid.painters import paint_garage
 from garage_mj.grid.rules import apply_stall_rule
 from garage_mj.scene.car import CarConfig, car_geometry
+from tests._scenes import distinct_painted
 
 MAPS = ("tiny_7x11", "tiny_b")  # the library's map column is a label: two maps from one shape keep it tiny
 
@@ -34,12 +34,7 @@ def _run(map: str, seed: int) -> str:
 @pytest.fixture(scope="module")
 def garages() -> list[Garage]:
     """Distinct usable tiny garages."""
-    out, seen = [], set()
-    for seed in range(30):
-        g = paint_garage("tiny_7x11", seed=seed)
-        if g.canonical_hash() not in seen:
-            seen.add(g.canonical_hash())
-            out.append(g)
+    out = distinct_painted("tiny_7x11", range(30))
     assert len(out) >= 18
     return out[:18]
 

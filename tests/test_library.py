@@ -11,19 +11,13 @@ import pytest
 
 from garage_mj.generation.library import SCHEMA_VERSION, Library, LibraryError
 from garage_mj.grid.metrics import evaluate
-from garage_mj.grid.painters import paint_garage
+from tests._scenes import distinct_painted
 
 
 @pytest.fixture(scope="module")
 def garages():
     """Distinct usable tiny garages (the scripted painter repeats itself now and then)."""
-    out, seen = [], set()
-    for seed in range(40):
-        g = paint_garage("tiny_7x11", seed=seed)
-        if g.canonical_hash() not in seen:
-            seen.add(g.canonical_hash())
-            out.append(g)
-    return out
+    return distinct_painted("tiny_7x11", range(40))
 
 
 def _fill(lib: Library, garages, map="tiny_7x11") -> list[int]:

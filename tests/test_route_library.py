@@ -12,22 +12,17 @@ from garage_mj.cli import main
 from garage_mj.driving import route_rating
 from garage_mj.driving.route_rating import rate_library
 from garage_mj.generation.library import SCHEMA_VERSION, Library, LibraryError
-from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.route_difficulty import fit, load_route_model, route_difficulty
+from tests._scenes import distinct_painted
 from tests.test_route_difficulty import _synthetic
 
 
 @pytest.fixture(scope="module")
 def garages():
     """Four distinct usable tiny garages."""
-    out, seen = [], set()
-    for seed in range(20):
-        g = paint_garage("tiny_7x11", seed=seed)
-        if g.canonical_hash() not in seen:
-            seen.add(g.canonical_hash())
-            out.append(g)
-        if len(out) == 4:
-            return out
+    out = distinct_painted("tiny_7x11", range(20))
+    assert len(out) >= 4
+    return out[:4]
     raise AssertionError("the painter gave fewer than 4 distinct tiny garages")
 
 
