@@ -98,10 +98,11 @@ class DriverTrainConfig:
     hunt_budget: int = 40  # [cruise tests] per iteration the hunt spends (curriculum "hunt")
     hunt_keep: int = 8  # hunted garages (with a failure, worst first) added per iteration
     hunt_share: float = 0.5  # share of an iteration's draws that go to the hunted garages
-    # the network: SB3's NatureCNN over the image to cnn_features, concatenated with the vector, then net_arch.
-    # A narrow image feature keeps the 5 route/speed numbers from being drowned by 256 image features
+    # the network (garage_mj.driving.learned_net): NatureCNN-shaped convolutions with cnn_channels filters over the
+    # image to cnn_features, concatenated with the vector, then net_arch. A narrow image feature keeps the 5 route/speed numbers from being drowned by 256 image features
     # (with 256: 94% agreement with the oracle but 35-50% validation success)
     cnn_features: int = 32
+    cnn_channels: tuple[int, ...] = (32, 64, 64)  # filters of the 3 convolutions (NatureCNN's)
     # weight of the states within 2 m of the goal in the imitation loss: the stop is a tenth of the states but,
     # at weight 1, all of the shipped model's held-out failures (stops 1 m short of or past the goal)
     stop_weight: float = 4.0
@@ -113,6 +114,8 @@ class DriverTrainConfig:
         for name in ("iterations", "steps_per_iteration", "epochs", "batch_size", "n_envs"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if len(self.cnn_channels) != 3 or any(not isinstance(c, int) or c < 1 for c in self.cnn_channels):
+            raise ValueError(f"cnn_channels must be 3 positive filter counts (one per convolution), got {self.cnn_channels!r}")
         if not 0.0 <= self.beta0 <= 1.0 or not 0.0 <= self.beta_decay <= 1.0:
             raise ValueError("beta0 and beta_decay must be in [0, 1]")
 
@@ -365,8 +368,12 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
         if done:
             model = DQN.load(out / "checkpoints" / f"iter_{done - 1:03d}.zip", env=venv, device="cpu")
         else:
-            policy_kwargs = {"net_arch": list(cfg.net_arch),
-                             "features_extractor_kwargs": {"cnn_output_dim": cfg.cnn_features}}
+            from garage_mj.driving.learned_net import CameraRouteExtractor
+
+            policy_kwargs = {"net_arch": list(cfg.net_arch), "features_extractor_class": CameraRouteExtractor,
+                             "normalize_images": False,  # the extractor scales the image itself
+                             "features_extractor_kwargs": {"channels": tuple(cfg.cnn_channels),
+                                                           "cnn_features": cfg.cnn_features}}
             model = DQN("MultiInputPolicy", venv, seed=seed, device="cpu", verbose=0, buffer_size=1,
                         learning_starts=0, policy_kwargs=policy_kwargs)
         shards = [np.load(out / "data" / f"iter_{i:03d}.npz") for i in range(done)]

@@ -36,6 +36,12 @@ ALGORITHMS = {"stable_baselines3.dqn.policies": "DQN", "stable_baselines3.common
 #: with others' training on it, 1 thread 0.40-0.65 ms, 2 threads 5-70 ms (a thread waits for a busy
 #: core); ``vision`` takes 0.2-0.4 ms, an env step 0.7-1.2 ms.
 TORCH_THREADS = 1
+#: Whether an act runs the convolutions through oneDNN (PyTorch's default on CPU). No: between two acts
+#: the renderer and the physics evict oneDNN's kernels from the caches, and a cold oneDNN convolution
+#: costs more than PyTorch's own (im2col + GEMM). Measured inside a drive loop on the 2-core machine,
+#: an act of the shipped model took 0.21 ms with oneDNN and 0.15 ms without (``eval/bench_driver_step.py``).
+#: The Q-values differ from oneDNN's in the 7th digit; every act of a process takes the same path.
+MKLDNN_IN_ACT = False
 _MODEL_CACHE_SIZE = 4  # models a process keeps loaded (a retrained file is a new entry)
 _MODELS: dict[tuple[str, int, int], Any] = {}
 
@@ -145,16 +151,18 @@ class LearnedDriver:
             self._check(o["image"].shape[1:])
         import torch  # loaded with the model already: a dict lookup
 
-        threads = torch.get_num_threads()
+        threads, mkldnn = torch.get_num_threads(), torch.backends.mkldnn.enabled
         torch.set_num_threads(TORCH_THREADS)  # ~0.2 us a swap
+        torch.backends.mkldnn.enabled = MKLDNN_IN_ACT  # given back below, as the threads are
         try:
             # the policy's own greedy step on a batch of one, as model.predict does, without its checks and
             # copies (half the time of predict per step; same action: tests compare them)
-            with torch.no_grad():
+            with torch.inference_mode():
                 batch = {k: torch.from_numpy(v).unsqueeze(0) for k, v in o.items()}
                 action = int(self.model.policy._predict(batch, deterministic=True).reshape(-1)[0])
         finally:
             torch.set_num_threads(threads)
+            torch.backends.mkldnn.enabled = mkldnn
         if self.discrete:
             return action
         return np.array(DISCRETE_COMMANDS[DiscreteAction(action)], dtype=np.float32)
