@@ -11,7 +11,8 @@ import pytest
 from garage_mj.driving.learned_obs import learned_observation, learned_space
 from garage_mj.driving.sources import painted_sources
 
-TINY = dict(iterations=2, steps_per_iteration=60, epochs=1, batch_size=32, n_envs=1, val_tests=1)
+TINY = dict(iterations=2, steps_per_iteration=60, epochs=1, batch_size=32, n_envs=1, val_tests=1,
+            cnn_channels=[8, 16, 16])
 
 
 @pytest.fixture(scope="module")
@@ -85,6 +86,11 @@ def test_train_driver_runs_resumes_and_repeats(tmp_path, tiny_sources, monkeypat
     curve = (tmp_path / "a" / "curve.csv").read_text().splitlines()
     assert len(curve) == 3 and curve[0].startswith("iteration,states")
     assert a.name == "model.zip" and a.stat().st_size < 20e6
+    from garage_mj.driving.drivers.learned import load_model
+    from garage_mj.driving.learned_net import CameraRouteExtractor
+
+    extractor = load_model(a).policy.q_net.features_extractor  # the filters the config asked for
+    assert isinstance(extractor, CameraRouteExtractor) and [c.out_channels for c in extractor.convs] == [8, 16, 16]
     chosen = manifest["state"]["selected_iteration"]  # the best validation success, the later of equals
     rows = [r.split(",") for r in curve[1:]]
     best = max((float(r[6]), int(r[0])) for r in rows)[1]
@@ -193,3 +199,29 @@ def test_train_driver_with_actors_labels_the_oracles_yield(tmp_path):
     obs, info = env.reset(seed=0)
     assert set(obs) == {"image", "vector"} and info["actors"]["pedestrian"] == 1  # the actor exists, unobserved
     env.close()
+
+
+@pytest.mark.parametrize("channels", [[16, 32], [16, 0, 32], [16, 32, 2.5]])
+def test_a_network_config_without_three_filter_counts_is_refused(channels):
+    from garage_mj.driving.train_driver import DriverTrainConfig
+
+    with pytest.raises(ValueError, match="cnn_channels must be 3 positive filter counts"):
+        DriverTrainConfig(cnn_channels=tuple(channels))
+
+
+def test_the_network_body_is_its_layers_called_in_order():
+    """The extractor's lean forward pass gives what calling its layers as modules gives, for a camera of any size."""
+    import torch
+
+    from garage_mj.driving.learned_net import CameraRouteExtractor
+    from garage_mj.driving.learned_obs import learned_space
+
+    torch.manual_seed(0)
+    for h, w in ((64, 64), (48, 80)):
+        net = CameraRouteExtractor(learned_space(h, w), channels=(4, 8, 8), cnn_features=16)
+        assert net.features_dim == 16 + 8
+        obs = {"image": torch.randint(0, 256, (3, 2, h, w)).float(), "vector": torch.rand(3, 8)}
+        layers = [m for c in net.convs for m in (c, torch.nn.ReLU())] + [torch.nn.Flatten(), net.linear, torch.nn.ReLU()]
+        with torch.no_grad():
+            image = torch.nn.Sequential(*layers)(obs["image"] / 255.0)
+            assert torch.equal(net(obs), torch.cat((image, obs["vector"]), dim=1))
