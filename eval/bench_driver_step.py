@@ -7,6 +7,12 @@ each driver's ``act`` on that same observation (interleaved, so the machine's lo
 and the env step itself. It prints, per driver, the median and mean ms per ``act`` and the cost of
 a control step with that driver (env step + act) relative to ``vision``.
 
+Then, per simulated second of cruise (``--cruise-garages``, 0: skip): each driver drives the same
+cruise tests (2 per garage, :func:`~garage_mj.driving.cruise.run_test`, discrete actions, seed 0) in
+this one process, once to warm up (imports, scenes) and then ``--rounds`` times, interleaved; the wall
+time per simulated second of each driver, relative to ``vision``. A driver that crashes early ends its
+tests sooner, so this is per simulated second, not per test.
+
     MUJOCO_GL=egl .venv/bin/python eval/bench_driver_step.py --tests 8 --json docs/learned_driver/driver_step.json
 """
 
@@ -32,6 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--tests", type=int, default=8, help="tests, one per garage of the held-out m5 set (default 8)")
     p.add_argument("--drivers", default="vision,learned,waypoint", help="drivers to time (default vision,learned,waypoint)")
+    p.add_argument("--cruise-garages", type=int, default=6, help="held-out m5 garages of the cruise part, 2 tests each (default 6; 0: skip)")
+    p.add_argument("--rounds", type=int, default=2, help="timed rounds of the cruise part (default 2)")
     p.add_argument("--json", type=Path, help="write the figures here")
     args = p.parse_args(argv)
     names = args.drivers.split(",")
@@ -74,10 +82,48 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{n:10s} act {row['act_ms_median']:.3f} ms median, {row['act_ms_mean']:.3f} mean; "
               f"step with it {row['step_with_driver_ms']:.3f} ms" +
               (f" = {row['cost_vs_vision']:.2f}x vision's" if base else ""))
+    if args.cruise_garages > 0:
+        out["cruise"] = cruise_cost(names, list(GarageSet.from_json(HELD_OUT))[: args.cruise_garages], args.rounds)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(out, indent=1) + "\n")
     return 0
+
+
+def cruise_cost(names: list[str], garages: list, rounds: int) -> dict:
+    """Wall s per simulated s of cruise tests, per driver, interleaved in this process (module docstring)."""
+    from garage_mj.driving.cruise import run_test
+    from garage_mj.driving.sources import CruiseSettings
+
+    def drive(name: str) -> tuple[float, float]:
+        settings = CruiseSettings(driver=name, seed=0, action_type="discrete")
+        t0, sim = time.perf_counter(), 0.0
+        for src in garages:
+            for index in range(2):
+                sim += float(run_test(src, index, settings)["time"])
+        return time.perf_counter() - t0, sim
+
+    for n in names:  # warm up: torch, the model, the scenes
+        drive(n)
+    wall = {n: 0.0 for n in names}
+    sim = dict(wall)
+    for _ in range(rounds):
+        for n in names:
+            w, t = drive(n)
+            wall[n] += w
+            sim[n] += t
+    out = {"garages": len(garages), "tests_per_driver": 2 * len(garages), "rounds": rounds, "drivers": {}}
+    base = wall["vision"] / sim["vision"] if "vision" in wall else None
+    print(f"cruise, one process, {2 * len(garages)} tests per driver x {rounds} rounds:")
+    for n in names:
+        ms = 1e3 * wall[n] / sim[n]
+        row = {"wall_s": round(wall[n], 2), "sim_s": round(sim[n], 1), "ms_per_sim_s": round(ms, 2)}
+        if base:
+            row["cost_vs_vision"] = round(wall[n] / sim[n] / base, 3)
+        out["drivers"][n] = row
+        print(f"{n:10s} {ms:.2f} ms per simulated s ({sim[n]:.0f} simulated s)" +
+              (f" = {row['cost_vs_vision']:.2f}x vision's" if base else ""))
+    return out
 
 
 if __name__ == "__main__":
