@@ -11,6 +11,7 @@
 - ``drivers``: the built-in drivers (``oracle``, ``waypoint``, ``vision``) and user drivers.
 - ``sources``: what a cruise run tests (``CruiseSource``), its settings and each test's seed.
 - ``learned_obs``: what a learned driver sees (camera, waypoint, speed, route left, steering; nothing privileged).
+- ``learned_net``: the learned driver's network body (NatureCNN-shaped convolutions over the camera, joined with the route vector).
 - ``fleet_env``: ``FleetDriveEnv``, one garage of a set per episode, with the oracle's action as a label.
 - ``train_driver``: ``train-driver``, DQN on the unprivileged observation, warm-started by DAgger.
 - ``garage_set``: ``GarageSet``, the garages a learned driver trains or is tested on, and where they came from.
