@@ -11,6 +11,7 @@ from garage_mj.grid.map_io import load_map
 from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.layout import MARKING_HEIGHT, build_layout, cover_cells, merge_intervals
 from garage_mj.scene.mjcf_scene import (
+    ParkedCars,
     build_scene,
     compile_scene,
     parked_car_bodies,
@@ -84,6 +85,23 @@ def test_set_parked_hides_and_shows_cars_on_the_compiled_model(painted_tiny, fus
     # what a user relies on: a parked car is solid, the car of an empty stall is not there
     assert _probe_lands_at(painted_tiny, 1, [1], fuse_static) > 1.4  # on the car's roof (1.49 m)
     assert _probe_lands_at(painted_tiny, 1, [0, 2], fuse_static) == pytest.approx(0.1, abs=0.01)  # on the floor
+
+
+@pytest.mark.parametrize("fuse_static", [False, True])
+def test_parked_cars_kept_for_a_scene_set_what_set_parked_sets(painted_tiny, fuse_static):
+    """A drive env keeps one ParkedCars per scene and applies it at every reset: whatever stalls it had before,
+    the model ends up as set_parked on a freshly compiled scene leaves it."""
+    model = compile_scene(painted_tiny, fuse_static=fuse_static)
+    cars = ParkedCars(model)
+    rng = np.random.default_rng(0)
+    for _ in range(6):
+        occupied = [s for s in cars.geoms if rng.random() < 0.5]
+        cars.apply(model, None, occupied)
+        fresh = compile_scene(painted_tiny, fuse_static=fuse_static)
+        set_parked(fresh, None, occupied)
+        for field in ("geom_contype", "geom_conaffinity", "geom_rgba", "body_pos"):
+            assert np.array_equal(getattr(model, field), getattr(fresh, field)), field
+        assert parked_stalls(model) == sorted(occupied)
 
 
 def test_fused_scene_keeps_every_geom_as_a_world_geom(painted_maps):

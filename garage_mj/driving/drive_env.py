@@ -55,7 +55,7 @@ from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.car import CarConfig, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
-from garage_mj.scene.mjcf_scene import build_scene, parked_car_geoms, set_parked
+from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import COLLIDABLE, Semantic, geom_classes
 
@@ -283,7 +283,8 @@ class GarageDriveEnv(gym.Env):
         self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
         self.planner = drive_planner(self.scene, self.car_geometry, self.drive_config)
         self.stalls = self.scene.stalls.stalls
-        self.parkable = sorted(parked_car_geoms(self.model))
+        self._parked_cars = ParkedCars(self.model)  # the parked cars' geoms, looked up once per scene
+        self.parkable = sorted(self._parked_cars.geoms)
 
     def plan(self, stall_id: int) -> TestPlan:
         """The planned drive to a stall (route, goal, clearances), or why it is infeasible."""
@@ -333,7 +334,7 @@ class GarageDriveEnv(gym.Env):
             x, y, yaw = (float(v) for v in options["start"])
         self.start_pose = (x, y, yaw)  # exactly as set (the measured pose after mj_forward differs in the last bits)
         mujoco.mj_resetData(self.model, self.data)
-        set_parked(self.model, None, occupied)
+        self._parked_cars.apply(self.model, None, occupied)
         self._place_actors()
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward
         self.monitor.progress = START_OFFSET  # [m] the car starts this far along the route

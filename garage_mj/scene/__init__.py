@@ -60,6 +60,7 @@ __getattr__, __all__ = lazy_exports(__name__, {
     "build_scene": "mjcf_scene",
     "compile_scene": "mjcf_scene",
     "set_parked": "mjcf_scene",
+    "ParkedCars": "mjcf_scene",
     "DrivePlanner": "drivable",
     "TestPlan": "drivable",
     "drive_planner": "drivable",

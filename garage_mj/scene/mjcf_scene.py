@@ -263,31 +263,47 @@ def _solid_bits() -> dict[str, tuple[int, int]]:
     return out
 
 
+class ParkedCars:
+    """What :func:`set_parked` writes, per stall, for one compiled scene: looked up once (by geom name), then
+    applied to the model at every call of :meth:`apply` (a drive env resets its stalls at every test)."""
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.geoms = parked_car_geoms(model)  # stall id -> geom ids of its car
+        solid = _solid_bits()
+        ids = [int(g) for geoms in self.geoms.values() for g in geoms]
+        bits = [solid.get(_car_geom_part(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g))[1], (1, 1)) for g in ids]
+        # every parked-car geom once, with its stall and what it collides as when its car is in place
+        self._ids = np.array(ids, dtype=int)
+        self._stall = np.array([sid for sid, geoms in self.geoms.items() for _ in geoms], dtype=int)
+        self._contype = np.array([b[0] for b in bits], dtype=int)
+        self._conaffinity = np.array([b[1] for b in bits], dtype=int)
+        self.bodies = parked_car_bodies(model)  # {} when fused: nothing can lie below the floor then
+
+    def apply(self, model: mujoco.MjModel, data: mujoco.MjData | None, occupied: Iterable[int]) -> None:
+        """:func:`set_parked` on ``model``, the compiled scene this was made from."""
+        want = set(occupied)
+        unknown = want - self.geoms.keys()
+        if unknown:
+            raise ValueError(f"no stall with id {sorted(unknown)}; the scene has stalls 0..{len(self.geoms) - 1}")
+        on = np.isin(self._stall, sorted(want))
+        model.geom_contype[self._ids] = np.where(on, self._contype, 0)
+        model.geom_conaffinity[self._ids] = np.where(on, self._conaffinity, 0)
+        model.geom_rgba[self._ids, 3] = np.where(on, 1.0, 0.0)
+        for sid in want & self.bodies.keys():
+            model.body_pos[self.bodies[sid], 2] = 0.0
+        if data is not None:
+            mujoco.mj_forward(model, data)
+
+
 def set_parked(model: mujoco.MjModel, data: mujoco.MjData | None, occupied: Iterable[int]) -> None:
     """Put a parked car in exactly the stalls ``occupied`` of a compiled scene, without recompiling.
 
     The cars of the other stalls stay where they are but neither collide nor render (see the
     module docstring); a car built below the floor (``build_scene(parked=...)``) comes up. With
     ``data`` the kinematics are refreshed (``mj_forward``) so renders and contacts see the change at once.
+    To do it often on one scene, keep a :class:`ParkedCars` of it and call its ``apply``.
     """
-    cars = parked_car_geoms(model)
-    want = set(occupied)
-    unknown = want - cars.keys()
-    if unknown:
-        raise ValueError(f"no stall with id {sorted(unknown)}; the scene has stalls 0..{len(cars) - 1}")
-    solid = _solid_bits()
-    bodies = parked_car_bodies(model)  # {} when fused: nothing can lie below the floor then
-    for sid, geoms in cars.items():
-        on = sid in want
-        for g in geoms:
-            part = _car_geom_part(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, int(g)))[1]
-            contype, conaffinity = solid.get(part, (1, 1)) if on else (0, 0)
-            model.geom_contype[g], model.geom_conaffinity[g] = contype, conaffinity
-        model.geom_rgba[geoms, 3] = 1.0 if on else 0.0
-        if on and sid in bodies:
-            model.body_pos[bodies[sid], 2] = 0.0
-    if data is not None:
-        mujoco.mj_forward(model, data)
+    ParkedCars(model).apply(model, data, occupied)
 
 
 def parked_stalls(model: mujoco.MjModel) -> list[int]:
