@@ -131,13 +131,24 @@ class VisionDriver(BaseDriver):
 
     def _free(self, arcs: tuple[np.ndarray, ...]) -> np.ndarray:
         """Free distance ahead of the bumper from :meth:`_first_obstacle`'s ``arcs``, bounded by the view."""
-        first, curvatures, straight, radius, r_abs = arcs
+        return self._free_seen_or_not(np.minimum(arcs[0], self._seen(arcs)))
+
+    def _seen(self, arcs: tuple[np.ndarray, ...]) -> np.ndarray:
+        """Per arc of ``arcs``, how far along it counts as free unseen: where it leaves the view plus
+        ``blind_allowance`` (rear-axle arc length [m]; kept per arc set)."""
+        _, curvatures, straight, radius, r_abs = arcs
         key = (self.car, self.camera, curvatures.tobytes())
         if key not in self._seen_to:
             if len(self._seen_to) >= 4096:  # the waypoint arc's curvature varies: keep the cache small
                 self._seen_to.clear()
-            self._seen_to[key] = self._seen_until(curvatures, straight, radius, r_abs)
-        return self._free_seen_or_not(np.minimum(first, self._seen_to[key] + self.config.blind_allowance))
+            self._seen_to[key] = self._seen_until(curvatures, straight, radius, r_abs) + self.config.blind_allowance
+        return self._seen_to[key]
+
+    def _free_one(self, first: float, seen: float = math.inf) -> float:
+        """:meth:`_free_seen_or_not` (``seen`` inf) or :meth:`_free` for one arc, on floats: the same
+        operations as on the arrays, without numpy's cost per call (the waypoint arc at every frame)."""
+        front = self.car.front - self.car.rear_axle
+        return min(max(min(first, seen) - front, 0.0), self.config.horizon)
 
     def _seen_until(self, curvatures: np.ndarray, straight: np.ndarray, radius: np.ndarray,
                     r_abs: np.ndarray) -> np.ndarray:
@@ -169,7 +180,7 @@ class VisionDriver(BaseDriver):
         # the waypoint arc first: free for needed_free, it is good whatever the others and the cheapest
         # (cost -1e-9 below), so the other arcs would not change the choice
         found = self._first_obstacle(points, np.array([k_goal]))
-        if self._free_seen_or_not(found[0])[0] < cfg.needed_free:
+        if self._free_one(float(found[0][0])) < cfg.needed_free:
             arcs = np.append(self._fan[1], k_goal)
             found = self._first_obstacle(points, arcs)
             clear = self._free_seen_or_not(found[0])  # blocked by what is seen
@@ -179,7 +190,7 @@ class VisionDriver(BaseDriver):
             best = int(np.argmin(cost))
             found = tuple(a[best : best + 1] for a in found)
         kappa = float(found[1][0])
-        room = float(self._free(found)[0])  # also bounded by the view
+        room = self._free_one(float(found[0][0]), float(self._seen(found)[0]))  # also bounded by the view
         v = self.curve_speed(kappa, cfg.cruise_speed, cfg.min_speed, cfg.lateral_accel)
         v = min(v, math.sqrt(2 * cfg.comfort_decel * max(room - cfg.stop_distance, 0.0)))
         v = min(v, self.approach_speed(obs, cfg.stop_decel))
