@@ -130,28 +130,31 @@ def wall_ratio(a: Sequence[dict[str, str]], b: Sequence[dict[str, str]]) -> dict
 
     da, db = driven(a), driven(b)
     common = sorted(set(da) & set(db))
-    wa, wb = (sum(float(d[k]["wall_s"]) for k in common) for d in (da, db))
-    sa, sb = (sum(float(d[k]["time"]) for k in common) for d in (da, db))
-    if not common or wb <= 0:
+
+    def total(keys, field):
+        return [sum(float(d[k][field]) for k in keys) for d in (da, db)]
+
+    def per_test(keys):
+        wall = total(keys, "wall_s")
+        return round(wall[0] / wall[1], 3) if keys and wall[1] > 0 else None
+
+    def per_sim(keys):
+        wall, sim = total(keys, "wall_s"), total(keys, "time")
+        return round((wall[0] / sim[0]) / (wall[1] / sim[1]), 3) if keys and min(sim) > 0 and wall[1] > 0 else None
+
+    if per_test(common) is None:
         return None
-    per_sim = (wa / sa) / (wb / sb) if sa > 0 and sb > 0 else None
     # the same work: tests both drove to the goal (a driver that crashes early ends its tests sooner); and
-    # those without the tests that carry a worker's start-up (flagged by start_up_flagged)
+    # each figure again without the tests that carry a worker's start-up (flagged by start_up_flagged)
+    def warm(keys):
+        return [k for k in keys if not (da[k].get("start_up") or db[k].get("start_up"))]
+
     done = [k for k in common if da[k]["outcome"] == "success" and db[k]["outcome"] == "success"]
-    warm = [k for k in done if not (da[k].get("start_up") or db[k].get("start_up"))]
-
-    def ratio(keys):
-        ws = [sum(float(d[k]["wall_s"]) for k in keys) for d in (da, db)]
-        return round(ws[0] / ws[1], 3) if keys and ws[1] > 0 else None
-
-    warm_keys = [k for k in common if not (da[k].get("start_up") or db[k].get("start_up"))]
-    wc, sc = ([sum(float(d[k][f]) for k in warm_keys) for d in (da, db)] for f in ("wall_s", "time"))
-    warm_sim = (wc[0] / sc[0]) / (wc[1] / sc[1]) if warm_keys and min(sc) > 0 and wc[1] > 0 else None
-    return {"tests": len(common), "per_test": round(wa / wb, 3),
-            "per_sim_second": round(per_sim, 3) if per_sim is not None else None,
-            "per_sim_second_warm": round(warm_sim, 3) if warm_sim is not None else None,
-            "both_succeeded": len(done), "per_test_both_succeeded": ratio(done),
-            "both_succeeded_warm": len(warm), "per_test_both_succeeded_warm": ratio(warm)}
+    done_warm = warm(done)
+    return {"tests": len(common), "per_test": per_test(common),
+            "per_sim_second": per_sim(common), "per_sim_second_warm": per_sim(warm(common)),
+            "both_succeeded": len(done), "per_test_both_succeeded": per_test(done),
+            "both_succeeded_warm": len(done_warm), "per_test_both_succeeded_warm": per_test(done_warm)}
 
 
 def start_up_flagged(rows: Sequence[dict[str, str]], workers: int) -> list[dict[str, Any]]:

@@ -98,9 +98,10 @@ class DriverTrainConfig:
     hunt_budget: int = 40  # [cruise tests] per iteration the hunt spends (curriculum "hunt")
     hunt_keep: int = 8  # hunted garages (with a failure, worst first) added per iteration
     hunt_share: float = 0.5  # share of an iteration's draws that go to the hunted garages
-    # the network (garage_mj.driving.learned_net): NatureCNN-shaped convolutions with cnn_channels filters over the
-    # image to cnn_features, concatenated with the vector, then net_arch. A narrow image feature keeps the 5 route/speed numbers from being drowned by 256 image features
-    # (with 256: 94% agreement with the oracle but 35-50% validation success)
+    # the network (garage_mj.driving.learned_net): NatureCNN-shaped convolutions with cnn_channels filters over
+    # the image to cnn_features, concatenated with the vector, then net_arch. A narrow image feature keeps the 5
+    # route/speed numbers from being drowned by 256 image features (with 256: 94% agreement with the oracle but
+    # 35-50% validation success)
     cnn_features: int = 32
     cnn_channels: tuple[int, ...] = (32, 64, 64)  # filters of the 3 convolutions (NatureCNN's)
     # weight of the states within 2 m of the goal in the imitation loss: the stop is a tenth of the states but,
