@@ -83,6 +83,20 @@ def test_occupancy_fraction(painted_tiny):
     env.close()
 
 
+def test_info_keeps_the_tests_entries_and_gives_each_step_its_own(env):
+    _, first = env.reset(seed=4)
+    fixed = {k: first[k] for k in ("target_stall", "route_length", "time_limit", "parked", "goal", "feasible")}
+    first["actors"]["pedestrian"] = 99  # a caller changing one info changes no other
+    infos = [env.step(1)[4] for _ in range(3)]
+    for info in infos:
+        assert {k: info[k] for k in fixed} == fixed
+        assert info["actors"] == {"pedestrian": 0, "moving_car": 0, "clutter": 0}
+    assert infos[0]["actors"] is not infos[1]["actors"]
+    assert infos[0]["time"] < infos[1]["time"] < infos[2]["time"]
+    _, other = env.reset(seed=5)  # a new test: its own entries
+    assert other["time"] == 0.0 and other["route_length"] == env.unwrapped.route.length
+
+
 @pytest.mark.parametrize("driver", ["waypoint", "vision"])
 def test_builtin_drivers_reach_the_goal_deterministically(env, driver):
     info, traj = drive(env, driver, seed=2)

@@ -21,6 +21,7 @@ from garage_mj.driving.drivers import (
 from garage_mj.driving.drivers.vision import VisionDriver
 from garage_mj.driving.outcomes import OutcomeKind
 from garage_mj.driving.vehicle import DiscreteAction
+from garage_mj.scene.semantics import NUM_CLASSES
 from tests._scenes import run_test
 
 L_ROUTE = [(0.0, 0.0), (14.0, 0.0), (14.0, 12.0)]  # a left turn at 14 m
@@ -190,8 +191,32 @@ def test_vision_obstacle_points_see_the_pillar():
     pts = d.obstacle_points(img["depth"], img["segmentation"])
     assert len(pts) > 10
     assert np.allclose(np.median(pts, axis=0), (11.7, 0.0), atol=0.3)  # the pillar's face
+    # any integer labels give the same points; labels past the last class read as the last class
+    seg = img["segmentation"].copy()
+    seg[:8] = 250
+    wide = seg.astype(np.int32)
+    assert np.array_equal(d.obstacle_points(img["depth"], wide), d.obstacle_points(img["depth"], seg))
+    wide[:8] = NUM_CLASSES - 1
+    assert np.array_equal(d.obstacle_points(img["depth"], wide), d.obstacle_points(img["depth"], seg))
+    assert np.array_equal(d.obstacle_points(img["depth"], img["segmentation"].astype(np.int64)), pts)
     free = d.free_distance(pts, np.array([0.0, 0.05]))
     assert free[0] == pytest.approx(11.7 - 2.3, abs=0.3) and free[1] > free[0]
+
+
+def test_vision_scores_one_arc_as_it_scores_that_arc_among_others():
+    """The single-arc path (the waypoint arc, every frame) gives the numbers of the general one, exactly."""
+    d = VisionDriver()
+    d.reset({})
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(-1.0, 16.0, 400), rng.uniform(-8.0, 8.0, 400)])
+    k_max = 0.25
+    ks = np.concatenate([rng.uniform(-k_max, k_max, 200), [0.0, 5e-5, -5e-5, 1e-4, -1e-4, k_max, -k_max]])
+    for k in ks:
+        alone, among = np.array([k]), np.array([k, 0.1, -0.2])
+        assert d._first_obstacle(points, alone)[0][0] == d._first_obstacle(points, among)[0][0]
+        assert d._first_obstacle(points[:3], alone)[0][0] == d._first_obstacle(points[:3], among)[0][0]
+        assert d._seen_until(alone)[0] == d._seen_until(among)[0]
+    assert np.isinf(d._first_obstacle(points[:0], np.array([0.1]))[0]).all()
 
 
 @pytest.mark.parametrize("name", ["vision", "waypoint"])  # the oracle's: tests/test_oracle.py

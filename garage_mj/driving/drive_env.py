@@ -261,6 +261,7 @@ class GarageDriveEnv(gym.Env):
             self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.route: Route | None = None
         self.monitor: OutcomeMonitor | None = None
+        self._info_test: dict[str, Any] | None = None  # _info's entries fixed per test
 
     # -- scene -------------------------------------------------------------------------------------
     def _build(self) -> None:
@@ -278,6 +279,7 @@ class GarageDriveEnv(gym.Env):
         self.classes = geom_classes(self.model)
         self._hittable = _hittable(self.car.geom_mask, self.classes)
         self._hit_counts = _hit_sensors(self.model, self.car.geom_mask, self._hittable)
+        self._sensor_values = memoryview(self.data.sensordata)  # the same buffer, read as floats
         self.camera = Camera(self.model, self.camera_config)
         self._top: Camera | None = None
         self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
@@ -341,6 +343,7 @@ class GarageDriveEnv(gym.Env):
         self.path_length = 0.0  # [m] driven
         self._last_xy = (x, y)
         self.outcome: Outcome | None = None
+        self._info_test: dict[str, Any] | None = None
         if not plan.feasible:
             self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, plan.reason)
         elif not self.scenario.feasible:
@@ -400,7 +403,7 @@ class GarageDriveEnv(gym.Env):
         model, data, hittable = self.model, self.data, self._hittable
         if self._hit_counts is not None:  # the wheels touch the floor at every step: count the rest
             touched, floor, own = self._hit_counts
-            counts = data.sensordata
+            counts = self._sensor_values  # Python floats per read, cheaper than numpy scalars
             for _ in range(self.n_substeps):
                 mujoco.mj_step(model, data)
                 if counts[touched] > counts[floor] + counts[own]:
@@ -455,21 +458,23 @@ class GarageDriveEnv(gym.Env):
 
     def _info(self, pose: tuple[float, float, float] | None = None) -> dict[str, Any]:
         x, y, yaw = pose or self.car.pose(self.data)
-        info: dict[str, Any] = {
-            "target_stall": self.target,
-            "route_length": self.route.length,
-            "time_limit": self.monitor.time_limit,
-            "time": float(self.data.time),
-            "path_length": self.path_length,
-            "progress": self.monitor.progress,
-            "pose": (x, y, yaw),
-            "parked": len(self.occupied),
-            "goal": self.monitor.goal_pose,
-            "feasible": self.test_plan.feasible and self.scenario.feasible,
-            "actors": {k: self.scenario.count(k) for k in ("pedestrian", "moving_car", "clutter")},
-        }
-        if self.scenario.missing:
-            info["actors_missing"] = dict(self.scenario.missing)
+        if self._info_test is None:  # what stays the same for the whole test, built once per reset
+            self._info_test = {
+                "target_stall": self.target,
+                "route_length": self.route.length,
+                "time_limit": self.monitor.time_limit,
+                "parked": len(self.occupied),
+                "goal": self.monitor.goal_pose,
+                "feasible": self.test_plan.feasible and self.scenario.feasible,
+                "actors": {k: self.scenario.count(k) for k in ("pedestrian", "moving_car", "clutter")},
+            }
+            if self.scenario.missing:
+                self._info_test["actors_missing"] = dict(self.scenario.missing)
+        info: dict[str, Any] = {"time": float(self.data.time), "path_length": self.path_length,
+                                "progress": self.monitor.progress, "pose": (x, y, yaw), **self._info_test}
+        info["actors"] = dict(info["actors"])  # fresh dicts: a caller may keep or change an info
+        if "actors_missing" in info:
+            info["actors_missing"] = dict(info["actors_missing"])
         if self.outcome is not None:
             info.update(outcome=self.outcome.kind.value, reason=self.outcome.reason,
                         hit=self.outcome.hit_class, hit_geom=self.outcome.hit_geom)

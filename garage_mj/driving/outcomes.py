@@ -140,6 +140,9 @@ class OutcomeMonitor:
         g = np.asarray(route.goal if goal is None else goal, dtype=float).reshape(-1)
         self.goal = g[:2]
         self.goal_yaw = float(g[2]) if len(g) > 2 else route.heading_at(route.length)
+        # the goal as floats, for update()'s per-step arithmetic (the same numbers as numpy's norm and dot)
+        self._goal_xy = (float(g[0]), float(g[1]))
+        self._goal_dir = (math.cos(self.goal_yaw), math.sin(self.goal_yaw))
         self.reset()
 
     @property
@@ -174,17 +177,18 @@ class OutcomeMonitor:
                 return self._end(OutcomeKind.COLLISION, time,
                                  f"hit {c.semantic.name.lower()} {c.geom} at {abs(speed):.1f} m/s",
                                  c.semantic.name.lower(), c.geom)
-        p = np.asarray(position, dtype=float)[:2]
-        goal_dist = float(np.linalg.norm(p - self.goal))
+        x, y = float(position[0]), float(position[1])
+        dx, dy = x - self._goal_xy[0], y - self._goal_xy[1]
+        goal_dist = math.sqrt(dx * dx + dy * dy)
         yaw_err = 0.0 if yaw is None else abs(math.remainder(yaw - self.goal_yaw, math.tau))
         if goal_dist <= cfg.goal_tolerance and yaw_err <= cfg.goal_heading_tolerance and abs(speed) <= cfg.goal_speed:
             return self._end(OutcomeKind.SUCCESS, time, f"stopped at the goal ({goal_dist:.2f} m, {yaw_err:.2f} rad)")
-        past = float((p - self.goal) @ (math.cos(self.goal_yaw), math.sin(self.goal_yaw)))
+        past = dx * self._goal_dir[0] + dy * self._goal_dir[1]  # [m] along the goal's heading
         near_end = self.progress >= self.route.length - cfg.goal_tolerance - 1.0  # [m] (a route may pass the goal's axis earlier)
         if near_end and past > cfg.goal_tolerance:
             return self._end(OutcomeKind.DEADLOCK, time, f"overshot the goal by {past:.1f} m")
         window = 2.0 * cfg.max_deviation + cfg.stuck_progress + abs(speed) * 1.0
-        s, dist = self.route.project(p, self.progress - window, self.progress + window)
+        s, dist = self.route.project((x, y), self.progress - window, self.progress + window)
         self.deviation = dist
         if dist > cfg.max_deviation:
             return self._end(OutcomeKind.DEADLOCK, time, f"{dist:.1f} m off the route")

@@ -29,6 +29,9 @@ _NOT_OBSTACLE[[int(Semantic.BACKGROUND), int(Semantic.EGO_CAR)]] = True
 _ALWAYS = ~_NOT_OBSTACLE
 _IF_HIGH = np.ones(NUM_CLASSES, dtype=bool)
 _IF_HIGH[[int(Semantic.BACKGROUND), int(Semantic.EGO_CAR)]] = False
+# the same per uint8 label (labels past the last class read as the last class), indexed without clipping
+_ALWAYS_U8 = _ALWAYS[np.minimum(np.arange(256), NUM_CLASSES - 1)]
+_IF_HIGH_U8 = _IF_HIGH[np.minimum(np.arange(256), NUM_CLASSES - 1)]
 
 
 @dataclass(frozen=True)
@@ -75,18 +78,26 @@ class VisionDriver(BaseDriver):
             u = ((np.arange(w) + 0.5) / w * 2 - 1) * tan_h  # right positive
             v = (1 - (np.arange(h) + 0.5) / h * 2) * tan_v  # up positive (row 0 is the top)
             c, s = math.cos(cam.pitch), math.sin(cam.pitch)
-            self._rays[key] = (c + v[:, None] * s, u[None, :], v[:, None] * c - s)
+            # per pixel, flat: forward and right terms (read only at the pixels kept); per row: up
+            self._rays[key] = (np.repeat(c + v * s, w), np.tile(u, h), v[:, None] * c - s)
         forward, right, up = self._rays[key]
         d = depth.astype(np.float64)
-        x = cam.x + d * forward
-        y = -d * right
         z = cam.z + d * up
-        seg = (np.minimum(segmentation, NUM_CLASSES - 1) if segmentation.dtype.kind == "u"  # labels: never below 0
-               else np.clip(segmentation, 0, NUM_CLASSES - 1))
-        # not drivable, or high enough and not background; never the ego car, the ceiling or beyond the horizon
-        hit = _ALWAYS[seg] | (z > cfg.obstacle_height) & _IF_HIGH[seg]
-        hit &= (z < cfg.max_height) & (x < cfg.horizon + cam.x)
-        return np.stack([x[hit], y[hit]], axis=1)
+        if segmentation.dtype == np.uint8:
+            always, if_high = _ALWAYS_U8[segmentation], _IF_HIGH_U8[segmentation]
+        else:  # other label types: clipped to the classes
+            seg = np.clip(segmentation, 0, NUM_CLASSES - 1)
+            always, if_high = _ALWAYS[seg], _IF_HIGH[seg]
+        # not drivable, or high enough and not background; never the ego car or the ceiling ...
+        hit = always | (z > cfg.obstacle_height) & if_high
+        hit &= z < cfg.max_height
+        # ... nor beyond the horizon: x and y only where z kept a pixel (the same numbers, fewer of them)
+        kept = np.flatnonzero(hit)
+        d = d.ravel()[kept]
+        x = cam.x + d * forward[kept]
+        near = x < cfg.horizon + cam.x
+        y = -d * right[kept]
+        return np.stack([x[near], y[near]], axis=1)
 
     def free_distance(self, points: np.ndarray, curvatures: np.ndarray, seen_only: bool = True) -> np.ndarray:
         """Free distance [m] ahead of the front bumper along each arc (driven by the rear axle).
@@ -98,31 +109,48 @@ class VisionDriver(BaseDriver):
         arcs = self._first_obstacle(points, curvatures)
         return self._free(arcs) if seen_only else self._free_seen_or_not(arcs[0])
 
-    def _first_obstacle(self, points: np.ndarray, curvatures: np.ndarray) -> tuple[np.ndarray, ...]:
-        """``(first, curvatures, straight, radius, |radius|)``: per arc, the rear-axle arc length [m] to
-        the first obstacle in its swept band (inf: none), with the arcs' geometry as columns."""
-        cfg, car = self.config, self.car
+    @staticmethod
+    def _arc_geometry(curvatures: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(straight, radius, |radius|)`` of each arc, as (n, 1) columns (radius 1 for a straight arc)."""
         k = curvatures[:, None]
         straight = np.abs(k) < 1e-4
         radius = 1.0 / np.where(straight, 1.0, k)
-        r_abs = np.abs(radius)
+        return straight, radius, np.abs(radius)
+
+    def _first_obstacle(self, points: np.ndarray, curvatures: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(first, curvatures)``: per arc, the rear-axle arc length [m] to the first obstacle in its
+        swept band (inf: none)."""
+        cfg, car = self.config, self.car
         front = car.front - car.rear_axle  # [m] bumper ahead of the rear axle
         half = car.half_width + cfg.margin
-        first = np.full(len(curvatures), np.inf)
-        if len(points):
-            xr = points[:, 0] - car.rear_axle
-            y = points[:, 1]
-            r = np.hypot(xr, y - radius)
-            theta = np.arctan2(xr, r_abs - np.sign(radius) * y)
-            r_out = np.hypot(r_abs + half, front)
-            blocked = (r > r_abs - half) & (r < r_out) & (theta > 0)  # in the swept band, ahead
-            along = r_abs * theta
-            rows = straight[:, 0]
-            if rows.any():  # straight arcs: the band is |y| < half, ahead is x > 0
-                blocked[rows] = (np.abs(y) < half) & (xr > 0)
-                along[rows] = xr
-            first = np.where(blocked, along, np.inf).min(axis=1)
-        return first, curvatures, straight, radius, r_abs
+        if not len(points):
+            return np.full(len(curvatures), np.inf), curvatures
+        xr = points[:, 0] - car.rear_axle
+        y = points[:, 1]
+        if len(curvatures) == 1:  # one arc (the waypoint's, every frame): the same numbers on 1-D arrays
+            k = float(curvatures[0])
+            if abs(k) < 1e-4:  # straight: the band is |y| < half, ahead is x > 0
+                blocked, along = (np.abs(y) < half) & (xr > 0), xr
+            else:
+                radius = 1.0 / k
+                r_abs = abs(radius)
+                r = np.hypot(xr, y - radius)
+                theta = np.arctan2(xr, r_abs - (1.0 if radius > 0 else -1.0) * y)
+                r_out = np.hypot(r_abs + half, front)
+                blocked = (r > r_abs - half) & (r < r_out) & (theta > 0)
+                along = r_abs * theta
+            return np.where(blocked, along, np.inf).min(keepdims=True), curvatures
+        straight, radius, r_abs = self._arc_geometry(curvatures)
+        r = np.hypot(xr, y - radius)
+        theta = np.arctan2(xr, r_abs - np.sign(radius) * y)
+        r_out = np.hypot(r_abs + half, front)
+        blocked = (r > r_abs - half) & (r < r_out) & (theta > 0)  # in the swept band, ahead
+        along = r_abs * theta
+        rows = straight[:, 0]
+        if rows.any():  # straight arcs: the band is |y| < half, ahead is x > 0
+            blocked[rows] = (np.abs(y) < half) & (xr > 0)
+            along[rows] = xr
+        return np.where(blocked, along, np.inf).min(axis=1), curvatures
 
     def _free_seen_or_not(self, first: np.ndarray) -> np.ndarray:
         """Free distance ahead of the bumper from the first obstacles, the unseen counted as free."""
@@ -136,12 +164,12 @@ class VisionDriver(BaseDriver):
     def _seen(self, arcs: tuple[np.ndarray, ...]) -> np.ndarray:
         """Per arc of ``arcs``, how far along it counts as free unseen: where it leaves the view plus
         ``blind_allowance`` (rear-axle arc length [m]; kept per arc set)."""
-        _, curvatures, straight, radius, r_abs = arcs
+        curvatures = arcs[1]
         key = (self.car, self.camera, curvatures.tobytes())
         if key not in self._seen_to:
             if len(self._seen_to) >= 4096:  # the waypoint arc's curvature varies: keep the cache small
                 self._seen_to.clear()
-            self._seen_to[key] = self._seen_until(curvatures, straight, radius, r_abs) + self.config.blind_allowance
+            self._seen_to[key] = self._seen_until(curvatures) + self.config.blind_allowance
         return self._seen_to[key]
 
     def _free_one(self, first: float, seen: float = math.inf) -> float:
@@ -150,8 +178,7 @@ class VisionDriver(BaseDriver):
         front = self.car.front - self.car.rear_axle
         return min(max(min(first, seen) - front, 0.0), self.config.horizon)
 
-    def _seen_until(self, curvatures: np.ndarray, straight: np.ndarray, radius: np.ndarray,
-                    r_abs: np.ndarray) -> np.ndarray:
+    def _seen_until(self, curvatures: np.ndarray) -> np.ndarray:
         """Per arc, how far along it (rear-axle arc length [m]) its centre line stays in the camera's
         horizontal field of view (inf: to the horizon); depends on the arcs, car and camera only."""
         cfg, car = self.config, self.car
@@ -159,6 +186,19 @@ class VisionDriver(BaseDriver):
         cam = self.camera
         half_fov = math.atan(math.tan(math.radians(cam.fovy) / 2))  # square images: h fov = v fov
         s = np.arange(cam.x - car.rear_axle + cfg.near_blind, cfg.horizon + front, 0.25)[None, :]
+        if len(curvatures) == 1:  # one arc (the waypoint's, a new one every frame): the same numbers, 1-D
+            k, s = float(curvatures[0]), s[0]
+            if abs(k) < 1e-4:
+                px, py, turned = s, np.zeros_like(s), np.zeros_like(s)
+            else:
+                radius = 1.0 / k
+                turned = s / abs(radius)
+                px = abs(radius) * np.sin(turned)
+                py = radius * (1 - np.cos(turned))
+            unseen = (np.abs(np.arctan2(py, px - (cam.x - car.rear_axle))) > half_fov) | (turned > math.pi / 2)
+            i = int(unseen.argmax())
+            return np.array([s[i] if unseen[i] else np.inf])
+        straight, radius, r_abs = self._arc_geometry(curvatures)
         turned = s / r_abs  # [rad] heading change along each arc
         px = r_abs * np.sin(turned)
         py = radius * (1 - np.cos(turned))
