@@ -11,6 +11,14 @@ Protocol (fixed before any result was seen; nothing is tuned on the held-out set
   4; no fit garage comes from it), 50 tests each, exactly ``eval/paper_validation.py --run-seeds 4``.
 * **held-out driver**: ``learned`` (the shipped deep-RL model, never in the fit) on the held-out
   garages; the fit drivers on the held-out garages are the garage-only hold-out.
+* **leave one driver out** (``--lodo-drivers``, default ``vision,waypoint,learned``; added in session 9
+  before any of its models was scored): the fit set is also driven by ``learned``, and for each of
+  these drivers a model is fitted on the fit-set tests of the others only and scored on that
+  driver's held-out tests, so both its garages and the driver are unseen by the model.
+
+Next to each r it prints the largest |r| any per-garage difficulty can expect on those garages
+(``attainable_r``): each garage's success % is measured on 50 tests, and only the spread between
+garages beyond that binomial noise can follow a difficulty.
 
 For each held-out (driver, set) it prints and writes the per-garage Pearson r between success %
 and (a) the route difficulty, (b) the paper's difficulty, each with a 95 % bootstrap interval over
@@ -35,6 +43,7 @@ FIT_MAPS = ("m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u")
 HELDOUT_MAP = "m5_13x13_aligned"
 FIT_DRIVERS = ("vision", "waypoint")
 HELDOUT_DRIVERS = ("vision", "waypoint", "learned")
+LODO_DRIVERS = ("vision", "waypoint", "learned")
 
 
 def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, tests: int, workers: int,
@@ -109,14 +118,18 @@ def main(argv: list[str] | None = None) -> int:
                         "behaviour than the fit's discrete one; '' for none; default vision)")
     p.add_argument("--reuse", nargs="*", default=[], metavar="DRIVER=DIR",
                    help="held-out runs done before with the same settings (e.g. vision=runs/paper_validation_vision)")
+    p.add_argument("--lodo-drivers", default=",".join(LODO_DRIVERS), metavar="DRIVERS",
+                   help="leave-one-driver-out: these drivers also drive the fit set, and each is scored by a model "
+                        "fitted on the others ('' for none)")
     p.add_argument("--workers", type=positive_int, default=2)
     p.add_argument("--only", choices=("fit", "heldout"), help="only collect this part's cruise tests")
     args = p.parse_args(argv)
     if args.heldout_run_seed in args.fit_run_seeds:
         p.error("--heldout-run-seed must not be one of --fit-run-seeds")
+    lodo = [d for d in args.lodo_drivers.split(",") if d]
     if args.only in (None, "fit"):
-        collect(args.library, args.out, FIT_DRIVERS, FIT_MAPS, args.fit_run_seeds, args.fit_per_map,
-                args.fit_tests, args.workers, "fit")
+        collect(args.library, args.out, list(dict.fromkeys([*FIT_DRIVERS, *lodo])), FIT_MAPS, args.fit_run_seeds,
+                args.fit_per_map, args.fit_tests, args.workers, "fit")
     if args.only in (None, "heldout"):
         collect(args.library, args.out, args.heldout_drivers.split(","), (HELDOUT_MAP,), [args.heldout_run_seed],
                 args.heldout_garages, args.heldout_tests, args.workers, "heldout", _reuse(args.reuse))
@@ -153,7 +166,9 @@ def report(args) -> int:
         records_of = [r for r in records if r["run"] == str(run)]
         scores[label] = next(iter(score(model, records_of, garage_route=per_garage).values()))
         refit[label] = _two_fold(records_of)
+    lodo = _leave_one_driver_out(args, [d for d in args.lodo_drivers.split(",") if d], held)
     result = {"model_key": model.key, "fit": model.fit, "heldout": scores, "refit_two_fold": refit,
+              "leave_one_driver_out": lodo,
               "protocol": {"fit_maps": list(FIT_MAPS), "fit_run_seeds": args.fit_run_seeds,
                            "fit_per_map": args.fit_per_map, "fit_tests": args.fit_tests, "fit_drivers": list(FIT_DRIVERS),
                            "heldout_map": HELDOUT_MAP, "heldout_run_seed": args.heldout_run_seed,
@@ -168,14 +183,43 @@ def report(args) -> int:
         for name, key in (("route", "route"), ("paper", "paper")):
             m = d[key]
             print(f"    {name:<5} r = {m['r']} {m['r_ci95']}  AUC = {m['auc']}")
+        print(f"    attainable |r| (binomial noise of {d['tests'] // max(1, d['garages'])} tests per garage): "
+              f"{d['attainable_r']} {d['attainable_r_ci95']}")
         f = refit[label]
         print(f"    refit on this driver, two folds of garages (fit on one half, scored on the other): "
               f"route r = {f['r']}, AUC = {f['auc']}")
+    if lodo:
+        print("leave one driver out (fitted on the fit set's tests of the other drivers, scored on this driver's "
+              "held-out tests):")
+    for driver, d in lodo.items():
+        m = d["route"]
+        print(f"  {driver}: fitted on {'+'.join(d['fit_drivers'])} ({d['fit_tests']} tests): route r = {m['r']} "
+              f"{m['r_ci95']}  AUC = {m['auc']}  (attainable |r| {d['attainable_r']})")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(args.json, json.dumps(result, indent=1) + "\n")
         print(f"wrote {args.json}")
     return 0
+
+
+def _leave_one_driver_out(args, drivers: list[str], held: dict[str, Path]) -> dict:
+    """Per driver: a model fitted on the fit-set runs of the other ``drivers``, scored on its held-out run."""
+    from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
+
+    out = {}
+    for driver in drivers:
+        others = [args.out / f"fit_{o}" for o in drivers if o != driver]
+        missing = [str(r) for r in others if not (r / "tests.csv").is_file()]
+        if driver not in held or missing:
+            print(f"leave-one-driver-out {driver}: skipped, missing {missing or held.get(driver)}", flush=True)
+            continue
+        model, _ = fit_runs(others, args.out / f"route_without_{driver}.json", args.library, progress=False)
+        records, per_garage = load_runs([held[driver]], args.library, model)
+        scored = next(iter(score(model, records, garage_route=per_garage).values()))
+        out[driver] = {"fit_drivers": [o for o in drivers if o != driver], "fit_tests": model.fit["tests"],
+                       "model_key": model.key,
+                       "coefficients": {n: round(float(w), 4) for n, w in model.coefficients()}, **scored}
+    return out
 
 
 if __name__ == "__main__":

@@ -38,6 +38,25 @@ def test_paper_table_gives_the_papers_r():
     assert (line.r, line.slope, line.intercept) == pytest.approx((-1.0, -100.0, 100.0))
 
 
+def test_attainable_r_is_what_a_perfect_difficulty_reaches_through_test_noise():
+    import numpy as np
+
+    from garage_mj.driving.regression import attainable_r, bootstrap_attainable_r
+
+    rng = np.random.default_rng(0)
+    for spread, tests in ((0.0, 50), (0.05, 50), (0.2, 50), (0.05, 800)):
+        truth = np.clip(0.7 + rng.normal(0.0, spread, 3000), 0.0, 1.0)  # each garage's true success rate
+        measured = 100.0 * rng.binomial(tests, truth) / tests
+        got = attainable_r(measured, [tests] * len(truth))
+        if spread:  # a difficulty = -truth would reach this |r|
+            assert got == pytest.approx(pearson(truth, measured), abs=0.05)
+        else:  # noise alone: near 0 (the square root lifts a small positive estimate)
+            assert got < 0.2
+    lo, hi = bootstrap_attainable_r(measured, [tests] * len(measured))
+    assert lo <= attainable_r(measured, [tests] * len(measured)) <= hi
+    assert attainable_r([90.0, 90.0], [50, 50]) != attainable_r([90.0, 90.0], [50, 50])  # no spread: NaN
+
+
 def test_test_seeds_depend_only_on_seed_garage_and_index():
     assert cruise_seed(0, "ab", 3) == cruise_seed(0, "ab", 3)
     assert len({cruise_seed(0, "ab", i) for i in range(50)} | {cruise_seed(1, "ab", 0)}) == 51

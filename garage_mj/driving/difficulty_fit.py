@@ -9,7 +9,8 @@ the paper's difficulty. :func:`fit_runs` fits a :class:`~garage_mj.scene.route_d
 on them and writes the model with its fitting data beside it (``<model>.fit.csv``), so anyone can
 refit on their own driver's results. :func:`score` measures how well a difficulty predicts the
 failures of other records: per-garage Pearson r with success % (95 % bootstrap interval over
-garages) and per-test AUC, for the route difficulty and for the paper's.
+garages) and per-test AUC, for the route difficulty and for the paper's, next to the largest |r|
+that the garages' numbers of tests let any difficulty expect (:func:`~garage_mj.driving.regression.attainable_r`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.cruise import GARAGES_FILE
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
-from garage_mj.driving.regression import auc, bootstrap_r, pearson
+from garage_mj.driving.regression import attainable_r, auc, bootstrap_attainable_r, bootstrap_r, pearson
 from garage_mj.driving.results import read_tests, rounded
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.generation.library import Library
@@ -191,8 +192,12 @@ def score(model: RouteDifficulty, records: Sequence[dict[str, Any]], seed: int =
         route = [garage_route[t["garage_hash"]] if garage_route else t["route_difficulty"] for t in rows]
         paper = [t["difficulty"] for t in rows]
         failed = [bool(r["failed"]) for r in recs]
+        per_garage = [t["tests"] for t in rows]
         out[driver] = {
             "garages": len(rows), "tests": len(recs), "success_pct": round(100.0 * (1 - np.mean(failed)), 2),
+            # the best |r| any per-garage difficulty can expect here, given each garage's number of tests
+            "attainable_r": rounded(attainable_r(succ, per_garage)),
+            "attainable_r_ci95": [rounded(v) for v in bootstrap_attainable_r(succ, per_garage, seed)],
             "route": {"r": rounded(pearson(route, succ)), "r_ci95": [rounded(v) for v in bootstrap_r(route, succ, seed)],
                       "auc": rounded(auc(model.test_probability(recs), failed))},
             "paper": {"r": rounded(pearson(paper, succ)), "r_ci95": [rounded(v) for v in bootstrap_r(paper, succ, seed)],

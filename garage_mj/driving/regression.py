@@ -80,6 +80,43 @@ def bootstrap_r(x: Sequence[float], y: Sequence[float], seed: int = 0, resamples
     return float(lo), float(hi)
 
 
+def attainable_r(success_pct: Sequence[float], tests: Sequence[int]) -> float:
+    """The largest |Pearson r| any per-garage difficulty can expect with these garages' success rates.
+
+    Each garage's success % is measured on ``tests`` tests, so it carries binomial noise of variance
+    p (1 - p) / (n - 1) (unbiased, p the measured fraction). Only the rest of the spread between
+    garages, their true differences, can follow a difficulty: r(measured, true) = sqrt(1 - mean noise
+    variance / variance between garages). A difficulty that knew each garage's true success rate would
+    still expect this |r|, no more. NaN with fewer than 2 garages or no spread; 0 when noise explains it all.
+    """
+    p = np.asarray(success_pct, dtype=float) / 100.0
+    n = np.asarray(tests, dtype=float)
+    if p.size < 2 or p.shape != n.shape or (n < 2).any():
+        return math.nan
+    spread = float(p.var(ddof=1))
+    if spread <= 0:
+        return math.nan
+    noise = float(np.mean(p * (1 - p) / (n - 1)))
+    return math.sqrt(max(0.0, 1.0 - noise / spread))
+
+
+def bootstrap_attainable_r(success_pct: Sequence[float], tests: Sequence[int], seed: int = 0, resamples: int = 2000,
+                           level: float = 0.95) -> tuple[float, float]:
+    """Percentile bootstrap interval of :func:`attainable_r` over the garages."""
+    p, n = np.asarray(success_pct, dtype=float), np.asarray(tests, dtype=float)
+    if p.size < 3:
+        return math.nan, math.nan
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, p.size, size=(resamples, p.size))
+    values = np.array([attainable_r(p[i], n[i]) for i in idx])
+    values = values[~np.isnan(values)]
+    if not values.size:
+        return math.nan, math.nan
+    tail = (1 - level) / 2 * 100
+    lo, hi = np.percentile(values, [tail, 100 - tail])
+    return float(lo), float(hi)
+
+
 def auc(score: Sequence[float], positive: Sequence[bool]) -> float:
     """Area under the ROC curve of ``score`` for ``positive`` (ties count half): the Mann-Whitney U / (n+ n-)."""
     from scipy.stats import rankdata
