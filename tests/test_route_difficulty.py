@@ -136,6 +136,7 @@ def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage
     assert main(["difficulty", "score", str(run), "--model", str(out), "--json", str(tmp_path / "s.json")]) == 0
     score = json.loads((tmp_path / "s.json").read_text())
     assert score["waypoint"]["garages"] == 2 and 0.0 <= score["waypoint"]["route"]["auc"] <= 1.0
+    assert "attainable_r" in score["waypoint"] and len(score["waypoint"]["attainable_r_ci95"]) == 2
     # a folder that is not a cruise run: one line naming it
     assert main(["difficulty", "fit", str(tmp_path), "--out", str(out)]) == 2
     assert "holds no tests.csv" in capsys.readouterr().err

@@ -90,6 +90,11 @@ def _print_score(score: dict) -> None:
             r = "n/a" if m["r"] is None else f"{m['r']:.3f}"
             a = "n/a" if m["auc"] is None else f"{m['auc']:.3f}"
             print(f"  {name:<19} per-garage r = {r}{ci}   per-test AUC = {a}")
+        if d.get("attainable_r") is not None:  # the ceiling that the garages' test counts put on any r
+            lo, hi = d["attainable_r_ci95"]
+            ci = f" [{lo:.3f}, {hi:.3f}]" if lo is not None else ""
+            print(f"  {'':<19} attainable |r| = {d['attainable_r']:.3f}{ci} (what each garage's number of "
+                  "tests leaves to explain)")
 
 
 @user_errors
