@@ -61,6 +61,29 @@ def test_every_feasible_goal_is_a_pose_on_the_lane_beside_its_stall(painted_tiny
     assert np.mean(beside) >= 0.8  # the rest: corner cells, where the lane turns away before the stall
 
 
+def test_a_plan_is_the_same_planned_alone_or_after_the_stalls_that_share_its_route():
+    """The planner keeps each sampled route and pose for the stalls along it; what it gives stays each stall's own."""
+    from garage_mj.grid.painters import paint_garage
+    from garage_mj.scene.route_features import garage_features, plan_features
+
+    garage = paint_garage("m5_13x13_aligned", seed=1)
+    together = drive_planner(GarageScene(garage))
+    plans = together.plans()
+    features = garage_features(together.scene)
+    assert sum(p.feasible for p in plans) > 10
+    for p in plans[::5]:
+        alone = drive_planner(GarageScene(garage))  # a fresh scene: nothing shared with other stalls
+        q = alone.plan(p.stall)
+        assert (q.feasible, q.reason, q.goal, q.clearance, q.pullback) == (p.feasible, p.reason, p.goal, p.clearance,
+                                                                          p.pullback)
+        if p.feasible:
+            for a, b in ((p.centre, q.centre), (p.rear, q.rear), (p.clearances, q.clearances)):
+                np.testing.assert_array_equal(a, b)
+            assert plan_features(alone, q) == features[p.stall]
+            with pytest.raises(ValueError):  # plans share their route's arrays: read-only
+                p.centre[0, 0] = 0.0
+
+
 def test_routes_never_turn_tighter_than_the_car_with_margin(painted_tiny):
     car = car_geometry()
     cfg = DriveConfig()

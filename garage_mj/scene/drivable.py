@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -96,6 +96,17 @@ def _r(v: float) -> float | None:
     return None if v is None or not math.isfinite(v) else round(float(v), 4)
 
 
+class _Route(NamedTuple):
+    """A candidate's sampled route: rear-axle path, heading, curvature, centre path, arc length, pose keys."""
+
+    rear: np.ndarray
+    heading: np.ndarray
+    curvature: np.ndarray
+    centre: np.ndarray
+    s: np.ndarray
+    keys: list[bytes]
+
+
 @dataclass
 class _Candidate:
     cost: float
@@ -123,6 +134,8 @@ class DrivePlanner:
         self._dist = self.routes.dist  # (cell, heading) -> cost of the best forward route to it
         self._obstacles: Obstacles | None = None
         self._clear_cache: dict[bytes, tuple[float, int]] = {}  # pose -> (clearance, nearest obstacle) over all
+        self._routes: dict[tuple, _Route | str] = {}  # (path, final heading) -> its sampled route, or why none
+        self._plan_keys: dict[int, list[bytes]] = {}  # stall -> pose keys of its feasible plan's path
         self._lanes: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- obstacles and the footprint (garage_mj.scene.clearance) --------------------------------------
@@ -136,15 +149,17 @@ class DrivePlanner:
         """(N, 4, 2) corners of the car's body with its rear-axle midpoint at ``rear`` and ``heading``."""
         return footprint(self.car, rear, heading)
 
-    def clearance(self, rear: np.ndarray, heading: np.ndarray, exclude_stall: int = -1) -> tuple[np.ndarray, list[str]]:
+    def clearance(self, rear: np.ndarray, heading: np.ndarray, exclude_stall: int = -1,
+                  keys: list[bytes] | None = None) -> tuple[np.ndarray, list[str]]:
         """Per pose, the distance [m] of the car body to the nearest obstacle (0 when touching), and its class.
 
         The routes to a garage's stalls share most of their poses (they fan out from one start), so
         each pose's nearest obstacle over all of them is computed once and kept; only the poses whose
         nearest obstacle is the outline of ``exclude_stall`` itself are measured again without it.
+        ``keys``: the poses' :func:`pose_keys`, when the caller has them.
         """
         obs = self.obstacles()
-        keys = pose_keys(rear, heading)
+        keys = pose_keys(rear, heading) if keys is None else keys
         cache = self._clear_cache
         miss = [i for i, k in enumerate(keys) if k not in cache]
         if miss:
@@ -188,6 +203,12 @@ class DrivePlanner:
     def plans(self) -> list[TestPlan]:
         return [self.plan(s.id) for s in self.scene.stalls.stalls]
 
+    def plan_keys(self, plan: TestPlan) -> list[bytes]:
+        """:func:`pose_keys` of ``plan``'s path (``rear``, ``heading``): kept from planning when this planner made it."""
+        if self._plans.get(plan.stall) is plan and plan.stall in self._plan_keys:
+            return self._plan_keys[plan.stall]
+        return pose_keys(plan.rear, plan.heading)
+
     def _candidates(self, stall_id: int) -> list[_Candidate]:
         stall = self.scene.stalls.stalls[stall_id]
         q = stall.road_cell
@@ -218,16 +239,31 @@ class DrivePlanner:
             first_reason = first_reason or plan.reason
         return TestPlan(stall_id, False, first_reason)
 
+    def _route(self, cand: _Candidate) -> _Route | str:
+        """The sampled route of a candidate's path and final heading, or why it cannot be filleted; kept,
+        since the stalls along a road cell share it (read-only arrays: plans hold views of them)."""
+        key = (tuple(cand.path), cand.final)
+        if key not in self._routes:
+            verts, dirs = self.routes.polyline(cand.path, cand.final)
+            radii, why = self.routes.fillets(verts, dirs)
+            if why:
+                self._routes[key] = why
+            else:
+                rear, hdg, kap = sample(verts, dirs, radii)
+                centre = rear + self.b * np.stack([np.cos(hdg), np.sin(hdg)], axis=1)
+                seg = np.linalg.norm(np.diff(centre, axis=0), axis=1)
+                s = np.concatenate([[0.0], np.cumsum(seg)])
+                for a in (rear, hdg, kap, centre, s):
+                    a.flags.writeable = False
+                self._routes[key] = _Route(rear, hdg, kap, centre, s, pose_keys(rear, hdg))
+        return self._routes[key]
+
     def _try(self, stall, cand: _Candidate) -> TestPlan:
         cfg = self.config
-        verts, dirs = self.routes.polyline(cand.path, cand.final)
-        radii, why = self.routes.fillets(verts, dirs)
-        if why:
-            return TestPlan(stall.id, False, why, stall_side=cand.side)
-        rear, hdg, kap = sample(verts, dirs, radii)
-        centre = rear + self.b * np.stack([np.cos(hdg), np.sin(hdg)], axis=1)
-        seg = np.linalg.norm(np.diff(centre, axis=0), axis=1)
-        s = np.concatenate([[0.0], np.cumsum(seg)])
+        route = self._route(cand)
+        if isinstance(route, str):
+            return TestPlan(stall.id, False, route, stall_side=cand.side)
+        rear, hdg, kap, centre, s, keys = route
         # the goal: the centre-path point nearest the stall's entry, within the stall's road cell
         cx, cy = cell_center(*stall.road_cell, self.rows, self.world)
         half = self.world.block / 2 + 0.5
@@ -245,7 +281,7 @@ class DrivePlanner:
             dist = straight
         # the footprint at the goal must be clear; else move back along the lane
         pull = 0.0
-        clear_g, what = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id)
+        clear_g, what = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id, keys=keys[g:g + 1])
         first = (clear_g[0], what[0])
         while clear_g[0] < cfg.clearance_margin:
             g -= 1
@@ -254,13 +290,13 @@ class DrivePlanner:
                 return TestPlan(stall.id, False, f"no clear place to stop beside the stall within {cfg.max_pullback:.0f} m "
                                 f"(a {first[1]} {first[0]:.2f} m from the car; margin {cfg.clearance_margin:.2f} m)",
                                 stall_side=cand.side)
-            clear_g, _ = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id)
+            clear_g, _ = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id, keys=keys[g:g + 1])
         goal = (float(centre[g, 0]), float(centre[g, 1]), float(hdg[g]))
         offset = self.lane_offset(*goal)
         side = _side(stall, hdg[g])  # where the stall lies seen from the goal pose
         # the drive: from the start pose to the goal
         i0 = int(np.searchsorted(s, START_OFFSET))
-        clear, names = self.clearance(rear[i0:g + 1], hdg[i0:g + 1], exclude_stall=stall.id)
+        clear, names = self.clearance(rear[i0:g + 1], hdg[i0:g + 1], exclude_stall=stall.id, keys=keys[i0:g + 1])
         k = int(np.argmin(clear))
         max_k = float(np.abs(kap[: g + 1]).max())
         common = dict(centre=centre[: g + 1], rear=rear[: g + 1], heading=hdg[: g + 1], curvature=kap[: g + 1],
@@ -275,6 +311,7 @@ class DrivePlanner:
                             f"({x:.1f}, {y:.1f}) (margin {cfg.clearance_margin:.2f} m)", **common)
         if offset > cfg.lane_tolerance:
             return TestPlan(stall.id, False, f"the goal lies {offset:.2f} m off the lane centre", **common)
+        self._plan_keys[stall.id] = keys[: g + 1]
         return TestPlan(stall.id, True, "", **common)
 
 

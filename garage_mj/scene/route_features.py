@@ -99,7 +99,7 @@ def plan_features(planner: DrivePlanner, plan: TestPlan) -> dict[str, float]:
         "squeeze": float(CLEAR_CAP - clear.min()),
         "turn_squeeze": float(CLEAR_CAP - clear[near_turn].min()) if near_turn.any() else 0.0,
         "tight_length": float(ds[clear < TIGHT].sum()),
-        "stalls_passed": float(_stalls_passed(planner, rear, hdg, plan.stall)),
+        "stalls_passed": float(_stalls_passed(planner, rear, hdg, plan.stall, planner.plan_keys(plan)[i0:])),
         "junctions": float(junctions),
         "goal_left": float(plan.stall_side == "left"),
         "goal_ahead": float(plan.stall_side == "ahead"),
@@ -107,13 +107,14 @@ def plan_features(planner: DrivePlanner, plan: TestPlan) -> dict[str, float]:
     }
 
 
-def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, target: int) -> int:
+def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, target: int,
+                   keys: list[bytes] | None = None) -> int:
     """Stalls other than ``target`` whose outline comes within ``PASS_REACH`` of the car's body.
 
     Routes to a garage's stalls share most poses, so each pose's stalls in reach are kept on the planner.
     """
     cache = _PASSED.setdefault(planner, {})
-    keys = pose_keys(rear, hdg)
+    keys = pose_keys(rear, hdg) if keys is None else keys
     miss = [i for i, k in enumerate(keys) if k not in cache]
     if miss:
         obs = planner.obstacles()
