@@ -77,8 +77,10 @@ def test_a_plan_is_the_same_planned_alone_or_after_the_stalls_that_share_its_rou
         assert (q.feasible, q.reason, q.goal, q.clearance, q.pullback) == (p.feasible, p.reason, p.goal, p.clearance,
                                                                           p.pullback)
         if p.feasible:
-            for a, b in ((p.centre, q.centre), (p.rear, q.rear), (p.clearances, q.clearances)):
+            for a, b in ((p.centre, q.centre), (p.rear, q.rear)):
                 np.testing.assert_array_equal(a, b)
+            # clearances the same where the car is within 2 m of something (farther ones count as open)
+            np.testing.assert_array_equal(np.minimum(p.clearances, 2.0), np.minimum(q.clearances, 2.0))
             assert plan_features(alone, q) == features[p.stall]
             with pytest.raises(ValueError):  # plans share their route's arrays: read-only
                 p.centre[0, 0] = 0.0
@@ -130,6 +132,33 @@ def test_clearance_is_checked_against_walls_pillars_and_stall_outlines():
     rear, hdg = plan.rear[40:41], plan.heading[40:41]
     clear, what = drive_planner(scene).clearance(rear, hdg)
     assert clear[0] == pytest.approx(4.5 - 1.75 - 0.95, abs=0.05) and what[0] in ("parked_car", "obstacle")
+
+
+def test_one_pass_gives_the_nearest_obstacle_and_the_nearest_of_another_stall():
+    """What the planner measures toward a stall (its own outline no obstacle) from one pass over the poses
+    equals measuring without that stall, wherever the car is within 2 m of something."""
+    from garage_mj.grid.painters import paint_garage
+    from garage_mj.scene.clearance import nearest_obstacle, nearest_two
+
+    scene = GarageScene(paint_garage("m5_13x13_aligned", seed=1))
+    planner = drive_planner(scene)
+    obs = planner.obstacles()
+    plans = [p for p in planner.plans() if p.feasible][::4]
+    rear = np.concatenate([p.rear for p in plans])
+    hdg = np.concatenate([p.heading for p in plans])
+    d, j, d2, j2 = nearest_two(obs, planner.car, rear, hdg)
+    np.testing.assert_array_equal((d, j), nearest_obstacle(obs, planner.car, rear, hdg))
+    at_stall = np.flatnonzero((j >= 0) & (obs.stall[np.maximum(j, 0)] >= 0))
+    assert len(at_stall) > 50
+    checked = 0
+    for i in at_stall[::7]:
+        stall = int(obs.stall[j[i]])
+        alone_d, alone_j = nearest_obstacle(obs, planner.car, rear[i:i + 1], hdg[i:i + 1], exclude_stall=stall)
+        assert obs.stall[j2[i]] != stall if j2[i] >= 0 else np.isinf(d2[i])
+        if min(alone_d[0], d2[i]) < 2.0:  # near: the same obstacle and distance
+            assert (d2[i], j2[i]) == (alone_d[0], alone_j[0])
+            checked += 1
+    assert checked > 5
 
 
 def test_a_stall_with_no_forward_route_is_infeasible_with_a_reason():

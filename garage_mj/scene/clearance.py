@@ -83,13 +83,45 @@ def nearest_obstacle(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading
     """Per pose, the distance [m] of the car body to the nearest obstacle and that obstacle's index in ``obs``
     (-1 when none lies within ``NEAR_OBSTACLE`` of the poses: distance inf)."""
     keep = obs.stall != exclude_stall if exclude_stall >= 0 else np.ones(len(obs.boxes), dtype=bool)
+    dist, idx = _distances(obs, car, rear, heading, keep)
+    if not len(idx):
+        return np.full(len(rear), np.inf), np.full(len(rear), -1)
+    j = np.argmin(dist, axis=1)
+    return dist[np.arange(len(rear)), j], idx[j]
+
+
+def nearest_two(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`nearest_obstacle` per pose, and the same without the nearest obstacle's stall (its own
+    answer when that is no stall outline): what a test toward that stall measures (its own outline is
+    no obstacle to it), from one pass over the obstacles near the poses."""
+    keep = np.ones(len(obs.boxes), dtype=bool)
+    dist, idx = _distances(obs, car, rear, heading, keep)
+    n = len(rear)
+    if not len(idx):
+        none_d, none_j = np.full(n, np.inf), np.full(n, -1)
+        return none_d, none_j, none_d.copy(), none_j.copy()
+    rows = np.arange(n)
+    j = np.argmin(dist, axis=1)
+    stall_of = obs.stall[idx]
+    own = stall_of[j]  # the nearest obstacle's stall (-1: not an outline)
+    other = np.where((own[:, None] >= 0) & (stall_of[None, :] == own[:, None]), np.inf, dist)
+    j2 = np.argmin(other, axis=1)
+    d2 = other[rows, j2]
+    return dist[rows, j], idx[j], d2, np.where(np.isinf(d2), -1, idx[j2])
+
+
+def _distances(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.ndarray,
+               keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, M) distances of the car body at each pose to the ``keep`` obstacles near the poses, and those
+    obstacles' indices (M,) in ``obs`` (exact below ``EXACT_BELOW``, else a lower bound)."""
     boxes = obs.boxes
     # only obstacles near the path
     lo, hi = rear.min(axis=0) - NEAR_OBSTACLE, rear.max(axis=0) + NEAR_OBSTACLE
-    keep &= (boxes[:, 2] >= lo[0]) & (boxes[:, 0] <= hi[0]) & (boxes[:, 3] >= lo[1]) & (boxes[:, 1] <= hi[1])
+    keep = keep & (boxes[:, 2] >= lo[0]) & (boxes[:, 0] <= hi[0]) & (boxes[:, 3] >= lo[1]) & (boxes[:, 1] <= hi[1])
     idx = np.flatnonzero(keep)
     if not len(idx):
-        return np.full(len(rear), np.inf), np.full(len(rear), -1)
+        return np.zeros((len(rear), 0)), idx
     boxes = boxes[idx]
     body = footprint(car, rear, heading)  # (N, 4, 2)
     # a cheap lower bound from the body's bounding circle; exact distances only where it is small
@@ -106,8 +138,7 @@ def nearest_obstacle(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading
         exact = np.minimum(_points_to_edges(cars, bc), _points_to_edges(bc, cars))
         exact[_overlap_pairs(cars, bx, bc)] = 0.0
         dist[n_i, m_i] = exact
-    j = np.argmin(dist, axis=1)
-    return dist[np.arange(len(rear)), j], idx[j]
+    return dist, idx
 
 
 def _points_to_edges(points: np.ndarray, polys: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from garage_mj.core.geometry import OPPOSITE
-from garage_mj.scene.clearance import Obstacles, footprint, nearest_obstacle, scene_obstacles
+from garage_mj.scene.clearance import Obstacles, footprint, nearest_obstacle, nearest_two, scene_obstacles
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.routing import START_OFFSET, LaneRoutes, Node, sample
 from garage_mj.scene.world import WORLD_DIR, cell_center
@@ -105,6 +105,13 @@ class _Route(NamedTuple):
     centre: np.ndarray
     s: np.ndarray
     keys: list[bytes]
+    dist: np.ndarray  # per pose, the clearance to the nearest obstacle over all, once known ...
+    near: np.ndarray  # ... and that obstacle's index (-1: none near; _UNKNOWN: not measured yet)
+    dist2: np.ndarray  # ... and the same without the nearest obstacle's stall (nearest_two)
+    near2: np.ndarray
+
+
+_UNKNOWN = -2
 
 
 @dataclass
@@ -133,10 +140,13 @@ class DrivePlanner:
         self.routes = LaneRoutes(self.net, self.world, self.rows, car, self.r_min)
         self._dist = self.routes.dist  # (cell, heading) -> cost of the best forward route to it
         self._obstacles: Obstacles | None = None
-        self._clear_cache: dict[bytes, tuple[float, int]] = {}  # pose -> (clearance, nearest obstacle) over all
+        # pose -> (clearance, nearest obstacle) over all, and without that obstacle's stall (nearest_two)
+        self._clear_cache: dict[bytes, tuple[float, int, float, int]] = {}
         self._routes: dict[tuple, _Route | str] = {}  # (path, final heading) -> its sampled route, or why none
         self._plan_keys: dict[int, list[bytes]] = {}  # stall -> pose keys of its feasible plan's path
+        self._names: np.ndarray | None = None  # obstacle classes by index, "" last (for index -1)
         self._lanes: tuple[np.ndarray, np.ndarray] | None = None
+        self._lanes_along: dict[float, np.ndarray] = {}  # heading -> lane points driving within 45 degrees of it
 
     # -- obstacles and the footprint (garage_mj.scene.clearance) --------------------------------------
     def obstacles(self) -> Obstacles:
@@ -163,17 +173,56 @@ class DrivePlanner:
         cache = self._clear_cache
         miss = [i for i, k in enumerate(keys) if k not in cache]
         if miss:
-            d, j = nearest_obstacle(obs, self.car, rear[miss], heading[miss])
-            for i, dd, jj in zip(miss, d.tolist(), j.tolist(), strict=True):
-                cache[keys[i]] = (dd, jj)
+            for i, *got in zip(miss, *(a.tolist() for a in nearest_two(obs, self.car, rear[miss], heading[miss])),
+                               strict=True):
+                cache[keys[i]] = tuple(got)
         got = [cache[k] for k in keys]
         dist = np.array([g[0] for g in got])
         near = np.array([g[1] for g in got], dtype=int)
+        return self._without_stall(rear, heading, dist, near, exclude_stall)
+
+    def _without_stall(self, rear: np.ndarray, heading: np.ndarray, dist: np.ndarray, near: np.ndarray,
+                       exclude_stall: int) -> tuple[np.ndarray, list[str]]:
+        """:meth:`clearance`'s answer from the poses' nearest obstacles over all (``dist``, ``near``: changed
+        here): the poses nearest the outline of ``exclude_stall`` measured again without it, and the names."""
+        obs = self.obstacles()
         if exclude_stall >= 0:
             redo = np.flatnonzero((near >= 0) & (obs.stall[np.maximum(near, 0)] == exclude_stall))
             if len(redo):
                 dist[redo], near[redo] = nearest_obstacle(obs, self.car, rear[redo], heading[redo], exclude_stall)
-        return dist, [obs.classes[k] if k >= 0 else "" for k in near]
+        if self._names is None:  # obstacle index -> class, with "" for none (-1)
+            self._names = np.array([*obs.classes, ""], dtype=object)
+        return dist, self._names[near].tolist()
+
+    def _route_clearance(self, route: _Route, lo: int, hi: int, exclude_stall: int) -> tuple[np.ndarray, list[str]]:
+        """:meth:`clearance` of the poses ``lo:hi`` of a candidate's route toward stall ``exclude_stall``, the
+        poses' two nearest obstacles kept on the route (the stalls along it ask for the same poses again).
+
+        Where a pose's nearest obstacle is the target stall's own outline, the answer is the nearest
+        obstacle of another stall or none, found in the same pass (``nearest_two``) instead of a
+        second pass over the obstacles near these poses: the same obstacle and distance wherever it
+        is below ``EXACT_BELOW`` (2 m, where distances are exact); above, where both are lower bounds,
+        it may differ in the last bits or come from another far obstacle (route features cap
+        clearance at 2 m). Poses within a micrometre share one cached value, whichever came first.
+        """
+        unknown = np.flatnonzero(route.near[lo:hi] == _UNKNOWN) + lo
+        if len(unknown):
+            cache, keys = self._clear_cache, route.keys
+            miss = [i for i in unknown.tolist() if keys[i] not in cache]  # others are shared with other routes
+            if miss:
+                found = nearest_two(self.obstacles(), self.car, route.rear[miss], route.heading[miss])
+                for i, *got in zip(miss, *(a.tolist() for a in found), strict=True):
+                    cache[keys[i]] = tuple(got)
+            for i in unknown.tolist():  # from the cache: poses with one key (within a micrometre) get one value
+                route.dist[i], route.near[i], route.dist2[i], route.near2[i] = cache[keys[i]]
+        dist, near = route.dist[lo:hi].copy(), route.near[lo:hi].copy()
+        if exclude_stall >= 0:
+            obs = self.obstacles()
+            own = (near >= 0) & (obs.stall[np.maximum(near, 0)] == exclude_stall)
+            dist[own], near[own] = route.dist2[lo:hi][own], route.near2[lo:hi][own]
+        if self._names is None:  # obstacle index -> class, with "" for none (-1)
+            self._names = np.array([*self.obstacles().classes, ""], dtype=object)
+        return dist, self._names[near].tolist()
 
     # -- lanes of the road model ----------------------------------------------------------------
     def _lane_points(self) -> tuple[np.ndarray, np.ndarray]:
@@ -186,11 +235,13 @@ class DrivePlanner:
 
     def lane_offset(self, x: float, y: float, yaw: float) -> float:
         """[m] distance of (x, y) to the nearest lane centre point driving within 45 degrees of ``yaw``."""
-        pos, hdg = self._lane_points()
-        same = np.cos(hdg - yaw) > math.cos(math.pi / 4)
-        if not same.any():
+        if yaw not in self._lanes_along:  # goals share a few headings: their lane points found once each
+            pos, hdg = self._lane_points()
+            self._lanes_along[yaw] = pos[np.cos(hdg - yaw) > math.cos(math.pi / 4)]
+        along = self._lanes_along[yaw]
+        if not len(along):
             return math.inf
-        d = np.linalg.norm(pos[same] - (x, y), axis=1)
+        d = np.linalg.norm(along - (x, y), axis=1)
         return float(d.min())
 
     # -- plans ---------------------------------------------------------------------------------------
@@ -255,7 +306,9 @@ class DrivePlanner:
                 s = np.concatenate([[0.0], np.cumsum(seg)])
                 for a in (rear, hdg, kap, centre, s):
                     a.flags.writeable = False
-                self._routes[key] = _Route(rear, hdg, kap, centre, s, pose_keys(rear, hdg))
+                n = len(rear)
+                self._routes[key] = _Route(rear, hdg, kap, centre, s, pose_keys(rear, hdg), np.full(n, np.inf),
+                                           np.full(n, _UNKNOWN), np.full(n, np.inf), np.full(n, _UNKNOWN))
         return self._routes[key]
 
     def _try(self, stall, cand: _Candidate) -> TestPlan:
@@ -263,7 +316,7 @@ class DrivePlanner:
         route = self._route(cand)
         if isinstance(route, str):
             return TestPlan(stall.id, False, route, stall_side=cand.side)
-        rear, hdg, kap, centre, s, keys = route
+        rear, hdg, kap, centre, s, keys = route[:6]
         # the goal: the centre-path point nearest the stall's entry, within the stall's road cell
         cx, cy = cell_center(*stall.road_cell, self.rows, self.world)
         half = self.world.block / 2 + 0.5
@@ -281,7 +334,7 @@ class DrivePlanner:
             dist = straight
         # the footprint at the goal must be clear; else move back along the lane
         pull = 0.0
-        clear_g, what = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id, keys=keys[g:g + 1])
+        clear_g, what = self._route_clearance(route, g, g + 1, stall.id)
         first = (clear_g[0], what[0])
         while clear_g[0] < cfg.clearance_margin:
             g -= 1
@@ -290,13 +343,13 @@ class DrivePlanner:
                 return TestPlan(stall.id, False, f"no clear place to stop beside the stall within {cfg.max_pullback:.0f} m "
                                 f"(a {first[1]} {first[0]:.2f} m from the car; margin {cfg.clearance_margin:.2f} m)",
                                 stall_side=cand.side)
-            clear_g, _ = self.clearance(rear[g:g + 1], hdg[g:g + 1], exclude_stall=stall.id, keys=keys[g:g + 1])
+            clear_g, _ = self._route_clearance(route, g, g + 1, stall.id)
         goal = (float(centre[g, 0]), float(centre[g, 1]), float(hdg[g]))
         offset = self.lane_offset(*goal)
         side = _side(stall, hdg[g])  # where the stall lies seen from the goal pose
         # the drive: from the start pose to the goal
         i0 = int(np.searchsorted(s, START_OFFSET))
-        clear, names = self.clearance(rear[i0:g + 1], hdg[i0:g + 1], exclude_stall=stall.id, keys=keys[i0:g + 1])
+        clear, names = self._route_clearance(route, i0, g + 1, stall.id)
         k = int(np.argmin(clear))
         max_k = float(np.abs(kap[: g + 1]).max())
         common = dict(centre=centre[: g + 1], rear=rear[: g + 1], heading=hdg[: g + 1], curvature=kap[: g + 1],
