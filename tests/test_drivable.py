@@ -64,6 +64,7 @@ def test_every_feasible_goal_is_a_pose_on_the_lane_beside_its_stall(painted_tiny
 def test_a_plan_is_the_same_planned_alone_or_after_the_stalls_that_share_its_route():
     """The planner keeps each sampled route and pose for the stalls along it; what it gives stays each stall's own."""
     from garage_mj.grid.painters import paint_garage
+    from garage_mj.scene.clearance import nearest_obstacle
     from garage_mj.scene.route_features import garage_features, plan_features
 
     garage = paint_garage("m5_13x13_aligned", seed=1)
@@ -81,6 +82,10 @@ def test_a_plan_is_the_same_planned_alone_or_after_the_stalls_that_share_its_rou
                 np.testing.assert_array_equal(a, b)
             # clearances the same where the car is within 2 m of something (farther ones count as open)
             np.testing.assert_array_equal(np.minimum(p.clearances, 2.0), np.minimum(q.clearances, 2.0))
+            # ... and what one direct measurement of the drive, without the target stall's outline, gives
+            i0 = p.drive_from
+            direct, _ = nearest_obstacle(together.obstacles(), together.car, p.rear[i0:], p.heading[i0:], p.stall)
+            np.testing.assert_allclose(np.minimum(p.clearances, 2.0), np.minimum(direct, 2.0), rtol=0, atol=1e-9)
             assert plan_features(alone, q) == features[p.stall]
             with pytest.raises(ValueError):  # plans share their route's arrays: read-only
                 p.centre[0, 0] = 0.0

@@ -205,16 +205,19 @@ class DrivePlanner:
         it may differ in the last bits or come from another far obstacle (route features cap
         clearance at 2 m). Poses within a micrometre share one cached value, whichever came first.
         """
-        unknown = np.flatnonzero(route.near[lo:hi] == _UNKNOWN) + lo
-        if len(unknown):
+        if (route.near[lo:hi] == _UNKNOWN).any():  # the whole route from its start pose at once: its stalls ask
+            start = min(lo, int(np.searchsorted(route.s, START_OFFSET)))
+            unknown = (np.flatnonzero(route.near[start:] == _UNKNOWN) + start).tolist()
             cache, keys = self._clear_cache, route.keys
-            miss = [i for i in unknown.tolist() if keys[i] not in cache]  # others are shared with other routes
+            miss = [i for i in unknown if keys[i] not in cache]  # the others are shared with other routes
             if miss:
                 found = nearest_two(self.obstacles(), self.car, route.rear[miss], route.heading[miss])
                 for i, *got in zip(miss, *(a.tolist() for a in found), strict=True):
                     cache[keys[i]] = tuple(got)
-            for i in unknown.tolist():  # from the cache: poses with one key (within a micrometre) get one value
-                route.dist[i], route.near[i], route.dist2[i], route.near2[i] = cache[keys[i]]
+            # from the cache: poses with one key (within a micrometre) get one value
+            columns = list(zip(*[cache[keys[i]] for i in unknown], strict=True))
+            for array, values in zip((route.dist, route.near, route.dist2, route.near2), columns, strict=True):
+                array[unknown] = values
         dist, near = route.dist[lo:hi].copy(), route.near[lo:hi].copy()
         if exclude_stall >= 0:
             obs = self.obstacles()
