@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "they run on any map. With --metric route the band is one of the route-aware difficulty "
             "(garage-mj difficulty): the policy's first 20 rollouts (asking in turn for each tenth of the paper's "
             "difficulty, for seeds of every kind) and every search step are rated by "
-            "planning the routes to all stalls (about 0.2-0.4 CPU-s per 13x13 garage), the search climbs and "
+            "planning the routes to all stalls (about 0.1-0.2 CPU-s per 13x13 garage), the search climbs and "
             "walks by that rating, and each garage stored gets its value in the library (library ls "
             "--route-difficulty LO HI finds them)."
         ),
