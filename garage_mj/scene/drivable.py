@@ -58,7 +58,11 @@ DEFAULT_DRIVE = DriveConfig()
 
 @dataclass(frozen=True)
 class TestPlan:
-    """The planned drive to one stall: feasible with its route and goal, or infeasible with a reason."""
+    """The planned drive to one stall: feasible with its route and goal, or infeasible with a reason.
+
+    The path arrays (``centre``, ``rear``, ``heading``, ``curvature``) are read-only views: the stalls
+    along one route share them.
+    """
 
     stall: int
     feasible: bool
@@ -159,17 +163,15 @@ class DrivePlanner:
         """(N, 4, 2) corners of the car's body with its rear-axle midpoint at ``rear`` and ``heading``."""
         return footprint(self.car, rear, heading)
 
-    def clearance(self, rear: np.ndarray, heading: np.ndarray, exclude_stall: int = -1,
-                  keys: list[bytes] | None = None) -> tuple[np.ndarray, list[str]]:
+    def clearance(self, rear: np.ndarray, heading: np.ndarray, exclude_stall: int = -1) -> tuple[np.ndarray, list[str]]:
         """Per pose, the distance [m] of the car body to the nearest obstacle (0 when touching), and its class.
 
         The routes to a garage's stalls share most of their poses (they fan out from one start), so
         each pose's nearest obstacle over all of them is computed once and kept; only the poses whose
         nearest obstacle is the outline of ``exclude_stall`` itself are measured again without it.
-        ``keys``: the poses' :func:`pose_keys`, when the caller has them.
         """
         obs = self.obstacles()
-        keys = pose_keys(rear, heading) if keys is None else keys
+        keys = pose_keys(rear, heading)
         cache = self._clear_cache
         miss = [i for i, k in enumerate(keys) if k not in cache]
         if miss:
@@ -179,20 +181,17 @@ class DrivePlanner:
         got = [cache[k] for k in keys]
         dist = np.array([g[0] for g in got])
         near = np.array([g[1] for g in got], dtype=int)
-        return self._without_stall(rear, heading, dist, near, exclude_stall)
-
-    def _without_stall(self, rear: np.ndarray, heading: np.ndarray, dist: np.ndarray, near: np.ndarray,
-                       exclude_stall: int) -> tuple[np.ndarray, list[str]]:
-        """:meth:`clearance`'s answer from the poses' nearest obstacles over all (``dist``, ``near``: changed
-        here): the poses nearest the outline of ``exclude_stall`` measured again without it, and the names."""
-        obs = self.obstacles()
         if exclude_stall >= 0:
             redo = np.flatnonzero((near >= 0) & (obs.stall[np.maximum(near, 0)] == exclude_stall))
             if len(redo):
                 dist[redo], near[redo] = nearest_obstacle(obs, self.car, rear[redo], heading[redo], exclude_stall)
-        if self._names is None:  # obstacle index -> class, with "" for none (-1)
-            self._names = np.array([*obs.classes, ""], dtype=object)
-        return dist, self._names[near].tolist()
+        return dist, self._class_names(near)
+
+    def _class_names(self, near: np.ndarray) -> list[str]:
+        """The class of each obstacle index in ``near`` ("" for -1, none)."""
+        if self._names is None:
+            self._names = np.array([*self.obstacles().classes, ""], dtype=object)
+        return self._names[near].tolist()
 
     def _route_clearance(self, route: _Route, lo: int, hi: int, exclude_stall: int) -> tuple[np.ndarray, list[str]]:
         """:meth:`clearance` of the poses ``lo:hi`` of a candidate's route toward stall ``exclude_stall``, the
@@ -223,9 +222,7 @@ class DrivePlanner:
             obs = self.obstacles()
             own = (near >= 0) & (obs.stall[np.maximum(near, 0)] == exclude_stall)
             dist[own], near[own] = route.dist2[lo:hi][own], route.near2[lo:hi][own]
-        if self._names is None:  # obstacle index -> class, with "" for none (-1)
-            self._names = np.array([*self.obstacles().classes, ""], dtype=object)
-        return dist, self._names[near].tolist()
+        return dist, self._class_names(near)
 
     # -- lanes of the road model ----------------------------------------------------------------
     def _lane_points(self) -> tuple[np.ndarray, np.ndarray]:
