@@ -91,6 +91,11 @@ def _two_fold(records: list[dict]) -> dict:
     return {"r": round(r, 4) if r == r else None, "auc": round(a, 4) if a == a else None, "garages": len(rows)}
 
 
+def _names(text: str) -> list[str]:
+    """A comma-separated list of driver names ('' for none)."""
+    return [d for d in text.split(",") if d]
+
+
 def _reuse(items: list[str]) -> dict[str, Path]:
     out = {}
     for item in items:
@@ -118,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
                         "behaviour than the fit's discrete one; '' for none; default vision)")
     p.add_argument("--reuse", nargs="*", default=[], metavar="DRIVER=DIR",
                    help="held-out runs done before with the same settings (e.g. vision=runs/paper_validation_vision)")
-    p.add_argument("--lodo-drivers", default=",".join(LODO_DRIVERS), metavar="DRIVERS",
+    p.add_argument("--lodo-drivers", type=_names, default=",".join(LODO_DRIVERS), metavar="DRIVERS",
                    help="leave-one-driver-out: these drivers also drive the fit set, and each is scored by a model "
                         "fitted on the others ('' for none)")
     p.add_argument("--workers", type=positive_int, default=2)
@@ -126,9 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.heldout_run_seed in args.fit_run_seeds:
         p.error("--heldout-run-seed must not be one of --fit-run-seeds")
-    lodo = [d for d in args.lodo_drivers.split(",") if d]
     if args.only in (None, "fit"):
-        collect(args.library, args.out, list(dict.fromkeys([*FIT_DRIVERS, *lodo])), FIT_MAPS, args.fit_run_seeds,
+        collect(args.library, args.out, list(dict.fromkeys([*FIT_DRIVERS, *args.lodo_drivers])), FIT_MAPS, args.fit_run_seeds,
                 args.fit_per_map, args.fit_tests, args.workers, "fit")
     if args.only in (None, "heldout"):
         collect(args.library, args.out, args.heldout_drivers.split(","), (HELDOUT_MAP,), [args.heldout_run_seed],
@@ -166,7 +170,7 @@ def report(args) -> int:
         records_of = [r for r in records if r["run"] == str(run)]
         scores[label] = next(iter(score(model, records_of, garage_route=per_garage).values()))
         refit[label] = _two_fold(records_of)
-    lodo = _leave_one_driver_out(args, [d for d in args.lodo_drivers.split(",") if d], held)
+    lodo = _leave_one_driver_out(args, args.lodo_drivers, held)
     result = {"model_key": model.key, "fit": model.fit, "heldout": scores, "refit_two_fold": refit,
               "leave_one_driver_out": lodo,
               "protocol": {"fit_maps": list(FIT_MAPS), "fit_run_seeds": args.fit_run_seeds,

@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from garage_mj.scene.drivable import DrivePlanner, drive_planner, pose_keys
+from garage_mj.scene.drivable import DrivePlanner, drive_planner
 
 if TYPE_CHECKING:
     from garage_mj.scene.drivable import TestPlan
@@ -107,14 +107,13 @@ def plan_features(planner: DrivePlanner, plan: TestPlan) -> dict[str, float]:
     }
 
 
-def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, target: int,
-                   keys: list[bytes] | None = None) -> int:
-    """Stalls other than ``target`` whose outline comes within ``PASS_REACH`` of the car's body.
+def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, target: int, keys: list[bytes]) -> int:
+    """Stalls other than ``target`` whose outline comes within ``PASS_REACH`` of the car's body at the poses
+    ``rear``, ``hdg`` (their :func:`~garage_mj.scene.drivable.pose_keys` ``keys``).
 
     Routes to a garage's stalls share most poses, so each pose's stalls in reach are kept on the planner.
     """
     cache = _PASSED.setdefault(planner, {})
-    keys = pose_keys(rear, hdg) if keys is None else keys
     miss = [i for i, k in enumerate(keys) if k not in cache]
     if miss:
         obs = planner.obstacles()
