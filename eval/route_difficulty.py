@@ -46,15 +46,18 @@ HELDOUT_DRIVERS = ("vision", "waypoint", "learned")
 LODO_DRIVERS = ("vision", "waypoint", "learned")
 
 
-def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, tests: int, workers: int,
-            tag: str, reuse: dict[str, Path] | None = None, action_type: str = "discrete") -> dict[str, Path]:
-    """Run (resumably) ``tests`` cruise tests of each driver on the garages; returns driver -> run folder."""
+def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, tests: int | dict[str, int], workers: int,
+            tag: str, reuse: dict[str, Path] | None = None, action_type: str = "discrete", sample_seed: int = 0,
+            exclude: frozenset[str] = frozenset()) -> dict[str, Path]:
+    """Run (resumably) ``tests`` cruise tests (or ``tests[driver]``) of each driver on the garages; returns
+    driver -> run folder. The garages: ``per_map`` of each map drawn with ``sample_seed``, none of ``exclude``."""
     from garage_mj.driving.garage_set import GarageSet
     from garage_mj.reporting.cruise import run_cruise
 
     sources = []
     for m in maps:
-        sources += list(GarageSet.from_library(library, map=m, run_seeds=run_seeds, n=per_map, seed=0))
+        sources += list(GarageSet.from_library(library, map=m, run_seeds=run_seeds, n=per_map, seed=sample_seed,
+                                               exclude=exclude))
     runs = {}
     for driver in drivers:
         run = out / f"{tag}_{driver}"
@@ -62,8 +65,9 @@ def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, te
             run.mkdir(parents=True, exist_ok=True)
             for name in ("tests.csv", "run.json"):
                 shutil.copy(reuse[driver] / name, run / name)
-        print(f"{tag}: {len(sources)} garages x {tests} tests, driver {driver} -> {run}", flush=True)
-        run_cruise(sources, tests, driver, workers, 0, run, action_type=action_type)
+        n = tests[driver] if isinstance(tests, dict) else tests
+        print(f"{tag}: {len(sources)} garages x {n} tests, driver {driver} -> {run}", flush=True)
+        run_cruise(sources, n, driver, workers, 0, run, action_type=action_type)
         runs[driver] = run
     return runs
 
@@ -96,6 +100,25 @@ def _names(text: str) -> list[str]:
     return [d for d in text.split(",") if d]
 
 
+def _driver_counts(text: str) -> dict[str, int]:
+    """``vision=50,learned=150`` -> {driver: tests per garage}."""
+    out = {}
+    for item in _names(text):
+        driver, _, n = item.partition("=")
+        if not n.isdigit() or int(n) < 1:
+            raise argparse.ArgumentTypeError(f"{item!r}: expected DRIVER=N with N >= 1")
+        out[driver] = int(n)
+    return out
+
+
+def _heldout_hashes(args) -> frozenset[str]:
+    """The garages of the (first) held-out set: the fresh set is drawn from the others."""
+    from garage_mj.driving.garage_set import GarageSet
+
+    return frozenset(GarageSet.from_library(args.library, map=HELDOUT_MAP, run_seeds=[args.heldout_run_seed],
+                                            n=args.heldout_garages, seed=0).hashes)
+
+
 def _reuse(items: list[str]) -> dict[str, Path]:
     out = {}
     for item in items:
@@ -126,8 +149,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--lodo-drivers", type=_names, default=",".join(LODO_DRIVERS), metavar="DRIVERS",
                    help="leave-one-driver-out: these drivers also drive the fit set, and each is scored by a model "
                         "fitted on the others ('' for none)")
+    p.add_argument("--fresh-sample-seed", type=int, default=1,
+                   help="fresh held-out set (session 10): the sample seed of its m5 garages of --heldout-run-seed, "
+                        "drawn from those the held-out set above did not take (default 1)")
+    p.add_argument("--fresh-garages", type=positive_int, default=50)
+    p.add_argument("--fresh-tests", type=_driver_counts, default="learned=150,vision=50,waypoint=50",
+                   metavar="DRIVER=N,...", help="tests per garage of each driver on the fresh set")
     p.add_argument("--workers", type=positive_int, default=2)
-    p.add_argument("--only", choices=("fit", "heldout"), help="only collect this part's cruise tests")
+    p.add_argument("--only", choices=("fit", "heldout", "fresh"), help="only collect this part's cruise tests")
     args = p.parse_args(argv)
     if args.heldout_run_seed in args.fit_run_seeds:
         p.error("--heldout-run-seed must not be one of --fit-run-seeds")
@@ -141,6 +170,10 @@ def main(argv: list[str] | None = None) -> int:
             collect(args.library, args.out, args.heldout_continuous.split(","), (HELDOUT_MAP,),
                     [args.heldout_run_seed], args.heldout_garages, args.heldout_tests, args.workers, "heldout_continuous",
                     action_type="continuous")
+    if args.only == "fresh":
+        collect(args.library, args.out, list(args.fresh_tests), (HELDOUT_MAP,), [args.heldout_run_seed],
+                args.fresh_garages, args.fresh_tests, args.workers, "fresh", sample_seed=args.fresh_sample_seed,
+                exclude=_heldout_hashes(args))
     if args.only is not None:
         return 0
     return report(args)

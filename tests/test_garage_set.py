@@ -98,6 +98,17 @@ def test_a_sample_is_seeded_stratified_and_the_library_s_own(library):
         assert [s.name for s in a] == [f"{r.map}#{r.id}" for r in lib.sample(7, 3)]
     others = {GarageSet.from_library(library, n=7, seed=s).hashes for s in range(6)}
     assert len(others) > 1  # the seed matters
+
+
+def test_excluded_garages_are_left_out_before_the_draw(library):
+    first = GarageSet.from_library(library, n=7, seed=3)
+    fresh = GarageSet.from_library(library, n=7, seed=3, exclude=first.hashes)
+    assert len(fresh) == 7 and not set(fresh.hashes) & set(first.hashes)  # a full, disjoint sample
+    assert "excluding=7" in fresh.origin
+    rest = GarageSet.from_library(library, exclude=first.hashes)
+    assert set(rest.hashes) == set(GarageSet.from_library(library).hashes) - set(first.hashes)
+    with pytest.raises(GarageSetError, match="among the 18 excluded"):
+        GarageSet.from_library(library, exclude=GarageSet.from_library(library).hashes)
     sub = GarageSet.from_library(library, run_seeds=[1], n=5, seed=0)
     everything = GarageSet.from_library(library, run_seeds=[1])
     assert len(sub) == 5 and set(sub.hashes) < set(everything.hashes)

@@ -111,6 +111,7 @@ class GarageSet:
         seed: int = 0,
         route: tuple[float, float] | None = None,
         route_model: RouteDifficulty | str | Path | None = None,
+        exclude: Iterable[str] = (),
     ) -> GarageSet:
         """The garages of a library file that match every filter, sorted by library id.
 
@@ -123,6 +124,8 @@ class GarageSet:
         ``n`` (all of them when fewer match), stratified by difficulty as ``garage-mj library sample``
         does (bins of :data:`~garage_mj.generation.library.DIFFICULTY_BIN`, spread evenly, so rare easy
         or hard garages are not drowned out); with no ``run_seeds`` it is exactly that command's sample.
+        ``exclude`` holds garage hashes left out before the draw (for example the garages an earlier
+        run already drove, so a new sample is disjoint from it).
         Each garage's grid is checked against its stored hash.
         """
         path = Path(path)
@@ -144,6 +147,12 @@ class GarageSet:
                 records = lib.query(map=map, difficulty=difficulty, route=route, route_model=key)
                 if seeds is not None:
                     records = [r for r in records if run_seed(r.run) in seeds]
+                excluded = frozenset(exclude)
+                if excluded and records:
+                    records = [r for r in records if r.hash not in excluded]
+                    if not records:
+                        raise GarageSetError(f"library {path}: every garage that matches the filters is among the "
+                                             f"{len(excluded)} excluded; exclude fewer or loosen the filters")
                 if not records:
                     raise GarageSetError(_no_match(lib, path, map, difficulty, seeds, route))
         except LibraryError as exc:
@@ -159,7 +168,8 @@ class GarageSet:
         filters = [f"map={map}" if map is not None else "",
                    "runs=" + ",".join(f"s{s}" for s in seeds) if seeds is not None else "",
                    f"difficulty={difficulty[0]:g}-{difficulty[1]:g}" if difficulty is not None else "",
-                   f"route_difficulty={route[0]:g}-{route[1]:g}@{key}" if route is not None else ""]
+                   f"route_difficulty={route[0]:g}-{route[1]:g}@{key}" if route is not None else "",
+                   f"excluding={len(excluded)}" if excluded else ""]
         drawn = (f"n={len(records)} of {total}, stratified by difficulty, seed {seed}" if len(records) < total
                  else f"all {total}")
         origin = " ".join(["library", str(path), *[f for f in filters if f], f"({drawn})"])
