@@ -16,6 +16,20 @@ Protocol (fixed before any result was seen; nothing is tuned on the held-out set
   these drivers a model is fitted on the fit-set tests of the others only and scored on that
   driver's held-out tests, so both its garages and the driver are unseen by the model.
 
+* **fresh held-out set** (``--only fresh`` collects it, ``--fresh-report`` scores it; session 10, fixed
+  before any of its tests was scored): 50 more m5 garages of training seed 4 (stratified sample seed
+  ``--fresh-sample-seed``, none of the first held-out set's), no earlier run drove any of them; ``learned``
+  150 tests each (at 50 its attainable |r| is too low to judge r <= -0.8), ``vision`` and ``waypoint`` 50.
+  The first held-out set has been seen, so it became development data: every model scored here
+  is fitted on ``--dev-runs`` (the fit set of the three drivers and the first held-out set) with the 16
+  route features (the 14 of the route and the paper's two garage terms, ``short_roads`` and ``few_way``):
+  ``pooled`` on all three drivers (shipped as ``models/difficulty/route.json``), ``without_<driver>``
+  on the other two (leave one driver out), ``own_<driver>`` on that driver alone (the learned
+  driver's is shipped as ``models/difficulty/learned.json``), next to the model shipped before and
+  the paper's difficulty. It also prints the bound on any single per-garage difficulty for two
+  drivers at once: if their success % correlate by r12 over the garages, no one difficulty can have
+  |r| above sqrt((1 + r12) / 2) with both.
+
 Next to each r it prints the largest |r| any per-garage difficulty can expect on those garages
 (``attainable_r``): each garage's success % is measured on 50 tests, and only the spread between
 garages beyond that binomial noise can follow a difficulty.
@@ -155,11 +169,22 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fresh-garages", type=positive_int, default=50)
     p.add_argument("--fresh-tests", type=_driver_counts, default="learned=150,vision=50,waypoint=50",
                    metavar="DRIVER=N,...", help="tests per garage of each driver on the fresh set")
+    p.add_argument("--dev-runs", type=_names, metavar="DIRS",
+                   default="fit_vision,fit_waypoint,fit_learned,heldout_vision,heldout_waypoint,heldout_learned_150",
+                   help="development runs (folders under --out) the fresh report fits its models on")
+    p.add_argument("--fresh-report", action="store_true",
+                   help="score the fresh held-out set (after --only fresh) and write --json; no other report")
+    p.add_argument("--models-out", type=Path, help="with --fresh-report: also write the pooled model to "
+                   "DIR/route.json and the learned driver's own to DIR/learned.json (with their .fit.csv)")
     p.add_argument("--workers", type=positive_int, default=2)
     p.add_argument("--only", choices=("fit", "heldout", "fresh"), help="only collect this part's cruise tests")
     args = p.parse_args(argv)
     if args.heldout_run_seed in args.fit_run_seeds:
         p.error("--heldout-run-seed must not be one of --fit-run-seeds")
+    if args.fresh_report:
+        if args.only:
+            p.error("--fresh-report collects nothing; run --only fresh first, then --fresh-report alone")
+        return report_fresh(args)
     if args.only in (None, "fit"):
         collect(args.library, args.out, list(dict.fromkeys([*FIT_DRIVERS, *args.lodo_drivers])), FIT_MAPS, args.fit_run_seeds,
                 args.fit_per_map, args.fit_tests, args.workers, "fit")
@@ -232,6 +257,87 @@ def report(args) -> int:
         m = d["route"]
         print(f"  {driver}: fitted on {'+'.join(d['fit_drivers'])} ({d['fit_tests']} tests): route r = {m['r']} "
               f"{m['r_ci95']}  AUC = {m['auc']}  (attainable |r| {d['attainable_r']})")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(args.json, json.dumps(result, indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+def report_fresh(args) -> int:
+    """Fit the session-10 models on the development runs and score them on the fresh held-out set."""
+    import json
+
+    import numpy as np
+
+    from garage_mj.core.fsutil import atomic_write
+    from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
+    from garage_mj.driving.regression import pearson
+    from garage_mj.scene.route_difficulty import load_route_model
+
+    work = args.out / "models_s10"
+    before = load_route_model()  # read before --models-out may replace it
+    dev = [args.out / d for d in args.dev_runs]
+    missing = [str(r) for r in dev if not (r / "tests.csv").is_file()]
+    fresh = {d: args.out / f"fresh_{d}" for d in args.fresh_tests}
+    missing += [str(r) for r in fresh.values() if not (r / "tests.csv").is_file()]
+    if missing:
+        raise SystemExit(f"missing runs {missing}; collect them first (--only fit / heldout / fresh)")
+    drivers = list(args.fresh_tests)
+
+    def dev_of(names):  # the development runs of these drivers
+        return [r for r in dev if any(r.name == f"{t}_{d}" or r.name.startswith(f"{t}_{d}_")
+                                      for d in names for t in ("fit", "heldout"))]
+
+    shipped = {"pooled": "route.json", "own_learned": "learned.json"}  # written into --models-out when given
+
+    def path(name):
+        return args.models_out / shipped[name] if args.models_out and name in shipped else work / f"{name}.json"
+
+    models = {"pooled": fit_runs(dev_of(drivers), path("pooled"), args.library, progress=False)[0]}
+    for d in drivers:
+        models[f"without_{d}"] = fit_runs(dev_of([o for o in drivers if o != d]), path(f"without_{d}"),
+                                          args.library, progress=False)[0]
+        models[f"own_{d}"] = fit_runs(dev_of([d]), path(f"own_{d}"), args.library, progress=False)[0]
+    models["shipped_before"] = before
+    for name, m in models.items():
+        print(f"{name}: {m.fit.get('tests')} tests of {m.fit.get('drivers')}; weights "
+              + ", ".join(f"{f} {w:.2f}" for f, w in m.coefficients() if w > 0))
+    result: dict = {"protocol": {"fresh_sample_seed": args.fresh_sample_seed, "garages": args.fresh_garages,
+                                 "tests": args.fresh_tests, "dev_runs": args.dev_runs, "map": HELDOUT_MAP,
+                                 "run_seed": args.heldout_run_seed},
+                    "models": {n: {"key": m.key, "fit": {k: m.fit.get(k) for k in ("tests", "failures", "drivers")},
+                                   "coefficients": {f: round(float(w), 4) for f, w in m.coefficients()}}
+                               for n, m in models.items()},
+                    "scores": {}}
+    success: dict[str, dict[str, float]] = {}
+    for d in drivers:
+        result["scores"][d] = {}
+        for name, m in models.items():
+            if name in (f"without_{o}" for o in drivers if o != d) or name in (f"own_{o}" for o in drivers if o != d):
+                continue
+            records, per_garage = load_runs([fresh[d]], args.library, m)
+            sc = next(iter(score(m, records, garage_route=per_garage).values()))
+            result["scores"][d][name] = sc
+            success[d] = {h: 100.0 * (1 - np.mean([r["failed"] for r in records if r["garage_hash"] == h]))
+                          for h in sorted({r["garage_hash"] for r in records})}
+        first = next(iter(result["scores"][d].values()))
+        print(f"{d}: {first['garages']} garages x {first['tests'] // max(1, first['garages'])} tests, success "
+              f"{first['success_pct']}%, attainable |r| {first['attainable_r']} {first['attainable_r_ci95']}")
+        print(f"  paper's difficulty   r = {first['paper']['r']} {first['paper']['r_ci95']}  AUC = {first['paper']['auc']}")
+        for name, sc in result["scores"][d].items():
+            print(f"  {name:<20} r = {sc['route']['r']} {sc['route']['r_ci95']}  AUC = {sc['route']['auc']}")
+    bounds = {}
+    for i, a in enumerate(drivers):
+        for b in drivers[i + 1:]:
+            hs = sorted(set(success[a]) & set(success[b]))
+            r12 = pearson([success[a][h] for h in hs], [success[b][h] for h in hs])
+            bounds[f"{a}+{b}"] = {"r_between": round(r12, 4), "best_joint_abs_r": round(float(np.sqrt((1 + r12) / 2)), 4)}
+            print(f"one difficulty for {a} and {b}: their success % correlate by r {r12:.3f}, so no single per-garage "
+                  f"difficulty has |r| above {np.sqrt((1 + r12) / 2):.3f} with both")
+    result["single_difficulty_bound"] = bounds
+    if args.models_out:
+        print(f"wrote the pooled and the learned driver's models to {args.models_out} (route.json, learned.json)")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(args.json, json.dumps(result, indent=1) + "\n")

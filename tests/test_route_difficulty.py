@@ -42,6 +42,17 @@ def test_route_features_describe_the_planned_route(painted_tiny, tiny_features):
     assert means["length"] == pytest.approx(np.mean([f["length"] for f in tiny_features.values() if f]))
 
 
+def test_garage_terms_are_the_paper_s_difficulty_split_in_two(painted_tiny, tiny_features):
+    from garage_mj.grid.metrics import DEFAULT_DIFFICULTY, evaluate
+
+    rows = [f for f in tiny_features.values() if f]
+    assert len({(f["short_roads"], f["few_way"]) for f in rows}) == 1  # the whole garage's: one value per garage
+    f, c, m = rows[0], DEFAULT_DIFFICULTY, evaluate(painted_tiny)
+    assert 0.0 <= f["short_roads"] <= 1.0 and 0.0 <= f["few_way"] <= 1.0
+    assert c.w_road_length * f["short_roads"] + c.w_intersection * f["few_way"] == pytest.approx(m.difficulty)
+    assert f["short_roads"] == pytest.approx((6 - m.mean_road_length) / 4)  # E[X] of 2 cells -> 1, 6 -> 0
+
+
 def _start_length(plan) -> float:
     """Length of the planned centre path before the start pose."""
     c = plan.centre[: plan.drive_from + 1]

@@ -157,6 +157,7 @@ def fit_runs(runs: Sequence[str | Path], out: str | Path, library: str | Path | 
     except ValueError as exc:
         raise DifficultyFitError(f"cannot fit on {len(records)} tests of {len(runs)} run(s): {exc}") from None
     model.fit["in_sample"] = score(model, records)
+    out.parent.mkdir(parents=True, exist_ok=True)
     write_records(data, records)
     model.save(out)
     return model, records

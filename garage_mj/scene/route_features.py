@@ -29,6 +29,11 @@ oriented so that a larger value is a harder drive:
     stalls); 0 when it lies on the car's own side (the planner's preference).
 ``pullback``
     [m] how far the goal moved back from the stall because its pose was not clear.
+``short_roads``, ``few_way``
+    the whole garage's two terms of the paper's difficulty (:func:`garage_mj.grid.metrics.difficulty`),
+    the same for every test of a garage: ``1 - n_X`` (short road segments, E[X] of 2 cells -> 1,
+    6 -> 0) and ``1 - n_Y`` (junctions where few roads meet, E[Y] of 2 -> 1, 4 -> 0). Some drivers
+    fail by the garage as a whole rather than by their route (the learned driver, session 10).
 
 :func:`garage_features` gives the features of every stall of a garage; cruise draws the target
 stall uniformly and counts success over the feasible ones, so the expectation of a per-test
@@ -43,6 +48,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from garage_mj.grid.metrics import DEFAULT_DIFFICULTY, evaluate
 from garage_mj.scene.drivable import DrivePlanner, drive_planner
 
 if TYPE_CHECKING:
@@ -50,13 +56,16 @@ if TYPE_CHECKING:
     from garage_mj.scene.garage_scene import GarageScene
 
 FEATURES = ("length", "turns", "left_turns", "right_turns", "heading_change", "tightness", "squeeze",
-            "turn_squeeze", "tight_length", "stalls_passed", "junctions", "goal_left", "goal_ahead", "pullback")
+            "turn_squeeze", "tight_length", "stalls_passed", "junctions", "goal_left", "goal_ahead", "pullback",
+            "short_roads", "few_way")
 CLEAR_CAP = 2.0  # [m] clearances above this count as open (the planner measures them exactly below 2 m)
 TIGHT = 0.75  # [m] swept clearance below which a stretch of route is tight
 TURN_REACH = 3.0  # [m] poses this close (along the route) to a turn belong to it for turn_squeeze
 PASS_REACH = 1.0  # [m] a stall outline this close to the car's body is passed
 #: per planner (one per garage and car), per pose (:func:`~garage_mj.scene.drivable.pose_keys`): the stalls in reach
 _PASSED: weakref.WeakKeyDictionary[DrivePlanner, dict[bytes, frozenset[int]]] = weakref.WeakKeyDictionary()
+#: per planner: its garage's grid-level features (``short_roads``, ``few_way``)
+_GARAGE: weakref.WeakKeyDictionary[DrivePlanner, dict[str, float]] = weakref.WeakKeyDictionary()
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -104,7 +113,20 @@ def plan_features(planner: DrivePlanner, plan: TestPlan) -> dict[str, float]:
         "goal_left": float(plan.stall_side == "left"),
         "goal_ahead": float(plan.stall_side == "ahead"),
         "pullback": float(plan.pullback),
+        **_garage_terms(planner),
     }
+
+
+def _garage_terms(planner: DrivePlanner) -> dict[str, float]:
+    """The paper's two difficulty terms of the planner's garage, as ``short_roads`` and ``few_way`` (kept per planner)."""
+    terms = _GARAGE.get(planner)
+    if terms is None:
+        m = evaluate(planner.scene.garage)
+        c = DEFAULT_DIFFICULTY
+        terms = {"short_roads": 1.0 - (m.mean_road_length - c.road_length_min) / (c.road_length_max - c.road_length_min),
+                 "few_way": 1.0 - (m.mean_intersection_degree - c.intersection_min) / (c.intersection_max - c.intersection_min)}
+        _GARAGE[planner] = terms
+    return terms
 
 
 def _stalls_passed(planner: DrivePlanner, rear: np.ndarray, hdg: np.ndarray, target: int, keys: list[bytes]) -> int:
