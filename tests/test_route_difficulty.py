@@ -130,6 +130,18 @@ def test_shipped_model_rates_a_garage(painted_tiny, tiny_features):
     assert model.fit["drivers"] and model.fit["tests"] > 100
 
 
+def test_shipped_models_load_by_name(tmp_path, monkeypatch, painted_tiny):
+    default, learned = load_route_model(), load_route_model("learned")
+    assert load_route_model("route") == default and learned.key != default.key
+    assert learned.fit["drivers"] == ["learned"] and {"short_roads", "few_way"} <= set(learned.features)
+    assert 0.0 < route_difficulty(painted_tiny, learned) < 1.0
+    monkeypatch.chdir(tmp_path)  # a file of that name wins over the shipped model
+    learned.save(tmp_path / "route")
+    assert load_route_model("route") == learned
+    with pytest.raises(RouteModelError, match="does not exist"):
+        load_route_model("no_such_model")
+
+
 @pytest.mark.filterwarnings("ignore::garage_mj.driving.drivers.ActionTypeWarning")
 def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage, capsys):
     from garage_mj.reporting.cruise import run_cruise

@@ -92,7 +92,7 @@ def add_filters(p: argparse.ArgumentParser) -> None:
                    "stored by 'garage-mj library rate LIBRARY'")
     p.add_argument("--route-model", type=Path, metavar="FILE",
                    help="route difficulty model of --route-difficulty and of the values shown (default: the shipped "
-                   "one; 'garage-mj difficulty fit' writes others)")
+                   "one; 'learned': the shipped learned driver's own; 'garage-mj difficulty fit' writes others)")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"),
                    help="only coverage in [LO, HI] (0-1)")
     p.add_argument("--feasible", nargs=2, type=unit_range, metavar=("LO", "HI"),

@@ -58,7 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                  "difficulty, with 95%% bootstrap intervals, and the per-test AUC of each as a "
                                  "failure predictor.")
     c.add_argument("results", nargs="+", type=Path, metavar="RESULTS", help="cruise run folders")
-    c.add_argument("--model", type=Path, help="model file (default: the shipped one)")
+    c.add_argument("--model", type=Path, help="model file (default: the shipped one; 'learned': the shipped learned driver's own)")
     c.add_argument("--library", type=Path, help="library of the runs' garages (runs without garages.json)")
     c.add_argument("--json", type=Path, help="also write the figures here")
     c.set_defaults(func=run_score)
@@ -75,7 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     w.add_argument("--map", help="only this map's garages (library)")
     w.add_argument("-n", type=positive_int, help="at most N garages (a seeded sample of a library; painted: N)")
     w.add_argument("--seed", type=seed, default=0, help="seed of the sample or of the painting (default 0)")
-    w.add_argument("--model", type=Path, help="model file (default: the shipped one)")
+    w.add_argument("--model", type=Path, help="model file (default: the shipped one; 'learned': the shipped learned driver's own)")
     w.add_argument("--stalls", type=positive_int, default=3, metavar="K", help="hardest stalls to list (default 3)")
     w.set_defaults(func=run_show)
 

@@ -51,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "route: the route-aware difficulty, the expected failure rate of a cruise test predicted "
                         "from the planned routes (garage-mj difficulty); each garage stored gets it in the library")
     p.add_argument("--route-model", type=Path, metavar="FILE",
-                   help="with --metric route: a model of garage-mj difficulty fit (default: the shipped one)")
+                   help="with --metric route: a model of garage-mj difficulty fit (default: the shipped one; 'learned': the shipped learned driver's own)")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"), help="coverage band [LO, HI] (0-1)")
     p.add_argument("--count", required=True, type=positive_int, help="distinct garages to find")
     p.add_argument("--library", required=True, type=Path, help="library file (created if missing)")

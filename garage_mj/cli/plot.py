@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--metric", choices=("paper", "route"), default="paper",
                    help="the difficulty on x: the paper's (default) or the route difficulty")
     h.add_argument("--route-model", type=Path, metavar="FILE",
-                   help="with --metric route: the model the values were rated with (default: the shipped one)")
+                   help="with --metric route: the model the values were rated with (default: the shipped one; 'learned': the shipped learned driver's own)")
     h.set_defaults(func=_heatmap)
     d = psub.add_parser(
         "driver",

@@ -43,6 +43,9 @@ if TYPE_CHECKING:
 FORMAT = "garage-mj route difficulty"
 VERSION = 1
 SHIPPED = "route.json"  # in the package data folder garage_mj.models/difficulty
+#: the shipped models by name (``--route-model learned``): the default, fitted on the three drivers' runs, and the
+#: shipped learned driver's own (its failures follow other features than the rule-based drivers')
+SHIPPED_MODELS = {"route": SHIPPED, "learned": "learned.json"}
 L2 = 1.0  # penalty on the standardized weights (the fit's only setting; fixed, never tuned)
 
 
@@ -106,10 +109,12 @@ class RouteDifficulty:
 
 
 def load_route_model(path: str | Path | None = None) -> RouteDifficulty:
-    """The model in ``path`` (a file of :meth:`RouteDifficulty.save`), or the shipped one when None."""
-    if path is None:
-        ref = resources.files("garage_mj.models") / "difficulty" / SHIPPED
-        text, where = ref.read_text(), "the shipped route difficulty model"
+    """The model in ``path`` (a file of :meth:`RouteDifficulty.save`), the shipped one when None, or a shipped
+    one by its name in :data:`SHIPPED_MODELS` (when no file of that name exists)."""
+    name = "route" if path is None else str(path) if str(path) in SHIPPED_MODELS and not Path(path).exists() else None
+    if name is not None:
+        ref = resources.files("garage_mj.models") / "difficulty" / SHIPPED_MODELS[name]
+        text, where = ref.read_text(), f"the shipped route difficulty model {name!r}"
     else:
         p = Path(path)
         if not p.is_file():
