@@ -85,6 +85,19 @@ def test_summary_json_regresses_success_on_both_difficulties(garages, tmp_path):
     assert json.loads((tmp_path / "summary.json").read_text())["route_r"] == pytest.approx(-1.0)
 
 
+def test_the_shipped_learned_driver_gets_its_own_route_model(garages, tmp_path):
+    from garage_mj.driving.route_rating import driver_route_model
+
+    assert driver_route_model("learned") == "learned"
+    assert driver_route_model("learned", {"model": "other.zip"}) is None  # another learned model: the default
+    assert driver_route_model("vision") is None and driver_route_model("learned:other.zip") is None
+    res = run_cruise(garages[:1], 1, "learned", out_dir=tmp_path / "l", env=FAST, progress=False)
+    own = load_route_model("learned")
+    assert res.stats["route_model"] == own.key
+    assert float(_summary(tmp_path / "l")[0]["route_difficulty"]) == pytest.approx(
+        route_difficulty(garages[0], own), abs=1e-4)
+
+
 def test_another_model_or_none(garages, shipped, tmp_path):
     mine = tmp_path / "mine.json"
     model = fit(*_synthetic())

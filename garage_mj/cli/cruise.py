@@ -34,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "cruise", help="run cruise tests of a driver in garages and correlate success with difficulty",
         description="Run --tests cruise tests per garage with --driver in GarageDrive-v0 over a process "
                     "pool. Writes tests.csv (appended as tests end; a re-run resumes), summary.csv (per garage, "
-                    "the paper's difficulty and the route difficulty under --route-model beside the outcomes), "
+                    "the paper's difficulty and the route difficulty under --route-model beside the outcomes; without it the "
+                    "driver's shipped model: 'learned' for the shipped learned driver, else the default), "
                     "summary.json (Pearson r and regression on each), regression.png and regression_route.png "
                     "into --out, and with --videos N MP4s of N tests into OUT/videos/.")
     src = p.add_mutually_exclusive_group(required=True)

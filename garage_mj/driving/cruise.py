@@ -35,7 +35,7 @@ from garage_mj.driving.episode import cached_env, close_cached_env, drive_test
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.replay import write_test_xosc
 from garage_mj.driving.results import TEST_COLUMNS, check_settings, read_tests, write_csv, write_outputs
-from garage_mj.driving.route_rating import cruise_route_difficulty, resolve_route_model
+from garage_mj.driving.route_rating import cruise_route_difficulty, driver_route_model, resolve_route_model
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
 
@@ -143,7 +143,9 @@ def run_cruise(
     running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.core.backends`;
     tests.csv gets the same rows either way. ``route_model``: the route difficulty model of
     ``summary.csv``'s ``route_difficulty`` column and ``summary.json``'s ``route_r`` (True: the shipped
-    one; a ``RouteDifficulty`` or a model file; False: none, the column stays empty), planned for the
+    one of the driver, :func:`~garage_mj.driving.route_rating.driver_route_model`: the learned driver's own
+    for the shipped learned driver, else the default; a ``RouteDifficulty``, a model file or a shipped
+    model's name; False: none, the column stays empty), planned for the
     default car and world as the model was fitted, whatever ``env`` changes. Raises
     :class:`CruiseError`, ``DriverError`` (bad driver), ``BackendError`` (bad backend, Ray missing),
     ``RouteModelError`` (a bad model file) before any test.
@@ -155,7 +157,9 @@ def run_cruise(
     # fails fast, in this process, with the loader's one-line message on a bad driver
     choice = action_type if isinstance(action_type, ActionChoice) else choose_action_type(driver, action_type)
     check_backend(backend, address)
-    model = None if route_model is False else resolve_route_model(None if route_model is True else route_model)
+    if route_model is True:
+        route_model = driver_route_model(driver, driver_kwargs)
+    model = None if route_model is False else resolve_route_model(route_model)
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     hashes = [s.hash for s in srcs]
     if len(set(hashes)) != len(hashes):

@@ -45,6 +45,18 @@ def resolve_route_model(model: RouteDifficulty | str | Path | None = None) -> Ro
     return model if isinstance(model, RouteDifficulty) else load_route_model(model)
 
 
+def driver_route_model(driver: Any, driver_kwargs: dict[str, Any] | None = None) -> str | None:
+    """The shipped route model that predicts ``driver`` best: the driver's own where one ships (``"learned"``
+    for the shipped learned driver), else None (the default model, fitted on the rule-based drivers).
+
+    Drivers fail for different reasons: on fresh garages the learned driver's success and ``vision``'s
+    are uncorrelated (r -0.05), so no one difficulty predicts both (``docs/route_difficulty/fresh_s10.json``).
+    """
+    if driver == "learned" and not (driver_kwargs or {}).get("model"):
+        return "learned"
+    return None
+
+
 def _rate(job: tuple[int, Garage, RouteDifficulty]) -> tuple[int, float]:
     """One garage's route difficulty, in a worker: (library id, value; NaN without a feasible stall)."""
     id_, garage, model = job
