@@ -50,12 +50,14 @@ def plan_seconds(library: Path | None, map_name: str, n: int) -> list[float]:
     return out
 
 
-def route_seconds(library: Path | None, map_name: str, n: int) -> tuple[list[float], list[int]]:
-    """CPU seconds of the whole route difficulty of each garage (scene included), and its stall counts."""
+def route_seconds(library: Path | None, map_name: str, n: int, route_model: str | None = None
+                  ) -> tuple[list[float], list[int]]:
+    """CPU seconds of the whole route difficulty of each garage (scene included) under ``route_model`` (a file
+    or a shipped model's name; None: the default), and its stall counts."""
     from garage_mj.scene.garage_scene import GarageScene
     from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
 
-    model = load_route_model()
+    model = load_route_model(route_model)
     garages = _garages(library, map_name, n)
     route_difficulty(garages[0], model)  # loads the car model once
     out, stalls = [], []
@@ -80,6 +82,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--maps", default=",".join(MAPS))
     p.add_argument("--baseline-tree", type=Path, help="a worktree of older code: time its planner too")
     p.add_argument("--plan-only", action="store_true", help=argparse.SUPPRESS)  # the baseline subprocess
+    p.add_argument("--route-model", help="route difficulty model timed: a file or a shipped model's name "
+                   "(route, learned; default: the default model)")
     p.add_argument("--json", type=Path)
     args = p.parse_args(argv)
     maps = args.maps.split(",")
@@ -90,8 +94,8 @@ def main(argv: list[str] | None = None) -> int:
     for m in maps:
         row: dict = {}
         plan = plan_seconds(args.library, m, args.garages)
-        route, stalls = route_seconds(args.library, m, args.garages)
-        row = {"garages": len(plan), "stalls": _stats([float(s) for s in stalls]), "plan_cpu_s": _stats(plan),
+        route, stalls = route_seconds(args.library, m, args.garages, args.route_model)
+        row = {"route_model": args.route_model or "route", "garages": len(plan), "stalls": _stats([float(s) for s in stalls]), "plan_cpu_s": _stats(plan),
                "route_difficulty_cpu_s": _stats(route)}
         if args.baseline_tree is not None:
             env = {**os.environ, "PYTHONPATH": str(args.baseline_tree.resolve())}
