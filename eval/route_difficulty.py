@@ -29,8 +29,8 @@ Protocol (fixed before any result was seen; nothing is tuned on the held-out set
   The plan was also to ship ``pooled`` as ``models/difficulty/route.json``; it was not, because on
   the fresh set it predicted ``vision`` and ``waypoint`` worse than the model shipped before (the
   learned driver's failures, uncorrelated with theirs there, pull it away), so the default stayed. It also prints the bound on any single per-garage difficulty for two
-  drivers at once: if their success % correlate by r12 over the garages, no one difficulty can have
-  |r| above sqrt((1 + r12) / 2) with both.
+  drivers at once: if their success % correlate by r12 over the garages, no one difficulty can
+  reach r below -sqrt((1 + r12) / 2) with both (harder for both).
 
 Next to each r it prints the largest |r| any per-garage difficulty can expect on those garages
 (``attainable_r``): each garage's success % is measured on 50 tests, and only the spread between
@@ -270,11 +270,8 @@ def report_fresh(args) -> int:
     """Fit the session-10 models on the development runs and score them on the fresh held-out set."""
     import json
 
-    import numpy as np
-
     from garage_mj.core.fsutil import atomic_write
-    from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
-    from garage_mj.driving.regression import pearson
+    from garage_mj.driving.difficulty_fit import driver_agreement, fit_runs, load_runs, score
     from garage_mj.scene.route_difficulty import load_route_model
 
     work = args.out / "models_s10"
@@ -312,7 +309,7 @@ def report_fresh(args) -> int:
                                    "coefficients": {f: round(float(w), 4) for f, w in m.coefficients()}}
                                for n, m in models.items()},
                     "scores": {}}
-    success: dict[str, dict[str, float]] = {}
+    outcomes: dict[str, list[dict]] = {}  # each driver's fresh records
     for d in drivers:
         result["scores"][d] = {}
         for name, m in models.items():
@@ -321,22 +318,17 @@ def report_fresh(args) -> int:
             records, per_garage = load_runs([fresh[d]], args.library, m)
             sc = next(iter(score(m, records, garage_route=per_garage).values()))
             result["scores"][d][name] = sc
-            success[d] = {h: 100.0 * (1 - np.mean([r["failed"] for r in records if r["garage_hash"] == h]))
-                          for h in sorted({r["garage_hash"] for r in records})}
+            outcomes[d] = records
         first = next(iter(result["scores"][d].values()))
         print(f"{d}: {first['garages']} garages x {first['tests'] // max(1, first['garages'])} tests, success "
               f"{first['success_pct']}%, attainable |r| {first['attainable_r']} {first['attainable_r_ci95']}")
         print(f"  paper's difficulty   r = {first['paper']['r']} {first['paper']['r_ci95']}  AUC = {first['paper']['auc']}")
         for name, sc in result["scores"][d].items():
             print(f"  {name:<20} r = {sc['route']['r']} {sc['route']['r_ci95']}  AUC = {sc['route']['auc']}")
-    bounds = {}
-    for i, a in enumerate(drivers):
-        for b in drivers[i + 1:]:
-            hs = sorted(set(success[a]) & set(success[b]))
-            r12 = pearson([success[a][h] for h in hs], [success[b][h] for h in hs])
-            bounds[f"{a}+{b}"] = {"r_between": round(r12, 4), "best_joint_abs_r": round(float(np.sqrt((1 + r12) / 2)), 4)}
-            print(f"one difficulty for {a} and {b}: their success % correlate by r {r12:.3f}, so no single per-garage "
-                  f"difficulty has |r| above {np.sqrt((1 + r12) / 2):.3f} with both")
+    bounds = driver_agreement([r for rs in outcomes.values() for r in rs])
+    for pair, a in bounds.items():
+        print(f"one difficulty for {pair.replace('+', ' and ')}: their success % correlate by r {a['r_between']}, so no "
+              f"single per-garage difficulty reaches r below -{a['best_joint_abs_r']} with both")
     result["single_difficulty_bound"] = bounds
     if args.models_out:
         print(f"wrote the learned driver's own model to {args.models_out / 'learned.json'}")

@@ -270,3 +270,37 @@ def test_cli_video_file_name_is_one_line(library, tmp_path, capsys):
 def test_sources_carry_the_metrics(garages):
     s = CruiseSource.from_garage(garages[0])
     assert 0 <= s.difficulty <= 1 and s.mean_road_length > 0 and s.name.startswith("tiny_7x11-")
+
+
+def test_no_one_difficulty_beats_the_joint_bound_of_two_drivers():
+    """joint_r_bound: whatever a difficulty is, it cannot have r <= -x with both drivers' success for x above
+    sqrt((1 + r_ab) / 2)."""
+    import math
+
+    import numpy as np
+
+    from garage_mj.driving.difficulty_fit import driver_agreement
+    from garage_mj.driving.regression import joint_r_bound, pearson
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        a, b = rng.normal(size=30), rng.normal(size=30)
+        bound = joint_r_bound(pearson(a, b))
+        for w in np.linspace(0, 1, 21):  # the best difficulties lie between the two (here: blends of them)
+            d = w * (a - a.mean()) / a.std() + (1 - w) * (b - b.mean()) / b.std() + 0.1 * rng.normal(size=30)
+            assert min(-pearson(d, a), -pearson(d, b)) <= bound + 1e-9  # r <= -x with both: x <= bound
+            assert min(pearson(d, a), pearson(d, b)) <= bound + 1e-9
+    ua, ub = rng.normal(size=30), rng.normal(size=30)  # the bisector of the normalized vectors reaches it
+    ua, ub = (ua - ua.mean()) / np.linalg.norm(ua - ua.mean()), (ub - ub.mean()) / np.linalg.norm(ub - ub.mean())
+    assert pearson(ua + ub, ua) == pytest.approx(joint_r_bound(pearson(ua, ub)))
+    assert joint_r_bound(1.0) == 1.0 and joint_r_bound(0.0) == pytest.approx(0.7071, abs=1e-4)
+    assert math.isnan(joint_r_bound(math.nan))
+    # from test records: per-garage success of each driver over the garages both drove
+    recs = [{"driver": d, "garage_hash": f"g{g}", "failed": int(t < k)}
+            for g, (ka, kb) in enumerate([(0, 5), (2, 3), (5, 0), (1, 1)]) for d, k in (("a", ka), ("b", kb))
+            for t in range(10)]
+    recs.append({"driver": "a", "garage_hash": "only_a", "failed": 0})
+    got = driver_agreement(recs)["a+b"]
+    r = pearson([100, 80, 50, 90], [50, 70, 100, 90])
+    assert got["garages"] == 4 and got["r_between"] == pytest.approx(r, abs=1e-4)
+    assert got["best_joint_abs_r"] == pytest.approx(joint_r_bound(r), abs=1e-4)

@@ -160,6 +160,13 @@ def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage
     score = json.loads((tmp_path / "s.json").read_text())
     assert score["waypoint"]["garages"] == 2 and 0.0 <= score["waypoint"]["route"]["auc"] <= 1.0
     assert "attainable_r" in score["waypoint"] and len(score["waypoint"]["attainable_r_ci95"]) == 2
+    assert "between_drivers" not in score  # one driver: nothing to compare
+    other = tmp_path / "oracle"
+    run_cruise([painted_tiny, junction_garage], 4, "oracle", 1, 0, other, progress=False)
+    assert main(["difficulty", "score", str(run), str(other), "--json", str(tmp_path / "s2.json")]) == 0
+    assert "between drivers" in capsys.readouterr().out
+    pair = json.loads((tmp_path / "s2.json").read_text())["between_drivers"]["oracle+waypoint"]
+    assert pair["garages"] == 2 and pair["r_between"] is None  # r needs 3 garages
     # a folder that is not a cruise run: one line naming it
     assert main(["difficulty", "fit", str(tmp_path), "--out", str(out)]) == 2
     assert "holds no tests.csv" in capsys.readouterr().err

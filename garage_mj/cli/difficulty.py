@@ -9,7 +9,7 @@ from pathlib import Path
 from garage_mj.cli import UserError
 from garage_mj.cli._common import positive_int, seed, user_errors
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
+from garage_mj.driving.difficulty_fit import driver_agreement, fit_runs, load_runs, score
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.scene.route_difficulty import load_route_model
 from garage_mj.scene.route_features import FEATURES, garage_features, mean_features
@@ -56,7 +56,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                      description="Per driver in RESULTS: per-garage Pearson r between success %% and the route "
                                  "difficulty (the expectation over each garage's feasible stalls) and the paper's "
                                  "difficulty, with 95%% bootstrap intervals, and the per-test AUC of each as a "
-                                 "failure predictor.")
+                                 "failure predictor. With several drivers, also how their per-garage success "
+                                 "correlates and the best r one difficulty can reach with both drivers of each pair "
+                                 "('between_drivers' in --json).")
     c.add_argument("results", nargs="+", type=Path, metavar="RESULTS", help="cruise run folders")
     c.add_argument("--model", type=Path, help="model file (default: the shipped one; 'learned': the shipped learned driver's own)")
     c.add_argument("--library", type=Path, help="library of the runs' garages (runs without garages.json)")
@@ -118,8 +120,15 @@ def run_fit(args: argparse.Namespace) -> int:
 def run_score(args: argparse.Namespace) -> int:
     model = load_route_model(args.model)
     records, per_garage = load_runs(args.results, args.library, model, progress=True)
-    result = score(model, records, garage_route=per_garage)
+    result: dict = score(model, records, garage_route=per_garage)
     _print_score(result)
+    if len(result) > 1:  # several drivers: can one difficulty predict them all?
+        result["between_drivers"] = agreement = driver_agreement(records)
+        print("between drivers (per-garage success % over the garages both drove):")
+        for pair, a in agreement.items():
+            r12 = "n/a" if a["r_between"] is None else f"{a['r_between']:.3f}"
+            bound = "n/a" if a["best_joint_abs_r"] is None else f"{a['best_joint_abs_r']:.3f}"
+            print(f"  {pair}: r = {r12} over {a['garages']} garages; no one difficulty reaches r -{bound} with both")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(args.json, json.dumps(result, indent=1) + "\n")

@@ -28,7 +28,14 @@ from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.cruise import GARAGES_FILE
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
-from garage_mj.driving.regression import attainable_r, auc, bootstrap_attainable_r, bootstrap_r, pearson
+from garage_mj.driving.regression import (
+    attainable_r,
+    auc,
+    bootstrap_attainable_r,
+    bootstrap_r,
+    joint_r_bound,
+    pearson,
+)
 from garage_mj.driving.results import read_tests, rounded
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.generation.library import Library
@@ -207,3 +214,29 @@ def score(model: RouteDifficulty, records: Sequence[dict[str, Any]], seed: int =
     return out
 
 
+def driver_agreement(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per pair of drivers in ``records`` (``"a+b"``): Pearson r between their per-garage success % over the
+    garages both drove, and the largest |r| any one difficulty can have with both, with the same sign
+    (harder for both; :func:`~garage_mj.driving.regression.joint_r_bound`). Drivers that fail alike correlate highly; a
+    difficulty fitted on one then transfers to the other, and otherwise it cannot."""
+    success: dict[str, dict[str, float]] = {}
+    for t in _success_by_garage(records):
+        success.setdefault(t["driver"], {})[t["garage_hash"]] = t["success_pct"]
+    drivers = sorted(success)
+    out = {}
+    for i, a in enumerate(drivers):
+        for b in drivers[i + 1:]:
+            shared = sorted(set(success[a]) & set(success[b]))
+            r12 = pearson([success[a][h] for h in shared], [success[b][h] for h in shared]) if len(shared) > 2 \
+                else float("nan")
+            out[f"{a}+{b}"] = {"garages": len(shared), "r_between": rounded(r12), "best_joint_abs_r": rounded(joint_r_bound(r12))}
+    return out
+
+
+def _success_by_garage(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per (driver, garage): tests and success % (:func:`garage_table` without a model)."""
+    groups: dict[tuple[str, str], list[int]] = defaultdict(list)
+    for r in records:
+        groups[(r["driver"], r["garage_hash"])].append(int(r["failed"]))
+    return [{"driver": d, "garage_hash": h, "tests": len(f), "success_pct": 100.0 * (1 - float(np.mean(f)))}
+            for (d, h), f in sorted(groups.items())]

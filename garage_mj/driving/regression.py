@@ -100,6 +100,19 @@ def attainable_r(success_pct: Sequence[float], tests: Sequence[int]) -> float:
     return math.sqrt(max(0.0, 1.0 - noise / spread))
 
 
+def joint_r_bound(r12: float) -> float:
+    """The largest |r| one difficulty can have, with the same sign, with two drivers' per-garage success at
+    once (say r <= -x with both: harder for both), when those correlate by ``r12`` over the same
+    garages: sqrt((1 + r12) / 2).
+
+    r is the cosine of the angle between centred vectors, and angles obey the triangle inequality: if
+    a difficulty is within angle t of both (negated) success vectors, they are within 2t of each other,
+    so r12 >= cos 2t = 2 r^2 - 1. Two drivers whose success is uncorrelated over the garages (r12 = 0)
+    cap any shared difficulty at r -0.707 with both; NaN in, NaN out.
+    """
+    return math.sqrt((1.0 + r12) / 2.0) if r12 == r12 else math.nan
+
+
 def bootstrap_attainable_r(success_pct: Sequence[float], tests: Sequence[int], seed: int = 0, resamples: int = 2000,
                            level: float = 0.95) -> tuple[float, float]:
     """Percentile bootstrap interval of :func:`attainable_r` over the garages."""
