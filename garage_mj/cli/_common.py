@@ -81,6 +81,10 @@ def seed_list(text: str) -> list[int]:
     return seeds
 
 
+#: What a ``--route-model`` help adds about the shipped models by name (``load_route_model``).
+SHIPPED_ROUTE_MODELS = "'learned': the shipped learned driver's own"
+
+
 def add_filters(p: argparse.ArgumentParser) -> None:
     """The library filters: --map, --difficulty LO HI, --coverage LO HI, --feasible LO HI,
     --route-difficulty LO HI (with --route-model FILE), --limit N."""
@@ -92,7 +96,7 @@ def add_filters(p: argparse.ArgumentParser) -> None:
                    "stored by 'garage-mj library rate LIBRARY'")
     p.add_argument("--route-model", type=Path, metavar="FILE",
                    help="route difficulty model of --route-difficulty and of the values shown (default: the shipped "
-                   "one; 'learned': the shipped learned driver's own; 'garage-mj difficulty fit' writes others)")
+                   f"one; {SHIPPED_ROUTE_MODELS}; 'garage-mj difficulty fit' writes others)")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"),
                    help="only coverage in [LO, HI] (0-1)")
     p.add_argument("--feasible", nargs=2, type=unit_range, metavar=("LO", "HI"),

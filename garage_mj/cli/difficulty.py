@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import positive_int, seed, user_errors
+from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, positive_int, seed, user_errors
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.difficulty_fit import driver_agreement, fit_runs, load_runs, score
 from garage_mj.driving.garage_set import load_garage_set
@@ -60,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                  "correlates and the best r one difficulty can reach with both drivers of each pair "
                                  "('between_drivers' in --json).")
     c.add_argument("results", nargs="+", type=Path, metavar="RESULTS", help="cruise run folders")
-    c.add_argument("--model", type=Path, help="model file (default: the shipped one; 'learned': the shipped learned driver's own)")
+    c.add_argument("--model", type=Path, help=f"model file (default: the shipped one; {SHIPPED_ROUTE_MODELS})")
     c.add_argument("--library", type=Path, help="library of the runs' garages (runs without garages.json)")
     c.add_argument("--json", type=Path, help="also write the figures here")
     c.set_defaults(func=run_score)
@@ -77,7 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     w.add_argument("--map", help="only this map's garages (library)")
     w.add_argument("-n", type=positive_int, help="at most N garages (a seeded sample of a library; painted: N)")
     w.add_argument("--seed", type=seed, default=0, help="seed of the sample or of the painting (default 0)")
-    w.add_argument("--model", type=Path, help="model file (default: the shipped one; 'learned': the shipped learned driver's own)")
+    w.add_argument("--model", type=Path, help=f"model file (default: the shipped one; {SHIPPED_ROUTE_MODELS})")
     w.add_argument("--stalls", type=positive_int, default=3, metavar="K", help="hardest stalls to list (default 3)")
     w.set_defaults(func=run_show)
 

@@ -7,7 +7,7 @@ import functools
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import positive_int, seed, unit_range, user_errors
+from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, positive_int, seed, unit_range, user_errors
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
 
@@ -51,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "route: the route-aware difficulty, the expected failure rate of a cruise test predicted "
                         "from the planned routes (garage-mj difficulty); each garage stored gets it in the library")
     p.add_argument("--route-model", type=Path, metavar="FILE",
-                   help="with --metric route: a model of garage-mj difficulty fit (default: the shipped one; 'learned': the shipped learned driver's own)")
+                   help=f"with --metric route: a model of garage-mj difficulty fit (default: the shipped one; {SHIPPED_ROUTE_MODELS})")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"), help="coverage band [LO, HI] (0-1)")
     p.add_argument("--count", required=True, type=positive_int, help="distinct garages to find")
     p.add_argument("--library", required=True, type=Path, help="library file (created if missing)")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import (
+    SHIPPED_ROUTE_MODELS,
     add_filters,
     filters,
     non_negative_int,
@@ -72,14 +73,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     rate.add_argument("library", type=Path, metavar="LIBRARY", help="library file (library.sqlite)")
     rate.add_argument("--map", help="only garages of this map (name as stored)")
     rate.add_argument("--model", "--route-model", dest="route_model", type=Path, metavar="FILE",
-                      help="route difficulty model (default: the shipped one; 'learned': the shipped learned driver's own; 'garage-mj difficulty fit' writes others)")
+                      help=f"route difficulty model (default: the shipped one; {SHIPPED_ROUTE_MODELS}; 'garage-mj difficulty fit' writes others)")
     rate.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
     rate.add_argument("--limit", type=non_negative_int, help="rate at most N garages (the rest on a later call)")
     rate.add_argument("--quiet", action="store_true", help="no progress bar")
     rate.set_defaults(func=_rate)
 
 
-ROUTE_MODEL_HELP = "route difficulty model of the values shown (default: the shipped one; 'learned': the shipped learned driver's own)"
+ROUTE_MODEL_HELP = f"route difficulty model of the values shown (default: the shipped one; {SHIPPED_ROUTE_MODELS})"
 
 
 def _open(path: Path):

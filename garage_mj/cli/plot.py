@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import route_key, user_errors
+from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, route_key, user_errors
 from garage_mj.generation.library import Library
 
 
@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--metric", choices=("paper", "route"), default="paper",
                    help="the difficulty on x: the paper's (default) or the route difficulty")
     h.add_argument("--route-model", type=Path, metavar="FILE",
-                   help="with --metric route: the model the values were rated with (default: the shipped one; 'learned': the shipped learned driver's own)")
+                   help=f"with --metric route: the model the values were rated with (default: the shipped one; {SHIPPED_ROUTE_MODELS})")
     h.set_defaults(func=_heatmap)
     d = psub.add_parser(
         "driver",
