@@ -172,16 +172,25 @@ def fit_runs(runs: Sequence[str | Path], out: str | Path, library: str | Path | 
 
 def garage_table(model: RouteDifficulty, records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (driver, garage): tests, success %, the paper's difficulty and the mean route difficulty of its tests."""
+    out = []
+    for (driver, h), rs in _by_garage(records):
+        p = model.test_probability(rs)
+        out.append({"driver": driver, "garage": rs[0]["garage"], "garage_hash": h, "tests": len(rs),
+                    "success_pct": _success_pct(rs), "difficulty": rs[0]["difficulty"],
+                    "route_difficulty": float(np.mean(p))})
+    return out
+
+
+def _by_garage(records: Sequence[dict[str, Any]]) -> list[tuple[tuple[str, str], list[dict[str, Any]]]]:
+    """The records grouped per (driver, garage hash), sorted by that key."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
     for r in records:
         groups[(r["driver"], r["garage_hash"])].append(r)
-    out = []
-    for (driver, h), rs in sorted(groups.items()):
-        p = model.test_probability(rs)
-        out.append({"driver": driver, "garage": rs[0]["garage"], "garage_hash": h, "tests": len(rs),
-                    "success_pct": 100.0 * (1 - np.mean([r["failed"] for r in rs])),
-                    "difficulty": rs[0]["difficulty"], "route_difficulty": float(np.mean(p))})
-    return out
+    return sorted(groups.items())
+
+
+def _success_pct(records: Sequence[dict[str, Any]]) -> float:
+    return 100.0 * (1 - np.mean([r["failed"] for r in records]))
 
 
 def score(model: RouteDifficulty, records: Sequence[dict[str, Any]], seed: int = 0,
@@ -220,8 +229,8 @@ def driver_agreement(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, A
     (harder for both; :func:`~garage_mj.driving.regression.joint_r_bound`). Drivers that fail alike correlate highly; a
     difficulty fitted on one then transfers to the other, and otherwise it cannot."""
     success: dict[str, dict[str, float]] = {}
-    for t in _success_by_garage(records):
-        success.setdefault(t["driver"], {})[t["garage_hash"]] = t["success_pct"]
+    for (driver, h), rs in _by_garage(records):
+        success.setdefault(driver, {})[h] = _success_pct(rs)
     drivers = sorted(success)
     out = {}
     for i, a in enumerate(drivers):
@@ -232,11 +241,3 @@ def driver_agreement(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, A
             out[f"{a}+{b}"] = {"garages": len(shared), "r_between": rounded(r12), "best_joint_abs_r": rounded(joint_r_bound(r12))}
     return out
 
-
-def _success_by_garage(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per (driver, garage): tests and success % (:func:`garage_table` without a model)."""
-    groups: dict[tuple[str, str], list[int]] = defaultdict(list)
-    for r in records:
-        groups[(r["driver"], r["garage_hash"])].append(int(r["failed"]))
-    return [{"driver": d, "garage_hash": h, "tests": len(f), "success_pct": 100.0 * (1 - float(np.mean(f)))}
-            for (d, h), f in sorted(groups.items())]
