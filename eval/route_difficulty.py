@@ -88,7 +88,7 @@ def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, te
     return runs
 
 
-def _two_fold(records: list[dict]) -> dict:
+def _two_fold(records: list[dict], features: tuple[str, ...]) -> dict:
     """A driver-specific refit, checked out of sample: garages split in two by hash, fit on each half and
     scored on the other; the per-garage r and AUC over both scored halves (route difficulty = mean over
     the garage's tests)."""
@@ -100,7 +100,7 @@ def _two_fold(records: list[dict]) -> dict:
     rows, probs, failed = [], [], []
     for train, test in ((halves[0], halves[1]), (halves[1], halves[0])):
         try:
-            m = fit(train, [r["failed"] for r in train])
+            m = fit(train, [r["failed"] for r in train], features)
         except ValueError:
             return {"r": None, "auc": None}
         rows += garage_table(m, test)
@@ -207,16 +207,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def report(args) -> int:
-    """Fit on the fit runs, score on the held-out runs, print and write the figures."""
-    import json
+    """Fit on the fit runs, score on the held-out runs, print and write the figures.
 
-    from garage_mj.core.fsutil import atomic_write
+    Its models are fitted on the shipped default model's features (the 14 of the route), as the protocol
+    of sessions 7-9 was: the garage terms added in session 10 belong to the fresh report only."""
     from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
     from garage_mj.scene.route_difficulty import load_route_model
 
-    fit_dirs = [args.out / f"fit_{d}" for d in FIT_DRIVERS]
-    model, _ = fit_runs(fit_dirs, args.out / "route.json", args.library, progress=False)
     shipped = load_route_model()
+    fit_dirs = [args.out / f"fit_{d}" for d in FIT_DRIVERS]
+    model, _ = fit_runs(fit_dirs, args.out / "route.json", args.library, shipped.features, progress=False)
     print(model.describe())
     print(f"fitted on {model.fit['tests']} tests of {model.fit['garages']} garages; "
           f"{'the same model as' if model.key == shipped.key else 'NOT the same model as'} models/difficulty/route.json")
@@ -229,8 +229,8 @@ def report(args) -> int:
     for label, run in held.items():
         records_of = [r for r in records if r["run"] == str(run)]
         scores[label] = next(iter(score(model, records_of, garage_route=per_garage).values()))
-        refit[label] = _two_fold(records_of)
-    lodo = _leave_one_driver_out(args, args.lodo_drivers, held)
+        refit[label] = _two_fold(records_of, shipped.features)
+    lodo = _leave_one_driver_out(args, args.lodo_drivers, held, shipped.features)
     result = {"model_key": model.key, "fit": model.fit, "heldout": scores, "refit_two_fold": refit,
               "leave_one_driver_out": lodo,
               "protocol": {"fit_maps": list(FIT_MAPS), "fit_run_seeds": args.fit_run_seeds,
@@ -259,18 +259,13 @@ def report(args) -> int:
         m = d["route"]
         print(f"  {driver}: fitted on {'+'.join(d['fit_drivers'])} ({d['fit_tests']} tests): route r = {m['r']} "
               f"{m['r_ci95']}  AUC = {m['auc']}  (attainable |r| {d['attainable_r']})")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(args.json, json.dumps(result, indent=1) + "\n")
-        print(f"wrote {args.json}")
+    _write_json(args.json, result)
     return 0
 
 
 def report_fresh(args) -> int:
     """Fit the session-10 models on the development runs and score them on the fresh held-out set."""
-    import json
 
-    from garage_mj.core.fsutil import atomic_write
     from garage_mj.driving.difficulty_fit import driver_agreement, fit_runs, load_runs, score
     from garage_mj.scene.route_difficulty import load_route_model
 
@@ -313,12 +308,11 @@ def report_fresh(args) -> int:
     for d in drivers:
         result["scores"][d] = {}
         for name, m in models.items():
-            if name in (f"without_{o}" for o in drivers if o != d) or name in (f"own_{o}" for o in drivers if o != d):
-                continue
+            if name.startswith(("without_", "own_")) and not name.endswith(f"_{d}"):
+                continue  # another driver's left-out or own model
             records, per_garage = load_runs([fresh[d]], args.library, m)
-            sc = next(iter(score(m, records, garage_route=per_garage).values()))
-            result["scores"][d][name] = sc
-            outcomes[d] = records
+            result["scores"][d][name] = next(iter(score(m, records, garage_route=per_garage).values()))
+        outcomes[d] = records  # the same records under every model
         first = next(iter(result["scores"][d].values()))
         print(f"{d}: {first['garages']} garages x {first['tests'] // max(1, first['garages'])} tests, success "
               f"{first['success_pct']}%, attainable |r| {first['attainable_r']} {first['attainable_r_ci95']}")
@@ -332,14 +326,23 @@ def report_fresh(args) -> int:
     result["single_difficulty_bound"] = bounds
     if args.models_out:
         print(f"wrote the learned driver's own model to {args.models_out / 'learned.json'}")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(args.json, json.dumps(result, indent=1) + "\n")
-        print(f"wrote {args.json}")
+    _write_json(args.json, result)
     return 0
 
 
-def _leave_one_driver_out(args, drivers: list[str], held: dict[str, Path]) -> dict:
+def _write_json(path: Path | None, result: dict) -> None:
+    """Write ``result`` to ``path`` (``--json``; nothing when None), atomically."""
+    import json
+
+    from garage_mj.core.fsutil import atomic_write
+
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(path, json.dumps(result, indent=1) + "\n")
+        print(f"wrote {path}")
+
+
+def _leave_one_driver_out(args, drivers: list[str], held: dict[str, Path], features: tuple[str, ...]) -> dict:
     """Per driver: a model fitted on the fit-set runs of the other ``drivers``, scored on its held-out run."""
     from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
 
@@ -350,7 +353,7 @@ def _leave_one_driver_out(args, drivers: list[str], held: dict[str, Path]) -> di
         if driver not in held or missing:
             print(f"leave-one-driver-out {driver}: skipped, missing {missing or held.get(driver)}", flush=True)
             continue
-        model, _ = fit_runs(others, args.out / f"route_without_{driver}.json", args.library, progress=False)
+        model, _ = fit_runs(others, args.out / f"route_without_{driver}.json", args.library, features, progress=False)
         records, per_garage = load_runs([held[driver]], args.library, model)
         scored = next(iter(score(model, records, garage_route=per_garage).values()))
         out[driver] = {"fit_drivers": [o for o in drivers if o != driver], "fit_tests": model.fit["tests"],
