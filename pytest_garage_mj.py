@@ -109,7 +109,7 @@ def tiny_7x11():
 @pytest.fixture
 def garage_drive_env(request: pytest.FixtureRequest, tiny_7x11):
     """``GarageDrive-v0`` on ``tiny_7x11`` (keyword arguments from indirect parametrization), closed after."""
-    from garage_mj.driving.drive_env import GarageDriveEnv
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
 
     env = GarageDriveEnv(**{"garage": tiny_7x11, **(getattr(request, "param", None) or {})})
     yield env

@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.garage_set import GarageSet
+from garage_mj.driving.sim.drive_env import GarageDriveEnv
 
 ROOT = Path(__file__).resolve().parents[1]
 HELD_OUT = ROOT / "docs" / "learned_driver" / "heldout" / "m5_unseen_seed.json"

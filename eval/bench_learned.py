@@ -53,7 +53,7 @@ from typing import Any
 from garage_mj.cli._common import positive_int
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.actor_config import load_scenario_config
+from garage_mj.driving.actors.config import load_scenario_config
 from garage_mj.driving.garage_set import GarageSet
 from garage_mj.driving.results import FAILURE_KINDS, paper_failures, read_tests
 

@@ -13,9 +13,9 @@ A quick trial of the plumbing (minutes; into /tmp):
 
 Training. Every curriculum x seed gets the same budget (``--iterations`` DAgger iterations of
 ``--steps`` env steps, ``--workers`` driving processes; every other key is
-:class:`~garage_mj.driving.train_driver.DriverTrainConfig`'s default) on the same training garages
+:class:`~garage_mj.driving.learning.train.DriverTrainConfig`'s default) on the same training garages
 and the same validation garages, into ``OUT/<curriculum>_s<seed>/`` (a ``garage-mj train-driver``
-run folder). What the curricula draw (:mod:`garage_mj.driving.train_driver`):
+run folder). What the curricula draw (:mod:`garage_mj.driving.learning.train`):
 
 - ``uniform``: every training garage equally often;
 - ``difficulty``: iteration ``i`` of ``n`` draws from the easiest ``(i + 1) / n`` of the set, by the
@@ -64,7 +64,7 @@ from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write
 from garage_mj.driving.garage_set import GarageSet, load_garage_set
-from garage_mj.driving.train_driver import CURRICULA, MANIFEST, MODEL, DriverTrainConfig
+from garage_mj.driving.learning.train import CURRICULA, MANIFEST, MODEL, DriverTrainConfig
 
 COMPARED = ("uniform", "difficulty", "hunt")  # the issue's (a), (b) and (c)
 
@@ -173,7 +173,7 @@ def training_sets(args: argparse.Namespace) -> tuple[GarageSet, GarageSet]:
 
 def train_all(args: argparse.Namespace) -> None:
     """Train (or continue) every curriculum x seed, seed by seed, so a stopped experiment has whole seeds."""
-    from garage_mj.driving.train_driver import train_driver
+    from garage_mj.driving.learning.train import train_driver
 
     train, val = training_sets(args)
     print(f"training on {len(train)} garages ({train.origin}); validating on {len(val)} ({val.origin})")

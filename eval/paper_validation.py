@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from garage_mj.cli._common import seed_list
-from garage_mj.driving.regression import PAPER_R
+from garage_mj.driving.difficulty.regression import PAPER_R
 from garage_mj.driving.sources import CruiseSource, painted_sources
 from garage_mj.reporting.cruise import run_cruise
 

@@ -92,8 +92,8 @@ def _two_fold(records: list[dict], features: tuple[str, ...]) -> dict:
     """A driver-specific refit, checked out of sample: garages split in two by hash, fit on each half and
     scored on the other; the per-garage r and AUC over both scored halves (route difficulty = mean over
     the garage's tests)."""
-    from garage_mj.driving.difficulty_fit import garage_table
-    from garage_mj.driving.regression import auc, pearson
+    from garage_mj.driving.difficulty.fit import garage_table
+    from garage_mj.driving.difficulty.regression import auc, pearson
     from garage_mj.scene.route_difficulty import fit
 
     halves = [[r for r in records if int(r["garage_hash"][-1], 16) % 2 == k] for k in (0, 1)]
@@ -211,7 +211,7 @@ def report(args) -> int:
 
     Its models are fitted on the shipped default model's features (the 14 of the route), as the protocol
     of sessions 7-9 was: the garage terms added in session 10 belong to the fresh report only."""
-    from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
+    from garage_mj.driving.difficulty.fit import fit_runs, load_runs, score
     from garage_mj.scene.route_difficulty import load_route_model
 
     shipped = load_route_model()
@@ -266,7 +266,7 @@ def report(args) -> int:
 def report_fresh(args) -> int:
     """Fit the session-10 models on the development runs and score them on the fresh held-out set."""
 
-    from garage_mj.driving.difficulty_fit import driver_agreement, fit_runs, load_runs, score
+    from garage_mj.driving.difficulty.fit import driver_agreement, fit_runs, load_runs, score
     from garage_mj.scene.route_difficulty import load_route_model
 
     work = args.out / "models_s10"
@@ -344,7 +344,7 @@ def _write_json(path: Path | None, result: dict) -> None:
 
 def _leave_one_driver_out(args, drivers: list[str], held: dict[str, Path], features: tuple[str, ...]) -> dict:
     """Per driver: a model fitted on the fit-set runs of the other ``drivers``, scored on its held-out run."""
-    from garage_mj.driving.difficulty_fit import fit_runs, load_runs, score
+    from garage_mj.driving.difficulty.fit import fit_runs, load_runs, score
 
     out = {}
     for driver in drivers:

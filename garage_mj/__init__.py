@@ -81,7 +81,7 @@ def evaluate(garage: Garage, config: DifficultyConfig = DEFAULT_DIFFICULTY, *, r
 ENV_IDS = {
     "garage_mj/GarageGen-v0": "garage_mj.generation.gen_env:GarageGenEnv",
     "garage_mj/GarageGenCond-v0": "garage_mj.generation.cond_env:GarageGenCondEnv",
-    "garage_mj/GarageDrive-v0": "garage_mj.driving.drive_env:GarageDriveEnv",
+    "garage_mj/GarageDrive-v0": "garage_mj.driving.sim.drive_env:GarageDriveEnv",
 }
 
 

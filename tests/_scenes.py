@@ -6,9 +6,9 @@ import mujoco
 import numpy as np
 from dm_control import mjcf
 
-from garage_mj.driving.outcomes import OutcomeMonitor, ego_contacts
-from garage_mj.driving.sensors import Camera, CameraConfig
-from garage_mj.driving.vehicle import Car, attach_car, compile_mjcf
+from garage_mj.driving.sim.outcomes import OutcomeMonitor, ego_contacts
+from garage_mj.driving.sim.sensors import Camera, CameraConfig
+from garage_mj.driving.sim.vehicle import Car, attach_car, compile_mjcf
 from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.route import Route, to_car_frame
 from garage_mj.scene.semantics import geom_classes

@@ -10,14 +10,14 @@ import pytest
 
 from garage_mj.cli import main
 from garage_mj.core.config import ConfigError
-from garage_mj.driving.actor_config import ScenarioConfig, load_scenario_config
-from garage_mj.driving.actor_judging import judge
-from garage_mj.driving.actor_placement import draw_scenario
-from garage_mj.driving.actors import Corridor, actor_poses, sample_times
+from garage_mj.driving.actors.config import ScenarioConfig, load_scenario_config
+from garage_mj.driving.actors.judging import judge
+from garage_mj.driving.actors.placement import draw_scenario
+from garage_mj.driving.actors.scenario import Corridor, actor_poses, sample_times
 from garage_mj.driving.cruise import read_tests, run_cruise
-from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.replay import replay_xosc
+from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import drive_planner

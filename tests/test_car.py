@@ -10,7 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.driving.vehicle import Car, DiscreteAction, command_from_action
+from garage_mj.driving.sim.vehicle import Car, DiscreteAction, command_from_action
 from tests._scenes import build
 
 DT = 0.1  # [s] control period

@@ -9,8 +9,14 @@ import cv2
 import pytest
 
 from garage_mj.cli import main
+from garage_mj.driving.difficulty.regression import (
+    PAPER_R,
+    PAPER_TABLE,
+    paper_regression,
+    pearson,
+    regression,
+)
 from garage_mj.driving.drivers import ActionTypeWarning
-from garage_mj.driving.regression import PAPER_R, PAPER_TABLE, paper_regression, pearson, regression
 from garage_mj.driving.results import SUMMARY_COLUMNS, TEST_COLUMNS, read_tests, write_csv, write_outputs
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.painters import paint_garage
@@ -41,7 +47,7 @@ def test_paper_table_gives_the_papers_r():
 def test_attainable_r_is_what_a_perfect_difficulty_reaches_through_test_noise():
     import numpy as np
 
-    from garage_mj.driving.regression import attainable_r, bootstrap_attainable_r
+    from garage_mj.driving.difficulty.regression import attainable_r, bootstrap_attainable_r
 
     rng = np.random.default_rng(0)
     for spread, tests in ((0.0, 50), (0.05, 50), (0.2, 50), (0.05, 800)):
@@ -279,8 +285,8 @@ def test_no_one_difficulty_beats_the_joint_bound_of_two_drivers():
 
     import numpy as np
 
-    from garage_mj.driving.difficulty_fit import driver_agreement
-    from garage_mj.driving.regression import joint_r_bound, pearson
+    from garage_mj.driving.difficulty.fit import driver_agreement
+    from garage_mj.driving.difficulty.regression import joint_r_bound, pearson
 
     rng = np.random.default_rng(0)
     for _ in range(200):

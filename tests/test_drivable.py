@@ -193,7 +193,7 @@ def test_the_drive_env_imports_nothing_from_export(painted_tiny):
     code = (
         "import sys, json\n"
         "from garage_mj.grid.garage import Garage\n"
-        "from garage_mj.driving.drive_env import GarageDriveEnv\n"
+        "from garage_mj.driving.sim.drive_env import GarageDriveEnv\n"
         f"g = Garage.from_json({painted_tiny.to_json()!r})\n"
         "env = GarageDriveEnv(garage=g, action_type='continuous')\n"
         "env.reset(seed=0); env.step([0.5, 0.0]); env.close()\n"

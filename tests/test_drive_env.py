@@ -8,8 +8,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import garage_mj  # noqa: F401  (registers the ids)
-from garage_mj.driving.drive_env import START_OFFSET, GarageDriveEnv, _hit_sensors
 from garage_mj.driving.drivers import load_driver
+from garage_mj.driving.sim.drive_env import START_OFFSET, GarageDriveEnv, _hit_sensors
 from garage_mj.scene.mjcf_scene import parked_stalls
 from garage_mj.scene.semantics import Semantic
 
@@ -112,8 +112,8 @@ def test_fused_scene_shows_the_camera_what_the_plain_scene_does(painted_tiny):
     segmentation as the plain scene with those cars below the floor, frame by frame along a drive."""
     import mujoco
 
-    from garage_mj.driving.sensors import Camera
-    from garage_mj.driving.vehicle import attach_car, compile_mjcf
+    from garage_mj.driving.sim.sensors import Camera
+    from garage_mj.driving.sim.vehicle import attach_car, compile_mjcf
     from garage_mj.scene.mjcf_scene import HIDDEN_DEPTH, build_scene, parked_car_bodies
 
     env = GarageDriveEnv(garage=painted_tiny, action_type="continuous", occupancy=0.6)

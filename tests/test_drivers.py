@@ -19,8 +19,8 @@ from garage_mj.driving.drivers import (
     resolve_driver,
 )
 from garage_mj.driving.drivers.vision import VisionDriver
-from garage_mj.driving.outcomes import OutcomeKind
-from garage_mj.driving.vehicle import DiscreteAction
+from garage_mj.driving.sim.outcomes import OutcomeKind
+from garage_mj.driving.sim.vehicle import DiscreteAction
 from garage_mj.scene.semantics import NUM_CLASSES
 from tests._scenes import run_test
 
@@ -180,7 +180,7 @@ def test_vision_driver_stops_before_a_wall():
 
 
 def test_vision_obstacle_points_see_the_pillar():
-    from garage_mj.driving.sensors import Camera
+    from garage_mj.driving.sim.sensors import Camera
     from tests._scenes import build
 
     model, data, _ = build(PILLAR_ON_ROUTE)

@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.driving.drivers import (
     DRIVERS,
     DriverError,
@@ -23,9 +22,10 @@ from garage_mj.driving.drivers import (
 )
 from garage_mj.driving.drivers import learned as learned_mod
 from garage_mj.driving.drivers.learned import DEFAULT_MODEL, LearnedDriver, default_model
-from garage_mj.driving.learned_obs import VECTOR_KEYS, learned_space
-from garage_mj.driving.outcomes import OutcomeKind
-from garage_mj.driving.vehicle import DISCRETE_COMMANDS, DiscreteAction
+from garage_mj.driving.learning.observation import VECTOR_KEYS, learned_space
+from garage_mj.driving.sim.drive_env import GarageDriveEnv
+from garage_mj.driving.sim.outcomes import OutcomeKind
+from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction
 from garage_mj.reporting.cruise import run_cruise
 
 REPO = Path(__file__).resolve().parents[1]
@@ -316,7 +316,7 @@ def test_the_fast_greedy_step_picks_what_sb3_predict_picks(painted_tiny):
     import torch
 
     from garage_mj.driving.drivers.learned import MKLDNN_IN_ACT
-    from garage_mj.driving.learned_obs import learned_observation
+    from garage_mj.driving.learning.observation import learned_observation
 
     driver = load_driver("learned")
     env = GarageDriveEnv(garage=painted_tiny, action_type="discrete")

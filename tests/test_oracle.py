@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from garage_mj.driving.cruise import run_cruise
-from garage_mj.driving.drive_env import GarageDriveEnv
 from garage_mj.driving.drivers import load_driver
+from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.grid.garage import Garage
 

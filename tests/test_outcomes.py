@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.driving.outcomes import (
+from garage_mj.driving.sim.outcomes import (
     FAILURES,
     PAPER_CLASS,
     Contact,

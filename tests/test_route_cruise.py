@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from garage_mj.cli import main
-from garage_mj.driving import route_rating
-from garage_mj.driving.regression import pearson
+from garage_mj.driving.difficulty import rating as route_rating
+from garage_mj.driving.difficulty.regression import pearson
 from garage_mj.grid.painters import paint_garage
 from garage_mj.reporting.cruise import cruise_figure, run_cruise
 from garage_mj.scene.route_difficulty import fit, load_route_model, route_difficulty
@@ -65,7 +65,7 @@ def test_summary_has_route_difficulty_beside_the_papers_and_route_r(garages, shi
 def test_summary_json_regresses_success_on_both_difficulties(garages, tmp_path):
     import math
 
-    from garage_mj.driving.regression import regression
+    from garage_mj.driving.difficulty.regression import regression
     from garage_mj.driving.results import write_outputs
     from garage_mj.driving.sources import CruiseSettings, CruiseSource
     from tests.test_cruise import fake_row
@@ -86,7 +86,7 @@ def test_summary_json_regresses_success_on_both_difficulties(garages, tmp_path):
 
 
 def test_the_shipped_learned_driver_gets_its_own_route_model(garages, tmp_path):
-    from garage_mj.driving.route_rating import driver_route_model
+    from garage_mj.driving.difficulty.rating import driver_route_model
 
     assert driver_route_model("learned") == "learned"
     assert driver_route_model("learned", {"model": "other.zip"}) is None  # another learned model: the default

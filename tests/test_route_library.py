@@ -9,8 +9,8 @@ import sqlite3
 import pytest
 
 from garage_mj.cli import main
-from garage_mj.driving import route_rating
-from garage_mj.driving.route_rating import rate_library
+from garage_mj.driving.difficulty import rating as route_rating
+from garage_mj.driving.difficulty.rating import rate_library
 from garage_mj.generation.library import SCHEMA_VERSION, Library, LibraryError
 from garage_mj.scene.route_difficulty import fit, load_route_model, route_difficulty
 from tests._scenes import distinct_painted

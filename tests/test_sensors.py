@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from garage_mj.driving.sensors import Camera, CameraConfig, RenderError
+from garage_mj.driving.sim.sensors import Camera, CameraConfig, RenderError
 from garage_mj.scene.semantics import Semantic, classify_name, geom_classes, unclassified_geoms
 from tests._scenes import build
 
@@ -122,7 +122,7 @@ def test_software_gl_draws_in_the_calling_thread_unless_told_otherwise():
     import subprocess
     import sys
 
-    code = "import os, garage_mj.driving.sensors; print(os.environ['LP_NUM_THREADS'])"
+    code = "import os, garage_mj.driving.sim.sensors; print(os.environ['LP_NUM_THREADS'])"
     env = {k: v for k, v in os.environ.items() if k != "LP_NUM_THREADS"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "0"

@@ -8,7 +8,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from garage_mj.driving.learned_obs import learned_observation, learned_space
+from garage_mj.driving.learning.observation import learned_observation, learned_space
 from garage_mj.driving.sources import painted_sources
 
 TINY = dict(iterations=2, steps_per_iteration=60, epochs=1, batch_size=32, n_envs=1, val_tests=1,
@@ -47,7 +47,7 @@ def test_learned_observation_reads_nothing_privileged():
 
 
 def test_fleet_env_is_seeded_and_unprivileged(tiny_sources):
-    from garage_mj.driving.fleet_env import FleetDriveEnv
+    from garage_mj.driving.learning.fleet_env import FleetDriveEnv
 
     def run(seed):
         env = FleetDriveEnv(tiny_sources, expert=True, cache_size=1)
@@ -78,7 +78,7 @@ def _params(path):
 
 
 def test_train_driver_runs_resumes_and_repeats(tmp_path, tiny_sources, monkeypatch):
-    from garage_mj.driving import train_driver as td
+    from garage_mj.driving.learning import train as td
 
     a = td.train_driver(tiny_sources, tmp_path / "a", config=TINY, seed=1, progress=False)
     manifest = json.loads((tmp_path / "a" / "run.json").read_text())
@@ -87,7 +87,7 @@ def test_train_driver_runs_resumes_and_repeats(tmp_path, tiny_sources, monkeypat
     assert len(curve) == 3 and curve[0].startswith("iteration,states")
     assert a.name == "model.zip" and a.stat().st_size < 20e6
     from garage_mj.driving.drivers.learned import load_model
-    from garage_mj.driving.learned_net import CameraRouteExtractor
+    from garage_mj.driving.learning.network import CameraRouteExtractor
 
     extractor = load_model(a).policy.q_net.features_extractor  # the filters the config asked for
     assert isinstance(extractor, CameraRouteExtractor) and [c.out_channels for c in extractor.convs] == [8, 16, 16]
@@ -125,8 +125,8 @@ def test_train_driver_runs_resumes_and_repeats(tmp_path, tiny_sources, monkeypat
 
 def test_train_driver_command_and_the_model_drives(tmp_path, capsys):
     from garage_mj.cli import main
-    from garage_mj.driving.drive_env import GarageDriveEnv
     from garage_mj.driving.drivers import load_driver
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
 
     config = tmp_path / "driver.toml"
     config.write_text("epochs = 1\nbatch_size = 32\nval_tests = 1\n")
@@ -156,7 +156,7 @@ def test_train_driver_command_and_the_model_drives(tmp_path, capsys):
 def test_hunt_curriculum_trains_on_the_garages_its_hunt_found(tmp_path, tiny_sources):
     import csv
 
-    from garage_mj.driving.train_driver import train_driver
+    from garage_mj.driving.learning.train import train_driver
 
     cfg = dict(TINY, iterations=2, curriculum="hunt", hunt_budget=16)
     train_driver(tiny_sources, tmp_path / "h", config=cfg, seed=0, progress=False)
@@ -169,7 +169,7 @@ def test_hunt_curriculum_trains_on_the_garages_its_hunt_found(tmp_path, tiny_sou
 
 
 def test_dqn_fine_tuning_after_imitation(tmp_path, tiny_sources):
-    from garage_mj.driving.train_driver import train_driver
+    from garage_mj.driving.learning.train import train_driver
 
     model = train_driver(tiny_sources, tmp_path / "rl", config=dict(TINY, iterations=1, rl_timesteps=300), seed=0,
                          progress=True)  # the bars of both stages
@@ -186,7 +186,7 @@ def test_dqn_fine_tuning_after_imitation(tmp_path, tiny_sources):
 
 def test_train_driver_with_actors_labels_the_oracles_yield(tmp_path):
     from garage_mj.cli import main
-    from garage_mj.driving.fleet_env import FleetDriveEnv
+    from garage_mj.driving.learning.fleet_env import FleetDriveEnv
 
     config = tmp_path / "driver.toml"
     config.write_text("epochs = 1\nbatch_size = 32\nval_tests = 1\n")
@@ -203,7 +203,7 @@ def test_train_driver_with_actors_labels_the_oracles_yield(tmp_path):
 
 @pytest.mark.parametrize("channels", [[16, 32], [16, 0, 32], [16, 32, 2.5]])
 def test_a_network_config_without_three_filter_counts_is_refused(channels):
-    from garage_mj.driving.train_driver import DriverTrainConfig
+    from garage_mj.driving.learning.train import DriverTrainConfig
 
     with pytest.raises(ValueError, match="cnn_channels must be 3 positive filter counts"):
         DriverTrainConfig(cnn_channels=tuple(channels))
@@ -213,8 +213,8 @@ def test_the_network_body_is_its_layers_called_in_order():
     """The extractor's lean forward pass gives what calling its layers as modules gives, for a camera of any size."""
     import torch
 
-    from garage_mj.driving.learned_net import CameraRouteExtractor
-    from garage_mj.driving.learned_obs import learned_space
+    from garage_mj.driving.learning.network import CameraRouteExtractor
+    from garage_mj.driving.learning.observation import learned_space
 
     torch.manual_seed(0)
     for h, w in ((64, 64), (48, 80)):

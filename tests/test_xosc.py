@@ -16,8 +16,8 @@ from lxml import etree
 from scenariogeneration.xosc import ParseOpenScenario
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.driving.actor_config import ScenarioConfig
-from garage_mj.driving.actor_placement import draw_scenario
+from garage_mj.driving.actors.config import ScenarioConfig
+from garage_mj.driving.actors.placement import draw_scenario
 from garage_mj.export.pack import export_pack
 from garage_mj.export.validate import ToolMissing, check_xosc_batch, qc_xosc_executable
 from garage_mj.export.xosc import XoscError, write_xosc

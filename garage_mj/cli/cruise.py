@@ -22,7 +22,7 @@ from garage_mj.cli._common import (
     user_errors,
 )
 from garage_mj.core.fsutil import atomic_write, ensure_dir
-from garage_mj.driving.actor_config import load_scenario_config
+from garage_mj.driving.actors.config import load_scenario_config
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import TEST_COLUMNS
 from garage_mj.driving.sources import CruiseSource
@@ -69,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="after the tests, MP4s of N of them (failures first, then successes, in garage and test "
                         "order) into OUT/videos/<garage>_<test>_<outcome>.mp4; re-run on a finished --out to only "
                         "make videos")
-    act = p.add_argument_group("adverse events (garage_mj.driving.actors; drawn per test from its seed)")
+    act = p.add_argument_group("adverse events (garage_mj.driving.actors.scenario; drawn per test from its seed)")
     act.add_argument("--pedestrians", type=non_negative_int, metavar="N",
                      help="pedestrians per test: crossing, stepping out between parked cars, walking along")
     act.add_argument("--moving-cars", type=non_negative_int, metavar="M",

@@ -9,7 +9,7 @@ from pathlib import Path
 from garage_mj.cli import UserError
 from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, positive_int, seed, user_errors
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.difficulty_fit import driver_agreement, fit_runs, load_runs, score
+from garage_mj.driving.difficulty.fit import driver_agreement, fit_runs, load_runs, score
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.scene.route_difficulty import load_route_model
 from garage_mj.scene.route_features import FEATURES, garage_features, mean_features

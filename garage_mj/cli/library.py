@@ -20,7 +20,7 @@ from garage_mj.cli._common import (
     user_errors,
 )
 from garage_mj.core.fsutil import atomic_write, write_error
-from garage_mj.driving.route_rating import rate_library
+from garage_mj.driving.difficulty.rating import rate_library
 from garage_mj.generation.library import Library
 from garage_mj.grid.text import draw
 

@@ -20,7 +20,7 @@ from garage_mj.cli.cruise import scenario
 from garage_mj.core.config import load_config, read_toml
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
-from garage_mj.driving.train_driver import CURRICULA, DriverTrainConfig, train_driver
+from garage_mj.driving.learning.train import CURRICULA, DriverTrainConfig, train_driver
 
 
 def register(sub: argparse._SubParsersAction) -> None:

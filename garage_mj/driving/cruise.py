@@ -11,7 +11,7 @@ appended and flushed as each test ends, so a crash or Ctrl-C loses nothing and a
 what is there), ``summary.csv`` (the paper's table columns per garage, and each garage's route difficulty beside the
 paper's difficulty), ``garages.json`` (the run's garages), ``summary.json`` (Pearson r and the linear regression of
 success rate on the paper's difficulty and on the route difficulty), ``route_difficulty.json`` (the garages' route
-difficulty, computed once in this process and read back by a re-run, :mod:`garage_mj.driving.route_rating`), and
+difficulty, computed once in this process and read back by a re-run, :mod:`garage_mj.driving.difficulty.rating`), and
 ``run.json`` (the settings; a
 re-run with other settings is refused). Both JSON files record the action type used and where it
 came from (``action_type_from``: ``"driver"``, the driver's own, or ``"--action-type"``, given). ``regression.png`` is the reporting stage's
@@ -31,11 +31,15 @@ from typing import TYPE_CHECKING, Any
 
 from garage_mj.core.backends import check_backend, map_unordered
 from garage_mj.core.fsutil import FolderLock, clean_temp, ensure_dir
+from garage_mj.driving.difficulty.rating import (
+    cruise_route_difficulty,
+    driver_route_model,
+    resolve_route_model,
+)
 from garage_mj.driving.episode import cached_env, close_cached_env, drive_test
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.replay import write_test_xosc
 from garage_mj.driving.results import TEST_COLUMNS, check_settings, read_tests, write_csv, write_outputs
-from garage_mj.driving.route_rating import cruise_route_difficulty, driver_route_model, resolve_route_model
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
 
@@ -143,7 +147,7 @@ def run_cruise(
     running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.core.backends`;
     tests.csv gets the same rows either way. ``route_model``: the route difficulty model of
     ``summary.csv``'s ``route_difficulty`` column and ``summary.json``'s ``route_r`` (True: the shipped
-    one of the driver, :func:`~garage_mj.driving.route_rating.driver_route_model`: the learned driver's own
+    one of the driver, :func:`~garage_mj.driving.difficulty.rating.driver_route_model`: the learned driver's own
     for the shipped learned driver, else the default; a ``RouteDifficulty``, a model file or a shipped
     model's name; False: none, the column stays empty), planned for the
     default car and world as the model was fitted, whatever ``env`` changes. Raises

@@ -22,7 +22,7 @@ _CACHE: dict[str, Any] = {}
 
 def cached_env(source: CruiseSource, settings: CruiseSettings):
     """This process's env for ``source`` (built once; the previous garage's env is closed)."""
-    from garage_mj.driving.drive_env import GarageDriveEnv
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
 
     key = (source.hash, json.dumps(settings.env, sort_keys=True))
     if _CACHE.get("hash") != key:

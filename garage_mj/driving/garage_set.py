@@ -31,7 +31,7 @@ import numpy as np
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_error
-from garage_mj.driving.route_rating import resolve_route_model
+from garage_mj.driving.difficulty.rating import resolve_route_model
 from garage_mj.driving.sources import CruiseSource, painted_sources
 from garage_mj.generation.library import Library, stratified_ids
 from garage_mj.generation.library_format import GarageRecord, LibraryError

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from garage_mj.driving.actor_config import load_scenario_config
+from garage_mj.driving.actors.config import load_scenario_config
 from garage_mj.driving.episode import drive_test
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
@@ -70,7 +70,7 @@ def replay_xosc(path: str | Path, driver: str | None = None, driver_kwargs: dict
                               dict(driver_kwargs if driver_kwargs is not None else meta.get("driver_kwargs") or {}))
     source = dataclasses.replace(CruiseSource.from_garage(pack.garage, str(meta.get("garage") or Path(pack.path).name)),
                                  pack=str(pack.path))
-    from garage_mj.driving.drive_env import GarageDriveEnv
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
 
     env = GarageDriveEnv(garage=pack.garage, action_type=settings.action_type, occupancy=settings.occupancy,
                          infeasible="report", **env_kwargs)

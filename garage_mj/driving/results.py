@@ -8,12 +8,12 @@ rows per garage (``summary.csv``, the paper's table columns and ``route_difficul
 ``difficulty``) and over the run (``summary.json``: counts, timing, Pearson r and the regression of
 success rate on the paper's difficulty (``r``, ``slope``, ``intercept``, ``n``) and on the route
 difficulty (``route_r``, ``route_slope``, ``route_intercept``, ``route_n``, under ``route_model``),
-:mod:`garage_mj.driving.regression`). A garage's route difficulty is empty in ``summary.csv`` when it
+:mod:`garage_mj.driving.difficulty.regression`). A garage's route difficulty is empty in ``summary.csv`` when it
 has no feasible stall or was not computed (a run without a route model, a run of an older garage-mj).
 
 Failures are counted per outcome class (:data:`FAILURE_KINDS`), ``missed_goal`` apart from
 ``deadlock``; the paper has three classes (collision, timeout, deadlock), in which a missed goal
-counts as a deadlock (:data:`garage_mj.driving.outcomes.PAPER_CLASS`): ``summary.json`` gives both.
+counts as a deadlock (:data:`garage_mj.driving.sim.outcomes.PAPER_CLASS`): ``summary.json`` gives both.
 Rows of older runs (no ``missed_goal``: such stops were ``deadlock``) load as they are.
 """
 
@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.outcomes import FAILURES, PAPER_CLASS
-from garage_mj.driving.regression import PAPER_R, regression
+from garage_mj.driving.difficulty.regression import PAPER_R, regression
+from garage_mj.driving.sim.outcomes import FAILURES, PAPER_CLASS
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
 TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",

@@ -1,7 +1,7 @@
 """The regression figure of cruise results: success rate against difficulty (paper Fig. "Linear regression").
 
 The numbers (Pearson r, the least-squares line, the paper's table) are computed in
-:mod:`garage_mj.driving.regression`, numpy only, so the cruise runner writes them without matplotlib;
+:mod:`garage_mj.driving.difficulty.regression`, numpy only, so the cruise runner writes them without matplotlib;
 :func:`regression_plot` draws them against the paper's difficulty next to the paper's 16 garages, or
 (``metric="route"``) against the route difficulty next to the line a perfectly calibrated one would
 follow (success = 100 (1 - route difficulty): it is the expected failure rate).
@@ -21,7 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from garage_mj.core.fsutil import atomic_write  # noqa: E402
-from garage_mj.driving.regression import PAPER_TABLE, paper_regression, regression  # noqa: E402
+from garage_mj.driving.difficulty.regression import PAPER_TABLE, paper_regression, regression  # noqa: E402
 
 #: The difficulties a figure can put on its x axis, and the axis label and default title of each.
 METRICS = {"paper": ("difficulty λ", "Success rate vs. garage difficulty"),

@@ -22,7 +22,7 @@ from typing import Any
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving import cruise as driving_cruise
 from garage_mj.driving.cruise import CruiseResult
-from garage_mj.driving.outcomes import FAILURES
+from garage_mj.driving.sim.outcomes import FAILURES
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.grid.garage import Garage
 from garage_mj.reporting.analysis import regression_plot

@@ -16,8 +16,8 @@ from pathlib import Path
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.outcomes import PAPER_CLASS, OutcomeConfig
 from garage_mj.driving.results import FAILURE_KINDS, HIT_CLASSES
+from garage_mj.driving.sim.outcomes import PAPER_CLASS, OutcomeConfig
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.generation.library import Library
 from garage_mj.grid.map_io import load_map
@@ -52,7 +52,7 @@ class DemoConfig:
     garages: int = 8  # garages sampled from the library, stratified by difficulty
     tests: int = 5  # cruise tests per garage and driver
     drivers: tuple[str, ...] = ("oracle", "waypoint", "vision", "learned")  # learned: models/drivers/cruise_m5.zip
-    # adverse events (garage_mj.driving.actors): these drivers run once more with these actors per test
+    # adverse events (garage_mj.driving.actors.scenario): these drivers run once more with these actors per test
     actor_drivers: tuple[str, ...] = ("oracle", "vision")
     actors: dict = field(default_factory=lambda: {"pedestrians": 1, "moving_cars": 1, "clutter": 1})
     failure_videos: int = 3  # failures shown per driver run, each with an MP4 and its .xosc

@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from garage_mj.core.fsutil import public_mode
-from garage_mj.driving.sensors import Camera, CameraConfig
+from garage_mj.driving.sim.sensors import Camera, CameraConfig
 from garage_mj.driving.sources import CruiseSource, cruise_seed
 
 if TYPE_CHECKING:
@@ -82,8 +82,8 @@ def record_video(
     """
     import cv2
 
-    from garage_mj.driving.drive_env import GarageDriveEnv
     from garage_mj.driving.drivers import ActionChoice, choose_action_type, load_driver
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
 
     src = source if isinstance(source, CruiseSource) else CruiseSource.from_garage(source)
     choice = action_type if isinstance(action_type, ActionChoice) else choose_action_type(driver, action_type)

@@ -2,7 +2,7 @@
 
 :func:`add_actor_bodies` adds one mocap body per actor slot of an
 :class:`~garage_mj.scene.actor_spec.ActorSlots` (the drive env's
-:class:`~garage_mj.driving.actor_config.ScenarioConfig`) to an ``mjcf.RootElement`` (before compiling): a
+:class:`~garage_mj.driving.actors.config.ScenarioConfig`) to an ``mjcf.RootElement`` (before compiling): a
 pedestrian per ``pedestrians``, a car per ``moving_cars``, and per ``clutter`` slot one body of
 each clutter shape (cone, trolley, car), since a slot's shape is drawn per test. Body names
 carry the semantic class (``pedestrian_0``, ``movingcar_0``, ``clutter_0_cone``...), so the

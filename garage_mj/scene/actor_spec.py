@@ -1,7 +1,7 @@
 """What an actor of a cruise test is: its kind, behaviour, body shape and size, trajectory and trigger.
 
 The adverse events of a test (pedestrians, moving cars, clutter) are drawn
-(:mod:`garage_mj.driving.actor_placement`) and judged (:mod:`garage_mj.driving.actor_judging`) in
+(:mod:`garage_mj.driving.actors.placement`) and judged (:mod:`garage_mj.driving.actors.judging`) in
 driving; this module holds only the data they are made of, so the scene
 (:mod:`garage_mj.scene.actor_bodies`, the actors' mocap bodies) and the OpenSCENARIO writer
 (:mod:`garage_mj.export.xosc`) read it without reaching into driving.
@@ -58,7 +58,7 @@ ROUND = frozenset({"pedestrian", "cone"})  # shapes whose body is a vertical cyl
 class ActorSlots(Protocol):
     """How many actors of each kind a test may hold: a scene builds one body per slot.
 
-    :class:`garage_mj.driving.actor_config.ScenarioConfig` is one.
+    :class:`garage_mj.driving.actors.config.ScenarioConfig` is one.
     """
 
     @property

@@ -2,7 +2,7 @@
 
 One source for the car's physical quantities: :class:`CarConfig` holds its limits, and
 :func:`car_geometry` reads its outline and axles from ``models/car/car.xml``. The MuJoCo
-actuation of the car lives in :mod:`garage_mj.driving.vehicle`.
+actuation of the car lives in :mod:`garage_mj.driving.sim.vehicle`.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ parked car     ``parkedcar``         a parked car in a stall
 ego car        ``ego``               the car under test
 entrance       ``entrance``          entrance gate marker / floor
 exit           ``exit``              exit gate marker / floor
-pedestrian     ``pedestrian``        a walking person (kinematic actor, :mod:`garage_mj.driving.actors`)
+pedestrian     ``pedestrian``        a walking person (kinematic actor, :mod:`garage_mj.driving.actors.scenario`)
 moving car     ``movingcar``         a car that drives during the test (kinematic actor)
 clutter        ``clutter``           cones, trolleys, a badly parked car (static actors)
 =============  ====================  ============================================

@@ -5,7 +5,7 @@ and ``act(obs) -> action`` once per control step. The observation dict holds ``d
 float32 metres), ``segmentation`` (H x W uint8 :class:`garage_mj.scene.semantics.Semantic` ids),
 optionally ``rgb``, ``waypoint`` (the route point a lookahead distance ahead, in the car frame:
 x forward, y left, metres) and ``speed`` (forward speed, m/s). An action is either the paper's
-discrete index (:class:`garage_mj.driving.vehicle.DiscreteAction`) or ``[throttle, steer]`` in [-1, 1].
+discrete index (:class:`garage_mj.driving.sim.vehicle.DiscreteAction`) or ``[throttle, steer]`` in [-1, 1].
 
 A driver class declares the action type it is made for in a class attribute ``action_type``
 ("continuous" or "discrete"; none: "discrete"); cruise and hunt run it with that type by default.
@@ -25,7 +25,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from garage_mj.core.config import load_config
-from garage_mj.driving.vehicle import DISCRETE_COMMANDS, DiscreteAction, clip
+from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction, clip
 from garage_mj.scene.car import CarGeometry, car_geometry
 
 
@@ -133,7 +133,7 @@ class BaseDriver:
     def track_discrete(self, throttle: float, steer: float, obs: dict[str, Any]) -> int:
         """The paper action whose next-step effect comes closest to ``(throttle, steer)``.
 
-        Knows how the car answers a discrete action (:data:`~garage_mj.driving.vehicle.DISCRETE_COMMANDS`):
+        Knows how the car answers a discrete action (:data:`~garage_mj.driving.sim.vehicle.DISCRETE_COMMANDS`):
         a turn moves the road wheels one rate-limited step toward full lock and holds the cruise
         speed; accelerate and brake move them one step back toward straight and change the speed.
         Reads the road-wheel angle from ``obs["steer"]`` (fraction of full lock); picks the action

@@ -1,8 +1,8 @@
 """``learned``: a deep-RL driver, a stable-baselines3 model acting from the unprivileged observation.
 
 The model (a DQN or PPO ``.zip`` saved by ``garage-mj train-driver``, ``MultiInputPolicy`` over
-:func:`~garage_mj.driving.learned_obs.learned_space`) sees what
-:func:`~garage_mj.driving.learned_obs.learned_observation` makes of the drive env's observation
+:func:`~garage_mj.driving.learning.observation.learned_space`) sees what
+:func:`~garage_mj.driving.learning.observation.learned_observation` makes of the drive env's observation
 (camera depth and segmentation, the next route waypoint, speed, route left, steer) and picks one of
 the paper's 4 actions by argmax, so the same test gives the same drive. ``--driver learned`` runs
 the shipped model ``models/drivers/<DEFAULT_MODEL>.zip``; ``--driver learned:PATH`` another one.
@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from garage_mj.driving.drivers import DriverError
-from garage_mj.driving.learned_obs import learned_observation, learned_space
-from garage_mj.driving.vehicle import DISCRETE_COMMANDS, DiscreteAction
+from garage_mj.driving.learning.observation import learned_observation, learned_space
+from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction
 
 DRIVER_MODELS = "drivers"  # the folder of models/ that holds the shipped driver models
 DEFAULT_MODEL = "cruise_m5"  # models/drivers/<DEFAULT_MODEL>.zip: what ``--driver learned`` runs
@@ -60,8 +60,8 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(f"{type(exc).__name__}: {exc}".split())
 
 
-def _algorithm(path: Path) -> str:
-    """``"DQN"`` or ``"PPO"``: which SB3 class saved ``path``, read from the zip's ``data`` JSON."""
+def _algorithm(path: Path) -> tuple[str, dict]:
+    """``"DQN"`` or ``"PPO"``: which SB3 class saved ``path``, and the zip's ``data`` JSON it is read from."""
     try:
         with zipfile.ZipFile(path) as z:
             data = json.loads(z.read("data"))
@@ -71,7 +71,7 @@ def _algorithm(path: Path) -> str:
     if module not in ALGORITHMS:
         raise DriverError(f"learned driver model {path}: its policy is from {module}; the learned driver runs "
                           f"DQN or PPO models ({', '.join(sorted(ALGORITHMS.values()))}) from `garage-mj train-driver`")
-    return ALGORITHMS[module]
+    return ALGORITHMS[module], data
 
 
 def load_model(path: str | Path) -> Any:
@@ -90,11 +90,15 @@ def load_model(path: str | Path) -> Any:
     key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
     if key in _MODELS:
         return _MODELS[key]
-    algo = _algorithm(path)
+    algo, data = _algorithm(path)
     import stable_baselines3  # heavy (torch): only when a learned driver is built
 
+    from garage_mj.driving.learning.network import saved_policy_kwargs
+
+    kwargs = saved_policy_kwargs(data)
+    custom = None if kwargs is None else {"policy_kwargs": kwargs}
     try:
-        model = getattr(stable_baselines3, algo).load(path, device="cpu")
+        model = getattr(stable_baselines3, algo).load(path, device="cpu", custom_objects=custom)
     except Exception as exc:  # torch/pickle/zip errors of a damaged file: name the file, keep one line
         raise _no_model(path, f" (cannot load it as {algo}: {_one_line(exc)})") from None
     space = model.action_space
@@ -134,7 +138,7 @@ class LearnedDriver:
 
     def reset(self, info: dict[str, Any]) -> None:
         """Start a test. Nothing is random (argmax); with continuous actions the chosen action's
-        ``[throttle, steer]`` command is sent (:data:`~garage_mj.driving.vehicle.DISCRETE_COMMANDS`)."""
+        ``[throttle, steer]`` command is sent (:data:`~garage_mj.driving.sim.vehicle.DISCRETE_COMMANDS`)."""
         self.discrete = info.get("action_type", "discrete") == "discrete"
 
     def _check(self, shape: tuple[int, ...]) -> None:

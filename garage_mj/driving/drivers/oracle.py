@@ -10,7 +10,7 @@ rear-axle path, headings and curvature from :mod:`garage_mj.scene.drivable`, han
   no faster than ``lateral_accel`` allows and than the steering rate can follow, braking at
   ``stop_decel`` into curves and to the goal.
 
-With actors (:mod:`garage_mj.driving.actors`) it is privileged too: it gets every actor's trajectory
+With actors (:mod:`garage_mj.driving.actors.scenario`) it is privileged too: it gets every actor's trajectory
 (``info["actors"]``) and each actor's time since its trigger (``obs["actors"]``), and yields: at
 reset it finds, per moving actor and per moment of its trajectory, which poses of its own path the
 actor's body comes near (``actor_margin``); while any not-yet-run part of an actor's trajectory
@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.driving.actors import Corridor, actor_poses, sample_times
+from garage_mj.driving.actors.scenario import Corridor, actor_poses, sample_times
 from garage_mj.driving.drivers.base import BaseDriver
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import TestPlan

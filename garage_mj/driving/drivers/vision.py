@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.driving.drivers.base import BaseDriver
-from garage_mj.driving.vehicle import clip
+from garage_mj.driving.sim.vehicle import clip
 from garage_mj.scene.semantics import DRIVABLE, NUM_CLASSES, Semantic
 
 _NOT_OBSTACLE = np.zeros(NUM_CLASSES, dtype=bool)

@@ -94,7 +94,7 @@ class Outcome:
 def ego_contacts(model, data, ego_geoms, geom_classes: np.ndarray) -> list[Contact]:
     """Contacts between an ego geom and a non-ego geom of a collidable class in ``data``, with its class.
 
-    ``ego_geoms``: a boolean mask over the model's geoms (:attr:`garage_mj.driving.vehicle.Car.geom_mask`,
+    ``ego_geoms``: a boolean mask over the model's geoms (:attr:`garage_mj.driving.sim.vehicle.Car.geom_mask`,
     the fast path) or the ego geom ids. Vectorised over ``data.contact``: the car's wheels touch
     the floor at every physics step, so only contacts with something collidable are named (name
     lookups cost more than the test).
@@ -132,7 +132,7 @@ class OutcomeMonitor:
         """``goal``: (x, y) or (x, y, yaw) [m, rad]; default the route's last point and heading.
 
         ``extra_time`` [s] is added to the time limit: how long the test's moving actors may
-        keep the car waiting (:attr:`garage_mj.driving.actors.Scenario.duration`).
+        keep the car waiting (:attr:`garage_mj.driving.actors.scenario.Scenario.duration`).
         """
         self.route = route
         self.config = config or OutcomeConfig()

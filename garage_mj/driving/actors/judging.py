@@ -4,15 +4,15 @@ Feasibility is never decided from a drive's outcome: a test with actors is infea
 actor starts or ends in the car's swept path (no room to pass, nothing to wait for), or when an
 actor's motion reaches the car's path less than the stopping distance
 ``v t_react + v^2 / (2 a_brake)`` (``v`` the car's top speed) beyond the place where the trigger
-fires (at the latest: one control step, :data:`~garage_mj.driving.actors.CONTROL_LAG`, late).
+fires (at the latest: one control step, :data:`~garage_mj.driving.actors.scenario.CONTROL_LAG`, late).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from garage_mj.driving.actor_config import ScenarioConfig
-from garage_mj.driving.actors import CONTROL_LAG, Corridor, actor_poses, sample_times
+from garage_mj.driving.actors.config import ScenarioConfig
+from garage_mj.driving.actors.scenario import CONTROL_LAG, Corridor, actor_poses, sample_times
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import DrivePlanner, TestPlan
 
@@ -21,7 +21,7 @@ def judge(actors: list[ActorSpec], plan: TestPlan, planner: DrivePlanner, config
           margin: float | None = None) -> tuple[bool, str]:
     """Whether a driver of this car can avoid every actor (and why not), from the scene and the trigger rule.
 
-    Used by :func:`~garage_mj.driving.actor_placement.draw_scenario` and on a replayed scenario (a
+    Used by :func:`~garage_mj.driving.actors.placement.draw_scenario` and on a replayed scenario (a
     ``.xosc``), whose actors were not drawn here.
     """
     if not actors or not plan.feasible:

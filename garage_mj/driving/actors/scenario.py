@@ -1,9 +1,9 @@
 """The actors of a cruise test against the ego car's swept path: :class:`Scenario` and :class:`Corridor`.
 
-A :class:`~garage_mj.driving.actor_config.ScenarioConfig` says how many actors of each kind a
-test gets; :func:`~garage_mj.driving.actor_placement.draw_scenario` places them from the test's
+A :class:`~garage_mj.driving.actors.config.ScenarioConfig` says how many actors of each kind a
+test gets; :func:`~garage_mj.driving.actors.placement.draw_scenario` places them from the test's
 random stream, around the test's planned route (:class:`~garage_mj.scene.drivable.TestPlan`),
-and :func:`~garage_mj.driving.actor_judging.judge` decides from the scene and the trigger rule
+and :func:`~garage_mj.driving.actors.judging.judge` decides from the scene and the trigger rule
 alone whether every event stays avoidable. What an actor is (kinds, behaviours, shapes, the
 trigger) is :mod:`garage_mj.scene.actor_spec`. Nothing here runs MuJoCo: the drive env moves the
 actors (kinematic mocap bodies, :mod:`garage_mj.scene.actor_bodies`) along their

@@ -2,13 +2,13 @@
 
 Each ``reset`` draws, from the env's seeded generator, a garage of the set (uniformly, or by
 :meth:`FleetDriveEnv.set_weights`, which a curriculum or an adversary moves during training) and a
-test seed, and resets that garage's :class:`~garage_mj.driving.drive_env.GarageDriveEnv` to it
+test seed, and resets that garage's :class:`~garage_mj.driving.sim.drive_env.GarageDriveEnv` to it
 (the paper's discrete actions; a test whose target stall cannot be reached is drawn again). The same seed gives the
 same sequence of garages and tests. Scenes are kept in a cache of ``cache_size`` envs (least
 recently used closed first), so a reset compiles a MuJoCo model only when it meets a garage not
 in the cache; a garage without a drivable test in :data:`DRAWS` draws is dropped with a warning.
 
-The observation is the unprivileged one (:func:`~garage_mj.driving.learned_obs.learned_observation`):
+The observation is the unprivileged one (:func:`~garage_mj.driving.learning.observation.learned_observation`):
 camera depth and segmentation, the next route waypoint, speed, the route left and the road-wheel
 angle. With ``expert=True`` each ``info`` also carries ``expert_action``: what the privileged
 ``oracle`` (:class:`~garage_mj.driving.drivers.oracle.OracleDriver`, with the paper's actions) would
@@ -27,11 +27,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.driving.drive_env import GarageDriveEnv
-from garage_mj.driving.learned_obs import learned_observation, learned_space
-from garage_mj.driving.sensors import CameraConfig
+from garage_mj.driving.learning.observation import learned_observation, learned_space
+from garage_mj.driving.sim.drive_env import GarageDriveEnv
+from garage_mj.driving.sim.sensors import CameraConfig
+from garage_mj.driving.sim.vehicle import DiscreteAction
 from garage_mj.driving.sources import CruiseSource
-from garage_mj.driving.vehicle import DiscreteAction
 
 DRAWS = 20  # test draws per reset before a garage is taken as one without a drivable test
 

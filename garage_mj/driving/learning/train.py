@@ -1,7 +1,7 @@
 """Train a learned cruise driver: SB3 DQN on the unprivileged observation, warm-started by DAgger.
 
 The model is a stable-baselines3 ``DQN`` with ``MultiInputPolicy`` (a CNN over the camera's depth
-and segmentation, an MLP over the vector: :mod:`garage_mj.driving.learned_obs`) and the paper's
+and segmentation, an MLP over the vector: :mod:`garage_mj.driving.learning.observation`) and the paper's
 four discrete actions. It is trained over a set of garages (:class:`FleetDriveEnv`, one garage per
 episode) in two stages:
 
@@ -98,7 +98,7 @@ class DriverTrainConfig:
     hunt_budget: int = 40  # [cruise tests] per iteration the hunt spends (curriculum "hunt")
     hunt_keep: int = 8  # hunted garages (with a failure, worst first) added per iteration
     hunt_share: float = 0.5  # share of an iteration's draws that go to the hunted garages
-    # the network (garage_mj.driving.learned_net): NatureCNN-shaped convolutions with cnn_channels filters over
+    # the network (garage_mj.driving.learning.network): NatureCNN-shaped convolutions with cnn_channels filters over
     # the image to cnn_features, concatenated with the vector, then net_arch. A narrow image feature keeps the 5
     # route/speed numbers from being drowned by 256 image features (with 256: 94% agreement with the oracle but
     # 35-50% validation success)
@@ -181,7 +181,7 @@ def _hunted(out: Path, it: int, sources: list[CruiseSource], cfg: DriverTrainCon
 def _make_venv(sources: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any], expert: bool):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    from garage_mj.driving.fleet_env import FleetDriveEnv
+    from garage_mj.driving.learning.fleet_env import FleetDriveEnv
 
     def make():
         return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs)
@@ -231,11 +231,11 @@ def _collect(model, venv, steps: int, beta: float, seed: int, weights: np.ndarra
 def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg: DriverTrainConfig,
          seed: int) -> tuple[float, float]:
     """``epochs`` passes of cross-entropy on the Q-network over the states (those within
-    :data:`~garage_mj.driving.learned_obs.NEAR_RANGE` of the goal weighted ``stop_weight``); (mean loss,
+    :data:`~garage_mj.driving.learning.observation.NEAR_RANGE` of the goal weighted ``stop_weight``); (mean loss,
     agreement) of the last."""
     import torch
 
-    from garage_mj.driving.learned_obs import VECTOR_KEYS
+    from garage_mj.driving.learning.observation import VECTOR_KEYS
 
     torch.manual_seed(seed)
     q_net = model.policy.q_net
@@ -290,6 +290,19 @@ def _success(counts: dict[str, int]) -> float | None:
     """Success over the feasible tests of ``validate``'s counts (None: no feasible test)."""
     feasible = sum(v for k, v in counts.items() if k != "infeasible")
     return round(counts.get("success", 0) / feasible, 4) if feasible else None
+
+
+def _load_checkpoint(path: Path, venv):
+    """A checkpoint saved by :func:`_save`, its network rebuilt from the zip's plain fields (not unpickled)."""
+    import zipfile
+
+    from stable_baselines3 import DQN
+
+    from garage_mj.driving.learning.network import saved_policy_kwargs
+
+    with zipfile.ZipFile(path) as z:
+        kwargs = saved_policy_kwargs(json.loads(z.read("data")))
+    return DQN.load(path, env=venv, device="cpu", custom_objects=None if kwargs is None else {"policy_kwargs": kwargs})
 
 
 def _save(model, path: Path, **kwargs: Any) -> None:
@@ -367,9 +380,9 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
     try:
         done = state["iterations_done"]
         if done:
-            model = DQN.load(out / "checkpoints" / f"iter_{done - 1:03d}.zip", env=venv, device="cpu")
+            model = _load_checkpoint(out / "checkpoints" / f"iter_{done - 1:03d}.zip", venv)
         else:
-            from garage_mj.driving.learned_net import CameraRouteExtractor
+            from garage_mj.driving.learning.network import CameraRouteExtractor
 
             policy_kwargs = {"net_arch": list(cfg.net_arch), "features_extractor_class": CameraRouteExtractor,
                              "normalize_images": False,  # the extractor scales the image itself

@@ -1,6 +1,6 @@
 """Placing the actors of a cruise test around its planned route: :func:`draw_scenario`.
 
-Each actor of a :class:`~garage_mj.driving.actor_config.ScenarioConfig` gets a behaviour and a
+Each actor of a :class:`~garage_mj.driving.actors.config.ScenarioConfig` gets a behaviour and a
 trajectory (see the table in :mod:`garage_mj.scene.actor_spec`) drawn from the test's random
 stream, so the same seed gives the same actors. A moving actor's trigger point lies
 ``stopping distance + lead`` before the first place where its motion comes within
@@ -8,8 +8,8 @@ stream, so the same seed gives the same actors. A moving actor's trigger point l
 config: the event is adverse (it starts as the car approaches) but avoidable. Static clutter is
 placed only where the swept path stays clear; an actor for which no valid place is found in
 :data:`PLACEMENT_TRIES` draws is left out, and counted
-(:attr:`~garage_mj.driving.actors.Scenario.missing`). The drawn scenario is then judged
-(:func:`garage_mj.driving.actor_judging.judge`).
+(:attr:`~garage_mj.driving.actors.scenario.Scenario.missing`). The drawn scenario is then judged
+(:func:`garage_mj.driving.actors.judging.judge`).
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.geometry import DELTAS
-from garage_mj.driving.actor_config import ScenarioConfig
-from garage_mj.driving.actor_judging import judge
-from garage_mj.driving.actors import (
+from garage_mj.driving.actors.config import ScenarioConfig
+from garage_mj.driving.actors.judging import judge
+from garage_mj.driving.actors.scenario import (
     CONTROL_LAG,
     Corridor,
     Scenario,

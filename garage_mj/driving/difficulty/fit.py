@@ -10,7 +10,7 @@ on them and writes the model with its fitting data beside it (``<model>.fit.csv`
 refit on their own driver's results. :func:`score` measures how well a difficulty predicts the
 failures of other records: per-garage Pearson r with success % (95 % bootstrap interval over
 garages) and per-test AUC, for the route difficulty and for the paper's, next to the largest |r|
-that the garages' numbers of tests let any difficulty expect (:func:`~garage_mj.driving.regression.attainable_r`).
+that the garages' numbers of tests let any difficulty expect (:func:`~garage_mj.driving.difficulty.regression.attainable_r`).
 """
 
 from __future__ import annotations
@@ -27,8 +27,7 @@ import numpy as np
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.cruise import GARAGES_FILE
-from garage_mj.driving.garage_set import GarageSet, GarageSetError
-from garage_mj.driving.regression import (
+from garage_mj.driving.difficulty.regression import (
     attainable_r,
     auc,
     bootstrap_attainable_r,
@@ -36,6 +35,7 @@ from garage_mj.driving.regression import (
     joint_r_bound,
     pearson,
 )
+from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.results import read_tests, rounded
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.generation.library import Library
@@ -226,7 +226,7 @@ def score(model: RouteDifficulty, records: Sequence[dict[str, Any]], seed: int =
 def driver_agreement(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per pair of drivers in ``records`` (``"a+b"``): Pearson r between their per-garage success % over the
     garages both drove, and the largest |r| any one difficulty can have with both, with the same sign
-    (harder for both; :func:`~garage_mj.driving.regression.joint_r_bound`). Drivers that fail alike correlate highly; a
+    (harder for both; :func:`~garage_mj.driving.difficulty.regression.joint_r_bound`). Drivers that fail alike correlate highly; a
     difficulty fitted on one then transfers to the other, and otherwise it cannot."""
     success: dict[str, dict[str, float]] = {}
     for (driver, h), rs in _by_garage(records):

@@ -1,7 +1,7 @@
 """How many adverse events a cruise test gets, and the rules they are drawn by: :class:`ScenarioConfig`.
 
 The actors themselves (:class:`~garage_mj.scene.actor_spec.ActorSpec`) are placed by
-:mod:`garage_mj.driving.actor_placement` and judged by :mod:`garage_mj.driving.actor_judging`.
+:mod:`garage_mj.driving.actors.placement` and judged by :mod:`garage_mj.driving.actors.judging`.
 """
 
 from __future__ import annotations
@@ -99,6 +99,6 @@ def load_scenario_config(source: str | dict[str, Any] | ScenarioConfig | None, *
         return load_config(ScenarioConfig, data)
     except ConfigError as exc:
         if isinstance(source, (str, Path)):  # name the file the bad value came from
-            raise ConfigError(f"{source}: {exc}; see garage_mj.driving.actor_config.ScenarioConfig for the keys") \
+            raise ConfigError(f"{source}: {exc}; see garage_mj.driving.actors.config.ScenarioConfig for the keys") \
                 from None
         raise

@@ -2,12 +2,12 @@
 
 A learned driver acts from the front camera and what the car itself knows of its route in its own
 frame, never from the world frame or the other road users' states: no ``pose``, no ``actors``. From a drive env's observation
-(:class:`~garage_mj.driving.drive_env.GarageDriveEnv`, depth in metres) :func:`learned_observation`
+(:class:`~garage_mj.driving.sim.drive_env.GarageDriveEnv`, depth in metres) :func:`learned_observation`
 makes a dict for stable-baselines3's ``MultiInputPolicy``:
 
 - ``image``: (2, H, W) uint8, channel first: depth clipped to :data:`DEPTH_RANGE` metres and scaled
   to 0..255, and the segmentation class ids spread over 0..255 (:data:`SEG_SCALE` per class);
-- ``vector``: (8,) float32: the route waypoint :data:`~garage_mj.driving.drive_env.LOOKAHEAD` metres
+- ``vector``: (8,) float32: the route waypoint :data:`~garage_mj.driving.sim.drive_env.LOOKAHEAD` metres
   ahead in the car frame (x, y over the lookahead), the speed over the car's top speed, the route
   left to the goal (metres over :data:`REMAINING_RANGE`, capped at 1), the road-wheel angle
   (fraction of full lock), the route left again over :data:`NEAR_RANGE` (capped at 1), and the goal
@@ -17,7 +17,7 @@ makes a dict for stable-baselines3's ``MultiInputPolicy``:
   were mostly stops 1 m short of or past the goal. The goal is in the car frame, as the waypoint
   is; the world frame (``pose``, where the goal is in the garage) stays hidden.
 
-The trainer (:mod:`garage_mj.driving.train_driver`) and the ``learned`` driver both call it, so a
+The trainer (:mod:`garage_mj.driving.learning.train`) and the ``learned`` driver both call it, so a
 model sees at test time exactly what it saw in training.
 """
 
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.driving.drive_env import LOOKAHEAD
+from garage_mj.driving.sim.drive_env import LOOKAHEAD
 from garage_mj.scene.semantics import Semantic
 
 DEPTH_RANGE = 20.0  # [m] depth beyond this reads as this (a garage's far wall rarely matters)

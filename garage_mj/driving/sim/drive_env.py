@@ -20,7 +20,7 @@ every obstacle and stall outline. A target that no driver of this car could reac
 outcome ``infeasible`` and its reason, never driven. The car starts :data:`START_OFFSET` metres
 along the route, so it is wholly inside the garage.
 
-Outcomes are the environment's (:class:`~garage_mj.driving.outcomes.OutcomeMonitor`): ``success`` and
+Outcomes are the environment's (:class:`~garage_mj.driving.sim.outcomes.OutcomeMonitor`): ``success`` and
 ``collision``/``deadlock``/``missed_goal`` terminate, ``timeout`` truncates. The reward is route progress [m]
 per step, plus :data:`SUCCESS_REWARD` or :data:`COLLISION_PENALTY` at the end.
 
@@ -42,13 +42,13 @@ import numpy as np
 from gymnasium import spaces
 
 from garage_mj.core.config import load_config
-from garage_mj.driving.actor_config import NO_ACTORS, ScenarioConfig, load_scenario_config
-from garage_mj.driving.actor_judging import judge
-from garage_mj.driving.actor_placement import draw_scenario
-from garage_mj.driving.actors import Scenario
-from garage_mj.driving.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
-from garage_mj.driving.sensors import Camera, CameraConfig
-from garage_mj.driving.vehicle import Car, DiscreteAction, attach_car, compile_mjcf
+from garage_mj.driving.actors.config import NO_ACTORS, ScenarioConfig, load_scenario_config
+from garage_mj.driving.actors.judging import judge
+from garage_mj.driving.actors.placement import draw_scenario
+from garage_mj.driving.actors.scenario import Scenario
+from garage_mj.driving.sim.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.driving.sim.sensors import Camera, CameraConfig
+from garage_mj.driving.sim.vehicle import Car, DiscreteAction, attach_car, compile_mjcf
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states
 from garage_mj.scene.actor_spec import ActorSpec
@@ -77,7 +77,7 @@ def _hittable(ego: np.ndarray, classes: np.ndarray) -> np.ndarray:
     """(ngeom,) bool: the geoms whose contact with the car is a hit (collidable classes, not the car itself).
 
     Where the hit sensors cannot tell (:func:`_hit_sensors`), one lookup per physics step says
-    whether :func:`~garage_mj.driving.outcomes.ego_contacts` has anything to name (it still checks
+    whether :func:`~garage_mj.driving.sim.outcomes.ego_contacts` has anything to name (it still checks
     that the car is one side of the contact); calling it at every step cost as much as the step
     itself, the wheels being always on the floor.
     """
@@ -166,7 +166,7 @@ class GarageDriveEnv(gym.Env):
             ``MultiInputPolicy`` hands them to its CNN. The built-in drivers expect the default
             (depth in metres as ``(H, W)`` float32).
         render_mode: ``"rgb_array"`` renders the ``ego/top`` camera (``render_size`` pixels).
-        scenario: :class:`~garage_mj.driving.actor_config.ScenarioConfig` (or a dict of its fields, or a TOML
+        scenario: :class:`~garage_mj.driving.actors.config.ScenarioConfig` (or a dict of its fields, or a TOML
             file): pedestrians, moving cars and clutter drawn per test from the test seed (after
             the draws above, so the same seed gives the same target, parked cars and start with
             or without actors). A test whose events no driver could avoid is ``infeasible``.

@@ -1,0 +1,1 @@
+"""Relating outcomes to difficulty: regression, the route-difficulty fit and the kept ratings."""

@@ -1,0 +1,1 @@
+"""Training a learned driver: its observation, its network, the fleet env and ``train-driver``."""
