@@ -25,8 +25,8 @@ from garage_mj.export.preview import render_preview
 from garage_mj.export.xodr import write_xodr
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.painters import paint_garage
-from garage_mj.scene.lanes import lane_graph
 from garage_mj.scene.mjcf_scene import build_scene
+from garage_mj.scene.opendrive_lanes import lane_graph
 
 
 def _mjcf(garage: Garage) -> None:

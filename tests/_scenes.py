@@ -10,7 +10,7 @@ from garage_mj.driving.sim.outcomes import OutcomeMonitor, ego_contacts
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
 from garage_mj.driving.sim.vehicle import Car, attach_car, compile_mjcf
 from garage_mj.grid.painters import paint_garage
-from garage_mj.scene.route import Route, to_car_frame
+from garage_mj.scene.route_line import Route, to_car_frame
 from garage_mj.scene.semantics import geom_classes
 
 LOOKAHEAD = 4.0  # [m] waypoint distance ahead of the car's route projection

@@ -47,9 +47,9 @@ def test_bad_specs_are_clear_errors():
     with pytest.raises(DriverError, match=r"cannot import module 'no_such_pkg\.mod'"):
         resolve_driver("no_such_pkg.mod:Driver")
     with pytest.raises(DriverError, match=r"has no attribute 'Nope'"):
-        resolve_driver("garage_mj.scene.route:Nope")
+        resolve_driver("garage_mj.scene.route_line:Nope")
     with pytest.raises(DriverError, match=r"must be a class with reset\(info\) and act\(obs\)"):
-        resolve_driver("garage_mj.scene.route:to_car_frame")
+        resolve_driver("garage_mj.scene.route_line:to_car_frame")
     with pytest.raises(ValueError, match="unknown key"):
         load_driver("waypoint", config={"cruise_sped": 2.0})
 

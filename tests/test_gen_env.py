@@ -15,7 +15,7 @@ from garage_mj.core.geometry import EAST, NORTH, SOUTH, WEST
 from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.grid.metrics import coverage
 from garage_mj.grid.reward import RewardConfig
-from garage_mj.grid.roadgraph import analyse
+from garage_mj.grid.road_segments import analyse
 from garage_mj.grid.rules import road_squares, stall_rule_violations
 
 ENV_ID = "garage_mj/GarageGen-v0"

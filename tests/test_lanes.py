@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from garage_mj.grid.painters import paint_garage
-from garage_mj.scene.lanes import entrance_pose, exit_pose, lane_graph, nearest_node, route
-from garage_mj.scene.roadmodel import build_road_model
-from garage_mj.scene.roadnet import RoadTile, road_network
+from garage_mj.scene.opendrive_lanes import entrance_pose, exit_pose, lane_graph, nearest_node, route
+from garage_mj.scene.opendrive_roads import build_road_model
+from garage_mj.scene.road_matrix import RoadTile, road_network
 from garage_mj.scene.stalls import stall_layout
 
 STEP_TOLERANCE = 1.0  # [m] a route may stop this far from a goal on a lane centre (waypoint spacing)

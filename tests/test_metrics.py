@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from garage_mj import Block, Garage, difficulty, evaluate
-from garage_mj.grid.roadgraph import Tile, analyse
+from garage_mj.grid.road_segments import Tile, analyse
 from garage_mj.grid.rules import apply_stall_rule
 
 # SPEC section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 tested garages.

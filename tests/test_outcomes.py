@@ -15,7 +15,7 @@ from garage_mj.driving.sim.outcomes import (
     OutcomeMonitor,
     ego_contacts,
 )
-from garage_mj.scene.route import Route, to_car_frame
+from garage_mj.scene.route_line import Route, to_car_frame
 from garage_mj.scene.semantics import Semantic, geom_classes
 
 L_ROUTE = Route([(0, 0), (20, 0), (20, 20)])  # 40 m

@@ -8,8 +8,8 @@ from hypothesis import strategies as st
 
 from garage_mj import evaluate
 from garage_mj.grid.painters import paint_garage
-from garage_mj.grid.roadgraph import analyse
-from garage_mj.scene.roadnet import RoadTile, road_network, tile_openings, tile_rotation
+from garage_mj.grid.road_segments import analyse
+from garage_mj.scene.road_matrix import RoadTile, road_network, tile_openings, tile_rotation
 from garage_mj.scene.stalls import stall_layout
 from garage_mj.scene.world import DEFAULT_WORLD, WORLD_DIR, cell_center, world_to_cell
 

@@ -25,9 +25,9 @@ from garage_mj.export.validate import (
 )
 from garage_mj.export.xodr import write_xodr
 from garage_mj.grid.painters import paint_garage
-from garage_mj.grid.roadgraph import analyse
-from garage_mj.scene.lanes import lane_graph_of
-from garage_mj.scene.roadmodel import IMPLICIT_ROAD, build_road_model
+from garage_mj.grid.road_segments import analyse
+from garage_mj.scene.opendrive_lanes import lane_graph_of
+from garage_mj.scene.opendrive_roads import IMPLICIT_ROAD, build_road_model
 from garage_mj.scene.stalls import stall_layout
 
 BROKEN = "broken_shifted_connecting_road"

@@ -1,6 +1,6 @@
 """OpenDRIVE writer: ``garage.xodr`` (ASAM OpenDRIVE 1.8) from the road model, with lxml.
 
-Everything geometric comes from :mod:`garage_mj.scene.roadmodel`; this module only spells
+Everything geometric comes from :mod:`garage_mj.scene.opendrive_roads`; this module only spells
 it in XML: header, roads (plan view, flat elevation and lateral profiles, one lane section
 with lanes 1/0/-1), junctions with their connections and lane links, and one
 ``<object type="parkingSpace">`` per stall on the road it faces.
@@ -16,7 +16,7 @@ from lxml import etree
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.garage_scene import GarageScene, as_scene
-from garage_mj.scene.roadmodel import Link, ParkingSpace, Road, RoadModel
+from garage_mj.scene.opendrive_roads import Link, ParkingSpace, Road, RoadModel
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
 REV_MAJOR, REV_MINOR = 1, 8

@@ -25,7 +25,7 @@ from garage_mj.grid.image import grid_image
 from garage_mj.grid.map_io import load_map
 from garage_mj.grid.metrics import difficulty, utility_values
 from garage_mj.grid.reward import RewardConfig
-from garage_mj.grid.roadgraph import RoadTracker
+from garage_mj.grid.road_segments import RoadTracker
 from garage_mj.grid.rules import stall_code
 from garage_mj.grid.text import draw
 

@@ -33,7 +33,7 @@ from garage_mj.grid.blocks import AXES, Axis, Block
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.map_io import load_map
 from garage_mj.grid.metrics import DEFAULT_DIFFICULTY, difficulty
-from garage_mj.grid.roadgraph import analyse
+from garage_mj.grid.road_segments import analyse
 from garage_mj.grid.rules import apply_stall_rule
 
 BIN_WIDTH = 0.1  # difficulty bin of the report

@@ -15,7 +15,7 @@ import numpy as np
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.grid.blocks import AXES, INITIAL_CODES, NUM_CODES, STALL_CODES, Axis, Block
-from garage_mj.grid.roadgraph import analyse
+from garage_mj.grid.road_segments import analyse
 from garage_mj.grid.rules import expected_cell, road_squares, stall_rule_violations
 
 MAX_SIDE = 64  # [cells] rows or columns of a map or garage (576 m at 9 m per cell); bounds memory and time

@@ -16,7 +16,7 @@ import numpy as np
 from garage_mj.grid.blocks import Block, count_stalls
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.reward import RewardConfig
-from garage_mj.grid.roadgraph import analyse
+from garage_mj.grid.road_segments import analyse
 from garage_mj.grid.rules import road_squares, stall_rule_violations
 
 

@@ -31,7 +31,7 @@ from garage_mj.core.geometry import DELTAS  # noqa: E402
 from garage_mj.grid.blocks import NUM_CODES, Block  # noqa: E402
 from garage_mj.grid.garage import Garage  # noqa: E402
 from garage_mj.grid.image import BLOCK_COLOURS as _BLOCK_COLOURS
-from garage_mj.grid.roadgraph import Tile, analyse  # noqa: E402
+from garage_mj.grid.road_segments import Tile, analyse  # noqa: E402
 
 BIN = 0.1  # heatmap cell width in difficulty and coverage
 CONFIDENCE = 0.95

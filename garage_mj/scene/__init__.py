@@ -5,13 +5,13 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 
 - ``world``: the world frame (x east, y north, metres) and the sizes of blocks, lanes, stalls, pillars.
 - ``garage_scene``: :class:`GarageScene`, every part below built on first use, at most once per garage.
-- ``roadnet``: the road network matrix: per road cell its tile type, rotation and world position.
+- ``road_matrix``: the road network matrix: per road cell its tile type, rotation and world position.
 - ``stalls``: where every stall (and obstruction pillar) lies in the world.
-- ``roadmodel``: roads, junctions and parking spaces as OpenDRIVE spells them, before any XML.
+- ``opendrive_roads``: roads, junctions and parking spaces as OpenDRIVE spells them, before any XML.
 - ``planview``: plan-view geometry (lines, arcs, poses along them) shared by the road model and lanes.
-- ``lanes``: the lane graph (right-hand lane waypoints of the road model), routes on it, gate poses.
-- ``route``: a route as a 2D polyline: length, projection of the car, lookahead points.
-- ``routing``: the ego car's forward routes on the road network matrix, filleted into turns it can steer.
+- ``opendrive_lanes``: the lane graph (right-hand lane waypoints of the road model), routes on it, gate poses.
+- ``route_line``: a route as a 2D polyline: length, projection of the car, lookahead points.
+- ``cruise_routes``: the ego car's forward routes on the road network matrix, filleted into turns it can steer.
 - ``clearance``: obstacles as rectangles, the car's footprint and its swept clearance along a path.
 - ``drivable``: the planned test to each stall (goal, route, checks) and a garage's drivability.
 - ``route_features``: what a test asks of a driver, from its planned route (turns, curvature, clearance, ...).
@@ -24,18 +24,18 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 - ``actor_spec``: what an actor of a cruise test is (kind, shape, size, trajectory, trigger).
 - ``actor_bodies``: the actors' kinematic mocap bodies in the MuJoCo scene.
 
-Four modules describe the roads, each for its own reader. ``garage_mj.grid.roadgraph`` (grid
+Four modules describe the roads, each for its own reader. ``garage_mj.grid.road_segments`` (grid
 stage) is the road graph on the grid: road-like cells, their tile by degree, key nodes and the
 segments between them, the counts the paper's metrics use; it knows no world coordinates.
-``roadnet`` is the road network matrix, one entry per road cell: its tile type (dead end,
+``road_matrix`` is the road network matrix, one entry per road cell: its tile type (dead end,
 straight, curve, T, cross, gate), the rotation of the tile's model and its world position;
-every exporter reads road cells from it. ``roadmodel`` turns it (with ``stalls``) into roads,
+every exporter reads road cells from it. ``opendrive_roads`` turns it (with ``stalls``) into roads,
 junctions with connecting roads and parking spaces as OpenDRIVE spells them; the
-``garage.xodr`` writer spells exactly this. ``lanes`` samples the road model's right-hand
+``garage.xodr`` writer spells exactly this. ``opendrive_lanes`` samples the road model's right-hand
 lanes into waypoints in driving direction, linked across junctions, for driving: routes between
-two points as a car in CARLA would drive them (``lanes.route``), the pose the ego car starts from and
+two points as a car in CARLA would drive them (``opendrive_lanes.route``), the pose the ego car starts from and
 the lane centre lines a test's goal must lie on. The ego car's planned route itself
-(``routing``) follows the right-hand lane lines of ``roadnet`` cells, filleted into turns the
+(``cruise_routes``) follows the right-hand lane lines of ``road_matrix`` cells, filleted into turns the
 car can steer.
 """
 
@@ -47,15 +47,15 @@ __getattr__, __all__ = lazy_exports(__name__, {
     "GarageScene": "garage_scene",
     "WorldConfig": "world",
     "DEFAULT_WORLD": "world",
-    "road_network": "roadnet",
+    "road_network": "road_matrix",
     "stall_layout": "stalls",
-    "build_road_model": "roadmodel",
-    "RoadModel": "roadmodel",
-    "lane_graph": "lanes",
-    "route": "lanes",
-    "entrance_pose": "lanes",
-    "exit_pose": "lanes",
-    "Route": "route",
+    "build_road_model": "opendrive_roads",
+    "RoadModel": "opendrive_roads",
+    "lane_graph": "opendrive_lanes",
+    "route": "opendrive_lanes",
+    "entrance_pose": "opendrive_lanes",
+    "exit_pose": "opendrive_lanes",
+    "Route": "route_line",
     "build_layout": "layout",
     "build_scene": "mjcf_scene",
     "compile_scene": "mjcf_scene",

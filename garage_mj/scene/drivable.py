@@ -1,6 +1,6 @@
 """Drivable tests for the ego car, and the checks that prove a cruise test can be driven (SPEC section 7).
 
-The route to a stall is a forward route of :mod:`garage_mj.scene.routing` (right-hand lane
+The route to a stall is a forward route of :mod:`garage_mj.scene.cruise_routes` (right-hand lane
 centre lines filleted into turns the car can steer, the path of the rear-axle midpoint); the
 route handed to drivers is the path of the car's centre (the rear-axle path moved
 ``-rear_axle`` metres forward along the heading).
@@ -29,8 +29,8 @@ import numpy as np
 
 from garage_mj.core.geometry import OPPOSITE
 from garage_mj.scene.clearance import Obstacles, footprint, nearest_obstacle, nearest_two, scene_obstacles
+from garage_mj.scene.cruise_routes import START_OFFSET, LaneRoutes, Node, sample
 from garage_mj.scene.garage_scene import GarageScene
-from garage_mj.scene.routing import START_OFFSET, LaneRoutes, Node, sample
 from garage_mj.scene.world import WORLD_DIR, cell_center
 
 if TYPE_CHECKING:
@@ -227,7 +227,7 @@ class DrivePlanner:
     # -- lanes of the road model ----------------------------------------------------------------
     def _lane_points(self) -> tuple[np.ndarray, np.ndarray]:
         if self._lanes is None:
-            g = self.scene.lane_graph
+            g = self.scene.opendrive_lanes
             pos = np.array([g.nodes[n]["pos"] for n in g.nodes], dtype=float)
             hdg = np.array([g.nodes[n]["heading"] for n in g.nodes], dtype=float)
             self._lanes = (pos, hdg)

@@ -17,11 +17,11 @@ from typing import Any
 import networkx as nx
 
 from garage_mj.grid.garage import Garage
-from garage_mj.scene.lanes import entrance_pose as lane_entrance_pose
-from garage_mj.scene.lanes import lane_graph as build_lane_graph
 from garage_mj.scene.layout import SceneLayout, build_layout
-from garage_mj.scene.roadmodel import RoadModel, build_road_model
-from garage_mj.scene.roadnet import RoadNetwork, road_network
+from garage_mj.scene.opendrive_lanes import entrance_pose as lane_entrance_pose
+from garage_mj.scene.opendrive_lanes import lane_graph as build_lane_graph
+from garage_mj.scene.opendrive_roads import RoadModel, build_road_model
+from garage_mj.scene.road_matrix import RoadNetwork, road_network
 from garage_mj.scene.stalls import StallLayout, stall_layout
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
@@ -41,7 +41,7 @@ class GarageScene:
 
     @cached_property
     def network(self) -> RoadNetwork:
-        """The road network matrix (:mod:`garage_mj.scene.roadnet`)."""
+        """The road network matrix (:mod:`garage_mj.scene.road_matrix`)."""
         return road_network(self.garage, self.world)
 
     @cached_property
@@ -56,7 +56,7 @@ class GarageScene:
 
     @cached_property
     def lane_graph(self) -> nx.DiGraph:
-        """Right-hand lane waypoints of the road model (:mod:`garage_mj.scene.lanes`)."""
+        """Right-hand lane waypoints of the road model (:mod:`garage_mj.scene.opendrive_lanes`)."""
         return build_lane_graph(self.garage, self.world, model=self.road_model)
 
     @cached_property

@@ -2,7 +2,7 @@
 
 The MJCF builder and the mesh writer both draw this one layout, so the 3D scene, the GLB and the
 OBJ always hold the same geometry. Positions come only from the shared road network
-(:mod:`garage_mj.scene.roadnet`), the stall geometry (:mod:`garage_mj.scene.stalls`) and the world
+(:mod:`garage_mj.scene.road_matrix`), the stall geometry (:mod:`garage_mj.scene.stalls`) and the world
 conventions (:mod:`garage_mj.scene.world`).
 
 What it holds (z up, floor top at z = 0):
@@ -24,7 +24,7 @@ import numpy as np
 from garage_mj.core.geometry import OPPOSITE
 from garage_mj.grid.blocks import ROAD_LIKE_TABLE, STALL_TABLE, Block
 from garage_mj.grid.garage import Garage
-from garage_mj.scene.roadnet import RoadNetwork, RoadTile, road_network
+from garage_mj.scene.road_matrix import RoadNetwork, RoadTile, road_network
 from garage_mj.scene.semantics import Semantic, geom_name
 from garage_mj.scene.stalls import StallLayout, stall_layout
 from garage_mj.scene.world import DEFAULT_WORLD, WORLD_DIR, WorldConfig

@@ -56,7 +56,7 @@ from garage_mj.scene.car import CarConfig, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
-from garage_mj.scene.route import Route, to_car_frame
+from garage_mj.scene.route_line import Route, to_car_frame
 from garage_mj.scene.semantics import COLLIDABLE, Semantic, geom_classes
 
 LOOKAHEAD = 4.0  # [m] the observed waypoint lies this far ahead of the car's route progress

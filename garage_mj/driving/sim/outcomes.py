@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from garage_mj.scene.route import Route
+from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, Semantic
 
 

@@ -21,7 +21,7 @@ from enum import Enum
 from garage_mj.core.geometry import DELTAS, EAST, NORTH, SOUTH, WEST
 from garage_mj.grid.blocks import Block
 from garage_mj.grid.garage import Garage
-from garage_mj.grid.roadgraph import Tile, analyse
+from garage_mj.grid.road_segments import Tile, analyse
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig, cell_center
 
 

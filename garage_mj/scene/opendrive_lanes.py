@@ -1,6 +1,6 @@
 """Lane graph and routing: the OpenDRIVE road network, reachable from Python without XML.
 
-Built from the same :class:`~garage_mj.scene.roadmodel.RoadModel` the ``garage.xodr`` writer
+Built from the same :class:`~garage_mj.scene.opendrive_roads.RoadModel` the ``garage.xodr`` writer
 spells, so a route here is a route in CARLA. Nodes are waypoints on lane centre lines, in
 driving direction (right-hand traffic): ``(road id, lane id, index)`` with attributes
 ``pos=(x, y)`` [m] and ``heading`` [rad]. Edges follow the lanes, the lane links across
@@ -19,8 +19,8 @@ import numpy as np
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig
 
+from .opendrive_roads import Road, RoadModel, build_road_model
 from .planview import sample
-from .roadmodel import Road, RoadModel, build_road_model
 
 WAYPOINT_STEP = 1.0  # [m] target spacing of lane waypoints
 UTURN_PENALTY = 20.0  # [m] added to a U-turn's length so routes avoid them when they can

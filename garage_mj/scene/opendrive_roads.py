@@ -1,8 +1,8 @@
 """Road model: the garage's roads as OpenDRIVE sees them, before any XML.
 
-Built from the road network matrix (:mod:`garage_mj.scene.roadnet`) and the stall geometry
+Built from the road network matrix (:mod:`garage_mj.scene.road_matrix`) and the stall geometry
 (:mod:`garage_mj.scene.stalls`) only. Both the OpenDRIVE writer (:mod:`garage_mj.export.xodr`)
-and the lane graph (:mod:`garage_mj.scene.lanes`) read this one model.
+and the lane graph (:mod:`garage_mj.scene.opendrive_lanes`) read this one model.
 
 - Runs of dead-end, straight, curve and gate tiles merge into one road each (lines, and a
   quarter circle of radius B/2 per curve tile). Dead ends and gates end their road at the far
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 from garage_mj.core.geometry import DELTAS, OPPOSITE
 from garage_mj.grid.garage import Garage
-from garage_mj.scene.roadnet import RoadNetwork, RoadTile, road_network
+from garage_mj.scene.road_matrix import RoadNetwork, RoadTile, road_network
 from garage_mj.scene.stalls import Stall, StallLayout, stall_layout
 from garage_mj.scene.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig
 

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from garage_mj.core.geometry import DELTAS, OPPOSITE
-from garage_mj.scene.roadnet import RoadNetwork
+from garage_mj.scene.road_matrix import RoadNetwork
 from garage_mj.scene.world import WORLD_DIR, WorldConfig, cell_center
 
 if TYPE_CHECKING:
