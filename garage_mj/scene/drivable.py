@@ -227,7 +227,7 @@ class DrivePlanner:
     # -- lanes of the road model ----------------------------------------------------------------
     def _lane_points(self) -> tuple[np.ndarray, np.ndarray]:
         if self._lanes is None:
-            g = self.scene.opendrive_lanes
+            g = self.scene.lane_graph
             pos = np.array([g.nodes[n]["pos"] for n in g.nodes], dtype=float)
             hdg = np.array([g.nodes[n]["heading"] for n in g.nodes], dtype=float)
             self._lanes = (pos, hdg)
