@@ -8,7 +8,11 @@ import pytest
 
 from garage_mj.driving.sim.outcomes import (
     FAILURES,
+    HIT_KINDS,
+    OUTCOMES,
     PAPER_CLASS,
+    PAPER_CLASSES,
+    TRUNCATING,
     Contact,
     OutcomeConfig,
     OutcomeKind,
@@ -139,6 +143,51 @@ def test_missed_goal_is_a_failure_and_a_deadlock_in_the_papers_classes():
     assert PAPER_CLASS == {"collision": "collision", "timeout": "timeout", "deadlock": "deadlock",
                            "missed_goal": "deadlock"}
     assert set(PAPER_CLASS) == {k.value for k in FAILURES}
+
+
+def test_every_table_of_outcomes_follows_the_declared_one():
+    """OUTCOMES is the one declaration: the enum, the failure kinds, the paper classes and every column of
+    counts (summary.csv, failures.csv, a driver's test table, the demo's table) are read off it."""
+    from dataclasses import asdict
+
+    from garage_mj.driving.hunt import FAILURE_COLUMNS
+    from garage_mj.driving.results import (
+        COUNT_COLUMNS,
+        FAILURE_KINDS,
+        SUMMARY_COLUMNS,
+        driven_tests,
+        failed_tests,
+        failure_counts,
+    )
+    from garage_mj.reporting.demo import _failure_cells
+    from garage_mj.testing.driver_tests import TABLE_COLUMNS
+
+    kinds = [s.kind for s in OUTCOMES]
+    assert len(set(kinds)) == len(kinds) and len({s.column for s in OUTCOMES}) == len(OUTCOMES)
+    assert [k.value for k in OutcomeKind] == kinds
+    failures = [s for s in OUTCOMES if s.failure]
+    assert [k.value for k in FAILURES] == list(FAILURE_KINDS) == [s.kind for s in failures]
+    assert PAPER_CLASSES == ("collision", "timeout", "deadlock")  # the paper's three, in its order
+    assert all(s.paper_class in PAPER_CLASSES for s in failures)
+    assert all(s.paper_class is None for s in OUTCOMES if not s.failure)
+    assert PAPER_CLASS == {s.kind: s.paper_class for s in failures}
+    assert (OutcomeKind.SUCCESS, OutcomeKind.INFEASIBLE) == (OutcomeKind(kinds[0]), OutcomeKind(kinds[-1]))
+    assert set(HIT_KINDS) | set(TRUNCATING) <= set(FAILURES)
+    values = asdict(OutcomeConfig())
+    assert all(s.note.format(**values) for s in OUTCOMES if s.note)  # its slots are OutcomeConfig fields
+    assert COUNT_COLUMNS == {s.kind: s.column for s in failures}
+    counts = list(COUNT_COLUMNS.values())
+    at = SUMMARY_COLUMNS.index("successes") + 1
+    assert list(SUMMARY_COLUMNS[at:at + len(counts)]) == counts and SUMMARY_COLUMNS[at + len(counts)] == "success_pct"
+    at = TABLE_COLUMNS.index("successes") + 1
+    assert list(TABLE_COLUMNS[at:at + len(counts) + 1]) == [*counts, "success_pct"]
+    at = FAILURE_COLUMNS.index("failure_pct") + 1
+    assert list(FAILURE_COLUMNS[at:at + len(counts)]) == sorted(counts)
+    cells = _failure_cells(COUNT_COLUMNS, "hit")
+    assert [c for c in cells if c != "hit"] == counts and cells.count("hit") == len(HIT_KINDS)
+    rows = [{"outcome": k, "test": str(i)} for i, k in enumerate(kinds * 2)]
+    assert failed_tests(rows) == [r for r in driven_tests(rows) if r["outcome"] != "success"]
+    assert failure_counts(rows) == {s.kind: 2 for s in failures}
 
 
 def test_deadlock_when_off_route():

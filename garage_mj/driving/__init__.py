@@ -3,7 +3,7 @@
 - ``sim``: the simulated car and its test, ``GarageDrive-v0``.
   - ``sim.vehicle``: the car in MuJoCo (actuation, discrete and continuous actions).
   - ``sim.sensors``: the front camera (depth + segmentation, offscreen).
-  - ``sim.outcomes``: how a test ends (success, collision, timeout, deadlock, missed_goal) and why.
+  - ``sim.outcomes``: how a test ends and why; every outcome kind declared once, in ``OUTCOMES``.
   - ``sim.drive_env``: ``GarageDrive-v0``, one garage, one test per episode.
 - ``actors``: the adverse events of a test.
   - ``actors.config``: ``ScenarioConfig``, how many adverse events (pedestrians, moving cars, clutter) a test gets.

@@ -47,15 +47,16 @@ from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir
 from garage_mj.driving.cruise import run_cruise, run_test, xosc_name
 from garage_mj.driving.episode import close_cached_env
-from garage_mj.driving.results import read_tests
+from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests, failure_counts, read_tests
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library, LibraryError
 from garage_mj.generation.search import mutate, replay
 from garage_mj.grid.garage import Garage
 
+#: The failure classes' count columns of ``failures.csv``, in alphabetical order (not the display order of the rest).
+_COUNTS = tuple(sorted(COUNT_COLUMNS.values()))
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
-                   "failure_pct", "collisions", "deadlocks", "missed_goals", "timeouts", "hit", "failure_progress", "failing_tests",
-                   "failing_seeds", "parent")
+                   "failure_pct", *_COUNTS, "hit", "failure_progress", "failing_tests", "failing_seeds", "parent")
 
 
 class HuntError(GarageMJError):
@@ -94,11 +95,11 @@ class Scored:
 
     @property
     def feasible(self) -> list[dict[str, str]]:
-        return [r for r in self.rows if r["outcome"] != "infeasible"]
+        return driven_tests(self.rows)
 
     @property
     def failures(self) -> list[dict[str, str]]:
-        return [r for r in self.feasible if r["outcome"] != "success"]
+        return failed_tests(self.rows)
 
     @property
     def score(self) -> float:
@@ -301,6 +302,7 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str
     rows = []
     for k, s in enumerate(ranked, 1):
         fails = s.failures
+        counts = {COUNT_COLUMNS[k]: n for k, n in failure_counts(fails).items()}
         hits: dict[str, int] = {}
         for r in fails:
             if r["hit"]:
@@ -310,10 +312,7 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str
             "difficulty": round(s.source.difficulty, 4), "tests": len(s.rows), "feasible": len(s.feasible),
             "failures": len(fails),
             "failure_pct": round(100.0 * s.rate, 2) if s.feasible else "",
-            "collisions": sum(r["outcome"] == "collision" for r in fails),
-            "deadlocks": sum(r["outcome"] == "deadlock" for r in fails),
-            "missed_goals": sum(r["outcome"] == "missed_goal" for r in fails),
-            "timeouts": sum(r["outcome"] == "timeout" for r in fails),
+            **{c: counts[c] for c in _COUNTS},
             "hit": " ".join(f"{c}:{n}" for c, n in sorted(hits.items())), "failure_progress": _where(fails),
             "failing_tests": " ".join(r["test"] for r in fails), "failing_seeds": " ".join(r["seed"] for r in fails),
             "parent": s.parent[:12],

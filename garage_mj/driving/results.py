@@ -11,10 +11,12 @@ difficulty (``route_r``, ``route_slope``, ``route_intercept``, ``route_n``, unde
 :mod:`garage_mj.driving.difficulty.regression`). A garage's route difficulty is empty in ``summary.csv`` when it
 has no feasible stall or was not computed (a run without a route model, a run of an older garage-mj).
 
-Failures are counted per outcome class (:data:`FAILURE_KINDS`), ``missed_goal`` apart from
-``deadlock``; the paper has three classes (collision, timeout, deadlock), in which a missed goal
-counts as a deadlock (:data:`garage_mj.driving.sim.outcomes.PAPER_CLASS`): ``summary.json`` gives both.
-Rows of older runs (no ``missed_goal``: such stops were ``deadlock``) load as they are.
+Failures are counted per failure kind of :data:`garage_mj.driving.sim.outcomes.OUTCOMES`
+(:data:`FAILURE_KINDS`, each with its column of :data:`COUNT_COLUMNS`), and folded into the paper's three
+classes (:data:`garage_mj.driving.sim.outcomes.PAPER_CLASS`): ``summary.json`` gives both.
+:func:`failed_tests` and :func:`failure_counts` are the one listing and count of failures the hunt,
+the reports and a driver's tests read. Rows of older runs (from before a kind had a class of its own:
+it was counted in its paper class) load as they are.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ import numpy as np
 
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.driving.difficulty.regression import PAPER_R, regression
-from garage_mj.driving.sim.outcomes import FAILURES, PAPER_CLASS
+from garage_mj.driving.sim.outcomes import FAILURES, HIT_KINDS, OUTCOMES, PAPER_CLASS, OutcomeKind
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
 TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",
@@ -40,12 +42,13 @@ TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall
                 "mean_intersection_degree", "pedestrians", "moving_cars", "clutter", "wall_s")
 #: What a collision can hit (``hit`` column): the summary counts collisions per class.
 HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
+#: The failure outcomes, as ``tests.csv`` writes them, in display order.
+FAILURE_KINDS = tuple(k.value for k in FAILURES)
+#: Each failure outcome's count column in ``summary.csv`` (and the other tables of failures), in display order.
+COUNT_COLUMNS = {s.kind: s.column for s in OUTCOMES if s.failure}
 #: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
 SUMMARY_COLUMNS = ("garage", "difficulty", "route_difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
-                   "collisions", "timeouts", "deadlocks", "missed_goals", "success_pct",
-                   *(f"hit_{c}" for c in HIT_CLASSES))
-#: The failure outcomes, as ``tests.csv`` writes them: collision, timeout, deadlock, missed_goal.
-FAILURE_KINDS = tuple(k.value for k in FAILURES)
+                   *COUNT_COLUMNS.values(), "success_pct", *(f"hit_{c}" for c in HIT_CLASSES))
 #: Settings beside the compared ones in ``run.json``: how they were chosen, not what the tests are.
 PROVENANCE_KEYS = ("action_type_from",)
 
@@ -162,9 +165,7 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
             "route_difficulty": rounded(route.get(s.hash)), "E[X]": round(s.mean_road_length, 3),
             "E[Y]": round(s.mean_intersection_degree, 3), "tests": len(mine),
             "infeasible": kinds.count("infeasible"), "feasible": feasible,
-            "successes": kinds.count("success"), "collisions": kinds.count("collision"),
-            "timeouts": kinds.count("timeout"), "deadlocks": kinds.count("deadlock"),
-            "missed_goals": kinds.count("missed_goal"),
+            "successes": kinds.count("success"), **{c: kinds.count(k) for k, c in COUNT_COLUMNS.items()},
             "success_pct": round(100.0 * kinds.count("success") / feasible, 2) if feasible else None,
             **{f"hit_{c}": hits.get(c, 0) for c in HIT_CLASSES},
         })
@@ -176,17 +177,33 @@ def rounded(value: float | None, digits: int = 4) -> float | None:
     return None if value is None or not math.isfinite(value) else round(float(value), digits)
 
 
+def driven_tests(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows of tests that were driven (an infeasible test is decided from the scene, never driven)."""
+    return [r for r in rows if r["outcome"] != OutcomeKind.INFEASIBLE.value]
+
+
+def failed_tests(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows of tests that failed (outcome one of :data:`FAILURE_KINDS`), in their order."""
+    return [r for r in rows if r["outcome"] in FAILURE_KINDS]
+
+
+def failure_counts(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """Failure kind -> its tests among ``rows``, every kind of :data:`FAILURE_KINDS` (0 too), in display order."""
+    kinds = [r["outcome"] for r in rows]
+    return {k: kinds.count(k) for k in FAILURE_KINDS}
+
+
 def _hits(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
     """Collisions by the class of what was hit."""
     out: dict[str, int] = {}
     for r in rows:
-        if r["outcome"] == "collision":
+        if r["outcome"] in HIT_KINDS:
             out[r["hit"] or "?"] = out.get(r["hit"] or "?", 0) + 1
     return dict(sorted(out.items()))
 
 
 def paper_failures(failures: dict[str, int]) -> dict[str, int]:
-    """Failure counts by outcome folded into the paper's three classes (a missed goal is a deadlock)."""
+    """Failure counts by outcome folded into the paper's three classes (:data:`PAPER_CLASS`)."""
     out = {c: 0 for c in dict.fromkeys(PAPER_CLASS.values())}
     for kind, n in failures.items():
         out[PAPER_CLASS[kind]] += n
@@ -206,11 +223,11 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
     fit = regression([r["difficulty"] for r in rated], [r["success_pct"] for r in rated])
     on_route = [r for r in rated if r["route_difficulty"] is not None]
     route_fit = regression([r["route_difficulty"] for r in on_route], [r["success_pct"] for r in on_route])
-    driven = [r for r in rows if r["outcome"] != "infeasible"]
+    driven = driven_tests(rows)
     walls = [float(r["wall_s"]) for r in driven]
     sims = [float(r["time"]) for r in driven]
     kinds = [r["outcome"] for r in rows]
-    failures = {k: kinds.count(k) for k in FAILURE_KINDS}
+    failures = failure_counts(rows)
     stats = {**fit.as_dict(), "paper_r": PAPER_R,
              **{f"route_{k}": v for k, v in route_fit.as_dict().items()}, "route_model": route_model if route else None,
              "garages": len(summary), "tests": len(rows),
@@ -219,7 +236,7 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
              "action_type": settings.action_type, "action_type_from": action_from,
              "success_pct": round(100.0 * kinds.count("success") / len(driven), 2) if driven else None,
              "failures": failures,
-             "paper_failures": paper_failures(failures),  # collision, timeout, deadlock (with missed_goal)
+             "paper_failures": paper_failures(failures),  # the paper's three classes
              "hits": _hits(driven),
              "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
              "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}

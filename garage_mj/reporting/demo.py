@@ -10,14 +10,14 @@ import json
 import re
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.results import FAILURE_KINDS, HIT_CLASSES
-from garage_mj.driving.sim.outcomes import PAPER_CLASS, OutcomeConfig
+from garage_mj.driving.results import COUNT_COLUMNS, HIT_CLASSES, failed_tests
+from garage_mj.driving.sim.outcomes import HIT_KINDS, OUTCOMES, PAPER_CLASS, PAPER_CLASSES, OutcomeConfig
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.generation.library import Library
 from garage_mj.grid.map_io import load_map
@@ -209,8 +209,8 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
     sources = [CruiseSource.from_pack(p) for p in packs]
     difficulty = {s.name: s.difficulty for s in sources}  # unrounded, as the gallery's (summary.csv rounds)
     columns = ["garage", "driver", "actions", "difficulty", "route difficulty", "E[X]", "E[Y]", "tests", "infeasible",
-               "collisions",
-               "what was hit", "timeouts", "deadlocks", "missed goals", "success of feasible"]
+               *_failure_cells({k: c.replace("_", " ") for k, c in COUNT_COLUMNS.items()}, "what was hit"),
+               "success of feasible"]
     rows: list[list[object]] = []
     failures: list[RunFailures] = []
     fits: dict[str, dict] = {}
@@ -238,7 +238,7 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
             kpis["infeasible tests"] = str(result.stats["infeasible"])  # the same for every driver: scene only
         else:
             kpis[f"infeasible tests with actors ({actors})"] = str(result.stats["infeasible"])
-        n_failed = sum(r["outcome"] in FAILURE_KINDS for r in result.rows)
+        n_failed = len(failed_tests(result.rows))
         # MP4s of the first failures (with the run's settings, explicit action type included): failures come first
         record_cruise_videos(result, sources, min(cfg.failure_videos, n_failed))
         failed = run_failures(label, folder, result.rows, sources, shown=cfg.failure_videos)
@@ -250,8 +250,8 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
             route = "n/a" if r["route_difficulty"] is None else fmt_difficulty(r["route_difficulty"])
             rows.append([r["garage"], label, action, fmt_difficulty(difficulty[r["garage"]]), route,
                          float(r["E[X]"]), float(r["E[Y]"]), int(r["tests"]), int(r["infeasible"]),
-                         int(r["collisions"]), hit or "-", int(r["timeouts"]), int(r["deadlocks"]),
-                         int(r["missed_goals"]), fmt_percent(r["success_pct"])])
+                         *_failure_cells({k: int(r[c]) for k, c in COUNT_COLUMNS.items()}, hit or "-"),
+                         fmt_percent(r["success_pct"])])
     main = "vision" if "vision" in fits else cfg.drivers[0]
     regression_png = figs / "regression.png"
     shutil.copyfile(out / "cruise" / run_folder(main) / "regression.png", regression_png)
@@ -270,16 +270,24 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
     return _CruisePart(columns, rows, _cruise_note(), failures, regression_png, regression_route_png, text, kpis)
 
 
+def _failure_cells(per_kind: dict[str, object], hit: object) -> list[object]:
+    """The cruise table's failure cells: one per failure kind, in display order, each kind that ends on
+    touching something followed by ``hit`` (what was hit)."""
+    cells: list[object] = []
+    for kind, cell in per_kind.items():
+        cells += [cell, hit] if kind in HIT_KINDS else [cell]
+    return cells
+
+
 def _cruise_note() -> str:
-    """What the failure columns count, and how they map onto the paper's three classes."""
-    oc = OutcomeConfig()
+    """What the failure columns count (each kind's note in :data:`~garage_mj.driving.sim.outcomes.OUTCOMES`),
+    and how they map onto the paper's three classes."""
+    values = asdict(OutcomeConfig())
+    notes = "; ".join(f"{s.column.replace('_', ' ')}: {s.note.format(**values)}" for s in OUTCOMES if s.note)
     mapped = ", ".join(f"a {k.replace('_', ' ')} counts as a {v}" for k, v in PAPER_CLASS.items() if k != v)
-    return (f"Deadlocks: the car made no progress for {oc.stuck_time:g} s farther than {oc.missed_goal_radius:g} m "
-            f"from the goal, left the route by more than {oc.max_deviation:g} m or drove past the goal; missed goals: "
-            f"it stopped within {oc.missed_goal_radius:g} m of the goal but outside the parking tolerance "
-            f"({oc.goal_tolerance:g} m, {oc.goal_heading_tolerance:g} rad). In the paper's three failure classes "
-            f"(collision, timeout, deadlock) {mapped}. Success is over feasible tests; an infeasible test (no driver "
-            "of this car can reach the stall) is never driven.")
+    return (f"{notes[:1].upper()}{notes[1:]}. In the paper's three failure classes ({', '.join(PAPER_CLASSES)}) "
+            f"{mapped}. Success is over feasible tests; an infeasible test (no driver of this car can reach the "
+            "stall) is never driven.")
 
 
 def _fmt_r(r) -> str:

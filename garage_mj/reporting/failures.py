@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from garage_mj.driving.cruise import xosc_name
-from garage_mj.driving.results import FAILURE_KINDS
+from garage_mj.driving.results import FAILURE_KINDS, driven_tests, failed_tests, failure_counts
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.reporting.report import FailureItem, ReasonGroup, RunFailures
 
@@ -62,7 +62,7 @@ def _group(template: str, members: list[tuple[list[str], str]]) -> ReasonGroup:
 def first_failures(rows: Sequence[dict[str, str]], sources: Sequence[CruiseSource], n: int) -> list[dict[str, str]]:
     """The first ``n`` failing tests in the order of ``sources`` and then of the test index."""
     order = {s.hash: i for i, s in enumerate(sources)}
-    failed = [r for r in rows if r["outcome"] in FAILURE_KINDS and r["garage_hash"] in order]
+    failed = [r for r in failed_tests(rows) if r["garage_hash"] in order]
     return sorted(failed, key=lambda r: (order[r["garage_hash"]], int(r["test"])))[:n]
 
 
@@ -83,8 +83,8 @@ def run_failures(label: str, run_dir: Path, rows: Sequence[dict[str, str]], sour
         mp4 = run_dir / "videos" / video_name(r)
         items.append(FailureItem(r["garage"], test, r["outcome"], r["reason"],
                                  mp4 if mp4.is_file() else None, xosc if xosc.is_file() else None))
-    feasible = [r for r in rows if r["outcome"] != "infeasible"]
-    counts = {k: sum(r["outcome"] == k for r in feasible) for k in FAILURE_KINDS}
+    feasible = driven_tests(rows)
+    counts = failure_counts(feasible)
     return RunFailures(label=label, action_type=settings["action_type"], tests_csv=run_dir / "tests.csv",
                        feasible=len(feasible), counts={k: v for k, v in counts.items() if v},
                        reasons=group_reasons(feasible), shown=items)

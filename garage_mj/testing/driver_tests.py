@@ -21,7 +21,7 @@ from typing import Any
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.driving.cruise import CruiseResult, run_cruise
-from garage_mj.driving.results import FAILURE_KINDS
+from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests
 from garage_mj.driving.sources import CruiseSource
 from garage_mj.reporting.failures import run_failures
 from garage_mj.testing.garages import TINY_MAP, cruise_sources
@@ -29,8 +29,7 @@ from garage_mj.testing.garages import TINY_MAP, cruise_sources
 DEFAULT_TESTS = 3  # cruise tests per garage
 DEFAULT_VIDEOS = 5  # failed tests recorded as MP4 when an assertion fails
 LISTED = 20  # failed tests listed one by one in a message (the rest are in tests.csv)
-TABLE_COLUMNS = ("garage", "difficulty", "tests", "infeasible", "successes", "collisions", "timeouts", "deadlocks",
-                 "missed_goals", "success_pct")
+TABLE_COLUMNS = ("garage", "difficulty", "tests", "infeasible", "successes", *COUNT_COLUMNS.values(), "success_pct")
 
 
 class DriverTestError(GarageMJError):
@@ -135,12 +134,12 @@ class DriverTests:
     @property
     def feasible(self) -> list[dict[str, str]]:
         """The tests that were driven (an infeasible test is decided from the scene, never driven)."""
-        return [r for r in self.rows if r["outcome"] != "infeasible"]
+        return driven_tests(self.rows)
 
     @property
     def failures(self) -> list[dict[str, str]]:
-        """The driven tests that ended in collision, timeout, deadlock or missed_goal."""
-        return [r for r in self.rows if r["outcome"] in FAILURE_KINDS]
+        """The driven tests that failed (:func:`garage_mj.driving.results.failed_tests`)."""
+        return failed_tests(self.rows)
 
     @property
     def success_rate(self) -> float | None:

@@ -63,6 +63,7 @@ from garage_mj.driving.cruise import run_test
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
 from garage_mj.driving.hunt import HuntConfig, hunt
+from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 
 MANIFEST = "run.json"
@@ -70,8 +71,10 @@ CURVE = "curve.csv"
 MODEL = "model.zip"
 RL_MONITOR = "rl_monitor.csv"
 CURRICULA = ("uniform", "difficulty", "adversarial", "hunt")
+#: The outcomes the training curve counts apart (``val_<kind>``); the other failures are ``val_other``.
+CURVE_KINDS = (OutcomeKind.COLLISION.value, OutcomeKind.TIMEOUT.value)
 CURVE_FIELDS = ("iteration", "states", "beta", "loss", "agreement", "own_drive_success", "val_success",
-                "val_collision", "val_timeout", "val_other", "wall_s")
+                *(f"val_{k}" for k in CURVE_KINDS), "val_other", "wall_s")
 
 
 class TrainDriverError(GarageMJError):
@@ -438,8 +441,8 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
                    "loss": round(loss, 4), "agreement": round(agreement, 4),
                    "own_drive_success": round(own.count("success") / len(own), 4) if own else "",
                    "val_success": "" if success is None else success,
-                   "val_collision": val.get("collision", 0), "val_timeout": val.get("timeout", 0),
-                   "val_other": sum(v for k, v in val.items() if k not in ("success", "collision", "timeout", "infeasible")),
+                   **{f"val_{k}": val.get(k, 0) for k in CURVE_KINDS},
+                   "val_other": sum(v for k, v in val.items() if k not in ("success", *CURVE_KINDS, "infeasible")),
                    "wall_s": round(time.perf_counter() - t0, 1)}
             state = {"iterations_done": it + 1, "curve": [*state["curve"], row],
                      "wall_s": state["wall_s"] + row["wall_s"], "failures": failures.tolist(),

@@ -20,9 +20,10 @@ every obstacle and stall outline. A target that no driver of this car could reac
 outcome ``infeasible`` and its reason, never driven. The car starts :data:`START_OFFSET` metres
 along the route, so it is wholly inside the garage.
 
-Outcomes are the environment's (:class:`~garage_mj.driving.sim.outcomes.OutcomeMonitor`): ``success`` and
-``collision``/``deadlock``/``missed_goal`` terminate, ``timeout`` truncates. The reward is route progress [m]
-per step, plus :data:`SUCCESS_REWARD` or :data:`COLLISION_PENALTY` at the end.
+Outcomes are the environment's (:class:`~garage_mj.driving.sim.outcomes.OutcomeMonitor`): each one
+terminates the episode, but a kind that :data:`~garage_mj.driving.sim.outcomes.OUTCOMES` marks as truncating
+(the time limit) truncates it. The reward is route progress [m] per step, plus :data:`SUCCESS_REWARD` or
+:data:`COLLISION_PENALTY` at the end.
 
 The observation: ``depth`` and ``segmentation`` (the front camera), ``waypoint`` (the route point
 :data:`LOOKAHEAD` metres ahead, car frame), ``speed`` [m/s], ``remaining`` (route left to the goal
@@ -46,7 +47,14 @@ from garage_mj.driving.actors.config import NO_ACTORS, ScenarioConfig, load_scen
 from garage_mj.driving.actors.judging import judge
 from garage_mj.driving.actors.placement import draw_scenario
 from garage_mj.driving.actors.scenario import Scenario
-from garage_mj.driving.sim.outcomes import Outcome, OutcomeConfig, OutcomeKind, OutcomeMonitor, ego_contacts
+from garage_mj.driving.sim.outcomes import (
+    TRUNCATING,
+    Outcome,
+    OutcomeConfig,
+    OutcomeKind,
+    OutcomeMonitor,
+    ego_contacts,
+)
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
 from garage_mj.driving.sim.vehicle import Car, DiscreteAction, attach_car, compile_mjcf
 from garage_mj.grid.garage import Garage
@@ -423,7 +431,7 @@ class GarageDriveEnv(gym.Env):
         reward = self.monitor.progress - before
         terminated = truncated = False
         if self.outcome is not None:
-            truncated = self.outcome.kind is OutcomeKind.TIMEOUT
+            truncated = self.outcome.kind in TRUNCATING
             terminated = not truncated
             if self.outcome.kind is OutcomeKind.SUCCESS:
                 reward += SUCCESS_REWARD

@@ -1,5 +1,12 @@
 """Outcome of one cruise test, decided by the environment (SPEC section 7), never by the driver.
 
+Every outcome kind is declared once, in :data:`OUTCOMES` (one :class:`OutcomeSpec` each, in display
+order): its name in ``tests.csv``, its count column in ``summary.csv``, whether it is a failure and
+its class among the paper's three, and what the report says of it. :class:`OutcomeKind`,
+:data:`FAILURES`, :data:`PAPER_CLASS` and the other tables here are derived from it, and so is every
+column, count and table of failures elsewhere; a new kind is one entry there and its check in
+:class:`OutcomeMonitor`.
+
 :class:`OutcomeMonitor` is pure: ``update(time, position, speed, contacts)`` looks at the car's
 state and the contacts of this step and returns an :class:`Outcome` once the test is over.
 :func:`ego_contacts` turns MuJoCo contacts into the (semantic class, geom name) pairs it reads.
@@ -32,20 +39,54 @@ from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, Semantic
 
 
-class OutcomeKind(str, enum.Enum):
-    """How a test ended."""
+@dataclass(frozen=True)
+class OutcomeSpec:
+    """One outcome kind: how the files name it, whether it is a failure, and what the report says of it."""
 
-    SUCCESS = "success"
-    COLLISION = "collision"
-    TIMEOUT = "timeout"
-    DEADLOCK = "deadlock"  # stuck, off the route, or past the goal
-    MISSED_GOAL = "missed_goal"  # stopped near the goal, outside the tolerance of its pose
-    INFEASIBLE = "infeasible"  # no driver of this car can drive it; decided from the scene, excluded from rates
+    kind: str  # the ``outcome`` column of tests.csv, the value of OutcomeKind
+    column: str  # its count column in summary.csv (and failures.csv, the tables of a driver's tests)
+    description: str  # what happened, in one line
+    failure: bool = False  # a driven test that did not succeed
+    paper_class: str | None = None  # a failure's class among the paper's three
+    hit: bool = False  # it ends on touching something: tests.csv's hit and hit_geom say what
+    truncates: bool = False  # the drive env truncates the episode (a time limit) instead of terminating it
+    note: str = ""  # what the report explains of it, with {OutcomeConfig field} slots ("": its name says it)
 
 
-FAILURES = (OutcomeKind.COLLISION, OutcomeKind.TIMEOUT, OutcomeKind.DEADLOCK, OutcomeKind.MISSED_GOAL)
+#: Every outcome kind, in display order: the one place a kind is declared.
+OUTCOMES = (
+    OutcomeSpec("success", "successes", "stopped on the goal pose"),
+    OutcomeSpec("collision", "collisions", "touched a wall, pillar, obstacle, parked car or actor",
+                failure=True, paper_class="collision", hit=True),
+    OutcomeSpec("timeout", "timeouts", "still driving at the time limit",
+                failure=True, paper_class="timeout", truncates=True),
+    OutcomeSpec("deadlock", "deadlocks", "stuck, off the route, or past the goal",
+                failure=True, paper_class="deadlock",
+                note="the car made no progress for {stuck_time:g} s farther than {missed_goal_radius:g} m from the "
+                     "goal, left the route by more than {max_deviation:g} m or drove past the goal"),
+    OutcomeSpec("missed_goal", "missed_goals", "stopped near the goal, outside the tolerance of its pose",
+                failure=True, paper_class="deadlock",
+                note="it stopped within {missed_goal_radius:g} m of the goal but outside the parking tolerance "
+                     "({goal_tolerance:g} m, {goal_heading_tolerance:g} rad)"),
+    OutcomeSpec("infeasible", "infeasible", "no driver of this car can drive it; decided from the scene, "
+                "never driven, excluded from rates"),
+)
+
+#: How a test ended: one member per entry of :data:`OUTCOMES` (``OutcomeKind.MISSED_GOAL.value == "missed_goal"``).
+OutcomeKind = enum.Enum("OutcomeKind", [(s.kind.upper(), s.kind) for s in OUTCOMES], type=str,
+                        module=__name__, qualname="OutcomeKind")
+OutcomeKind.__doc__ = "How a test ended: " + "; ".join(f"``{s.kind}``: {s.description}" for s in OUTCOMES) + "."
+
+#: The failure kinds, in display order.
+FAILURES = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.failure)
 #: Each failure kind's class among the paper's three (collision, timeout, deadlock).
-PAPER_CLASS = {"collision": "collision", "timeout": "timeout", "deadlock": "deadlock", "missed_goal": "deadlock"}
+PAPER_CLASS = {s.kind: s.paper_class for s in OUTCOMES if s.failure}
+#: The paper's three failure classes, in display order.
+PAPER_CLASSES = tuple(dict.fromkeys(PAPER_CLASS.values()))
+#: The kinds that end on touching something (tests.csv's ``hit`` and ``hit_geom`` say what).
+HIT_KINDS = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.hit)
+#: The kinds on which the drive env truncates the episode instead of terminating it.
+TRUNCATING = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.truncates)
 
 
 @dataclass(frozen=True)
