@@ -302,7 +302,7 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str
     rows = []
     for k, s in enumerate(ranked, 1):
         fails = s.failures
-        counts = {COUNT_COLUMNS[k]: n for k, n in failure_counts(fails).items()}
+        counts = {COUNT_COLUMNS[kind]: n for kind, n in failure_counts(fails).items()}
         hits: dict[str, int] = {}
         for r in fails:
             if r["hit"]:
