@@ -107,3 +107,34 @@ def test_physics_is_fast():
         mujoco.mj_step(model, data)
     rtf = steps * model.opt.timestep / (time.perf_counter() - t0)
     assert rtf > 20.0, f"real-time factor {rtf:.1f}"
+
+
+FRONT = '<camera name="front" pos="2.25 0 0.85" xyaxes="0 -1 0 0.173648 0 0.984808" fovy="90"/>'
+
+
+def test_camera_geometry_is_read_from_the_car_model():
+    from garage_mj.driving.drivers.base import CameraGeometry
+    from garage_mj.scene.car import car_xml_path
+
+    assert FRONT in car_xml_path().read_text()
+    # the numbers the vision driver used when they were typed in by hand, to the bit
+    assert CameraGeometry() == CameraGeometry(x=2.25, z=1.18, pitch=math.radians(10.0), fovy=90.0)
+    assert CameraGeometry.from_model() == CameraGeometry()
+    assert CameraGeometry(fovy=60.0).x == 2.25  # a partial override keeps the model's other numbers
+
+
+def test_moving_the_camera_in_the_mjcf_moves_camera_geometry(tmp_path):
+    from garage_mj.driving.drivers.base import CameraGeometry
+    from garage_mj.scene.car import car_xml_path
+
+    xml = car_xml_path().read_text()
+    moved = tmp_path / "car.xml"
+    moved.write_text(xml.replace(FRONT, '<camera name="front" pos="2.0 0 0.95" '
+                                        'xyaxes="0 -1 0 0.342020 0 0.939693" fovy="70"/>'))
+    cam = CameraGeometry.from_model(path=moved)
+    assert cam.x == 2.0 and cam.z == pytest.approx(0.33 + 0.95, abs=1e-12)
+    assert cam.pitch == math.radians(20.0) and cam.fovy == 70.0
+    aside = tmp_path / "aside.xml"
+    aside.write_text(xml.replace(FRONT, FRONT.replace('pos="2.25 0 0.85"', 'pos="2.25 0.4 0.85"')))
+    with pytest.raises(ValueError, match="centre line"):
+        CameraGeometry.from_model(path=aside)

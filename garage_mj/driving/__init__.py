@@ -3,6 +3,7 @@
 - ``sim``: the simulated car and its test, ``GarageDrive-v0``.
   - ``sim.vehicle``: the car in MuJoCo (actuation, discrete and continuous actions).
   - ``sim.sensors``: the front camera (depth + segmentation, offscreen).
+  - ``sim.observations``: the observation table (``OBSERVATIONS``): each key's space, privilege, meaning and fill.
   - ``sim.outcomes``: how a test ends and why; every outcome kind declared once, in ``OUTCOMES``.
   - ``sim.drive_env``: ``GarageDrive-v0``, one garage, one test per episode.
 - ``actors``: the adverse events of a test.

@@ -16,7 +16,7 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 - ``drivable``: the planned test to each stall (goal, route, checks) and a garage's drivability.
 - ``route_features``: what a test asks of a driver, from its planned route (turns, curvature, clearance, ...).
 - ``route_difficulty``: the route-aware difficulty, a monotone logistic model of failure on route features.
-- ``car``: the ego car's model file and geometry (outline, axles, steering limit).
+- ``car``: the ego car's model file and geometry (outline, axles, steering limit, camera poses).
 - ``layout``: the garage as named, classified boxes and model placements (pure, no MuJoCo).
 - ``templates``: the models of ``models/`` as stamps for scene builders.
 - ``mjcf_scene``: the MuJoCo scene (``build_scene``) and parked-car occupancy on a compiled model.

@@ -1,8 +1,9 @@
 """The ego car's model file and its geometry, as the planner, the drivers and the exporters see it.
 
-One source for the car's physical quantities: :class:`CarConfig` holds its limits, and
-:func:`car_geometry` reads its outline and axles from ``models/car/car.xml``. The MuJoCo
-actuation of the car lives in :mod:`garage_mj.driving.sim.vehicle`.
+One source for the car's physical quantities: :class:`CarConfig` holds its limits,
+:func:`car_geometry` reads its outline and axles from ``models/car/car.xml`` and
+:func:`car_camera` the pose and field of view of its cameras. The MuJoCo actuation of the car
+lives in :mod:`garage_mj.driving.sim.vehicle`.
 """
 
 from __future__ import annotations
@@ -11,10 +12,16 @@ import functools
 import importlib.resources
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 
 CAR_MODEL = "car"  # folder under garage_mj.models
+FRONT_CAMERA = "front"  # the car model's forward camera (``ego/front`` once attached to a scene)
+# The MJCF gives a camera's orientation as axes written to 6 digits: xyaxes="0 -1 0 0.173648 0 0.984808"
+# is a 10 degree tilt to within 2e-7 rad. The pitch is read to this many decimals of a degree, so it comes
+# out as the tilt the file means (exactly math.radians(10.0)), not as its 6-digit rounding.
+PITCH_DECIMALS = 4
 
 
 @dataclass(frozen=True)
@@ -85,6 +92,40 @@ def _car_body() -> dict[str, float]:
     rear_axle = float(model.body_pos[ident(B, "wheel_rl"), 0])
     return {"wheelbase": front_axle - rear_axle, "rear_axle": rear_axle, "half_width": half_w,
             "front": cx + half_len, "rear": cx - half_len}
+
+
+def car_camera(camera: str = FRONT_CAMERA, path: str | Path | None = None) -> dict[str, float]:
+    """Where camera ``camera`` of the car model sits and looks, read from its compiled model.
+
+    ``x`` [m] forward of the car centre, ``z`` [m] above the ground, ``pitch`` [rad] downward tilt
+    of the optical axis (to :data:`PITCH_DECIMALS` decimals of a degree), ``fovy`` [deg] vertical
+    field of view. ``path``: another car MJCF than ``models/car/car.xml``. The camera must sit on
+    the car's centre line and look straight ahead (what a driver's camera geometry assumes).
+    """
+    return dict(_car_camera(camera, None if path is None else str(path)))
+
+
+@functools.lru_cache(maxsize=8)
+def _car_camera(camera: str, path: str | None) -> tuple[tuple[str, float], ...]:
+    if path is None:
+        with importlib.resources.as_file(car_xml_path()) as default:
+            model = mujoco.MjModel.from_xml_path(str(default))
+    else:
+        model = mujoco.MjModel.from_xml_path(path)
+    cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+    if cam < 0:
+        names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_CAMERA, i) for i in range(model.ncam)]
+        raise ValueError(f"the car model has no camera {camera!r}; cameras: {', '.join(map(str, names))}")
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)  # the car at rest on the ground (qpos0): its frame is the world's
+    x, y, z = (float(v) for v in data.cam_xpos[cam])
+    axis = -data.cam_xmat[cam].reshape(3, 3)[:, 2]  # a camera looks along its -z axis
+    if abs(y) > 1e-9 or abs(float(axis[1])) > 1e-9:
+        raise ValueError(f"car camera {camera!r} must sit on the car's centre line and look straight ahead "
+                         f"(y {y:g} m, optical axis {axis.round(6).tolist()})")
+    pitch = math.atan2(-float(axis[2]), math.hypot(float(axis[0]), float(axis[1])))
+    pitch = math.radians(round(math.degrees(pitch), PITCH_DECIMALS))
+    return ("x", x), ("z", z), ("pitch", pitch), ("fovy", float(model.cam_fovy[cam]))
 
 
 def car_xml_path():

@@ -20,13 +20,14 @@ import collections
 import dataclasses
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from garage_mj.core.config import load_config
 from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction, clip
-from garage_mj.scene.car import CarGeometry, car_geometry
+from garage_mj.scene.car import FRONT_CAMERA, CarGeometry, car_camera, car_geometry
 
 
 @runtime_checkable
@@ -47,14 +48,25 @@ class DriverNoiseConfig:
     delay_steps: int = 0  # [control steps] reaction delay: commands act this many steps late
 
 
+def _from_car_model(key: str):
+    """A field whose default is read from ``models/car``'s compiled model (:func:`car_camera`)."""
+    return dataclasses.field(default_factory=lambda: car_camera()[key])
+
+
 @dataclass(frozen=True)
 class CameraGeometry:
-    """The forward camera in the car frame (defaults: ``front`` camera of ``models/car``)."""
+    """The forward camera in the car frame (defaults: the ``front`` camera of ``models/car``, read from its
+    compiled model, so moving the camera there moves it here too)."""
 
-    x: float = 2.25  # [m] forward of the car centre
-    z: float = 1.18  # [m] above the ground
-    pitch: float = math.radians(10.0)  # [rad] downward tilt
-    fovy: float = 90.0  # [deg] vertical field of view (square pixels)
+    x: float = _from_car_model("x")  # [m] forward of the car centre
+    z: float = _from_car_model("z")  # [m] above the ground
+    pitch: float = _from_car_model("pitch")  # [rad] downward tilt
+    fovy: float = _from_car_model("fovy")  # [deg] vertical field of view (square pixels)
+
+    @classmethod
+    def from_model(cls, camera: str = FRONT_CAMERA, path: str | Path | None = None) -> CameraGeometry:
+        """Camera ``camera`` of the car model (``path``: another car MJCF than ``models/car/car.xml``)."""
+        return cls(**car_camera(camera, path))
 
 
 def _car(car: CarGeometry | dict[str, Any] | None) -> CarGeometry:

@@ -1,13 +1,15 @@
 """What a learned driver sees: the unprivileged observation, one function for training and driving.
 
 A learned driver acts from the front camera and what the car itself knows of its route in its own
-frame, never from the world frame or the other road users' states: no ``pose``, no ``actors``. From a drive env's observation
+frame, never from the world frame or the other road users' states: it reads only the entries of
+:data:`~garage_mj.driving.sim.observations.OBSERVATIONS` not marked privileged (so no ``pose``, no
+``actors``; :data:`UNPRIVILEGED`). From a drive env's observation
 (:class:`~garage_mj.driving.sim.drive_env.GarageDriveEnv`, depth in metres) :func:`learned_observation`
 makes a dict for stable-baselines3's ``MultiInputPolicy``:
 
 - ``image``: (2, H, W) uint8, channel first: depth clipped to :data:`DEPTH_RANGE` metres and scaled
   to 0..255, and the segmentation class ids spread over 0..255 (:data:`SEG_SCALE` per class);
-- ``vector``: (8,) float32: the route waypoint :data:`~garage_mj.driving.sim.drive_env.LOOKAHEAD` metres
+- ``vector``: (8,) float32: the route waypoint :data:`~garage_mj.driving.sim.observations.LOOKAHEAD` metres
   ahead in the car frame (x, y over the lookahead), the speed over the car's top speed, the route
   left to the goal (metres over :data:`REMAINING_RANGE`, capped at 1), the road-wheel angle
   (fraction of full lock), the route left again over :data:`NEAR_RANGE` (capped at 1), and the goal
@@ -28,7 +30,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.driving.sim.drive_env import LOOKAHEAD
+from garage_mj.driving.sim.observations import LOOKAHEAD, unprivileged
 from garage_mj.scene.semantics import Semantic
 
 DEPTH_RANGE = 20.0  # [m] depth beyond this reads as this (a garage's far wall rarely matters)
@@ -36,6 +38,7 @@ SEG_SCALE = 255 // max(Semantic)  # segmentation id -> pixel value
 REMAINING_RANGE = 10.0  # [m] route left to the goal, read up to this (it matters for stopping)
 NEAR_RANGE = 2.0  # [m] the route left read again at a finer scale, for the stop
 SPEED_RANGE = 4.0  # [m/s] the car's top speed in a garage (CarConfig.max_speed)
+UNPRIVILEGED = unprivileged()  # the drive env's entries a learned driver may read (the table's, not privileged)
 VECTOR_KEYS = ("waypoint_x", "waypoint_y", "speed", "remaining", "steer", "near_goal", "goal_x", "goal_y")
 
 
@@ -53,6 +56,7 @@ def learned_space(height: int, width: int) -> spaces.Dict:
 
 def learned_observation(obs: dict[str, Any]) -> dict[str, np.ndarray]:
     """The unprivileged observation from a drive env's (depth in metres, ``image_obs=False``)."""
+    obs = {k: obs[k] for k in UNPRIVILEGED if k in obs}  # the privileged entries are out of reach
     depth = np.asarray(obs["depth"], dtype=np.float32)
     if depth.ndim != 2:
         raise ValueError(f"learned_observation needs depth as (H, W) metres (GarageDriveEnv(image_obs=False)), "

@@ -25,10 +25,10 @@ terminates the episode, but a kind that :data:`~garage_mj.driving.sim.outcomes.O
 (the time limit) truncates it. The reward is route progress [m] per step, plus :data:`SUCCESS_REWARD` or
 :data:`COLLISION_PENALTY` at the end.
 
-The observation: ``depth`` and ``segmentation`` (the front camera), ``waypoint`` (the route point
-:data:`LOOKAHEAD` metres ahead, car frame), ``speed`` [m/s], ``remaining`` (route left to the goal
-[m]) and ``steer`` (the road-wheel angle over full lock, in [-1, 1]: what the car itself knows,
-like its speed); privileged for reference drivers: ``goal`` (car frame), ``pose`` (world frame)
+The observation is declared once, in :data:`~garage_mj.driving.sim.observations.OBSERVATIONS`
+(``docs/observations.md`` is rendered from it): the front camera's ``depth`` and ``segmentation``
+(and ``rgb``), the route ``waypoint`` and ``goal`` in the car frame, ``speed``, ``remaining`` and
+``steer``: what the car itself knows; privileged, for reference drivers: ``pose`` (world frame)
 and, with actors, ``actors``.
 """
 
@@ -47,6 +47,13 @@ from garage_mj.driving.actors.config import NO_ACTORS, ScenarioConfig, load_scen
 from garage_mj.driving.actors.judging import judge
 from garage_mj.driving.actors.placement import draw_scenario
 from garage_mj.driving.actors.scenario import Scenario
+from garage_mj.driving.sim.observations import (
+    ObservationSetup,
+    Snapshot,
+    observation_spaces,
+    observe,
+    observed_entries,
+)
 from garage_mj.driving.sim.outcomes import (
     TRUNCATING,
     Outcome,
@@ -58,18 +65,15 @@ from garage_mj.driving.sim.outcomes import (
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
 from garage_mj.driving.sim.vehicle import Car, DiscreteAction, attach_car, compile_mjcf
 from garage_mj.grid.garage import Garage
-from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies, states
+from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.car import CarConfig, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
-from garage_mj.scene.route_line import Route, to_car_frame
-from garage_mj.scene.semantics import COLLIDABLE, Semantic, geom_classes
+from garage_mj.scene.route_line import Route
+from garage_mj.scene.semantics import COLLIDABLE, geom_classes
 
-LOOKAHEAD = 4.0  # [m] the observed waypoint lies this far ahead of the car's route progress
-MAX_EXTENT = 1000.0  # [m] bound of the waypoint observation (far beyond any garage)
-MAX_SPEED = 50.0  # [m/s] bound of the speed observation
 SUCCESS_REWARD = 10.0
 COLLISION_PENALTY = -10.0
 ACTION_TYPES = ("discrete", "continuous")
@@ -238,31 +242,9 @@ class GarageDriveEnv(gym.Env):
         if not self.targets:
             raise ValueError(f"garage {garage.name!r}: no stall can be reached by a feasible route from the entrance")
 
-        h, w = cam.height, cam.width
-        obs = {
-            "depth": spaces.Box(0.0, cam.far, (h, w), np.float32),
-            "segmentation": spaces.Box(0, max(Semantic), (h, w), np.uint8),
-        } if not self.image_obs else {
-            "depth": spaces.Box(0, 255, (h, w, 1), np.uint8),
-            "segmentation": spaces.Box(0, 255, (h, w, 1), np.uint8),
-        }
-        obs |= {
-            "waypoint": spaces.Box(-MAX_EXTENT, MAX_EXTENT, (2,), np.float32),
-            "speed": spaces.Box(-MAX_SPEED, MAX_SPEED, (1,), np.float32),
-            "goal": spaces.Box(-MAX_EXTENT, MAX_EXTENT, (2,), np.float32),
-            "remaining": spaces.Box(0.0, MAX_EXTENT, (1,), np.float32),
-            "steer": spaces.Box(-1.0, 1.0, (1,), np.float32),
-            "pose": spaces.Box(np.array([-MAX_EXTENT, -MAX_EXTENT, -np.pi], np.float32),
-                               np.array([MAX_EXTENT, MAX_EXTENT, np.pi], np.float32), dtype=np.float32),
-        }
-        if cam.rgb:
-            obs["rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
-        if self.scenario_config.count:
-            n = self.scenario_config.count
-            obs["actors"] = spaces.Box(np.tile(np.array([-MAX_EXTENT, -MAX_EXTENT, -np.pi, -1.0], np.float32), (n, 1)),
-                                       np.tile(np.array([MAX_EXTENT, MAX_EXTENT, np.pi, np.inf], np.float32), (n, 1)),
-                                       dtype=np.float32)
-        self.observation_space = spaces.Dict(obs)
+        setup = ObservationSetup(cam, self.image_obs, self.scenario_config.count)
+        self.observation_space = spaces.Dict(observation_spaces(setup))
+        self._observed = observed_entries(setup)  # the observation table's entries this env has
         if action_type == "discrete":
             self.action_space: spaces.Space = spaces.Discrete(len(DiscreteAction))
         else:
@@ -443,26 +425,9 @@ class GarageDriveEnv(gym.Env):
                  ) -> dict[str, np.ndarray]:
         """The observation of the current state (``pose`` and ``speed``: the car's, when the caller has them)."""
         x, y, yaw = pose or self.car.pose(self.data)
-        obs = self.camera.render(self.data)
-        if self.image_obs:
-            far = self.camera_config.far
-            obs["depth"] = np.rint(np.clip(obs["depth"], 0.0, far) * (255.0 / far)).astype(np.uint8)[..., None]
-            obs["segmentation"] = obs["segmentation"][..., None]
-        target = self.route.point_at(self.monitor.progress + LOOKAHEAD)
-        obs["waypoint"] = to_car_frame(target, x, y, yaw).astype(np.float32)
-        obs["speed"] = np.array([self.car.speed(self.data) if speed is None else speed], dtype=np.float32)
-        obs["goal"] = to_car_frame(self.monitor.goal, x, y, yaw).astype(np.float32)
-        obs["remaining"] = np.array([max(self.route.length - self.monitor.progress, 0.0)], dtype=np.float32)
-        obs["steer"] = np.array([self.car.steer_angle / self.car_config.max_steer], dtype=np.float32)
-        obs["pose"] = np.array([x, y, math.remainder(yaw, math.tau)], dtype=np.float32)
-        if self.scenario_config.count:
-            rows = np.zeros((self.scenario_config.count, 4), dtype=np.float32)
-            rows[:, 3] = -1.0
-            rows[:, :2] = MAX_EXTENT  # slots without an actor: far away
-            if self.scenario.actors:
-                rows[: len(self.scenario.actors)] = states(self.scenario.actors, self._actor_tau)
-            obs["actors"] = rows
-        return obs
+        frame = self.camera.render(self.data)
+        speed = self.car.speed(self.data) if speed is None else speed
+        return observe(self._observed, Snapshot(self, x, y, yaw, speed, frame))
 
     def _info(self, pose: tuple[float, float, float] | None = None) -> dict[str, Any]:
         x, y, yaw = pose or self.car.pose(self.data)

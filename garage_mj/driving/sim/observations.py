@@ -1,0 +1,261 @@
+"""The drive env's observation, declared once: one :class:`ObservationEntry` per key of ``GarageDrive-v0``'s dict.
+
+Each entry says how its gymnasium space is built from the env's options (:class:`ObservationSetup`),
+whether it is privileged (the world frame and the other road users' states, for reference drivers;
+a learned driver never reads it, :mod:`garage_mj.driving.learning.observation`), what it holds (one
+line, with units), and how it is filled from the env's state at a step (:class:`Snapshot`).
+:class:`~garage_mj.driving.sim.drive_env.GarageDriveEnv` builds its observation space and each
+step's observation dict from :data:`OBSERVATIONS`, in this order; :func:`observations_markdown`
+renders ``docs/observations.md`` from it.
+
+A new sensor is one entry in :data:`OBSERVATIONS` plus the function that fills it (the
+:class:`Snapshot` carries the env, so the fill reads whatever the env knows).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from gymnasium import spaces
+
+from garage_mj.driving.sim.sensors import CameraConfig
+from garage_mj.scene.actor_bodies import states
+from garage_mj.scene.route_line import to_car_frame
+from garage_mj.scene.semantics import Semantic
+
+if TYPE_CHECKING:
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+
+LOOKAHEAD = 4.0  # [m] the observed waypoint lies this far ahead of the car's route progress
+MAX_EXTENT = 1000.0  # [m] bound of the waypoint observation (far beyond any garage)
+MAX_SPEED = 50.0  # [m/s] bound of the speed observation
+
+
+@dataclass(frozen=True)
+class ObservationSetup:
+    """What the observation's spaces depend on: the camera, SB3 image spaces or not, the actor slots."""
+
+    camera: CameraConfig = CameraConfig()
+    image_obs: bool = False  # depth and segmentation as (H, W, 1) uint8 images (GarageDriveEnv(image_obs=True))
+    actors: int = 0  # actor slots: the scenario's actor count
+
+
+@dataclass(slots=True)  # not frozen: one is made per step, and a frozen init costs more
+class Snapshot:
+    """What one observation is made of: the env at this step, the car's pose and speed, the camera's images."""
+
+    env: GarageDriveEnv
+    x: float  # [m] world frame
+    y: float  # [m]
+    yaw: float  # [rad]
+    speed: float  # [m/s] forward
+    frame: dict[str, np.ndarray]  # the camera's images of this step (Camera.render: the ones it is set to render)
+
+
+@dataclass(frozen=True)
+class ObservationEntry:
+    """One key of the drive env's observation dict.
+
+    ``space`` builds its gymnasium space from the env's options, or returns None where the env has no
+    such entry (``rgb`` without colour, ``actors`` without actors); ``fill`` computes its value at a
+    step, or None where the camera did not render it (its image is then missing from the dict).
+    """
+
+    name: str
+    space: Callable[[ObservationSetup], spaces.Box | None]
+    privileged: bool  # True: a reference driver's (world frame, other road users); learned drivers never read it
+    description: str  # one line, with units
+    fill: Callable[[Snapshot], np.ndarray | None]
+
+
+# -- camera images -----------------------------------------------------------------------------------
+def _image(setup: ObservationSetup, channels: int | None, high, dtype) -> spaces.Box:
+    h, w = setup.camera.height, setup.camera.width
+    return spaces.Box(0, high, (h, w) if channels is None else (h, w, channels), dtype)
+
+
+def _depth_space(setup: ObservationSetup) -> spaces.Box:
+    if setup.image_obs:
+        return _image(setup, 1, 255, np.uint8)
+    return spaces.Box(0.0, setup.camera.far, (setup.camera.height, setup.camera.width), np.float32)
+
+
+def _depth(s: Snapshot) -> np.ndarray | None:
+    depth = s.frame.get("depth")
+    if depth is None or not s.env.image_obs:
+        return depth
+    far = s.env.camera_config.far
+    return np.rint(np.clip(depth, 0.0, far) * (255.0 / far)).astype(np.uint8)[..., None]
+
+
+def _segmentation_space(setup: ObservationSetup) -> spaces.Box:
+    return _image(setup, 1, 255, np.uint8) if setup.image_obs else _image(setup, None, max(Semantic), np.uint8)
+
+
+def _segmentation(s: Snapshot) -> np.ndarray | None:
+    seg = s.frame.get("segmentation")
+    return seg if seg is None or not s.env.image_obs else seg[..., None]
+
+
+# -- the car and its route ---------------------------------------------------------------------------
+def _vector(n: int, low: float, high: float) -> Callable[[ObservationSetup], spaces.Box]:
+    return lambda setup: spaces.Box(low, high, (n,), np.float32)
+
+
+def _waypoint(s: Snapshot) -> np.ndarray:
+    env = s.env
+    target = env.route.point_at(env.monitor.progress + LOOKAHEAD)
+    return to_car_frame(target, s.x, s.y, s.yaw).astype(np.float32)
+
+
+def _goal(s: Snapshot) -> np.ndarray:
+    return to_car_frame(s.env.monitor.goal, s.x, s.y, s.yaw).astype(np.float32)
+
+
+def _remaining(s: Snapshot) -> np.ndarray:
+    env = s.env
+    return np.array([max(env.route.length - env.monitor.progress, 0.0)], dtype=np.float32)
+
+
+def _steer(s: Snapshot) -> np.ndarray:
+    return np.array([s.env.car.steer_angle / s.env.car_config.max_steer], dtype=np.float32)
+
+
+def _pose_space(setup: ObservationSetup) -> spaces.Box:
+    return spaces.Box(np.array([-MAX_EXTENT, -MAX_EXTENT, -np.pi], np.float32),
+                      np.array([MAX_EXTENT, MAX_EXTENT, np.pi], np.float32), dtype=np.float32)
+
+
+def _pose(s: Snapshot) -> np.ndarray:
+    return np.array([s.x, s.y, math.remainder(s.yaw, math.tau)], dtype=np.float32)
+
+
+# -- the other road users ----------------------------------------------------------------------------
+def _actors_space(setup: ObservationSetup) -> spaces.Box | None:
+    n = setup.actors
+    if not n:
+        return None
+    return spaces.Box(np.tile(np.array([-MAX_EXTENT, -MAX_EXTENT, -np.pi, -1.0], np.float32), (n, 1)),
+                      np.tile(np.array([MAX_EXTENT, MAX_EXTENT, np.pi, np.inf], np.float32), (n, 1)),
+                      dtype=np.float32)
+
+
+def _actors(s: Snapshot) -> np.ndarray:
+    env = s.env
+    rows = np.zeros((env.scenario_config.count, 4), dtype=np.float32)
+    rows[:, 3] = -1.0
+    rows[:, :2] = MAX_EXTENT  # slots without an actor: far away
+    if env.scenario.actors:
+        rows[: len(env.scenario.actors)] = states(env.scenario.actors, env._actor_tau)
+    return rows
+
+
+OBSERVATIONS: tuple[ObservationEntry, ...] = (
+    ObservationEntry("rgb", lambda setup: _image(setup, 3, 255, np.uint8) if setup.camera.rgb else None, False,
+                     "front camera colour image (only with colour on: `rgb=True`)", lambda s: s.frame.get("rgb")),
+    ObservationEntry("depth", _depth_space, False,
+                     "front camera depth along the optical axis [m], at most the far plane; "
+                     "`image_obs`: 0..255 over [0, far] m", _depth),
+    ObservationEntry("segmentation", _segmentation_space, False,
+                     "front camera semantic class per pixel (`garage_mj.scene.semantics.Semantic` ids)",
+                     _segmentation),
+    ObservationEntry("waypoint", _vector(2, -MAX_EXTENT, MAX_EXTENT), False,
+                     f"the route point {LOOKAHEAD:g} m ahead of the car's route progress, car frame "
+                     "(x forward, y left) [m]", _waypoint),
+    ObservationEntry("speed", _vector(1, -MAX_SPEED, MAX_SPEED), False, "forward speed [m/s]",
+                     lambda s: np.array([s.speed], dtype=np.float32)),
+    ObservationEntry("goal", _vector(2, -MAX_EXTENT, MAX_EXTENT), False,
+                     "the goal, where the car must stop beside the target stall, car frame (x forward, y left) [m]",
+                     _goal),
+    ObservationEntry("remaining", _vector(1, 0.0, MAX_EXTENT), False,
+                     "route left to the goal [m] (0 past it)", _remaining),
+    ObservationEntry("steer", _vector(1, -1.0, 1.0), False,
+                     "road-wheel angle over full lock, in [-1, 1] (positive: left)", _steer),
+    ObservationEntry("pose", _pose_space, True, "the car's pose, world frame: x, y [m], yaw [rad] in [-pi, pi]",
+                     _pose),
+    ObservationEntry("actors", _actors_space, True,
+                     "per actor slot, world frame: x, y [m], yaw [rad], seconds since its trigger (-1: not yet); "
+                     "in the order of `driver_info()[\"actors\"]`, empty slots at (1000, 1000); only with actors",
+                     _actors),
+)
+
+
+def unprivileged() -> tuple[str, ...]:
+    """Names of the entries any driver may read (a learned driver reads only these)."""
+    return tuple(e.name for e in OBSERVATIONS if not e.privileged)
+
+
+def observed_entries(setup: ObservationSetup) -> tuple[ObservationEntry, ...]:
+    """The entries of :data:`OBSERVATIONS` an env of ``setup`` has, in order."""
+    return tuple(e for e in OBSERVATIONS if e.space(setup) is not None)
+
+
+def observation_spaces(setup: ObservationSetup) -> dict[str, spaces.Box]:
+    """The env's observation spaces by name, in :data:`OBSERVATIONS` order (entries the env has only)."""
+    return {e.name: e.space(setup) for e in observed_entries(setup)}
+
+
+def observe(entries: Iterable[ObservationEntry], snapshot: Snapshot) -> dict[str, np.ndarray]:
+    """The observation dict of ``entries`` at ``snapshot`` (an image the camera did not render is left out)."""
+    return {e.name: value for e in entries if (value := e.fill(snapshot)) is not None}
+
+
+# -- the docs table ----------------------------------------------------------------------------------
+DOC_SETUP = ObservationSetup(CameraConfig(rgb=True), image_obs=False, actors=2)  # what docs/observations.md shows
+
+
+def _number(v: float) -> str:
+    v = float(v)
+    if math.isclose(abs(v), math.pi, rel_tol=1e-6):  # a float32 pi
+        return "-pi" if v < 0 else "pi"
+    return f"{v:g}"
+
+
+def _bounds(a: np.ndarray) -> str:
+    """A bound array as one number when uniform, else per component of its last axis."""
+    a = np.asarray(a, dtype=np.float64)
+    if (a == a.flat[0]).all():
+        return _number(a.flat[0])
+    per_column = a.reshape(-1, a.shape[-1])
+    return "(" + ", ".join(_number(v) for v in per_column[0]) + ")"
+
+
+def space_text(space: spaces.Box) -> str:
+    """A Box as ``dtype shape in [low, high]`` (e.g. ``float32 (2,) in [-1000, 1000]``)."""
+    return f"{space.dtype} {tuple(space.shape)} in [{_bounds(space.low)}, {_bounds(space.high)}]"
+
+
+def observations_markdown(setup: ObservationSetup = DOC_SETUP) -> str:
+    """``docs/observations.md``: the table of :data:`OBSERVATIONS` (name, space, privileged, description)."""
+    images = observation_spaces(ObservationSetup(setup.camera, image_obs=True, actors=setup.actors))
+    cam = setup.camera
+    lines = [
+        "# Observations of `GarageDrive-v0`",
+        "",
+        "Generated from `garage_mj/driving/sim/observations.py` (`OBSERVATIONS`) by",
+        "`python -m garage_mj.driving.sim.observations > docs/observations.md`; a test checks that",
+        "this file is what it renders. The observation is a dict with these keys, in this order.",
+        f"Spaces as built for a {cam.width} x {cam.height} camera with a {cam.far:g} m far plane, colour "
+        f"{'on' if cam.rgb else 'off'},",
+        f"and {setup.actors} actor slots; where `image_obs=True` changes a space, it is given after the default.",
+        "Privileged entries are for reference drivers (the `oracle`); a learned driver never reads them",
+        "(`garage_mj/driving/learning/observation.py`).",
+        "",
+        "| name | space | privileged | description |",
+        "|---|---|---|---|",
+    ]
+    for e in OBSERVATIONS:
+        space = e.space(setup)
+        text = "(none with these options)" if space is None else space_text(space)
+        if e.name in images and space_text(images[e.name]) != text:
+            text += f"; `image_obs`: {space_text(images[e.name])}"
+        lines.append(f"| `{e.name}` | {text} | {'yes' if e.privileged else 'no'} | {e.description} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    print(observations_markdown(), end="")
