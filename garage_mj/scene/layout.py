@@ -160,19 +160,41 @@ def _segment(x0: float, y0: float, x1: float, y1: float) -> tuple[str, float, fl
 def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bool = False, *,
                  network: RoadNetwork | None = None, stalls: StallLayout | None = None) -> SceneLayout:
     """The scene layout of ``garage`` (see the module docstring); ``network``/``stalls`` are derived if not given."""
-    grid = garage.grid
-    rows, cols = grid.shape
-    b = world.block
-    sx, sy = cols * b, rows * b
-    h = world.ceiling_height
-    t = world.wall_thickness
+    rows, cols = garage.grid.shape
     net = network or road_network(garage, world)
     stalls = stalls or stall_layout(garage, world)
-    boxes: list[Box] = [
-        Box("floor", Semantic.FLOOR, (sx / 2, sy / 2, -FLOOR_THICKNESS / 2), (sx / 2, sy / 2, FLOOR_THICKNESS / 2), True)
-    ]
+    boxes = [_floor_box(rows, cols, world), *_wall_boxes(garage, world), *_obstacle_boxes(garage.grid, world)]
+    if ceiling:
+        boxes.append(_ceiling_box(rows, cols, world))
+    boxes += _lane_marking_boxes(net, world)
+    boxes += _stall_marking_boxes(stalls, world)
+    boxes += _gate_patch_boxes(garage, net, world)
+    parked = [Placement(f"parkedcar_{s.id}", s.x, s.y, s.yaw, s.id) for s in stalls.stalls]
+    return SceneLayout(rows, cols, world, tuple(boxes), tuple(_pillar_placements(garage.grid, stalls, world)),
+                       tuple(parked))
 
-    # outer walls, just outside the grid, split at the gates
+
+def _floor_box(rows: int, cols: int, world: WorldConfig) -> Box:
+    """One slab under the whole grid, its top face at z = 0."""
+    sx, sy = cols * world.block, rows * world.block
+    return Box("floor", Semantic.FLOOR, (sx / 2, sy / 2, -FLOOR_THICKNESS / 2),
+               (sx / 2, sy / 2, FLOOR_THICKNESS / 2), True)
+
+
+def _ceiling_box(rows: int, cols: int, world: WorldConfig) -> Box:
+    """One slab over the whole grid, its bottom face at the ceiling height."""
+    sx, sy = cols * world.block, rows * world.block
+    h = world.ceiling_height
+    return Box("ceiling", Semantic.WALL, (sx / 2, sy / 2, h + CEILING_THICKNESS / 2),
+               (sx / 2, sy / 2, CEILING_THICKNESS / 2), True)
+
+
+def _wall_segments(garage: Garage, world: WorldConfig) -> list[tuple[str, float, float, float]]:
+    """One wall segment per border block, just outside the grid, none at the entrance and exit;
+    the end blocks reach over the corners by the wall thickness so the walls close there."""
+    rows, cols = garage.grid.shape
+    b, t = world.block, world.wall_thickness
+    sx, sy = cols * b, rows * b
     gates = {garage.entrance, garage.exit}
     wall_segs = []
     for side, cells, fixed in (
@@ -192,13 +214,26 @@ def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bo
                 lo = (rows - 1 - r) * b - (t if r == rows - 1 else 0)
                 hi = (rows - r) * b + (t if r == 0 else 0)
             wall_segs.append((along, fixed, lo, hi))
-    for k, (axis, line, lo, hi) in enumerate(merge_intervals(wall_segs)):
+    return wall_segs
+
+
+def _wall_boxes(garage: Garage, world: WorldConfig) -> list[Box]:
+    """The outer walls, merged into one box per straight run, split at the gates."""
+    h, t = world.ceiling_height, world.wall_thickness
+    boxes = []
+    for k, (axis, line, lo, hi) in enumerate(merge_intervals(_wall_segments(garage, world))):
         mid, hl = (lo + hi) / 2, (hi - lo) / 2
         center = (mid, line, h / 2) if axis == "x" else (line, mid, h / 2)
         half = (hl, t / 2, h / 2) if axis == "x" else (t / 2, hl, h / 2)
         boxes.append(Box(geom_name(Semantic.WALL, k), Semantic.WALL, center, half, True))
+    return boxes
 
-    # OBSTACLE blocks, merged into rectangles
+
+def _obstacle_boxes(grid: np.ndarray, world: WorldConfig) -> list[Box]:
+    """OBSTACLE blocks as solid boxes up to the ceiling, merged into rectangles."""
+    rows = grid.shape[0]
+    b, h = world.block, world.ceiling_height
+    boxes = []
     for k, (r0, c0, n, w) in enumerate(cover_cells(grid == Block.OBSTACLE)):
         x0, x1 = c0 * b, (c0 + w) * b
         y0, y1 = (rows - r0 - n) * b, (rows - r0) * b
@@ -211,15 +246,12 @@ def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bo
                 True,
             )
         )
+    return boxes
 
-    if ceiling:
-        boxes.append(
-            Box("ceiling", Semantic.WALL, (sx / 2, sy / 2, h + CEILING_THICKNESS / 2),
-                (sx / 2, sy / 2, CEILING_THICKNESS / 2), True)
-        )
 
-    # lane centre lines: junction interiors stay clear, gates run across their whole cell
-    half_road = world.road_width / 2
+def _lane_marking_boxes(net: RoadNetwork, world: WorldConfig) -> list[Box]:
+    """Lane centre lines: junction interiors stay clear, gates run across their whole cell."""
+    b, half_road = world.block, world.road_width / 2
     lane_segs = []
     for cell in net.cells.values():
         dirs = set(cell.openings)
@@ -231,9 +263,11 @@ def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bo
             lane_segs.append(
                 _segment(cell.x + ux * start, cell.y + uy * start, cell.x + ux * b / 2, cell.y + uy * b / 2)
             )
-    boxes.extend(_line_boxes(lane_segs, Semantic.ROAD_MARKING, world.marking_width))
+    return _line_boxes(lane_segs, Semantic.ROAD_MARKING, world.marking_width)
 
-    # stall outlines: two sides and the back line, open towards the road
+
+def _stall_marking_boxes(stalls: StallLayout, world: WorldConfig) -> list[Box]:
+    """Stall outlines: two sides and the back line, open towards the road."""
     stall_segs = []
     L, W, mw = world.stall_length, world.stall_width, world.marking_width
     for s in stalls.stalls:
@@ -245,20 +279,27 @@ def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bo
         bx, by = s.x - ux * L / 2, s.y - uy * L / 2
         e = W / 2 + mw / 2
         stall_segs.append(_segment(bx - tx * e, by - ty * e, bx + tx * e, by + ty * e))
-    boxes.extend(_line_boxes(stall_segs, Semantic.STALL_MARKING, mw))
+    return _line_boxes(stall_segs, Semantic.STALL_MARKING, mw)
 
-    # entrance and exit floor patches (the road width, across the whole gate cell)
+
+def _gate_patch_boxes(garage: Garage, net: RoadNetwork, world: WorldConfig) -> list[Box]:
+    """Entrance and exit floor patches: the road width, across the whole gate cell."""
+    b, half_road = world.block, world.road_width / 2
+    boxes = []
     for cls, pos in ((Semantic.ENTRANCE, garage.entrance), (Semantic.EXIT, garage.exit)):
         cell = net.cells[pos]
         along_x = any(WORLD_DIR[d][0] != 0 for d in cell.openings)
         half = (b / 2, half_road, GATE_PATCH_HEIGHT / 2) if along_x else (half_road, b / 2, GATE_PATCH_HEIGHT / 2)
         boxes.append(Box(geom_name(cls, "floor"), cls, (cell.x, cell.y, GATE_PATCH_HEIGHT / 2), half, False))
+    return boxes
 
+
+def _pillar_placements(grid: np.ndarray, stalls: StallLayout, world: WorldConfig) -> list[Placement]:
+    """The obstruction pillars of the stall layout first, then the structural ones, numbered in that order."""
     pillars = [Placement(f"pillar_{k}", p.x, p.y, 0.0) for k, p in enumerate(stalls.pillars)]
     for x, y in structural_pillars(grid, world):
         pillars.append(Placement(f"pillar_{len(pillars)}", x, y, 0.0))
-    parked = [Placement(f"parkedcar_{s.id}", s.x, s.y, s.yaw, s.id) for s in stalls.stalls]
-    return SceneLayout(rows, cols, world, tuple(boxes), tuple(pillars), tuple(parked))
+    return pillars
 
 
 def structural_pillars(grid: np.ndarray, world: WorldConfig = DEFAULT_WORLD) -> list[tuple[float, float]]:
