@@ -52,7 +52,7 @@ from typing import Any
 
 from garage_mj.cli._common import positive_int
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import atomic_write
+from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.driving.actors.config import load_scenario_config
 from garage_mj.driving.garage_set import GarageSet
 from garage_mj.driving.results import FAILURE_KINDS, paper_failures, read_tests
@@ -412,7 +412,7 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(report)
     print(text, end="")
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(args.json, json.dumps(report, indent=1) + "\n")
+    write_json(args.json, report, indent=1)
     md = args.json.with_suffix(".md")
     atomic_write(md, f"# Learned driver on held-out garages\n\n`{report['command']}`\n\n{text}")
     print(f"wrote {args.json} and {md}")

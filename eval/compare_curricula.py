@@ -62,7 +62,7 @@ from typing import Any
 from garage_mj.cli._common import positive_int, seed_list
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import FolderLock, atomic_write
+from garage_mj.core.fsutil import FolderLock, atomic_write, write_json
 from garage_mj.driving.garage_set import GarageSet, load_garage_set
 from garage_mj.driving.learning.train import CURRICULA, MANIFEST, MODEL, DriverTrainConfig
 
@@ -463,7 +463,7 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(report)
     print(text, end="")
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(args.json, json.dumps(report, indent=1) + "\n")
+    write_json(args.json, report, indent=1)
     md = args.json.with_suffix(".md")
     atomic_write(md, f"# What generated garages are worth for training: curricula compared\n\n"
                      f"`{report['command']}`\n\n{text}")

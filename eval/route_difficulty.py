@@ -332,13 +332,12 @@ def report_fresh(args) -> int:
 
 def _write_json(path: Path | None, result: dict) -> None:
     """Write ``result`` to ``path`` (``--json``; nothing when None), atomically."""
-    import json
 
-    from garage_mj.core.fsutil import atomic_write
+    from garage_mj.core.fsutil import write_json
 
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(path, json.dumps(result, indent=1) + "\n")
+        write_json(path, result, indent=1)
         print(f"wrote {path}")
 
 

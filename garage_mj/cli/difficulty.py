@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, positive_int, seed, user_errors
-from garage_mj.core.fsutil import atomic_write
+from garage_mj.core.fsutil import write_json
 from garage_mj.driving.difficulty.fit import driver_agreement, fit_runs, load_runs, score
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.scene.route_difficulty import load_route_model
@@ -131,7 +130,7 @@ def run_score(args: argparse.Namespace) -> int:
             print(f"  {pair}: r = {r12} over {a['garages']} garages; no one difficulty reaches r -{bound} with both")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(args.json, json.dumps(result, indent=1) + "\n")
+        write_json(args.json, result, indent=1)
         print(f"wrote {args.json}")
     return 0
 

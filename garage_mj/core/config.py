@@ -3,14 +3,17 @@
 Each config is a frozen dataclass that lives beside the code it configures (for example
 :class:`garage_mj.grid.metrics.DifficultyConfig`, :class:`garage_mj.grid.reward.RewardConfig`).
 ``load_config(cls, mapping_or_path)`` builds one from a dict or a TOML file and rejects unknown
-keys, so a typo never passes silently.
+keys, so a typo never passes silently. :func:`refuse_other_settings` is the check every resumable
+job makes before it continues in a folder: the settings stored there must be the ones asked for now.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import sys
 import typing
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -100,3 +103,27 @@ def load_config(cls: type[T], source: dict[str, Any] | str | Path | None = None,
 def to_dict(config: Any) -> dict[str, Any]:
     """A plain dict of a config dataclass (for manifests and logs)."""
     return dataclasses.asdict(config)
+
+
+def settings_diff(stored: Mapping[str, Any], wanted: Mapping[str, Any],
+                  keys: Iterable[str] | None = None) -> list[str]:
+    """The keys whose values differ between ``stored`` and ``wanted`` (a missing key reads as None):
+    in the order of ``keys`` when given, else all keys of either, sorted."""
+    names = sorted(set(stored) | set(wanted)) if keys is None else list(keys)
+    return [k for k in names if stored.get(k) != wanted.get(k)]
+
+
+def refuse_other_settings(stored: Mapping[str, Any], wanted: Mapping[str, Any],
+                          refuse: Callable[[list[str]], Exception], keys: Iterable[str] | None = None) -> None:
+    """Raise ``refuse(differing keys)`` unless the settings ``stored`` in a run folder are those ``wanted`` now.
+
+    A job that resumes in a folder must not mix its results with another settings' ones; ``refuse``
+    builds the job's own error from the keys :func:`settings_diff` names. ``wanted`` is compared as
+    JSON would store it (tuples as lists), since ``stored`` was read back from a JSON file. With
+    ``keys``, only those are compared; without, the whole mappings are, so a key that one side lacks
+    and the other holds as None refuses too (no name shows it).
+    """
+    wanted = json.loads(json.dumps(wanted))
+    diff = settings_diff(stored, wanted, keys)
+    if diff or (keys is None and stored != wanted):
+        raise refuse(diff)

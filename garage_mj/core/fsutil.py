@@ -2,7 +2,8 @@
 
 * :func:`atomic_write` writes a file through a temp file made with ``mkstemp`` in the target's
   own folder (``O_EXCL``, unpredictable name, never follows a planted symlink), fsyncs it and
-  renames it over the target, so a reader sees the old file or the new one, never half of one.
+  renames it over the target, so a reader sees the old file or the new one, never half of one;
+  :func:`write_json` writes JSON through it (every ``run.json``, manifest, summary and ``--json`` file).
 * :class:`FolderLock` marks an output folder as in use by one long job (``cruise``, ``export``,
   ``train``, ``demo``); a second job into the same folder is refused with one line naming the
   first one's pid. The lock is an ``flock`` on ``.garage-mj.lock``, so the kernel drops it when
@@ -20,7 +21,9 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from garage_mj.core.errors import FolderBusy, GarageMJError
 
@@ -114,6 +117,16 @@ def atomic_write(path: str | Path, data: str | bytes) -> Path:
         raise
     fsync_dir(path.parent)
     return path
+
+
+def write_json(path: str | Path, data: Any, *, indent: int | None = 2, sort_keys: bool = False,
+               default: Callable[[Any], Any] | None = None, end: str = "\n") -> Path:
+    """Write ``data`` as JSON to ``path`` through :func:`atomic_write` (durable, never half a file).
+
+    The text is ``json.dumps(data, indent=indent, sort_keys=sort_keys, default=default) + end``: each
+    file keeps the layout it has always had (``indent=1`` for the large ones, a final newline).
+    """
+    return atomic_write(path, json.dumps(data, indent=indent, sort_keys=sort_keys, default=default) + end)
 
 
 def fsync_dir(folder: str | Path) -> None:

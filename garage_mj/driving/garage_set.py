@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import atomic_write, write_error
+from garage_mj.core.fsutil import write_error, write_json
 from garage_mj.driving.difficulty.rating import resolve_route_model
 from garage_mj.driving.sources import CruiseSource, painted_sources
 from garage_mj.generation.library import Library, stratified_ids
@@ -268,7 +268,7 @@ class GarageSet:
         path = Path(path)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write(path, json.dumps(self.to_dict(), indent=1) + "\n")
+            write_json(path, self.to_dict(), indent=1)
         except OSError as exc:
             raise write_error(path, exc) from None
 

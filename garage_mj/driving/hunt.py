@@ -43,8 +43,9 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.backends import check_backend, ray_session
+from garage_mj.core.config import refuse_other_settings
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir
+from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir, write_json
 from garage_mj.driving.cruise import run_cruise, run_test, xosc_name
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests, failure_counts, read_tests
@@ -199,14 +200,10 @@ def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: s
         state_path = _state_file(out)
         if state_path.is_file():
             old = json.loads(state_path.read_text()).get("settings") or {}
-            mine = json.loads(json.dumps(settings))
-            if old != mine:
-                diff = sorted(k for k in set(mine) | set(old) if mine.get(k) != old.get(k))
-                raise HuntError(f"{out} holds a hunt with other settings ({', '.join(diff)}); use another --out "
-                                "or the same settings")
+            refuse_other_settings(old, settings, lambda diff: HuntError(
+                f"{out} holds a hunt with other settings ({', '.join(diff)}); use another --out or the same settings"))
         else:
-            atomic_write(state_path, json.dumps({"settings": settings, "action_type_from": choice.source},
-                                                indent=2) + "\n")
+            write_json(state_path, {"settings": settings, "action_type_from": choice.source})
         result = _hunt(driver, out, map, library, cfg, seed, choice, occupancy, env or {}, workers,
                        progress, settings, cruise_kwargs)
     result.action_type, result.action_label = choice.action_type, choice.label
@@ -273,7 +270,7 @@ def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, choice, o
     state.update({"action_type_from": choice.source, "generations": generation,
                   "tests": sum(len(s.rows) for s in scored.values()),
                   "garages": len(scored), "files": {k: str(v) for k, v in files.items() if not isinstance(v, list)}})
-    atomic_write(_state_file(out), json.dumps(state, indent=2) + "\n")
+    write_json(_state_file(out), state)
     return HuntResult(out, state["tests"], generation, ranked, files, worst, table)
 
 
@@ -360,7 +357,7 @@ def add_file(out_dir: str | Path, name: str, path: Path) -> None:
     state_path = _state_file(Path(out_dir))
     state = json.loads(state_path.read_text())
     state["files"][name] = str(path)
-    atomic_write(state_path, json.dumps(state, indent=2) + "\n")
+    write_json(state_path, state)
 
 
 def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:

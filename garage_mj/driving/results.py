@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.core.fsutil import atomic_write
+from garage_mj.core.config import refuse_other_settings
+from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.driving.difficulty.regression import PAPER_R, regression
 from garage_mj.driving.sim.outcomes import FAILURES, HIT_KINDS, OUTCOMES, PAPER_CLASS, OutcomeKind
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
@@ -135,16 +136,18 @@ def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--ac
                 raise CruiseError(f"{path} is damaged ({type(exc).__name__}: {exc}); it holds the settings "
                                   f"of the tests in {out / 'tests.csv'}: restore it, or use another --out") from None
             theirs = record  # no test was recorded under it: nothing to lose, write it afresh
-            atomic_write(path, json.dumps(record, indent=2) + "\n")
+            write_json(path, record)
         theirs = {k: v for k, v in theirs.items() if k not in PROVENANCE_KEYS}
-        if theirs != mine:
-            diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
+
+        def refuse(diff: list[str]) -> CruiseError:
             shown = ", ".join(f"{k} {_shown(theirs.get(k))} there, {_shown(mine.get(k))} now" for k in diff)
             hint = f" (--action-type {theirs['action_type']})" if diff == ["action_type"] else ""
-            raise CruiseError(f"{out} holds a run with other settings ({shown}); "
-                              f"use another --out or the same settings to resume it{hint}")
+            return CruiseError(f"{out} holds a run with other settings ({shown}); "
+                               f"use another --out or the same settings to resume it{hint}")
+
+        refuse_other_settings(theirs, mine, refuse)
     else:
-        atomic_write(path, json.dumps(record, indent=2) + "\n")
+        write_json(path, record)
 
 
 def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
@@ -240,5 +243,5 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
              "hits": _hits(driven),
              "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
              "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}
-    atomic_write(out / "summary.json", json.dumps(stats, indent=2) + "\n")
+    write_json(out / "summary.json", stats)
     return summary, stats

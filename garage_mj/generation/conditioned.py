@@ -39,8 +39,9 @@ from stable_baselines3.dqn.policies import DQNPolicy
 
 from garage_mj.core.config import ConfigError, load_config, read_toml
 from garage_mj.core.errors import GarageMJError
+from garage_mj.core.fsutil import write_json
 from garage_mj.generation.cond_env import ConditionConfig, GarageGenCondEnv
-from garage_mj.generation.runs import DQNRun, write_json
+from garage_mj.generation.runs import DQNRun
 from garage_mj.generation.search import search
 from garage_mj.generation.training import DQNConfig, load_dqn_config
 from garage_mj.grid.map_io import load_map

@@ -41,7 +41,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 
 from garage_mj.core.backends import stream_unordered
-from garage_mj.core.fsutil import atomic_write
+from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.generation.library import Library
 from garage_mj.generation.runs import checkpoint_files, latest_checkpoint, prune_checkpoints
 from garage_mj.generation.training import (
@@ -275,7 +275,7 @@ class RunKeeper:
         manifest["garages_stored"] = lib.count(run=self.run_id)
         if isinstance(manifest.get("last_session"), dict):
             manifest["last_session"]["garages_stored"] = self.stored
-        atomic_write(self.folder / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+        write_json(self.folder / MANIFEST, manifest)
         self.finished = True
         return manifest
 
@@ -295,7 +295,7 @@ class RunKeeper:
             manifest["status"] = "interrupted"
             if manifest.get("attempts"):
                 manifest["attempts"][-1]["stopped"] = "the head stopped (Ctrl-C or an error)"
-            atomic_write(self.folder / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+            write_json(self.folder / MANIFEST, manifest)
 
 
 def run_remote(keepers: list[RunKeeper], workers: int, address: str | None = None, backend: str = "ray",

@@ -32,6 +32,8 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecEnv
 
+from garage_mj.core.fsutil import write_json
+
 if TYPE_CHECKING:
     from garage_mj.generation.training import DQNConfig
 
@@ -46,13 +48,6 @@ class EpisodeCounter(Protocol):
 
     def flush(self) -> None:
         """Put what it logged so far on disk (called before each checkpoint)."""
-
-
-def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write JSON atomically (temp file + rename), so a kill never leaves half a file."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
 
 
 def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:

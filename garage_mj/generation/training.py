@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import gymnasium as gym
 from stable_baselines3.common.callbacks import BaseCallback
 
-from garage_mj.core.config import ConfigError, load_config, read_toml
+from garage_mj.core.config import ConfigError, load_config, read_toml, refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.library import Library
@@ -366,26 +366,11 @@ def train(
     if timesteps < 1:
         raise TrainingError(f"--timesteps must be >= 1, got {timesteps}")
     out = Path(out_dir)
-    garage = load_map(map)  # validates the map before anything is written
-    map_name = garage.name
+    map_name = load_map(map).name  # validates the map before anything is written
     if resume:
-        manifest = read_manifest(out)
-        for key, value in (("map", map_name), ("seed", seed)):
-            if manifest[key] != value:
-                raise TrainingError(f"{out} is a run with {key} {manifest[key]!r}, not {value!r}; pass the same --{key}")
-        run_config = load_dqn_config(manifest["config"])
-        if config is not None and config != run_config:
-            raise TrainingError(f"{out} was trained with another config; resume it without --config")
-        config = run_config
+        manifest, config = _resumed_manifest(out, map_name, seed, config)
     else:
-        if (out / MANIFEST).exists():
-            raise TrainingError(f"{out} already holds a run; pass --resume to continue it or choose a new --out")
-        config = config or DQNConfig()
-        manifest = {
-            "run": run_id or new_run_id(map_name, seed, out),
-            "map": map_name, "map_source": str(map), "seed": seed, "algo": "dqn", "config": config.to_dict(),
-            "status": "running", "timesteps": 0, "episodes": 0,
-        }
+        manifest, config = _new_manifest(out, map, map_name, seed, config, run_id)
     run = DQNRun(out, manifest, MANIFEST, resume)
     library_path = None if sink is not None else Path(library_path) if library_path is not None else out / LIBRARY
     manifest.update(target_timesteps=timesteps, library=None if library_path is None else str(library_path))
@@ -400,14 +385,7 @@ def train(
                              episodes=run.done_episodes)
     bar = ProgressCallback(timesteps, run.done_steps, lib_cb, f"{map_name} seed {seed}", progress)
     manifest["status"] = "running"
-    steps0 = model.num_timesteps
-    t0 = time.perf_counter()
-
-    def live() -> dict[str, Any]:
-        wall, steps = time.perf_counter() - t0, model.num_timesteps - steps0
-        return {"live": {"timesteps": model.num_timesteps, "episodes": lib_cb.episodes,
-                         "timesteps_per_s": round(steps / wall, 1) if steps > 0 and wall > 0 else None,
-                         "updated_at": datetime.now(timezone.utc).isoformat(timespec="seconds")}}
+    live = _Live(model, lib_cb)
 
     def beat() -> None:
         manifest.update(live())
@@ -425,9 +403,63 @@ def train(
     run.learn(timesteps, lib_cb, [bar, LiveCallback(beat), *(callbacks or [])],
               checkpoint_every=config.checkpoint_every, close=close, on_interrupt=bar.close,
               interrupted_status="interrupted", checkpoint_fields=live)
+    _finish(run, live, library_path, envs)
+    if on_files is not None:
+        on_files([out / FINAL_MODEL, run.manifest_path])
+    return manifest
+
+
+def _resumed_manifest(out: Path, map_name: str, seed: int, config: DQNConfig | None
+                      ) -> tuple[dict[str, Any], DQNConfig]:
+    """The manifest and config of the run in ``out``, which must be of ``map_name`` and ``seed``; a
+    ``config`` given must be the run's own."""
+    manifest = read_manifest(out)
+    wanted = {"map": map_name, "seed": seed}
+    refuse_other_settings(manifest, wanted, lambda diff: TrainingError(
+        f"{out} is a run with {diff[0]} {manifest[diff[0]]!r}, not {wanted[diff[0]]!r}; pass the same --{diff[0]}"),
+        keys=wanted)
+    run_config = load_dqn_config(manifest["config"])
+    if config is not None:
+        refuse_other_settings(run_config.to_dict(), config.to_dict(), lambda diff: TrainingError(
+            f"{out} was trained with another config; resume it without --config"))
+    return manifest, run_config
+
+
+def _new_manifest(out: Path, map: str, map_name: str, seed: int, config: DQNConfig | None, run_id: str | None
+                  ) -> tuple[dict[str, Any], DQNConfig]:
+    """A new run's manifest and config (default :class:`DQNConfig`); ``out`` must not hold a run yet."""
+    if (out / MANIFEST).exists():
+        raise TrainingError(f"{out} already holds a run; pass --resume to continue it or choose a new --out")
+    config = config or DQNConfig()
+    manifest = {
+        "run": run_id or new_run_id(map_name, seed, out),
+        "map": map_name, "map_source": str(map), "seed": seed, "algo": "dqn", "config": config.to_dict(),
+        "status": "running", "timesteps": 0, "episodes": 0,
+    }
+    return manifest, config
+
+
+class _Live:
+    """The manifest's ``live`` fields of the running run: timesteps, episodes, and timesteps/s since it (re)started."""
+
+    def __init__(self, model: Any, counter: LibraryCallback) -> None:
+        self.model, self.counter = model, counter
+        self.steps0 = model.num_timesteps
+        self.t0 = time.perf_counter()
+
+    def __call__(self) -> dict[str, Any]:
+        wall, steps = time.perf_counter() - self.t0, self.model.num_timesteps - self.steps0
+        return {"live": {"timesteps": self.model.num_timesteps, "episodes": self.counter.episodes,
+                         "timesteps_per_s": round(steps / wall, 1) if steps > 0 and wall > 0 else None,
+                         "updated_at": datetime.now(timezone.utc).isoformat(timespec="seconds")}}
+
+
+def _finish(run: DQNRun, live: _Live, library_path: Path | None, envs: list[StepTimer]) -> None:
+    """Save ``final_model.zip`` and write the finished manifest, with this process's throughput in ``last_session``."""
+    model, lib_cb, manifest = live.model, live.counter, run.manifest
     wall, cpu = run.wall_s, run.cpu_s
-    model.save(out / FINAL_MODEL)
-    steps = model.num_timesteps - steps0
+    model.save(run.out / FINAL_MODEL)
+    steps = model.num_timesteps - live.steps0
     manifest.update(live())
     manifest.update(
         status="finished", timesteps=model.num_timesteps, episodes=lib_cb.episodes,
@@ -442,6 +474,3 @@ def train(
         },
     )
     run.write_manifest()
-    if on_files is not None:
-        on_files([out / FINAL_MODEL, run.manifest_path])
-    return manifest

@@ -6,7 +6,6 @@ already in the CSV are not run again. ``garage-mj demo`` and ``make demo`` call 
 
 from __future__ import annotations
 
-import json
 import re
 import shutil
 import time
@@ -15,7 +14,7 @@ from pathlib import Path
 
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import atomic_write
+from garage_mj.core.fsutil import write_json
 from garage_mj.driving.results import COUNT_COLUMNS, HIT_CLASSES, failed_tests
 from garage_mj.driving.sim.outcomes import HIT_KINDS, OUTCOMES, PAPER_CLASS, PAPER_CLASSES, OutcomeConfig
 from garage_mj.driving.sources import CruiseSource
@@ -169,7 +168,8 @@ def run_demo(cfg: DemoConfig) -> Path:
         ],
     )
     report = write_report(data, out)
-    atomic_write(out / "demo.json", json.dumps({"config": cfg.__dict__, "seconds": time.perf_counter() - t0}, default=str))
+    write_json(out / "demo.json", {"config": cfg.__dict__, "seconds": time.perf_counter() - t0}, indent=None,
+               default=str, end="")
     _say(f"report: {report}  ({time.perf_counter() - t0:.0f} s)")
     return report
 

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import atomic_write
+from garage_mj.core.fsutil import write_json
 from garage_mj.scene.route_features import FEATURES, garage_features
 
 if TYPE_CHECKING:
@@ -105,7 +105,7 @@ class RouteDifficulty:
     def save(self, path: str | Path) -> None:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(path, json.dumps(self.to_dict(), indent=1) + "\n")
+        write_json(path, self.to_dict(), indent=1)
 
 
 def load_route_model(path: str | Path | None = None) -> RouteDifficulty:

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from garage_mj.core.backends import map_unordered
-from garage_mj.core.fsutil import atomic_write
+from garage_mj.core.fsutil import write_json
 from garage_mj.generation.library import Library
 from garage_mj.scene.route_difficulty import RouteDifficulty, load_route_model, route_difficulty
 
@@ -134,5 +134,5 @@ def cruise_route_difficulty(out_dir: str | Path, sources: Sequence[CruiseSource]
             new = True
         out[s.hash] = math.nan if v is None else float(v)
     if new:
-        atomic_write(path, json.dumps({"format": CACHE_FORMAT, "models": cache}, indent=1, sort_keys=True) + "\n")
+        write_json(path, {"format": CACHE_FORMAT, "models": cache}, indent=1, sort_keys=True)
     return out

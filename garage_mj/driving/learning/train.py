@@ -50,15 +50,16 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from garage_mj.core.config import load_config
+from garage_mj.core.config import load_config, refuse_other_settings
 from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import atomic_write
+from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.driving.cruise import run_test
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
@@ -323,8 +324,32 @@ def _write_curve(path: Path, rows: list[dict[str, Any]]) -> None:
     atomic_write(path, text.getvalue())
 
 
-def _write_json(path: Path, data: Any) -> None:
-    atomic_write(path, json.dumps(data, indent=1) + "\n")
+def _write_manifest(out: Path, manifest: dict[str, Any], state: dict[str, Any]) -> None:
+    write_json(out / MANIFEST, {**manifest, "state": state}, indent=1)
+
+
+class _Workers:
+    """The worker envs a run drives, made again when the garages they draw from change; closed once at the end."""
+
+    def __init__(self, pool: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any]) -> None:
+        self.pool, self.n_envs, self.env_kwargs = pool, n_envs, env_kwargs
+        self.venv = _make_venv(pool, n_envs, env_kwargs, expert=True)
+
+    def draw_from(self, pool: list[CruiseSource]) -> None:
+        """Expert-labelled workers over ``pool`` (the same ones when they already draw from it)."""
+        if pool is not self.pool:  # the workers hold other garages than this iteration draws from
+            self.pool = pool
+            self.venv.close()
+            self.venv = _make_venv(pool, self.n_envs, self.env_kwargs, expert=True)
+
+    def remake(self, make: Callable[[], Any]) -> Any:
+        """Close the workers, then run on those ``make()`` returns."""
+        self.venv.close()
+        self.venv = make()
+        return self.venv
+
+    def close(self) -> None:
+        self.venv.close()
 
 
 def train_driver(garages, out_dir: str | Path, *, validation=None, config: DriverTrainConfig | dict | None = None,
@@ -334,7 +359,7 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
     ``out_dir`` (module docstring); ``validation``: the garages of the curve (default: the training
     ones). Returns the final model's path. Same seed and config, same model, interrupted or not."""
     import torch
-    from stable_baselines3 import DQN
+    from stable_baselines3 import DQN  # noqa: F401  (here: a missing stable-baselines3 fails before the folder is made)
 
     cfg = config if isinstance(config, DriverTrainConfig) else load_config(DriverTrainConfig, config)
     out = Path(out_dir)
@@ -344,32 +369,67 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
         raise TrainDriverError("no garages to train on: check the garage set's filters")
     env_kwargs = dict(env_kwargs or {})
     env_kwargs.setdefault("occupancy", cfg.occupancy)
-    manifest = {"kind": "garage-mj driver", "algorithm": "DQN (MultiInputPolicy), DAgger warm start",
-                "seed": seed, "config": dataclasses.asdict(cfg), "env": env_kwargs,
-                "garages": getattr(garages, "origin", f"{len(sources)} garages"),
-                "garage_hashes": [s.hash for s in sources],
-                "validation": getattr(validation, "origin", "the training garages") if validation is not None
-                else "the training garages"}
+    manifest = _new_manifest(garages, validation, sources, cfg, seed, env_kwargs)
+    state = _resumed_state(out, manifest, cfg, resume)
+    _prepare_folder(out, garages, validation)
+
+    torch.set_num_threads(cfg.torch_threads)
+    workers = _Workers(sources, cfg.n_envs, env_kwargs)  # the garages the worker envs draw from (the hunt adds some)
+    try:
+        model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed)
+        state = _dagger(model, workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs, progress)
+        state["selected_iteration"] = _selected(state["curve"])
+        _write_manifest(out, manifest, state)
+        _final_model(workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs, progress)
+    finally:
+        workers.close()
+    return out / MODEL
+
+
+def _new_manifest(garages, validation, sources: list[CruiseSource], cfg: DriverTrainConfig, seed: int,
+                  env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The run's ``run.json`` without its ``state``: what it trains, on what, with which settings."""
+    return {"kind": "garage-mj driver", "algorithm": "DQN (MultiInputPolicy), DAgger warm start",
+            "seed": seed, "config": dataclasses.asdict(cfg), "env": env_kwargs,
+            "garages": getattr(garages, "origin", f"{len(sources)} garages"),
+            "garage_hashes": [s.hash for s in sources],
+            "validation": getattr(validation, "origin", "the training garages") if validation is not None
+            else "the training garages"}
+
+
+#: The manifest's keys a run resumes only under (more iterations or a DQN stage extend a run: not compared).
+_RESUME_KEYS = ("seed", "config", "env", "garage_hashes")
+_EXTENDS = {"iterations": 0, "rl_timesteps": 0}
+
+
+def _resumed_state(out: Path, manifest: dict[str, Any], cfg: DriverTrainConfig, resume: bool) -> dict[str, Any]:
+    """The state of the run already in ``out`` (a fresh one when there is none), once it is known that this
+    call may continue it: ``resume`` asked, the same settings, no fewer iterations. An extended run's
+    ``model.zip`` is deleted, to be made again."""
     state: dict[str, Any] = {"iterations_done": 0, "curve": [], "wall_s": 0.0}
-    if (out / MANIFEST).exists():
-        try:
-            old = json.loads((out / MANIFEST).read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise TrainDriverError(f"{out / MANIFEST} is not readable JSON ({exc}); remove the folder or use another --out") from None
-        if not resume:
-            raise TrainDriverError(f"{out} already holds a driver run; pass --resume to continue it or use another --out")
-        for key in ("seed", "config", "env", "garage_hashes"):
-            mine, theirs = json.loads(json.dumps(manifest[key])), old.get(key)
-            if key == "config" and isinstance(theirs, dict):  # more iterations or a DQN stage extend a run
-                extend = {"iterations": 0, "rl_timesteps": 0}
-                mine, theirs = {**mine, **extend}, {**theirs, **extend}
-            if mine != theirs:
-                raise TrainDriverError(f"{out} holds a run with another {key}; use another --out, or the same settings to resume")
-        state = old.get("state", state)
-        if state["iterations_done"] > cfg.iterations:
-            raise TrainDriverError(f"{out} has already run {state['iterations_done']} iterations; ask for at least as many")
-        if state["iterations_done"] < cfg.iterations or (state.get("rl") or {}).get("timesteps", 0) != cfg.rl_timesteps:
-            (out / MODEL).unlink(missing_ok=True)  # extended: the final model is made again
+    if not (out / MANIFEST).exists():
+        return state
+    try:
+        old = json.loads((out / MANIFEST).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise TrainDriverError(f"{out / MANIFEST} is not readable JSON ({exc}); remove the folder or use another --out") from None
+    if not resume:
+        raise TrainDriverError(f"{out} already holds a driver run; pass --resume to continue it or use another --out")
+    wanted = {k: manifest[k] for k in _RESUME_KEYS}
+    wanted["config"] = {**wanted["config"], **_EXTENDS}
+    stored = {**old, "config": {**old["config"], **_EXTENDS}} if isinstance(old.get("config"), dict) else old
+    refuse_other_settings(stored, wanted, lambda diff: TrainDriverError(
+        f"{out} holds a run with another {diff[0]}; use another --out, or the same settings to resume"), _RESUME_KEYS)
+    state = old.get("state", state)
+    if state["iterations_done"] > cfg.iterations:
+        raise TrainDriverError(f"{out} has already run {state['iterations_done']} iterations; ask for at least as many")
+    if state["iterations_done"] < cfg.iterations or (state.get("rl") or {}).get("timesteps", 0) != cfg.rl_timesteps:
+        (out / MODEL).unlink(missing_ok=True)  # extended: the final model is made again
+    return state
+
+
+def _prepare_folder(out: Path, garages, validation) -> None:
+    """The run folder with ``data/`` and ``checkpoints/``, and the garage sets it trains and validates on."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "data").mkdir(exist_ok=True)
     (out / "checkpoints").mkdir(exist_ok=True)
@@ -377,110 +437,125 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
         if group is not None and hasattr(group, "to_json") and not (out / name).exists():
             group.to_json(out / name)
 
-    torch.set_num_threads(cfg.torch_threads)
-    pool = sources  # the garages the worker envs draw from (the hunt adds some per iteration)
-    venv = _make_venv(pool, cfg.n_envs, env_kwargs, expert=True)
-    try:
-        done = state["iterations_done"]
-        if done:
-            model = _load_checkpoint(out / "checkpoints" / f"iter_{done - 1:03d}.zip", venv)
-        else:
-            from garage_mj.driving.learning.network import CameraRouteExtractor
 
-            policy_kwargs = {"net_arch": list(cfg.net_arch), "features_extractor_class": CameraRouteExtractor,
-                             "normalize_images": False,  # the extractor scales the image itself
-                             "features_extractor_kwargs": {"channels": tuple(cfg.cnn_channels),
-                                                           "cnn_features": cfg.cnn_features}}
-            model = DQN("MultiInputPolicy", venv, seed=seed, device="cpu", verbose=0, buffer_size=1,
-                        learning_starts=0, policy_kwargs=policy_kwargs)
-        shards = [np.load(out / "data" / f"iter_{i:03d}.npz") for i in range(done)]
-        images = [s["image"] for s in shards]
-        vectors = [s["vector"] for s in shards]
-        labels = [s["label"] for s in shards]
-        failures = np.asarray(state.get("failures", np.zeros(len(sources))), dtype=float)
-        drives = np.asarray(state.get("drives", np.zeros(len(sources))), dtype=float)
-        bar = None
-        if progress:
-            from tqdm import tqdm
+def _start_model(out: Path, done: int, venv, cfg: DriverTrainConfig, seed: int):
+    """The model after ``done`` iterations: the last checkpoint's, or a new one seeded with ``seed``."""
+    from stable_baselines3 import DQN
 
-            bar = tqdm(total=cfg.iterations, initial=done, desc="DAgger", unit="iter")
-        for it in range(done, cfg.iterations):
-            t0 = time.perf_counter()
-            beta = cfg.beta0 * (cfg.beta_decay ** it) if it else cfg.beta0
-            weights = _weights(cfg, sources, it, failures, drives)
-            torch.set_num_threads(1)
-            hunted: list[CruiseSource] = []
-            if cfg.curriculum == "hunt" and it >= 1:
-                hunted = _hunted(out, it, sources, cfg, seed, env_kwargs)
-                if hunted:
-                    weights = np.array([(1 - cfg.hunt_share) / len(sources)] * len(sources)
-                                       + [cfg.hunt_share / len(hunted)] * len(hunted))
-            draw = sources + hunted if hunted else sources
-            if draw is not pool:  # the workers hold other garages than this iteration draws from
-                pool = draw
-                venv.close()
-                venv = _make_venv(pool, cfg.n_envs, env_kwargs, expert=True)
-            im, vec, lab, drives, failures, outcomes = _collect(model, venv, cfg.steps_per_iteration, beta,
-                                                                 seed * 1_000 + it, weights, len(pool))
-            drives, failures = drives[: len(sources)], failures[: len(sources)]
-            tmp = out / "data" / f"iter_{it:03d}.tmp.npz"
-            np.savez(tmp, image=im, vector=vec, label=lab)
-            os.replace(tmp, out / "data" / f"iter_{it:03d}.npz")
-            images.append(im)
-            vectors.append(vec)
-            labels.append(lab)
-            torch.set_num_threads(cfg.torch_threads)
-            loss, agreement = _fit(model, np.concatenate(images), np.concatenate(vectors), np.concatenate(labels),
-                                   cfg, seed * 1_000 + it)
-            ckpt = out / "checkpoints" / f"iter_{it:03d}.zip"
-            _save(model, ckpt)
-            val = validate(ckpt, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
-            success = _success(val)
-            own = [o for m, o in outcomes if m]
-            row = {"iteration": it, "states": int(sum(len(x) for x in labels)), "beta": round(beta, 4),
-                   "loss": round(loss, 4), "agreement": round(agreement, 4),
-                   "own_drive_success": round(own.count("success") / len(own), 4) if own else "",
-                   "val_success": "" if success is None else success,
-                   **{f"val_{k}": val.get(k, 0) for k in CURVE_KINDS},
-                   "val_other": sum(v for k, v in val.items() if k not in ("success", *CURVE_KINDS, "infeasible")),
-                   "wall_s": round(time.perf_counter() - t0, 1)}
-            state = {"iterations_done": it + 1, "curve": [*state["curve"], row],
-                     "wall_s": state["wall_s"] + row["wall_s"], "failures": failures.tolist(),
-                     "drives": drives.tolist(),
-                     "hunted": {**state.get("hunted", {}), **({str(it): [h.hash for h in hunted]} if hunted else {})}}
-            _write_curve(out / CURVE, state["curve"])
-            _write_json(out / MANIFEST, {**manifest, "state": state})
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(val=row["val_success"], agree=row["agreement"])
+    if done:
+        return _load_checkpoint(out / "checkpoints" / f"iter_{done - 1:03d}.zip", venv)
+    from garage_mj.driving.learning.network import CameraRouteExtractor
+
+    policy_kwargs = {"net_arch": list(cfg.net_arch), "features_extractor_class": CameraRouteExtractor,
+                     "normalize_images": False,  # the extractor scales the image itself
+                     "features_extractor_kwargs": {"channels": tuple(cfg.cnn_channels),
+                                                   "cnn_features": cfg.cnn_features}}
+    return DQN("MultiInputPolicy", venv, seed=seed, device="cpu", verbose=0, buffer_size=1,
+               learning_starts=0, policy_kwargs=policy_kwargs)
+
+
+def _dagger(model, workers: _Workers, out: Path, manifest: dict[str, Any], state: dict[str, Any],
+            sources: list[CruiseSource], val_sources: list[CruiseSource], cfg: DriverTrainConfig, seed: int,
+            env_kwargs: dict[str, Any], progress: bool) -> dict[str, Any]:
+    """The imitation iterations still to do (module docstring, stage 1), each checkpointed with its
+    states, its curve row and the manifest; returns the run's state after the last."""
+    import torch
+
+    done = state["iterations_done"]
+    shards = [np.load(out / "data" / f"iter_{i:03d}.npz") for i in range(done)]
+    images = [s["image"] for s in shards]
+    vectors = [s["vector"] for s in shards]
+    labels = [s["label"] for s in shards]
+    failures = np.asarray(state.get("failures", np.zeros(len(sources))), dtype=float)
+    drives = np.asarray(state.get("drives", np.zeros(len(sources))), dtype=float)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=cfg.iterations, initial=done, desc="DAgger", unit="iter")
+    for it in range(done, cfg.iterations):
+        t0 = time.perf_counter()
+        beta = cfg.beta0 * (cfg.beta_decay ** it) if it else cfg.beta0
+        weights = _weights(cfg, sources, it, failures, drives)
+        torch.set_num_threads(1)
+        hunted: list[CruiseSource] = []
+        if cfg.curriculum == "hunt" and it >= 1:
+            hunted = _hunted(out, it, sources, cfg, seed, env_kwargs)
+            if hunted:
+                weights = np.array([(1 - cfg.hunt_share) / len(sources)] * len(sources)
+                                   + [cfg.hunt_share / len(hunted)] * len(hunted))
+        workers.draw_from(sources + hunted if hunted else sources)
+        im, vec, lab, drives, failures, outcomes = _collect(model, workers.venv, cfg.steps_per_iteration, beta,
+                                                             seed * 1_000 + it, weights, len(workers.pool))
+        drives, failures = drives[: len(sources)], failures[: len(sources)]
+        tmp = out / "data" / f"iter_{it:03d}.tmp.npz"
+        np.savez(tmp, image=im, vector=vec, label=lab)
+        os.replace(tmp, out / "data" / f"iter_{it:03d}.npz")
+        images.append(im)
+        vectors.append(vec)
+        labels.append(lab)
+        torch.set_num_threads(cfg.torch_threads)
+        loss, agreement = _fit(model, np.concatenate(images), np.concatenate(vectors), np.concatenate(labels),
+                               cfg, seed * 1_000 + it)
+        ckpt = out / "checkpoints" / f"iter_{it:03d}.zip"
+        _save(model, ckpt)
+        val = validate(ckpt, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
+        row = _curve_row(it, sum(len(x) for x in labels), beta, loss, agreement, outcomes, val, t0)
+        state = {"iterations_done": it + 1, "curve": [*state["curve"], row],
+                 "wall_s": state["wall_s"] + row["wall_s"], "failures": failures.tolist(),
+                 "drives": drives.tolist(),
+                 "hunted": {**state.get("hunted", {}), **({str(it): [h.hash for h in hunted]} if hunted else {})}}
+        _write_curve(out / CURVE, state["curve"])
+        _write_manifest(out, manifest, state)
         if bar is not None:
-            bar.close()
-        chosen = _selected(state["curve"])
-        state["selected_iteration"] = chosen
-        _write_json(out / MANIFEST, {**manifest, "state": state})
-        last = out / "checkpoints" / f"iter_{chosen:03d}.zip"
-        if cfg.rl_timesteps > 0 and not (out / MODEL).exists():
-            from stable_baselines3.common.vec_env import VecMonitor
+            bar.update(1)
+            bar.set_postfix(val=row["val_success"], agree=row["agreement"])
+    if bar is not None:
+        bar.close()
+    return state
 
-            venv.close()
-            venv = VecMonitor(_make_venv(sources, cfg.n_envs, env_kwargs, expert=False), str(out / RL_MONITOR))
-            venv.seed(seed * 1_000 + cfg.iterations)
-            torch.set_num_threads(cfg.torch_threads)
-            model = DQN.load(last, env=venv, device="cpu", exploration_initial_eps=0.05, exploration_final_eps=0.05,
-                             exploration_fraction=1.0, learning_starts=min(1_000, cfg.rl_timesteps // 2),
-                             buffer_size=50_000, batch_size=64, learning_rate=1e-4, target_update_interval=1_000)
-            model.set_random_seed(seed + cfg.iterations)
-            model.learn(cfg.rl_timesteps, callback=_progress_bar(cfg.rl_timesteps) if progress else None,
-                        reset_num_timesteps=True)
-            _save(model, out / MODEL)
-            val = validate(out / MODEL, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
-            state["rl"] = {"timesteps": cfg.rl_timesteps, "val": val, "val_success": _success(val)}
-            _write_json(out / MANIFEST, {**manifest, "state": state})
-        elif not (out / MODEL).exists():
-            _save(DQN.load(last, device="cpu"), out / MODEL, exclude=["replay_buffer"])
-            if state.pop("rl", None) is not None:  # a DQN stage asked for before and not now
-                _write_json(out / MANIFEST, {**manifest, "state": state})
-    finally:
-        venv.close()
-    return out / MODEL
 
+def _curve_row(it: int, states: int, beta: float, loss: float, agreement: float,
+               outcomes: list[tuple[bool, str]], val: dict[str, int], t0: float) -> dict[str, Any]:
+    """Iteration ``it``'s row of ``curve.csv`` (:data:`CURVE_FIELDS`); ``t0``: when the iteration began."""
+    success = _success(val)
+    own = [o for m, o in outcomes if m]
+    return {"iteration": it, "states": int(states), "beta": round(beta, 4),
+            "loss": round(loss, 4), "agreement": round(agreement, 4),
+            "own_drive_success": round(own.count("success") / len(own), 4) if own else "",
+            "val_success": "" if success is None else success,
+            **{f"val_{k}": val.get(k, 0) for k in CURVE_KINDS},
+            "val_other": sum(v for k, v in val.items() if k not in ("success", *CURVE_KINDS, "infeasible")),
+            "wall_s": round(time.perf_counter() - t0, 1)}
+
+
+def _final_model(workers: _Workers, out: Path, manifest: dict[str, Any], state: dict[str, Any],
+                 sources: list[CruiseSource], val_sources: list[CruiseSource], cfg: DriverTrainConfig, seed: int,
+                 env_kwargs: dict[str, Any], progress: bool) -> None:
+    """``model.zip`` unless it is there: the selected iteration's network, then the DQN stage when
+    ``rl_timesteps`` asks for one (module docstring, stage 2; validated into the manifest's ``rl``)."""
+    import torch
+    from stable_baselines3 import DQN
+
+    last = out / "checkpoints" / f"iter_{state['selected_iteration']:03d}.zip"
+    if cfg.rl_timesteps > 0 and not (out / MODEL).exists():
+        from stable_baselines3.common.vec_env import VecMonitor
+
+        venv = workers.remake(lambda: VecMonitor(_make_venv(sources, cfg.n_envs, env_kwargs, expert=False),
+                                                 str(out / RL_MONITOR)))
+        venv.seed(seed * 1_000 + cfg.iterations)
+        torch.set_num_threads(cfg.torch_threads)
+        model = DQN.load(last, env=venv, device="cpu", exploration_initial_eps=0.05, exploration_final_eps=0.05,
+                         exploration_fraction=1.0, learning_starts=min(1_000, cfg.rl_timesteps // 2),
+                         buffer_size=50_000, batch_size=64, learning_rate=1e-4, target_update_interval=1_000)
+        model.set_random_seed(seed + cfg.iterations)
+        model.learn(cfg.rl_timesteps, callback=_progress_bar(cfg.rl_timesteps) if progress else None,
+                    reset_num_timesteps=True)
+        _save(model, out / MODEL)
+        val = validate(out / MODEL, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
+        state["rl"] = {"timesteps": cfg.rl_timesteps, "val": val, "val_success": _success(val)}
+        _write_manifest(out, manifest, state)
+    elif not (out / MODEL).exists():
+        _save(DQN.load(last, device="cpu"), out / MODEL, exclude=["replay_buffer"])
+        if state.pop("rl", None) is not None:  # a DQN stage asked for before and not now
+            _write_manifest(out, manifest, state)

@@ -1,0 +1,77 @@
+"""The core helpers every writer and every resumable job share: the JSON writer and the settings check."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from garage_mj.core.config import refuse_other_settings, settings_diff
+from garage_mj.core.fsutil import write_json
+
+
+class Refused(Exception):
+    """The caller's own error class, built from the differing keys."""
+
+
+def _refuse(diff: list[str]) -> Refused:
+    return Refused(f"other settings ({', '.join(diff)})")
+
+
+@pytest.mark.parametrize("kw", [{}, {"indent": 1}, {"indent": 1, "sort_keys": True}, {"indent": None, "end": ""}])
+def test_write_json_writes_what_json_dumps_gives(tmp_path, kw):
+    data = {"b": [1, 2.5, None], "a": {"z": "é", "y": (3, 4)}, "c": True}
+    path = write_json(tmp_path / "out.json", data, **kw)
+    want = json.dumps(data, indent=kw.get("indent", 2), sort_keys=kw.get("sort_keys", False)) + kw.get("end", "\n")
+    assert path == tmp_path / "out.json"
+    assert path.read_bytes() == want.encode()
+
+
+def test_write_json_default_writes_what_json_cannot(tmp_path):
+    write_json(tmp_path / "d.json", {"where": tmp_path}, indent=None, default=str, end="")
+    assert (tmp_path / "d.json").read_text() == json.dumps({"where": str(tmp_path)})
+
+
+def test_write_json_replaces_the_file_atomically_and_leaves_no_temp(tmp_path):
+    path = tmp_path / "run.json"
+    path.write_text("old")
+    os.link(path, tmp_path / "reader_view")  # a reader that opened the old file keeps it whole
+    write_json(path, {"new": 1})
+    assert json.loads(path.read_text()) == {"new": 1}
+    assert (tmp_path / "reader_view").read_text() == "old"  # renamed over, not rewritten in place
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["reader_view", "run.json"]
+
+
+def test_write_json_that_fails_leaves_the_old_file_and_no_temp(tmp_path):
+    path = tmp_path / "run.json"
+    path.write_text("old")
+    with pytest.raises(TypeError):
+        write_json(path, {"not json": object()})
+    assert path.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["run.json"]
+
+
+def test_settings_diff_names_the_differing_keys():
+    stored = {"seed": 0, "map": "a", "env": {"x": [1, 2]}, "old": 1}
+    wanted = {"seed": 1, "map": "a", "env": {"x": [1, 3]}, "new": 2}
+    assert settings_diff(stored, wanted) == ["env", "new", "old", "seed"]  # sorted
+    assert settings_diff(stored, wanted, keys=("seed", "map", "env")) == ["seed", "env"]  # in the order given
+
+
+def test_refuse_other_settings_raises_the_callers_error_naming_the_keys():
+    stored = {"seed": 0, "env": {"x": [1, 2]}, "driver": "oracle"}
+    refuse_other_settings(stored, {"seed": 0, "env": {"x": (1, 2)}, "driver": "oracle"}, _refuse)  # tuples as JSON lists
+    with pytest.raises(Refused, match=r"^other settings \(driver, seed\)$"):
+        refuse_other_settings(stored, {"seed": 3, "env": {"x": [1, 2]}, "driver": "vision"}, _refuse)
+    # only the keys given are compared, and the first one differing comes first
+    refuse_other_settings(stored, {"seed": 0, "env": {"x": [1, 2]}, "driver": "vision"}, _refuse, keys=("seed", "env"))
+    with pytest.raises(Refused, match=r"^other settings \(env\)$"):
+        refuse_other_settings(stored, {"seed": 0, "env": {}}, _refuse, keys=("seed", "env"))
+
+
+def test_refuse_other_settings_refuses_a_key_one_side_lacks():
+    with pytest.raises(Refused, match=r"\(new\)"):
+        refuse_other_settings({"a": 1}, {"a": 1, "new": 0}, _refuse)
+    with pytest.raises(Refused):  # held as None on one side only: the mappings differ, though no value does
+        refuse_other_settings({"a": 1, "gone": None}, {"a": 1}, _refuse)
