@@ -9,7 +9,8 @@ import pytest
 
 from garage_mj.cli import main
 from garage_mj.export import fbx as fbx_mod
-from garage_mj.export.fbx import FBX_NAME, fbx_bytes
+from garage_mj.export.artefacts import FBX
+from garage_mj.export.fbx import fbx_bytes
 from garage_mj.export.meshes import garage_meshes
 from garage_mj.export.pack import MANIFEST, PackError, export_pack, load_pack
 from garage_mj.export.validate import check_fbx_batch, fbx_problems, read_fbx_batch
@@ -28,7 +29,7 @@ def packs(painted_maps, tmp_path_factory):
 @pytest.fixture(scope="module")
 def blender(packs):
     """Blender's reading of both packs' FBX files (one Blender process)."""
-    return read_fbx_batch([p / FBX_NAME for p in packs])
+    return read_fbx_batch([p / FBX for p in packs])
 
 
 def test_blender_reads_the_same_classes_triangles_and_boxes_as_the_glb(packs, blender):
@@ -63,10 +64,10 @@ def test_the_comparison_fails_on_another_garage(packs, blender):
 
 
 def test_a_broken_fbx_is_one_line_from_blender(packs, tmp_path):
-    bad = tmp_path / FBX_NAME
-    bad.write_bytes((packs[0] / FBX_NAME).read_bytes()[:5000])
+    bad = tmp_path / FBX
+    bad.write_bytes((packs[0] / FBX).read_bytes()[:5000])
     (problem,) = fbx_problems(read_fbx_batch([bad])[0], packs[0] / "garage.glb")
-    assert problem.startswith(f"Blender could not import {FBX_NAME}: ") and "\n" not in problem
+    assert problem.startswith(f"Blender could not import {FBX}: ") and "\n" not in problem
 
 
 def test_one_garage_gives_the_same_fbx_bytes_on_every_run(painted_tiny):
@@ -80,13 +81,13 @@ def test_one_garage_gives_the_same_fbx_bytes_on_every_run(painted_tiny):
 def test_the_manifest_hashes_the_fbx(painted_tiny, tmp_path):
     path = export_pack(painted_tiny, tmp_path)
     manifest = load_pack(path).manifest
-    assert FBX_NAME in manifest["files"] and manifest["skipped"] == {}
-    (path / FBX_NAME).write_bytes(b"Kaydara FBX Binary  \x00 not this garage")
-    with pytest.raises(PackError, match=f"{FBX_NAME} does not match its hash in the manifest"):
+    assert FBX in manifest["files"] and manifest["skipped"] == {}
+    (path / FBX).write_bytes(b"Kaydara FBX Binary  \x00 not this garage")
+    with pytest.raises(PackError, match=f"{FBX} does not match its hash in the manifest"):
         load_pack(path)
     assert main(["check", str(path)]) == 2  # garage-mj check verifies packs the same way
     assert export_pack(painted_tiny, tmp_path) == path  # repaired
-    assert load_pack(path).file(FBX_NAME).read_bytes().startswith(b"Kaydara FBX Binary")
+    assert load_pack(path).file(FBX).read_bytes().startswith(b"Kaydara FBX Binary")
 
 
 def test_without_assimp_packs_say_they_skip_the_fbx(painted_tiny, tmp_path, monkeypatch, capsys):
@@ -96,16 +97,16 @@ def test_without_assimp_packs_say_they_skip_the_fbx(painted_tiny, tmp_path, monk
     gfile.write_text(painted_tiny.to_json())
     assert main(["export", "--garage", str(gfile), "--out", str(tmp_path / "packs"), "--quiet"]) == 0
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"{FBX_NAME} left out of the packs: {reason}"]
+    assert err == [f"{FBX} left out of the packs: {reason}"]
     (path,) = [p for p in (tmp_path / "packs").iterdir() if p.is_dir()]
     manifest = load_pack(path).manifest  # a complete pack that says what it left out
-    assert FBX_NAME not in manifest["files"] and manifest["skipped"] == {FBX_NAME: reason}
+    assert FBX not in manifest["files"] and manifest["skipped"] == {FBX: reason}
     with pytest.raises(fbx_mod.FbxError, match="needs Assimp"):
         fbx_bytes(garage_meshes(painted_tiny))
 
     monkeypatch.undo()  # Assimp is back: the next export adds the FBX
     export_pack(painted_tiny, tmp_path / "packs")
-    assert FBX_NAME in load_pack(path).manifest["files"]
+    assert FBX in load_pack(path).manifest["files"]
 
     skips_a_required_file = json.loads((path / MANIFEST).read_text())
     skips_a_required_file["skipped"] = {"garage.xodr": "no reason"}

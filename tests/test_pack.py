@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import os
 
 import mujoco
 import pytest
 import trimesh
 
 from garage_mj.cli import main
+from garage_mj.export import artefacts as artefacts_mod
 from garage_mj.export import pack as pack_mod
+from garage_mj.export import preview as preview_mod
+from garage_mj.export.artefacts import ARTEFACTS, Artefact, Dependency, WhenMissing, _entry_point, formats
 from garage_mj.export.pack import (
     INDEX,
     MANIFEST,
@@ -55,16 +60,14 @@ def test_complete_pack_is_skipped(painted_tiny, tmp_path, monkeypatch):
 
 
 def test_crash_mid_export_leaves_no_half_pack_and_rerun_repairs(painted_tiny, tmp_path, monkeypatch):
-    real = pack_mod.write_preview
-
     def crash(*args, **kwargs):
         raise KeyboardInterrupt("simulated crash")
 
-    monkeypatch.setattr(pack_mod, "write_preview", crash)
+    monkeypatch.setattr(preview_mod, "write_preview", crash)  # the last file of a pack
     with pytest.raises(KeyboardInterrupt):
         export_pack(painted_tiny, tmp_path)
     assert list(tmp_path.iterdir()) == []  # neither a pack nor a temp folder
-    monkeypatch.setattr(pack_mod, "write_preview", real)
+    monkeypatch.undo()
     load_pack(export_pack(painted_tiny, tmp_path))
 
 
@@ -107,3 +110,39 @@ def test_cli_exports_a_garage_file_and_a_library(painted_tiny, painted_maps, tmp
     assert main(["export", "--library", str(lib_path), "--map", "nope", "--out", str(out), "--quiet"]) == 2
     assert "no garage" in capsys.readouterr().err
     assert main(["export", "--library", str(tmp_path / "missing.sqlite"), "--out", str(out)]) == 2
+
+
+def test_the_table_of_artefacts_drives_the_help_and_names_real_validators():
+    assert formats() == "xodr, MJCF, GLB/OBJ/FBX, preview"
+    assert PACK_FILES == tuple(name for a in ARTEFACTS for name in a.files)
+    assert len(set(PACK_FILES)) == len(PACK_FILES) and MANIFEST not in PACK_FILES
+    for artefact in ARTEFACTS:
+        assert artefact.description and all(callable(_entry_point(v)) for v in artefact.validators)
+        if artefact.needs is not None:
+            assert callable(_entry_point(artefact.needs.probe))
+
+
+def test_a_new_artefact_is_one_record(painted_tiny, tmp_path, monkeypatch):
+    """A record in the table is written, hashed in the manifest and required on load; one whose missing
+    dependency is an error stops the export, one that may be skipped is skipped with the reason."""
+    def write_note(inputs, path):
+        path.write_text(inputs.scene.garage.name)
+
+    note = Artefact("note.txt", write_note, "a note")
+    monkeypatch.setattr(artefacts_mod, "ARTEFACTS", (*ARTEFACTS, note))
+    path = export_pack(painted_tiny, tmp_path)
+    assert "note.txt" in load_pack(path).manifest["files"]
+    (path / MANIFEST).write_text((path / MANIFEST).read_text().replace('"note.txt"', '"other.txt"'))
+    with pytest.raises(PackError, match="note.txt not in the manifest"):
+        load_pack(path)
+
+    never = Dependency("Nothing", "no-such-package", "os:getcwd")  # a string: the dependency is never there
+    monkeypatch.setattr(artefacts_mod, "ARTEFACTS", (*ARTEFACTS, dataclasses.replace(note, needs=never)))
+    with pytest.raises(PackError, match="cannot write note.txt into asset packs"):
+        export_pack(painted_tiny, tmp_path / "error")
+    assert list((tmp_path / "error").iterdir()) == []
+    skip = dataclasses.replace(note, needs=never, when_missing=WhenMissing.SKIP)
+    monkeypatch.setattr(artefacts_mod, "ARTEFACTS", (*ARTEFACTS, skip))
+    manifest = load_pack(export_pack(painted_tiny, tmp_path / "skip")).manifest
+    assert "note.txt" not in manifest["files"] and manifest["skipped"] == {"note.txt": os.getcwd()}
+    assert artefacts_mod.left_out_here() == {"note.txt": os.getcwd()}

@@ -26,6 +26,7 @@ from garage_mj.driving.actors.config import load_scenario_config
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import TEST_COLUMNS
 from garage_mj.driving.sources import CruiseSource
+from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
 
 
@@ -122,7 +123,7 @@ def sources(args: argparse.Namespace) -> list:
             raise UserError(f"--packs {args.packs}: no such folder; export packs with garage-mj export")
         if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.route_difficulty, args.sample)):
             raise UserError("--map/--difficulty/--coverage/--route-difficulty/--sample filter a --library, not --packs")
-        dirs = sorted(d for d in args.packs.iterdir() if (d / "manifest.json").is_file())
+        dirs = sorted(d for d in args.packs.iterdir() if (d / MANIFEST).is_file())
         if args.limit is not None:
             dirs = dirs[: args.limit]
         found = [CruiseSource.from_pack(d) for d in dirs]

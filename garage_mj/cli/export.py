@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from garage_mj.cli import UserError
+from garage_mj.export.artefacts import INDEX, contents, formats, left_out_here
 from garage_mj.generation.library import Library, LibraryError
 from garage_mj.grid.garage import Garage
 
@@ -23,10 +24,12 @@ from garage_mj.grid.garage import Garage
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "export",
-        help="export garages as asset packs (xodr, MJCF, GLB/OBJ/FBX, preview) and CARLA import packages",
-        description="Write one asset pack folder per garage under --out, plus index.json. "
-        "Re-running skips complete packs and repairs partial ones. --carla-package DIR lays the "
-        "garages out for CARLA's map import: copy DIR into CARLA's Import/ folder and run `make import`.",
+        help=f"export garages as asset packs ({formats()}) and CARLA import packages",
+        description=f"Write one asset pack folder per garage under --out, plus {INDEX}. Re-running skips\n"
+        "complete packs and repairs partial ones. --carla-package DIR lays the garages out for\n"
+        "CARLA's map import: copy DIR into CARLA's Import/ folder and run `make import`.",
+        epilog=f"Each asset pack holds:\n{contents()}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--garage", type=Path, metavar="FILE", help="a garage JSON file (Garage.to_json)")
@@ -86,16 +89,14 @@ def run(args: argparse.Namespace) -> int:
     else:
         garages = _from_library(args)
     if args.out is not None:
-        from garage_mj.export.fbx import FBX_NAME, fbx_problem
         from garage_mj.export.pack import export_packs
 
-        problem = fbx_problem()
-        if problem is not None:
-            print(f"{FBX_NAME} left out of the packs: {problem}", file=sys.stderr)
+        for name, problem in left_out_here().items():
+            print(f"{name} left out of the packs: {problem}", file=sys.stderr)
         paths = export_packs(garages, args.out, force=args.force, progress=not args.quiet, total=len(garages))
         for path in paths:
             print(path)
-        print(f"{len(paths)} pack(s) in {args.out} (index: {args.out / 'index.json'})")
+        print(f"{len(paths)} pack(s) in {args.out} (index: {args.out / INDEX})")
     if args.carla_package is not None:
         from garage_mj.export.carla_package import write_carla_package
 

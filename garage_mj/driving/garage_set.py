@@ -33,6 +33,7 @@ from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import write_error, write_json
 from garage_mj.driving.difficulty.rating import resolve_route_model
 from garage_mj.driving.sources import CruiseSource, painted_sources
+from garage_mj.export.artefacts import GARAGE_JSON, MANIFEST
 from garage_mj.generation.library import Library, stratified_ids
 from garage_mj.generation.library_format import GarageRecord, LibraryError
 from garage_mj.grid.garage import Garage, MapError
@@ -186,9 +187,9 @@ class GarageSet:
             why = "is a file" if folder.exists() else "does not exist"
             raise GarageSetError(f"pack folder {folder} {why}; pass the folder garage-mj export wrote the packs into")
         dirs = sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith(".")
-                      and ((d / "manifest.json").exists() or (d / "garage.json").exists()))
+                      and ((d / MANIFEST).exists() or (d / GARAGE_JSON).exists()))
         if not dirs:
-            raise GarageSetError(f"{folder} holds no asset packs (folders with manifest.json); "
+            raise GarageSetError(f"{folder} holds no asset packs (folders with {MANIFEST}); "
                                  "export some with garage-mj export")
         try:
             sources = tuple(CruiseSource.from_pack(d) for d in dirs)

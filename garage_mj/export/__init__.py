@@ -9,6 +9,7 @@ others' dependencies.
 - ``meshes``: ``garage.glb`` and ``garage.obj`` + ``.mtl`` of the scene layout, with trimesh, for other engines.
 - ``fbx``: ``garage.fbx``, the same meshes written by Assimp's FBX exporter (Z up, metres: CARLA's convention).
 - ``preview``: ``preview.png``, a top-down picture of the garage (opencv).
+- ``artefacts``: the table of a pack's files (name, writer, optional dependency, validators, description).
 - ``pack``: asset packs, one folder per garage with every export and a manifest of hashes (``export_pack``, ``load_pack``).
 - ``carla_package``: a package folder for CARLA's ``make import`` (``<map>.fbx`` + ``<map>.xodr`` per garage, the package JSON).
 - ``validate``: checks ``garage.xodr`` with real tools (CARLA's parser, the ASAM checker), ``.xosc`` files

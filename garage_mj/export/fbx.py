@@ -42,7 +42,6 @@ from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
 from garage_mj.export.meshes import Z_UP_TO_Y_UP
 
-FBX_NAME = "garage.fbx"
 ASSIMP_PACKAGE = "cmeel-assimp"  # PyPI package shipping libassimp (Linux and macOS wheels)
 UNIT_SCALE_FACTOR = 100.0  # [cm per file unit]: FBX's unit is the centimetre, so 100 says metres
 #: FBX GlobalSettings written through the scene metadata that Assimp's FBX exporter reads.

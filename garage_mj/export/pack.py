@@ -1,15 +1,16 @@
 """Asset packs: one folder per garage with every export and a manifest of hashes.
 
-A pack folder ``<name>_<hash12>/`` holds ``garage.json``, ``garage.xodr`` (OpenDRIVE 1.8),
-``scene.xml`` (MJCF, + assets), ``garage.glb``, ``garage.obj`` + ``garage.mtl``, ``garage.fbx``
-(:mod:`garage_mj.export.fbx`), ``preview.png`` and ``manifest.json`` (sha256 of every file,
-metrics, garage hash, tool versions, creation time).
+A pack folder ``<name>_<hash12>/`` holds the files of :data:`garage_mj.export.artefacts.ARTEFACTS`
+(``garage.json``, ``garage.xodr`` (OpenDRIVE 1.8), ``scene.xml`` (MJCF, + assets), ``garage.glb``,
+``garage.obj`` + ``garage.mtl``, ``garage.fbx``, ``preview.png``), written in that table's order
+from one :class:`~garage_mj.scene.garage_scene.GarageScene`, and ``manifest.json`` (sha256 of every
+file, metrics, garage hash, tool versions, creation time).
 
-``garage.fbx`` needs Assimp (PyPI ``cmeel-assimp``, a dependency on Linux and macOS). Where it
-cannot be loaded the pack is written without it and says so: the manifest's ``skipped`` maps
-``garage.fbx`` to the reason, ``garage-mj export`` prints that reason once, and a later export
-with Assimp rebuilds such a pack. A pack that neither lists nor skips a file of
-:data:`PACK_FILES` is incomplete.
+A file whose dependency is missing and whose record says to skip it (``garage.fbx`` needs Assimp,
+PyPI ``cmeel-assimp``, a dependency on Linux and macOS) is left out and the pack says so: the
+manifest's ``skipped`` maps the file to the reason, ``garage-mj export`` prints that reason once,
+and a later export with the dependency rebuilds such a pack. A pack that neither lists nor skips
+a file of :data:`PACK_FILES` is incomplete.
 
 Writes are atomic: a pack is built in a hidden temp folder beside its final path, then renamed
 into place, so a crash never leaves a half pack at the final path. Re-running skips a complete
@@ -36,24 +37,21 @@ from tqdm import tqdm
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp, ensure_dir, make_temp_dir, swap_in_dir
-from garage_mj.export.fbx import FBX_NAME, fbx_problem, write_fbx
-from garage_mj.export.meshes import garage_meshes, write_glb, write_obj
-from garage_mj.export.preview import write_preview
-from garage_mj.export.xodr import write_xodr
+from garage_mj.export import artefacts as table
+from garage_mj.export.artefacts import GARAGE_JSON, INDEX, MANIFEST, PackInputs, WhenMissing
 from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.drivable import drivability
 from garage_mj.scene.garage_scene import GarageScene
-from garage_mj.scene.mjcf_scene import SCENE_XML, write_scene
 
-MANIFEST = "manifest.json"
-INDEX = "index.json"
+__all__ = ["INDEX", "MANIFEST", "OPTIONAL_FILES", "PACK_FILES", "Pack", "PackError", "export_pack", "export_packs",
+           "load_pack", "pack_name", "write_index"]
+
 PACK_FORMAT = 1
 #: Files every pack holds besides the manifest (scene assets, if any, are listed in the manifest).
-PACK_FILES = ("garage.json", "garage.xodr", SCENE_XML, "garage.glb", "garage.obj", "garage.mtl", FBX_NAME,
-              "preview.png")
+PACK_FILES = table.pack_files()
 #: Files a pack may be written without, with the reason in the manifest's ``skipped`` table.
-OPTIONAL_FILES = (FBX_NAME,)
+OPTIONAL_FILES = table.optional_files()
 _TOOLS = ("garage-mj", "mujoco", "dm-control", "trimesh", "cmeel-assimp")
 
 
@@ -94,7 +92,7 @@ class Pack:
 
     @property
     def garage(self) -> Garage:
-        return Garage.from_json((self.path / "garage.json").read_text(), source=str(self.path / "garage.json"))
+        return Garage.from_json((self.path / GARAGE_JSON).read_text(), source=str(self.path / GARAGE_JSON))
 
     def file(self, name: str) -> Path:
         """Path of one of the pack's files (``"scene.xml"``, ``"garage.glb"``, ...)."""
@@ -135,11 +133,12 @@ def _check(path: Path) -> tuple[str | None, dict]:
     if not isinstance(manifest.get("garage_hash"), str):
         return f"{MANIFEST} has no garage_hash", {}
     skipped = manifest.get("skipped", {})
-    if not isinstance(skipped, dict) or not set(skipped) <= set(OPTIONAL_FILES):
+    if not isinstance(skipped, dict) or not set(skipped) <= set(table.optional_files()):
         return f"{MANIFEST} skips files a pack must hold: {sorted(skipped)[:5]}", {}
-    for name in PACK_FILES:
-        if name not in files and name not in skipped:
-            return f"{name} not in the manifest", {}
+    for artefact in table.ARTEFACTS:
+        for name in artefact.files:  # a skipped artefact's companions are skipped with it
+            if name not in files and artefact.name not in skipped:
+                return f"{name} not in the manifest", {}
     for name, digest in files.items():
         problem = _member_problem(path, name)
         if problem is not None:
@@ -147,14 +146,14 @@ def _check(path: Path) -> tuple[str | None, dict]:
         if _sha256(path / name) != digest:
             return f"{name} does not match its hash in the manifest", {}
     try:
-        garage = Garage.from_json((path / "garage.json").read_bytes(), source=str(path / "garage.json"), usable=True)
+        garage = Garage.from_json((path / GARAGE_JSON).read_bytes(), source=str(path / GARAGE_JSON), usable=True)
     except MapError as exc:
-        return f"garage.json is not a garage ({exc})", {}
+        return f"{GARAGE_JSON} is not a garage ({exc})", {}
     digest = garage.canonical_hash()
     if digest != manifest["garage_hash"]:
-        return "garage.json is not the garage of the manifest's garage_hash", {}
+        return f"{GARAGE_JSON} is not the garage of the manifest's garage_hash", {}
     if not path.name.endswith(f"_{digest[:12]}"):
-        return f"its folder name does not end in _{digest[:12]}, the hash of its garage.json", {}
+        return f"its folder name does not end in _{digest[:12]}, the hash of its {GARAGE_JSON}", {}
     return None, manifest
 
 
@@ -173,24 +172,27 @@ def load_pack(path: str | Path) -> Pack:
 
 
 def _write_files(scene: GarageScene, tmp: Path) -> dict[str, str]:
-    """Every file of a pack, all drawn from one :class:`GarageScene` (each part derived once).
+    """Every artefact of :data:`~garage_mj.export.artefacts.ARTEFACTS` in order, all drawn from one
+    :class:`GarageScene` (each part derived once).
 
     Returns the files left out, each with the reason (``garage.fbx`` without Assimp).
     """
-    (tmp / "garage.json").write_text(scene.garage.to_json())
-    write_xodr(scene, tmp / "garage.xodr")
-    write_scene(scene, tmp)
-    meshes = garage_meshes(scene)
-    write_glb(meshes, tmp / "garage.glb")
-    write_obj(meshes, tmp / "garage.obj")
+    inputs = PackInputs(scene)
     skipped = {}
-    problem = fbx_problem()
-    if problem is None:
-        write_fbx(meshes, tmp / FBX_NAME)
-    else:
-        skipped[FBX_NAME] = problem
-    write_preview(scene, tmp / "preview.png")
+    for artefact in table.ARTEFACTS:
+        problem = artefact.problem()
+        if problem is None:
+            artefact.write(inputs, tmp / artefact.name)
+        elif artefact.when_missing is WhenMissing.SKIP:
+            skipped[artefact.name] = problem
+        else:
+            raise PackError(f"cannot write {artefact.name} into asset packs: {problem}")
     return skipped
+
+
+def _writable_now(skipped: dict[str, str]) -> bool:
+    """Whether a file a pack skipped could be written now (its dependency is back)."""
+    return any(a.name in skipped and a.problem() is None for a in table.ARTEFACTS)
 
 
 def _manifest(scene: GarageScene, tmp: Path, skipped: dict[str, str]) -> dict:
@@ -216,15 +218,15 @@ def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False) -> 
     """Write ``garage``'s pack under ``out_dir``; returns the pack folder.
 
     Skips a complete pack unless ``force``; a partial or broken one is rebuilt, and so is one
-    written without ``garage.fbx`` once Assimp is there. Atomic: files go
-    to a temp folder beside the target first, then one rename publishes the pack.
+    written without a file whose dependency is now there (``garage.fbx`` once Assimp is).
+    Atomic: files go to a temp folder beside the target first, then one rename publishes the pack.
     """
     validate_garage(garage)
     out_dir = ensure_dir(out_dir, "--out")
     final = out_dir / pack_name(garage)
     if not force:
         problem, manifest = _check(final)
-        if problem is None and not (manifest.get("skipped") and fbx_problem() is None):
+        if problem is None and not (manifest.get("skipped") and _writable_now(manifest["skipped"])):
             return final  # complete, and nothing it skipped could be written now
     tmp = make_temp_dir(out_dir, f".{final.name}.", ".tmp")
     try:
@@ -260,8 +262,6 @@ def export_packs(
             paths.append(export_pack(garage, out_dir, force=force))
         write_index(out_dir)
     return paths
-
-
 
 
 def write_index(out_dir: str | Path) -> Path:

@@ -34,6 +34,7 @@ from pathlib import Path
 from lxml import etree
 
 from garage_mj.core.errors import GarageMJError
+from garage_mj.export.artefacts import FBX, GLB
 
 #: No entity expansion, no DTD or network fetches: the files parsed here may come from anywhere.
 _SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False)
@@ -357,5 +358,5 @@ def check_fbx_batch(packs: Sequence[str | Path], timeout: float = 300.0) -> dict
     Returns each pack folder's problems (:func:`fbx_problems`; empty when the FBX matches).
     """
     packs = [Path(p) for p in packs]
-    reports = read_fbx_batch([p / "garage.fbx" for p in packs], timeout)
-    return {p: fbx_problems(r, p / "garage.glb") for p, r in zip(packs, reports)}
+    reports = read_fbx_batch([p / FBX for p in packs], timeout)
+    return {p: fbx_problems(r, p / GLB) for p, r in zip(packs, reports)}

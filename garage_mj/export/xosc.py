@@ -67,6 +67,7 @@ import numpy as np
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write
+from garage_mj.export.artefacts import MANIFEST, XODR
 from garage_mj.scene.actor_spec import BEHAVIOURS, KINDS, SHAPE_SIZE, ActorSpec
 from garage_mj.scene.car import car_geometry
 
@@ -236,11 +237,11 @@ def write_xosc(
         raise XoscError(f"OpenSCENARIO 1.{minor} is not written here; use 1.0, 1.1 or 1.2")
     path = Path(path)
     pack_dir = Path(pack_dir)
-    xodr = Path(xodr_path) if xodr_path is not None else pack_dir / "garage.xodr"
+    xodr = Path(xodr_path) if xodr_path is not None else pack_dir / XODR
     meta = dict(meta or {})
     if "garage_hash" not in meta:
         try:
-            meta["garage_hash"] = json.loads((pack_dir / "manifest.json").read_text())["garage_hash"]
+            meta["garage_hash"] = json.loads((pack_dir / MANIFEST).read_text())["garage_hash"]
         except (OSError, ValueError, KeyError, TypeError):
             pass
     occ = sorted({int(s) for s in occupied})

@@ -18,6 +18,7 @@ from garage_mj.core.fsutil import write_json
 from garage_mj.driving.results import COUNT_COLUMNS, HIT_CLASSES, failed_tests
 from garage_mj.driving.sim.outcomes import HIT_KINDS, OUTCOMES, PAPER_CLASS, PAPER_CLASSES, OutcomeConfig
 from garage_mj.driving.sources import CruiseSource
+from garage_mj.export.artefacts import INDEX, PREVIEW
 from garage_mj.generation.library import Library
 from garage_mj.grid.map_io import load_map
 from garage_mj.reporting.failures import run_failures
@@ -136,7 +137,7 @@ def run_demo(cfg: DemoConfig) -> Path:
         if not render.exists():
             _render_overview(rec.garage, render)
         gallery.append(
-            GalleryItem(pack.name, rec.difficulty, rec.coverage, rec.stalls, pack / "preview.png", render, pack)
+            GalleryItem(pack.name, rec.difficulty, rec.coverage, rec.stalls, pack / PREVIEW, render, pack)
         )
     write_index(packs_dir)
 
@@ -159,7 +160,7 @@ def run_demo(cfg: DemoConfig) -> Path:
         notes=[
             f"paths are relative to this report's folder ({out}): the folder can be moved",
             f"library: {library_path.relative_to(out).as_posix()}",
-            f"asset packs: {packs_dir.relative_to(out).as_posix()}/ (index.json lists them)",
+            f"asset packs: {packs_dir.relative_to(out).as_posix()}/ ({INDEX} lists them)",
             "cruise runs: cruise/<driver>/ (tests.csv, summary.csv, summary.json, xosc/ with every test "
             "as OpenSCENARIO, videos/ with the failures shown above)",
             "paper (SPEC section 5): r(difficulty, success) = -0.638 over 16 garages of the 13x13 aligned map",

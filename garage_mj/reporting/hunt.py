@@ -19,6 +19,7 @@ from typing import Any
 from garage_mj.core.fsutil import FolderLock, atomic_write
 from garage_mj.driving import hunt as driving_hunt
 from garage_mj.driving.hunt import HuntResult, Scored, add_file, read_settings
+from garage_mj.export.artefacts import PREVIEW
 from garage_mj.reporting.cruise import cruise_figure
 from garage_mj.reporting.video import record_video
 
@@ -74,7 +75,7 @@ def write_hunt_report(out: Path, rows: list[dict], worst: list[Scored], packs: l
                         f"{' (' + e(r['hit']) + ')' if r['hit'] else ''}: {e(r['reason'])}</li>" for r in s.failures)
         files = " ".join(f'<a href="{e(str(p.relative_to(out)))}">{e(p.name)}</a>' for p in mine)
         video = "".join(f'<p><video src="{e(str(p.relative_to(out)))}" controls width="480"></video></p>' for p in vid)
-        preview = rel / "preview.png"
+        preview = rel / PREVIEW
         cards.append(f'<section><h3>{e(s.source.name)}: {len(s.failures)} of {len(s.feasible)} feasible tests '
                      f'failed</h3><p><a href="{e(str(rel))}">asset pack</a></p>'
                      f'<img src="{e(str(preview))}" alt="preview of {e(s.source.name)}" width="360">'

@@ -213,12 +213,15 @@ def compile_scene(garage: Garage, **kwargs) -> mujoco.MjModel:
     return mujoco.MjModel.from_xml_string(xml, assets)
 
 
-def write_scene(garage: Garage | GarageScene, out_dir: str | Path, **kwargs) -> Path:
-    """Write ``scene.xml`` (and any assets it needs) into ``out_dir``; returns the XML path."""
+def write_scene(garage: Garage | GarageScene, out_dir: str | Path, *, file_name: str = SCENE_XML, **kwargs) -> Path:
+    """Write ``file_name`` (and any assets it needs) into ``out_dir``; returns the XML path.
+
+    Asset packs name the file themselves (:mod:`garage_mj.export.artefacts`).
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    mjcf.export_with_assets(build_scene(garage, **kwargs), str(out), out_file_name=SCENE_XML)
-    return out / SCENE_XML
+    mjcf.export_with_assets(build_scene(garage, **kwargs), str(out), out_file_name=file_name)
+    return out / file_name
 
 
 _PARKED_PREFIX = "parkedcar_"

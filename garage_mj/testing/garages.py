@@ -17,6 +17,7 @@ from typing import Any
 
 from garage_mj.driving.garage_set import is_sqlite_file, load_garage_set
 from garage_mj.driving.sources import CruiseSource, painted_sources
+from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library
 from garage_mj.generation.library_format import GarageRecord
 from garage_mj.grid.garage import Garage
@@ -60,7 +61,7 @@ def write_packs(garages: Iterable[Garage], out_dir: str | Path) -> Path:
 def _from_path(path: Path) -> list[CruiseSource]:
     """The garages of one asset pack folder, or what :func:`~garage_mj.driving.garage_set.load_garage_set` reads
     (a folder of packs, a library file: every garage, verified)."""
-    if path.is_dir() and (path / "manifest.json").is_file():
+    if path.is_dir() and (path / MANIFEST).is_file():
         return [CruiseSource.from_pack(path)]
     return list(load_garage_set(path))
 
