@@ -394,6 +394,26 @@ def test_read_only_library_lists_and_read_only_out_is_one_line(shared_tmp, tiny)
     assert snapshot(folder) == before
 
 
+@pytest.mark.parametrize("where", ["file", "folder"])
+def test_writing_into_a_read_only_library_is_one_line(shared_tmp, where):
+    """``library rate``, ``check --store`` and ``generate`` refuse a read-only library (file or folder) up front."""
+    folder = shared_tmp / "ro"
+    folder.mkdir()
+    lib = make_library(folder / "library.sqlite", 2)
+    os.chmod(lib, 0o444 if where == "file" else 0o644)
+    if where == "folder":
+        os.chmod(folder, 0o555)
+    before = snapshot(folder)
+    for argv in (["library", "rate", str(lib), "--quiet"], ["check", "--library", str(lib), "--store"],
+                 ["generate", "--map", "tiny_7x11", "--difficulty", "0", "1", "--count", "1", "--library", str(lib),
+                  "--no-progress"]):
+        done = _unprivileged(argv, shared_tmp)
+        err = [ln for ln in done.stderr.splitlines() if ln.strip()]
+        assert done.returncode == 2 and len(err) == 1, done.stderr
+        assert str(lib) in err[0] and "read-only" in err[0] and "writable" in err[0], err[0]
+    assert snapshot(folder) == before
+
+
 # -- tests.csv repair ------------------------------------------------------------------------------
 def _row(i: int) -> dict[str, str]:
     return {c: f"{c}{i}" for c in TEST_COLUMNS} | {"garage_hash": f"h{i % 3}", "test": str(i), "outcome": "success",

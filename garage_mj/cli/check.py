@@ -70,13 +70,13 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--max-steer {args.max_steer} rad is not a plausible full-lock angle; use 0.05 to 1.2")
     car = car_geometry(CarConfig(max_steer=args.max_steer) if args.max_steer is not None else None)
     report = []
-    print(f"{'garage':32s} {'feasible':>12s} {'clearance':>10s} {'curvature/limit':>16s}  commonest reason")
     if args.store and args.library is None:
         raise UserError("--store writes into a library: give --library FILE")
     found = _garages(args)
     store = None
     if args.store:
         store = Library(args.library, create=False, readonly=False)
+    print(f"{'garage':32s} {'feasible':>12s} {'clearance':>10s} {'curvature/limit':>16s}  commonest reason")
     car_key = f"models/car max_steer={car.max_steer:g}"
     for name, garage, lib_id in found:
         scene = GarageScene(garage)

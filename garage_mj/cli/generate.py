@@ -8,6 +8,7 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, positive_int, seed, unit_range, user_errors
+from garage_mj.generation.library import check_writable
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
 
@@ -91,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         band = getattr(args, name)
         if band is not None and band[0] > band[1]:
             raise UserError(f"--{name} {band[0]} {band[1]}: LO is above HI")
+    check_writable(args.library)  # before training a generator or rolling out: both end in the library
     model = args.model
     if model is None:
         garage = load_map(args.map)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sqlite3
 from collections.abc import Iterable
 from datetime import datetime, timezone
@@ -49,6 +50,22 @@ from garage_mj.grid.metrics import evaluate
 
 BUSY_TIMEOUT_S = 60.0  # [s] a writer waits this long for another writer's lock
 DIFFICULTY_BIN = 0.1  # width of the difficulty strata of :meth:`Library.sample`
+
+
+def check_writable(path: str | Path) -> None:
+    """Refuse, before anything is written, a library file (or its folder) this process may not write.
+
+    SQLite writes the file and, in WAL mode, ``-wal``/``-shm`` files beside it; without this check a
+    read-only file or folder fails at the first insert, after the work before it.
+    """
+    path = Path(path)
+    if path.exists() and not os.access(path, os.W_OK):
+        raise LibraryError(f"{path} is read-only; make it writable (chmod u+w {path}) or copy the library "
+                           "to a file you may write")
+    folder = path.parent
+    if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
+        raise LibraryError(f"{path}: its folder {folder} is read-only (SQLite writes its journal files beside "
+                           "the library); make the folder writable or copy the library to a writable folder")
 
 
 class Library:
@@ -80,6 +97,7 @@ class Library:
             return
         if not exists:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+        check_writable(self.path)
         try:
             self._con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
             self._con.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
