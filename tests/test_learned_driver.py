@@ -336,3 +336,79 @@ def test_the_fast_greedy_step_picks_what_sb3_predict_picks(painted_tiny):
                 break
     finally:
         env.close()
+
+
+class Touch:
+    """A pickle that, when loaded, creates the file ``path``: what a crafted model file could run."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return Path.touch, (self.path,)
+
+
+def rewrite_zip(src: Path, dst: Path, **entries: bytes) -> Path:
+    """``src`` copied to ``dst`` with the given entries replaced or added (``policy_pth`` for ``policy.pth``)."""
+    entries = {name.replace("_pth", ".pth"): data for name, data in entries.items()}
+    with zipfile.ZipFile(src) as s, zipfile.ZipFile(dst, "w") as d:
+        for name in s.namelist():
+            d.writestr(name, entries.pop(name, None) or s.read(name))
+        for name, data in entries.items():
+            d.writestr(name, data)
+    return dst
+
+
+@pytest.mark.parametrize("key", ["policy_class", "policy_kwargs", "observation_space", "action_space",
+                                 "lr_schedule", "exploration_schedule", "replay_buffer_class", "train_freq",
+                                 "a_new_entry"])
+def test_a_pickle_in_a_models_data_is_never_run(key, tmp_path):
+    """Every pickled entry of the data is rebuilt from its plain fields (the payload ignored) or refused."""
+    import base64
+    import pickle
+
+    marker = tmp_path / "ran"
+    with zipfile.ZipFile(default_model()) as z:
+        data = json.loads(z.read("data"))
+    payload = base64.b64encode(pickle.dumps(Touch(marker))).decode()
+    data[key] = {**data.get(key, {}), ":serialized:": payload}
+    path = rewrite_zip(default_model(), tmp_path / f"{key}.zip", data=json.dumps(data).encode())
+    try:
+        driver = LearnedDriver(path)
+    except DriverError as err:
+        msg = str(err)
+        assert key == "a_new_entry" and "\n" not in msg and msg.startswith(f"no learned driver model at {path} ")
+        assert f"its data entry '{key}' is pickled Python" in msg and msg.endswith("give learned:PATH")
+    else:
+        assert key != "a_new_entry"
+        assert driver.act(frame()) == LearnedDriver(default_model()).act(frame())
+    assert not marker.exists()
+
+
+def test_a_pickle_in_a_models_weights_is_never_run(tmp_path, dqn_zip):
+    import io
+
+    import torch
+
+    marker = tmp_path / "ran"
+    for entry in ("policy_pth", "pytorch_variables_pth"):
+        blob = io.BytesIO()
+        torch.save({"weight": Touch(marker)}, blob)
+        path = rewrite_zip(dqn_zip, tmp_path / f"{entry}.zip", **{entry: blob.getvalue()})
+        with pytest.raises(DriverError) as err:
+            load_driver(f"learned:{path}")
+        msg, name = str(err.value), entry.replace("_pth", ".pth")
+        assert msg == (f"no learned driver model at {path} (cannot load it as DQN: its {name} holds more than weights "
+                       "(Python objects to rebuild)): train one with `garage-mj train-driver` (see README) or give "
+                       "learned:PATH")
+        assert "weights_only" not in msg and not marker.exists()
+
+
+def test_a_model_whose_plain_fields_lie_is_refused(tmp_path, dqn_zip):
+    with zipfile.ZipFile(dqn_zip) as z:
+        data = json.loads(z.read("data"))
+    data["observation_space"]["spaces"] = "{'image': Box(0, 255, (3, 64, 64), uint8)}"
+    path = rewrite_zip(dqn_zip, tmp_path / "lies.zip", data=json.dumps(data).encode())
+    with pytest.raises(DriverError, match=r"its observation space .* is not a learned driver's \(learned_space\)\): "
+                                          r"train one with `garage-mj train-driver`"):
+        load_driver(f"learned:{path}")

@@ -7,7 +7,8 @@ The model (a DQN or PPO ``.zip`` saved by ``garage-mj train-driver``, ``MultiInp
 the paper's 4 actions by argmax, so the same test gives the same drive. ``--driver learned`` runs
 the shipped model ``models/drivers/<DEFAULT_MODEL>.zip``; ``--driver learned:PATH`` another one.
 
-A process loads each model file once (:func:`load_model`, keyed by path and modification time),
+A model file is data: its weights and plain settings are read, nothing in it is unpickled or run
+(:mod:`~garage_mj.driving.learning.model_file`). A process loads each model file once (:func:`load_model`, keyed by path and modification time),
 so a cruise worker that drives many tests reads the zip and imports torch once.
 """
 
@@ -56,12 +57,14 @@ def _no_model(path: Path, why: str = "") -> DriverError:
                        "(see README) or give learned:PATH")
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(f"{type(exc).__name__}: {exc}".split())
+def _one_line(exc: BaseException, limit: int = 160) -> str:
+    """``exc`` as one short line, so the fix after it is never cut off."""
+    line = " ".join(f"{type(exc).__name__}: {exc}".split())
+    return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
-def _algorithm(path: Path) -> tuple[str, dict]:
-    """``"DQN"`` or ``"PPO"``: which SB3 class saved ``path``, and the zip's ``data`` JSON it is read from."""
+def _algorithm(path: Path) -> str:
+    """``"DQN"`` or ``"PPO"``: which SB3 class saved ``path`` (read from the zip's ``data`` JSON)."""
     try:
         with zipfile.ZipFile(path) as z:
             data = json.loads(z.read("data"))
@@ -71,14 +74,16 @@ def _algorithm(path: Path) -> tuple[str, dict]:
     if module not in ALGORITHMS:
         raise DriverError(f"learned driver model {path}: its policy is from {module}; the learned driver runs "
                           f"DQN or PPO models ({', '.join(sorted(ALGORITHMS.values()))}) from `garage-mj train-driver`")
-    return ALGORITHMS[module], data
+    return ALGORITHMS[module]
 
 
 def load_model(path: str | Path) -> Any:
     """The SB3 model at ``path`` on the CPU, loaded once per process and file version.
 
-    Checks that it acts with the paper's 4 actions; a missing, unreadable or corrupt file, or
-    another action space, is a one-line :class:`DriverError` naming the file and the fix.
+    The file is read as data (:func:`~garage_mj.driving.learning.model_file.load_sb3`): weights and plain
+    settings, nothing in it unpickled or run. Checks that it acts with the paper's 4 actions; a missing,
+    unreadable, corrupt or code-carrying file, or another action space, is a one-line :class:`DriverError`
+    naming the file, what is wrong and the fix.
     """
     path = Path(path).expanduser()
     try:
@@ -90,16 +95,16 @@ def load_model(path: str | Path) -> Any:
     key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
     if key in _MODELS:
         return _MODELS[key]
-    algo, data = _algorithm(path)
+    algo = _algorithm(path)
     import stable_baselines3  # heavy (torch): only when a learned driver is built
 
-    from garage_mj.driving.learning.network import saved_policy_kwargs
+    from garage_mj.driving.learning.model_file import ModelFileError, load_sb3
 
-    kwargs = saved_policy_kwargs(data)
-    custom = None if kwargs is None else {"policy_kwargs": kwargs}
-    try:
-        model = getattr(stable_baselines3, algo).load(path, device="cpu", custom_objects=custom)
-    except Exception as exc:  # torch/pickle/zip errors of a damaged file: name the file, keep one line
+    try:  # the file read as data: weights and plain settings, nothing in it unpickled or run
+        model = load_sb3(path, getattr(stable_baselines3, algo))
+    except ModelFileError as exc:
+        raise _no_model(path, f" (cannot load it as {algo}: {exc})") from None
+    except Exception as exc:  # torch/zip errors of a damaged file: name the file, keep one short line
         raise _no_model(path, f" (cannot load it as {algo}: {_one_line(exc)})") from None
     space = model.action_space
     if type(space).__name__ != "Discrete" or int(space.n) != N_ACTIONS or int(getattr(space, "start", 0)) != 0:

@@ -297,16 +297,17 @@ def _success(counts: dict[str, int]) -> float | None:
 
 
 def _load_checkpoint(path: Path, venv):
-    """A checkpoint saved by :func:`_save`, its network rebuilt from the zip's plain fields (not unpickled)."""
-    import zipfile
-
+    """A checkpoint saved by :func:`_save`, read as data (:func:`~garage_mj.driving.learning.model_file.load_sb3`:
+    weights and plain settings, nothing in it unpickled or run)."""
     from stable_baselines3 import DQN
 
-    from garage_mj.driving.learning.network import saved_policy_kwargs
+    from garage_mj.driving.learning.model_file import ModelFileError, load_sb3
 
-    with zipfile.ZipFile(path) as z:
-        kwargs = saved_policy_kwargs(json.loads(z.read("data")))
-    return DQN.load(path, env=venv, device="cpu", custom_objects=None if kwargs is None else {"policy_kwargs": kwargs})
+    try:
+        return load_sb3(path, DQN, env=venv)
+    except ModelFileError as exc:
+        raise TrainDriverError(f"checkpoint {path} cannot be resumed: {exc}; "
+                               "run garage-mj train-driver again with another --out") from None
 
 
 def _save(model, path: Path, **kwargs: Any) -> None:
