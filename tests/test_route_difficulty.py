@@ -122,6 +122,31 @@ def test_a_negative_weight_is_refused(tmp_path):
         load_route_model(tmp_path / "m.json")
 
 
+@pytest.mark.parametrize("key, value", [("mean", "NaN"), ("scale", "Infinity"), ("weights", "NaN"),
+                                        ("intercept", "NaN"), ("weights", "-Infinity"), ("features", "[]")])
+def test_a_model_with_nan_inf_or_empty_values_is_refused(tmp_path, key, value):
+    rows, failed = _synthetic(100)
+    d = fit(rows, failed).to_dict()
+    text = json.dumps({**d, key: "@"}).replace('"@"', value if key in ("intercept", "features") else f"[{value}]")
+    if key == "features":
+        text = text.replace(json.dumps(d["mean"]), "[]").replace(json.dumps(d["scale"]), "[]")
+        text = text.replace(json.dumps(d["weights"]), "[]")
+    (tmp_path / "m.json").write_text(text)
+    with pytest.raises(RouteModelError) as err:
+        load_route_model(tmp_path / "m.json")
+    msg = str(err.value)
+    assert msg.startswith(f"{tmp_path / 'm.json'}: its {key} ") and "fit it again" in msg and "\n" not in msg
+
+
+def test_a_nan_difficulty_is_never_no_feasible_stall(painted_tiny, tiny_features):
+    """A model that computes NaN (a NaN feature value) fails loudly instead of claiming no feasible stall."""
+    model = load_route_model()
+    per_stall = {k: (None if v is None else {**v, model.features[0]: math.nan}) for k, v in tiny_features.items()}
+    with pytest.raises(RouteModelError, match="gives NaN for a garage with feasible stalls"):
+        model.of_features(per_stall)
+    assert math.isnan(model.of_features({k: None for k in tiny_features}))
+
+
 def test_shipped_model_rates_a_garage(painted_tiny, tiny_features):
     model = load_route_model()
     d = route_difficulty(painted_tiny, model)

@@ -76,7 +76,13 @@ class RouteDifficulty:
     def of_features(self, per_stall: dict[int, dict[str, float] | None]) -> float:
         """A garage's route difficulty from :func:`~garage_mj.scene.route_features.garage_features` (NaN: no feasible stall)."""
         rows = [f for f in per_stall.values() if f is not None]
-        return float(np.mean(self.test_probability(rows))) if rows else math.nan
+        if not rows:
+            return math.nan
+        value = float(np.mean(self.test_probability(rows)))
+        if math.isnan(value):  # never passed on: NaN means "no feasible stall", and this garage has some
+            raise RouteModelError(f"route difficulty model {self.key} gives NaN for a garage with feasible stalls; "
+                                  "fit it again with garage-mj difficulty fit")
+        return value
 
     @property
     def key(self) -> str:
@@ -140,11 +146,26 @@ def load_route_model(path: str | Path | None = None) -> RouteDifficulty:
         if unknown:
             raise RouteModelError(f"{where} uses unknown route features {unknown}; fit it again with this garage-mj")
         vals = [tuple(float(v) for v in d[k]) for k in ("mean", "scale", "weights")]
-        if any(len(v) != len(feats) for v in vals) or any(s <= 0 for s in vals[1]) or any(w < 0 for w in vals[2]):
-            raise ValueError
-        return RouteDifficulty(feats, *vals, float(d["intercept"]), dict(d.get("fit", {})))
+        intercept = float(d["intercept"])
     except (KeyError, TypeError, ValueError):
         raise RouteModelError(f"{where} is damaged (features, mean, scale, weights, intercept); fit it again") from None
+    _check_values(where, feats, dict(zip(("mean", "scale", "weights"), vals, strict=True)), intercept)
+    return RouteDifficulty(feats, *vals, intercept, dict(d.get("fit", {})))
+
+
+def _check_values(where: str, feats: tuple[str, ...], vals: dict[str, tuple[float, ...]], intercept: float) -> None:
+    """Refuse a model whose numbers cannot give a difficulty: no features, a NaN or infinite value, a
+    length that is not the features', a scale <= 0 or a negative weight (one line naming the key)."""
+    if not feats:
+        raise RouteModelError(f"{where}: its features are empty; fit it again with garage-mj difficulty fit")
+    for key, values in (*vals.items(), ("intercept", (intercept,))):
+        if not all(math.isfinite(v) for v in values):
+            raise RouteModelError(f"{where}: its {key} holds a NaN or infinite number; fit it again with "
+                                  "garage-mj difficulty fit")
+        if key != "intercept" and len(values) != len(feats):
+            raise RouteModelError(f"{where}: its {key} has {len(values)} values for {len(feats)} features; fit it again")
+    if any(s <= 0 for s in vals["scale"]) or any(w < 0 for w in vals["weights"]):
+        raise RouteModelError(f"{where} is damaged (a scale <= 0 or a negative weight); fit it again")
 
 
 def fit(rows: Sequence[dict[str, float]], failed: Sequence[bool], features: Sequence[str] = FEATURES,
