@@ -32,7 +32,7 @@ from hypothesis import strategies as st
 from garage_mj.cli import main
 from garage_mj.driving.results import TEST_COLUMNS, read_tests
 from garage_mj.export.pack import PackError, export_pack, load_pack
-from garage_mj.generation.library import Library
+from garage_mj.generation.library import Library, LibraryError
 from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.grid.map_io import load_map, parse_map_text
 from garage_mj.grid.painters import paint_garage
@@ -63,6 +63,7 @@ def one_line_error(capsys, argv: list[str]) -> str:
     lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("usage:") and not ln.startswith(" ")]
     assert rc not in (0, None), (out, err)
     assert "Traceback" not in err + out, err
+    assert "\x1b" not in err + out, err  # no terminal escape printed raw
     assert len(lines) == 1 and "error" in lines[0], err
     return lines[0]
 
@@ -123,6 +124,9 @@ def _mutated(g: Garage, how: str):
     if how == "long_name":
         d["name"] = "x" * 5000
         return json.dumps(d)
+    if how in ("escape_name", "newline_name", "bidi_name"):
+        d["name"] = {"escape_name": "\x1b[2Jgone", "newline_name": "two\nlines", "bidi_name": "abc\u202edef"}[how]
+        return json.dumps(d)
     if how == "square":
         return json.dumps(_with_square(g))
     if how == "unconnected":
@@ -145,6 +149,8 @@ def _mutated(g: Garage, how: str):
 BAD_GARAGES = {"str": "not a block code", "float": "not a block code", "bool": "not a block code",
                "big": "not a block code", "negative": "not a block code", "infinity": "not a block code",
                "deep": "nested too deeply", "not_utf8": "not valid JSON", "long_name": "longer than 128",
+               "escape_name": "control character", "newline_name": "control character",
+               "bidi_name": "control character",
                "square": "2x2 square", "unconnected": "no road joins", "stall_rule": "stall rule",
                "huge": "larger than 64x64"}
 
@@ -343,6 +349,37 @@ def test_a_damaged_library_row_is_refused_with_its_id(tmp_path, capsys, how):
         assert main(["library", "ls", str(lib)]) == 0
     capsys.readouterr()
     assert snapshot(tmp_path) == before  # nothing written, not even SQLite's -wal/-shm
+
+
+@pytest.mark.parametrize("column", ["map", "run"])
+def test_a_library_name_with_a_control_character_is_refused_with_its_id(tmp_path, capsys, column):
+    lib = make_library(tmp_path / "lib.sqlite", 2)
+    con = sqlite3.connect(lib)
+    con.execute(f"UPDATE garages SET {column} = ? WHERE id = 2", ("\x1b[2Jgone\nx",))
+    con.commit()
+    con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    con.close()
+    before = snapshot(tmp_path)
+    argvs = [["library", "ls", str(lib)], ["library", "show", str(lib), "2"],
+             ["export", "--library", str(lib), "--out", str(tmp_path / "packs"), "--quiet"]]
+    if column == "map":  # listed per map without reading the rows
+        argvs.append(["library", "stats", str(lib)])
+    for argv in argvs:
+        line = one_line_error(capsys, argv)
+        assert "row id 2" in line and "control character" in line and str(lib) in line
+    assert snapshot(tmp_path) == before
+    with Library(tmp_path / "new.sqlite") as fresh, pytest.raises(LibraryError, match="control character"):
+        fresh.add(paint_garage("tiny_7x11", seed=1), map="tiny_7x11", run="a\x07b", seed=0, episode=0, timestep=0)
+
+
+def test_a_map_file_name_with_a_control_character_is_one_line(tmp_path, capsys):
+    f = tmp_path / "m\x1b[2J.txt"
+    f.write_text(load_map("tiny_7x11").to_text())
+    line = one_line_error(capsys, ["maps", "show", str(f)])
+    assert "control character" in line and "rename the file" in line
+    assert main(["maps", "validate", str(f)]) == 1
+    out = capsys.readouterr().out
+    assert out.startswith("INVALID") and "\x1b" not in out
 
 
 def _unprivileged(argv: list[str], home: Path) -> subprocess.CompletedProcess:

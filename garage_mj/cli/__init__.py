@@ -32,7 +32,7 @@ import sys
 import traceback
 
 from garage_mj.core import __version__
-from garage_mj.core.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError, printable
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ["maps", "demo", "export", "check", "train", "generate", "library", "plot", "show", "cruise", "hunt", "train_driver",
@@ -62,8 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def one_line(text: object, limit: int = 600) -> str:
-    """``text`` on one line, at most ``limit`` characters (a message may quote user input)."""
-    line = " ".join(str(text).split())
+    """``text`` on one line, at most ``limit`` characters, control characters escaped (a message may
+    quote user input: a name holding an escape sequence must not act on the terminal)."""
+    line = printable(" ".join(str(text).split()))
     return line if len(line) <= limit else line[: limit - 3] + "..."
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from garage_mj.core.errors import printable
 from garage_mj.grid.garage import MapError
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.grid.text import draw
@@ -36,7 +37,7 @@ def _validate(args: argparse.Namespace) -> int:
         try:
             g = load_map(f)
         except MapError as exc:
-            print(f"INVALID {exc}")
+            print(f"INVALID {printable(str(exc))}")
             bad += 1
         else:
             h, w = g.shape

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from garage_mj.core.errors import control_character
 from garage_mj.generation.library_format import (
     APPLICATION_ID,
     COLUMNS,
@@ -410,7 +411,17 @@ class Library:
         return np.array(rows, dtype=float).reshape(-1, 2)
 
     def maps(self) -> list[str]:
-        return [r[0] for r in self._con.execute("SELECT DISTINCT map FROM garages ORDER BY map")]
+        return self._printable_maps([r[0] for r in self._con.execute("SELECT DISTINCT map FROM garages ORDER BY map")])
+
+    def _printable_maps(self, maps: list[str]) -> list[str]:
+        """``maps``; refuses, naming a row, a map name with a control character (it would act on the terminal)."""
+        for m in maps:
+            if isinstance(m, str) and control_character(m) is not None:
+                id_ = self._con.execute("SELECT id FROM garages WHERE map = ? LIMIT 1", (m,)).fetchone()[0]
+                raise LibraryError(f"{self.path}, row id {id_}: column map holds {m[:30]!r}, with the control "
+                                   f"character {control_character(m)!r}; the library is damaged: delete that row "
+                                   "or restore the file from a backup")
+        return maps
 
     def sample(
         self,
@@ -476,6 +487,7 @@ class Library:
                 if row[0] in per_map:
                     per_map[row[0]]["route_difficulty"] = {"model": key, "rated": row[1], "with_value": row[2],
                                                            "min": row[3], "mean": row[4], "max": row[5]}
+        self._printable_maps(list(per_map))
         out["maps"] = per_map
         return out
 
@@ -530,6 +542,10 @@ _INSERT = (
 
 def _row(garage: Garage, map: str, run: str, seed: int, episode: int, timestep: int) -> tuple:
     """The ``garages`` row of ``garage`` and its provenance (metrics recomputed), in :data:`_INSERT`'s order."""
+    for what, text in (("map", map), ("run", run)):
+        if control_character(text) is not None:
+            raise LibraryError(f"{what} name {text[:40]!r} holds the control character {control_character(text)!r}; "
+                               "give it a name of printable characters")
     m = evaluate(garage)
     h, w = garage.shape
     return (

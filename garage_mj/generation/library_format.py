@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.core.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError, control_character
 from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.grid.metrics import evaluate
 
@@ -227,4 +227,7 @@ def record_from_row(row: tuple, path: Path) -> GarageRecord:
         if not ok:
             raise LibraryError(f"{where}: column {name} holds {str(v)[:30]!r}, not a "
                                f"{kind.__name__}; {fix}")
+        if kind is str and control_character(v) is not None:
+            raise LibraryError(f"{where}: column {name} holds {v[:30]!r}, with the control character "
+                               f"{control_character(v)!r}; {fix}")
     return GarageRecord(*values)

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.core.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError, control_character
 from garage_mj.grid.blocks import AXES, INITIAL_CODES, NUM_CODES, STALL_CODES, Axis, Block
 from garage_mj.grid.road_segments import analyse
 from garage_mj.grid.rules import expected_cell, road_squares, stall_rule_violations
@@ -154,6 +154,10 @@ class Garage:
         if not isinstance(self.name, str) or len(self.name) > MAX_NAME:
             raise MapError(f"garage name {str(self.name)[:40]!r}... is longer than {MAX_NAME} characters; "
                            "give it a shorter name")
+        bad = control_character(self.name)
+        if bad is not None:
+            raise MapError(f"garage name {self.name[:40]!r} holds the control character {bad!r}; "
+                           "give it a name of printable characters")
         src = f"garage {self.name!r}"
         for what in ("grid", "initial"):
             arr = np.asarray(getattr(self, what))

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from garage_mj.core.errors import printable
 from garage_mj.grid.blocks import Axis
 from garage_mj.grid.garage import MAX_SIDE, Garage, MapError, validate_initial
 
@@ -109,4 +110,7 @@ def load_map(name_or_path: str | Path, six_stall_axis: Axis = "NS") -> Garage:
     name, source, text = _resolve(name_or_path)
     grid, _ = parse_map_text(text, source)
     validate_initial(grid, source)
-    return Garage.from_initial(grid, name=name, six_stall_axis=six_stall_axis)
+    try:
+        return Garage.from_initial(grid, name=name, six_stall_axis=six_stall_axis)
+    except MapError as exc:  # the name (the file's stem) is too long or holds a control character
+        raise MapError(f"{printable(source)}: {exc}; rename the file") from None
