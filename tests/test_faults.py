@@ -117,6 +117,8 @@ def _mutated(g: Garage, how: str):
         return json.dumps(d)
     if how == "infinity":
         return json.dumps(d).replace('"grid": [[2', '"grid": [[Infinity', 1)
+    if how == "huge_int":  # over Python's 4,300-digit limit for converting text to int
+        return json.dumps(d).replace('"grid": [[2', '"grid": [[' + "7" * 5000, 1)
     if how == "deep":
         return "[" * 100_000 + "]" * 100_000
     if how == "not_utf8":
@@ -149,6 +151,7 @@ def _mutated(g: Garage, how: str):
 BAD_GARAGES = {"str": "not a block code", "float": "not a block code", "bool": "not a block code",
                "big": "not a block code", "negative": "not a block code", "infinity": "not a block code",
                "deep": "nested too deeply", "not_utf8": "not valid JSON", "long_name": "longer than 128",
+               "huge_int": "row 0, column 0: 77777777... (5000 digits) is not a block code (an integer 0-9)",
                "escape_name": "control character", "newline_name": "control character",
                "bidi_name": "control character",
                "square": "2x2 square", "unconnected": "no road joins", "stall_rule": "stall rule",

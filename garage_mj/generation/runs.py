@@ -59,7 +59,7 @@ def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
             continue
         try:
             state = json.loads(state_path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError):
+        except (ValueError, RecursionError):
             continue  # a torn or foreign checkpoint record: an older one is used
         if best is None or state["timesteps"] > best[1]["timesteps"]:
             best = (model, state)

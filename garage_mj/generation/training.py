@@ -312,7 +312,7 @@ def read_manifest(out_dir: str | Path) -> dict[str, Any]:
         return json.loads(path.read_text())
     except FileNotFoundError:
         raise TrainingError(f"{out_dir} holds no training run (no {MANIFEST})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+    except (ValueError, RecursionError) as exc:
         raise TrainingError(f"{path} is not valid JSON ({str(exc)[:120]}); delete the run folder and train again") from None
 
 

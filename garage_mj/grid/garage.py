@@ -101,6 +101,26 @@ def validate_initial(grid: np.ndarray, source: str = "map") -> None:
     find_gates(grid, source)
 
 
+@dataclass(frozen=True)
+class _LongInteger:
+    """A JSON integer too long to be a block code, kept as its digits: Python refuses to convert one
+    of over 4,300 digits, and no cell needs more than one."""
+
+    digits: str
+
+
+def _parse_int(digits: str) -> int | _LongInteger:
+    """``json.loads``'s ``parse_int``: an integer, or a :class:`_LongInteger` for one of over 20 digits."""
+    return int(digits) if len(digits) <= 20 else _LongInteger(digits)
+
+
+def _shown(v: Any) -> str:
+    """A cell's value as the message quotes it (a long integer by its first digits and its length)."""
+    if isinstance(v, _LongInteger):
+        return f"{v.digits[:8]}... ({len(v.digits.lstrip('-'))} digits)"
+    return json.dumps(v)[:20]
+
+
 def _code_rows(rows: Any, where: str) -> np.ndarray:
     """A JSON list of rows of block codes as an int8 array; strict: no strings, floats, booleans."""
     if not isinstance(rows, list) or not rows or not all(isinstance(r, list) for r in rows):
@@ -112,7 +132,7 @@ def _code_rows(rows: Any, where: str) -> np.ndarray:
     for r, row in enumerate(rows):
         for c, v in enumerate(row):
             if type(v) is not int or not 0 <= v < NUM_CODES:
-                raise MapError(f"{where}, row {r}, column {c}: {json.dumps(v)[:20]} is not a block code "
+                raise MapError(f"{where}, row {r}, column {c}: {_shown(v)} is not a block code "
                                f"(an integer 0-{NUM_CODES - 1})")
     return np.array(rows, dtype=np.int8)
 
@@ -221,7 +241,7 @@ class Garage:
             data = text
         else:
             try:
-                data = json.loads(text)
+                data = json.loads(text, parse_int=_parse_int)
             except (json.JSONDecodeError, UnicodeDecodeError) as exc:
                 raise MapError(f"{source} is not valid JSON: {exc}") from None
             except RecursionError:
