@@ -143,18 +143,21 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
                       per_map: int | None = None, seed: int = 0, action_type: str | None = None,
                       occupancy: float = 0.5, driver_kwargs: dict[str, Any] | None = None,
                       env: dict[str, Any] | None = None):
+        from garage_mj.core.backends import Compute
         from garage_mj.core.errors import GarageMJError
+        from garage_mj.driving.sources import CruiseSettings
         from garage_mj.testing import run_driver_tests
 
         __tracebackhide__ = True
         k = next(runs)
         try:
+            settings = CruiseSettings(seed=seed, action_type=action_type, occupancy=occupancy, env=dict(env or {}),
+                                      driver_kwargs=dict(driver_kwargs or {}))  # the driver: run_driver_tests sets it
+            compute = Compute(workers=chosen["workers"] if workers is None else workers, progress=False)
             return run_driver_tests(
                 driver, chosen["maps"] if garages is None else garages, chosen["tests"] if tests is None else tests,
-                out_dir=tmp_path / ("cruise" if k == 0 else f"cruise_{k}"),
-                workers=chosen["workers"] if workers is None else workers,
-                per_map=chosen["per_map"] if per_map is None else per_map, seed=seed, action_type=action_type,
-                occupancy=occupancy, driver_kwargs=driver_kwargs, env=env)
+                out_dir=tmp_path / ("cruise" if k == 0 else f"cruise_{k}"), settings=settings, compute=compute,
+                per_map=chosen["per_map"] if per_map is None else per_map)
         except GarageMJError as exc:  # a bad map, driver or garage list, or a driver that raised: one message
             message = str(exc).replace(_CLI_HINT, "")
             if exc.details:  # the driver's own traceback, from whichever process ran it

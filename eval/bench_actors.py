@@ -29,9 +29,10 @@ import json
 import time
 from pathlib import Path
 
+from garage_mj.core.backends import Compute
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import read_tests
-from garage_mj.driving.sources import painted_sources
+from garage_mj.driving.sources import CruiseSettings, painted_sources
 from garage_mj.reporting.cruise import run_cruise
 
 MAPS = ["m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u"]
@@ -70,9 +71,9 @@ def part_oracle(args) -> dict:
     rows_all = []
     for m in MAPS:
         t0 = time.perf_counter()
-        res = run_cruise(painted_sources(m, args.garages, seed=0), args.tests, "oracle", workers=args.workers,
-                         seed=0, out_dir=args.out / "oracle" / m, action_type="continuous",
-                         env={"scenario": ACTORS}, xosc=True)
+        res = run_cruise(painted_sources(m, args.garages, seed=0), args.tests,
+                         CruiseSettings("oracle", seed=0, action_type="continuous", env={"scenario": ACTORS}),
+                         args.out / "oracle" / m, xosc=True, compute=Compute(workers=args.workers))
         out["maps"][m] = {**_rates(res.rows), "wall_s_this_call": round(time.perf_counter() - t0, 1)}
         rows_all += res.rows
         print(m, out["maps"][m], flush=True)
@@ -118,9 +119,10 @@ def part_density(args) -> dict:
     points = []
     for p, mc, c in DENSITIES:
         scen = {"pedestrians": p, "moving_cars": mc, "clutter": c}
-        res = run_cruise(srcs, args.density_tests, "vision", workers=args.workers, seed=0,
-                         out_dir=args.out / "density" / f"p{p}_m{mc}_c{c}", action_type="continuous",
-                         env={"scenario": scen} if p + mc + c else {})
+        settings = CruiseSettings("vision", seed=0, action_type="continuous",
+                                  env={"scenario": scen} if p + mc + c else {})
+        res = run_cruise(srcs, args.density_tests, settings, args.out / "density" / f"p{p}_m{mc}_c{c}",
+                         compute=Compute(workers=args.workers))
         r = _rates(res.rows)
         points.append({"actors_per_test": p + mc + c, **scen, **r})
         print("density", points[-1], flush=True)

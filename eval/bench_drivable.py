@@ -19,7 +19,8 @@ import time
 from pathlib import Path
 
 from garage_mj import list_maps
-from garage_mj.driving.sources import CruiseSource, painted_sources
+from garage_mj.core.backends import Compute
+from garage_mj.driving.sources import CruiseSettings, CruiseSource, painted_sources
 from garage_mj.grid.garage import Garage
 from garage_mj.reporting.cruise import run_cruise
 
@@ -54,8 +55,8 @@ def main(argv: list[str] | None = None) -> int:
         for name, sources in groups.items():
             t0 = time.perf_counter()
             folder = args.out / f"{driver}_{action}" / name.split(" ")[0]
-            res = run_cruise(sources, args.tests, driver=driver, workers=args.workers, seed=args.seed,
-                             out_dir=folder, action_type=action, progress=False)
+            res = run_cruise(sources, args.tests, CruiseSettings(driver, seed=args.seed, action_type=action),
+                             folder, compute=Compute(workers=args.workers, progress=False))
             s = res.stats
             row = {"driver": driver, "action_type": action, "group": name, "garages": len(sources),
                    "tests": s["tests"], "infeasible": s["infeasible"],

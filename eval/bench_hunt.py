@@ -24,8 +24,9 @@ import json
 import time
 from pathlib import Path
 
+from garage_mj.core.backends import Compute
 from garage_mj.driving.hunt import HuntConfig
-from garage_mj.driving.sources import CruiseSource
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library
 from garage_mj.reporting.cruise import run_cruise
 from garage_mj.reporting.hunt import hunt
@@ -46,8 +47,9 @@ def _rate(rows: list[dict]) -> dict:
 
 def _holdout(srcs: list[CruiseSource], args, out: Path) -> dict:
     """``--holdout-tests`` fresh tests per garage: indices HOLDOUT_FIRST.. via a shifted run seed."""
-    res = run_cruise(srcs, args.holdout_tests, args.driver, args.workers, args.seed + HOLDOUT_FIRST, out,
-                     action_type=args.action_type, progress=False)
+    res = run_cruise(srcs, args.holdout_tests,
+                     CruiseSettings(args.driver, seed=args.seed + HOLDOUT_FIRST, action_type=args.action_type),
+                     out, compute=Compute(workers=args.workers, progress=False))
     return _rate(res.rows)
 
 
@@ -70,10 +72,11 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=Path("docs/bench_hunt.json"))
     args = ap.parse_args()
     t0 = time.perf_counter()
-    res = hunt(args.driver, args.out / "hunt", map=args.map, library=args.library, seed=args.seed,
+    res = hunt(CruiseSettings(args.driver, seed=args.seed, action_type=args.action_type), args.out / "hunt",
+               map=args.map, library=args.library,
                config=HuntConfig(budget=args.budget, tests=args.tests, population=args.population,
                                  elites=args.elites, worst=3),
-               action_type=args.action_type, workers=args.workers, videos=True)
+               compute=Compute(workers=args.workers), videos=True)
     hunt_s = time.perf_counter() - t0
     hunt_rows = [r for s in res.ranked for r in s.rows]
     n_uniform = args.budget // args.tests
@@ -81,8 +84,9 @@ def main() -> None:
         recs = lib.verified(lib.sample(n_uniform, args.seed + 1, stratify=None, map=args.map))
     uniform = [CruiseSource.from_record(r) for r in recs]
     t1 = time.perf_counter()
-    uni = run_cruise(uniform, args.tests, args.driver, args.workers, args.seed, args.out / "uniform",
-                     action_type=args.action_type, progress=False)
+    uni = run_cruise(uniform, args.tests,
+                     CruiseSettings(args.driver, seed=args.seed, action_type=args.action_type),
+                     args.out / "uniform", compute=Compute(workers=args.workers, progress=False))
     uniform_s = time.perf_counter() - t1
     top = [s.source for s in res.ranked if s.feasible][: args.top]
     result = {

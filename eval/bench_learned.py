@@ -51,6 +51,7 @@ from pathlib import Path
 from typing import Any
 
 from garage_mj.cli._common import positive_int
+from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.driving.actors.config import load_scenario_config
@@ -229,6 +230,7 @@ def check_drivers(specs: dict[str, str]) -> dict[str, Any]:
 
 
 def run_all(sets: dict[str, GarageSet], scenarios: list[str], specs: dict[str, str], args) -> None:
+    from garage_mj.driving.sources import CruiseSettings
     from garage_mj.reporting.cruise import run_cruise
 
     choices = check_drivers(specs)
@@ -239,8 +241,10 @@ def run_all(sets: dict[str, GarageSet], scenarios: list[str], specs: dict[str, s
         print(f"[{k}/{len(cells)}] {set_name} / {scen} / {specs[drv]}: {len(srcs)} garages x {args.tests} tests "
               f"-> {out}", flush=True)
         start = time.perf_counter()
-        res = run_cruise(srcs, args.tests, specs[drv], args.workers, args.seed, out, action_type=choices[drv],
-                         occupancy=OCCUPANCY, env=scenario_env(scen), progress=not args.quiet)
+        res = run_cruise(srcs, args.tests,
+                         CruiseSettings(specs[drv], seed=args.seed, occupancy=OCCUPANCY, env=scenario_env(scen)),
+                         out, compute=Compute(workers=args.workers, progress=not args.quiet),
+                         choice=choices[drv])
         s = res.stats
         print(f"  success {s['success_pct']}% of {s['feasible']} feasible ({s['infeasible']} infeasible), "
               f"failures {s['failures']}; {res.tests_run} new tests in {time.perf_counter() - start:.0f} s",

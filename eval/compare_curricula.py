@@ -60,6 +60,7 @@ from pathlib import Path
 from typing import Any
 
 from garage_mj.cli._common import positive_int, seed_list
+from garage_mj.core.backends import Compute
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, write_json
@@ -215,6 +216,7 @@ def read_training(out: Path) -> dict[str, Any] | None:
 # -- evaluation ---------------------------------------------------------------------------------------
 def eval_all(args: argparse.Namespace, sets: dict[str, GarageSet]) -> None:
     """Every finished model on every held-out set x scenario (resumable cruise runs)."""
+    from garage_mj.driving.sources import CruiseSettings
     from garage_mj.reporting.cruise import run_cruise
 
     models = {run_name(c, s): args.out / run_name(c, s) / MODEL for s in args.seeds for c in args.curricula}
@@ -231,9 +233,10 @@ def eval_all(args: argparse.Namespace, sets: dict[str, GarageSet]) -> None:
         out = args.out / "eval" / set_name / scen / name
         print(f"[{k}/{len(cells)}] {name} on {set_name} / {scen}: {len(srcs)} garages x {args.tests} tests "
               f"-> {out}", flush=True)
-        res = run_cruise(srcs, args.tests, specs[name], args.workers, args.eval_seed, out,
-                         action_type=choices[name], occupancy=bench.OCCUPANCY, env=bench.scenario_env(scen),
-                         progress=not args.quiet)
+        settings = CruiseSettings(specs[name], seed=args.eval_seed, occupancy=bench.OCCUPANCY,
+                                  env=bench.scenario_env(scen))
+        res = run_cruise(srcs, args.tests, settings, out,
+                         compute=Compute(workers=args.workers, progress=not args.quiet), choice=choices[name])
         s = res.stats
         print(f"  success {s['success_pct']}% of {s['feasible']} feasible; {res.tests_run} new tests", flush=True)
 

@@ -21,8 +21,9 @@ import time
 from pathlib import Path
 
 from garage_mj.cli._common import seed_list
+from garage_mj.core.backends import Compute
 from garage_mj.driving.difficulty.regression import PAPER_R
-from garage_mj.driving.sources import CruiseSource, painted_sources
+from garage_mj.driving.sources import CruiseSettings, CruiseSource, painted_sources
 from garage_mj.reporting.cruise import run_cruise
 
 MAP = "m5_13x13_aligned"
@@ -73,8 +74,9 @@ def main(argv: list[str] | None = None) -> int:
           f"-{max(s.difficulty for s in sources):.3f}) x {n_tests} tests, driver {args.driver} with "
           f"{args.action_type} actions, {args.workers} workers")
     start = time.perf_counter()
-    res = run_cruise(sources, n_tests, args.driver, args.workers, args.seed, args.out,
-                     action_type=args.action_type)
+    res = run_cruise(sources, n_tests,
+                     CruiseSettings(args.driver, seed=args.seed, action_type=args.action_type), args.out,
+                     compute=Compute(workers=args.workers))
     wall = time.perf_counter() - start
     s = res.stats
     r = "n/a (constant success or difficulty)" if s["r"] is None else f"{s['r']:.3f}"

@@ -53,23 +53,25 @@ def run(out: Path, workers: int, parts: list[str]) -> None:
     """Drive the fixed sets with the imported garage_mj into ``out/<part>``."""
     import garage_mj
     from garage_mj import list_maps
+    from garage_mj.core.backends import Compute
     from garage_mj.driving.cruise import run_cruise
-    from garage_mj.driving.sources import painted_sources
+    from garage_mj.driving.sources import CruiseSettings, painted_sources
 
     tree = Path(garage_mj.__file__).resolve().parent.parent
     print(f"garage_mj from {tree}", flush=True)
     if "vision" in parts:
         t0 = time.perf_counter()
-        res = run_cruise(painted_sources(VISION_MAP, VISION_GARAGES, seed=SEED), VISION_TESTS, driver="vision",
-                         workers=workers, seed=SEED, out_dir=out / "vision", action_type="continuous", progress=False)
+        res = run_cruise(painted_sources(VISION_MAP, VISION_GARAGES, seed=SEED), VISION_TESTS,
+                         CruiseSettings("vision", seed=SEED, action_type="continuous"), out / "vision",
+                         compute=Compute(workers=workers, progress=False))
         print(f"vision: {res.stats['tests']} tests, success {res.stats['success_pct']}%, failures "
               f"{res.stats['failures']}, {time.perf_counter() - t0:.0f} s", flush=True)
     if "oracle" in parts:
         sources = [s for m in list_maps() for s in painted_sources(m.name, ORACLE_GARAGES, seed=SEED)]
         sources += _shape_sources(tree)
         t0 = time.perf_counter()
-        res = run_cruise(sources, ORACLE_TESTS, driver="oracle", workers=workers, seed=SEED, out_dir=out / "oracle",
-                         action_type="continuous", progress=False)
+        res = run_cruise(sources, ORACLE_TESTS, CruiseSettings("oracle", seed=SEED, action_type="continuous"),
+                         out / "oracle", compute=Compute(workers=workers, progress=False))
         print(f"oracle: {res.stats['tests']} tests, {res.stats['infeasible']} infeasible, success "
               f"{res.stats['success_pct']}% of feasible, failures {res.stats['failures']}, "
               f"{time.perf_counter() - t0:.0f} s", flush=True)

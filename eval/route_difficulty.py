@@ -67,7 +67,9 @@ def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, te
             exclude: frozenset[str] = frozenset()) -> dict[str, Path]:
     """Run (resumably) ``tests`` cruise tests (or ``tests[driver]``) of each driver on the garages; returns
     driver -> run folder. The garages: ``per_map`` of each map drawn with ``sample_seed``, none of ``exclude``."""
+    from garage_mj.core.backends import Compute
     from garage_mj.driving.garage_set import GarageSet
+    from garage_mj.driving.sources import CruiseSettings
     from garage_mj.reporting.cruise import run_cruise
 
     sources = []
@@ -83,7 +85,8 @@ def collect(library: Path, out: Path, drivers, maps, run_seeds, per_map: int, te
                 shutil.copy(reuse[driver] / name, run / name)
         n = tests[driver] if isinstance(tests, dict) else tests
         print(f"{tag}: {len(sources)} garages x {n} tests, driver {driver} -> {run}", flush=True)
-        run_cruise(sources, n, driver, workers, 0, run, action_type=action_type)
+        run_cruise(sources, n, CruiseSettings(driver, seed=0, action_type=action_type), run,
+                   compute=Compute(workers=workers))
         runs[driver] = run
     return runs
 

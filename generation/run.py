@@ -19,6 +19,7 @@ import json
 import sys
 from pathlib import Path
 
+from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.progress import format_progress, protocol_progress
 from garage_mj.generation.protocol import load_protocol
@@ -51,8 +52,9 @@ def main(argv: list[str] | None = None) -> int:
             print(format_progress(protocol_progress(protocol, out), title))
             return 0
         print(format_progress(protocol_progress(protocol, out), title) if not args.no_progress else title, flush=True)
-        summary = run_experiment(protocol, out, workers=args.workers, progress=not args.no_progress,
-                                 backend=args.backend, address=args.address)
+        compute = Compute(workers=args.workers, backend=args.backend, address=args.address,
+                          progress=not args.no_progress)
+        summary = run_experiment(protocol, out, compute=compute)
     except GarageMJError as exc:  # a bad config, map, library, run folder, backend ...: one line
         print(f"run.py: error: {exc}", file=sys.stderr)
         return 2

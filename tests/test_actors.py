@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from garage_mj.cli import main
+from garage_mj.core.backends import Compute
 from garage_mj.core.config import ConfigError
 from garage_mj.driving.actors.config import ScenarioConfig, load_scenario_config
 from garage_mj.driving.actors.judging import judge
@@ -18,6 +19,7 @@ from garage_mj.driving.cruise import read_tests, run_cruise
 from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
+from garage_mj.driving.sources import CruiseSettings
 from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import drive_planner
@@ -171,10 +173,10 @@ def test_oracle_yields_and_wins_with_actors(m5):
 def test_cruise_actors_xosc_replay_and_workers(tmp_path):
     g = paint_garage("tiny_7x11", 2)
     env = {"scenario": {"pedestrians": 1, "moving_cars": 1, "clutter": 1}}
-    one = run_cruise([g], 3, "waypoint", workers=1, out_dir=tmp_path / "w1", action_type="continuous", env=env,
-                     xosc=True, progress=False)
-    two = run_cruise([g], 3, "waypoint", workers=2, out_dir=tmp_path / "w2", action_type="continuous", env=env,
-                     progress=False)
+    one = run_cruise([g], 3, CruiseSettings("waypoint", action_type="continuous", env=env), tmp_path / "w1",
+                     xosc=True, compute=Compute(workers=1, progress=False))
+    two = run_cruise([g], 3, CruiseSettings("waypoint", action_type="continuous", env=env), tmp_path / "w2",
+                     compute=Compute(workers=2, progress=False))
     def key(rows):
         return sorted(tuple(v for k, v in r.items() if k != "wall_s") for r in rows)
 

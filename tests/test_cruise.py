@@ -9,6 +9,7 @@ import cv2
 import pytest
 
 from garage_mj.cli import main
+from garage_mj.core.backends import Compute
 from garage_mj.driving.difficulty.regression import (
     PAPER_R,
     PAPER_TABLE,
@@ -23,6 +24,7 @@ from garage_mj.grid.painters import paint_garage
 from garage_mj.reporting.cruise import pick_tests, run_cruise, video_name
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
+QUIET = Compute(progress=False)  # one process, no progress bar
 
 
 @pytest.fixture(scope="module")
@@ -70,16 +72,18 @@ def test_test_seeds_depend_only_on_seed_garage_and_index():
 
 def test_append_resume_no_duplicates_no_loss(garages, tmp_path):
     out = tmp_path / "run"
-    first = run_cruise(garages, 2, "waypoint", seed=5, out_dir=out, env=FAST, max_tests=3, progress=False)
+    first = run_cruise(garages, 2, CruiseSettings("waypoint", seed=5, env=FAST), out, max_tests=3,
+                       compute=QUIET)
     assert first.tests_run == 3 and len(rows_of(out / "tests.csv")) == 3  # "interrupted" after 3
     before = rows_of(out / "tests.csv")
-    second = run_cruise(garages, 2, "waypoint", seed=5, out_dir=out, env=FAST, progress=False)
+    second = run_cruise(garages, 2, CruiseSettings("waypoint", seed=5, env=FAST), out, compute=QUIET)
     after = rows_of(out / "tests.csv")
     assert second.tests_run == 1 and after[:3] == before
     assert sorted((r["garage_hash"], r["test"]) for r in after) == sorted(
         {(r["garage_hash"], r["test"]) for r in after})
     assert len(after) == 4
-    assert run_cruise(garages, 2, "waypoint", seed=5, out_dir=out, env=FAST, progress=False).tests_run == 0
+    assert run_cruise(garages, 2, CruiseSettings("waypoint", seed=5, env=FAST), out,
+                      compute=QUIET).tests_run == 0
     summary = rows_of(out / "summary.csv")
     assert [int(r["tests"]) for r in summary] == [2, 2]
     assert set(summary[0]) >= {"garage", "difficulty", "E[X]", "E[Y]", "collisions", "timeouts", "deadlocks",
@@ -99,31 +103,34 @@ def test_another_action_type_is_warned_recorded_and_resumes(garages, tmp_path):
     out = tmp_path / "discrete"
     with pytest.warns(ActionTypeWarning, match="driver 'waypoint' is made for continuous actions but runs with "
                                                "discrete ones"):
-        first = run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, action_type="discrete", progress=False)
+        first = run_cruise(garages[:1], 1, CruiseSettings("waypoint", action_type="discrete", env=FAST), out,
+                           compute=QUIET)
     run = json.loads((out / "run.json").read_text())
     stats = json.loads((out / "summary.json").read_text())
     assert (run["action_type"], run["action_type_from"]) == ("discrete", "--action-type")
     assert (stats["action_type"], stats["action_type_from"]) == ("discrete", "--action-type")
     assert first.action_label == "discrete actions from --action-type; the driver's own: continuous"
     with pytest.warns(ActionTypeWarning):
-        again = run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, action_type="discrete", progress=False)
+        again = run_cruise(garages[:1], 1, CruiseSettings("waypoint", action_type="discrete", env=FAST), out,
+                           compute=QUIET)
     assert again.tests_run == 0  # the same settings: resumed
     with pytest.raises(CruiseError, match='other settings \\(action_type "discrete" there, "continuous" now\\); '
                                           'use another --out or the same settings to resume it '
                                           '\\(--action-type discrete\\)'):
-        run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, progress=False)
+        run_cruise(garages[:1], 1, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
 
 
 def test_a_run_json_without_action_type_from_resumes(garages, tmp_path):
     # a folder from before action types were the driver's own: its run.json has an explicit action_type only
     out = tmp_path / "old"
-    run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, action_type="continuous", progress=False)
+    run_cruise(garages[:1], 1, CruiseSettings("waypoint", action_type="continuous", env=FAST), out,
+               compute=QUIET)
     run = json.loads((out / "run.json").read_text())
     assert run.pop("action_type_from") == "--action-type"
     (out / "run.json").write_text(json.dumps(run))
-    assert run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, progress=False).tests_run == 0
-    assert run_cruise(garages[:1], 1, "waypoint", out_dir=out, env=FAST, action_type="continuous",
-                      progress=False).tests_run == 0
+    assert run_cruise(garages[:1], 1, CruiseSettings("waypoint", env=FAST), out, compute=QUIET).tests_run == 0
+    assert run_cruise(garages[:1], 1, CruiseSettings("waypoint", action_type="continuous", env=FAST), out,
+                      compute=QUIET).tests_run == 0
 
 
 def fake_row(source: CruiseSource, test: int, outcome: str, reason: str = "") -> dict:
@@ -165,25 +172,35 @@ def test_videos_show_failures_first(garages):
 
 def test_a_torn_last_line_is_dropped_and_rerun(garages, tmp_path):
     out = tmp_path / "torn"
-    run_cruise(garages[:1], 2, "waypoint", out_dir=out, env=FAST, progress=False)
+    run_cruise(garages[:1], 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
     good = rows_of(out / "tests.csv")
     text = (out / "tests.csv").read_text()
     (out / "tests.csv").write_text(text[: len(text) - 20])  # crash in the middle of the last row
     assert len(read_tests(out / "tests.csv")) == 1
-    again = run_cruise(garages[:1], 2, "waypoint", out_dir=out, env=FAST, progress=False)
+    again = run_cruise(garages[:1], 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
     assert again.tests_run == 1
     assert [r["outcome"] for r in rows_of(out / "tests.csv")] == [r["outcome"] for r in good]
 
 
+def test_occupancy_is_a_setting_not_an_env_keyword():
+    with pytest.raises(CruiseError, match="occupancy is a cruise setting of its own"):
+        CruiseSettings("waypoint", env={"occupancy": 0.2})
+    split = CruiseSettings.from_env_kwargs("waypoint", {"occupancy": 0.2, "camera": False}, seed=3)
+    assert (split.occupancy, split.env, split.seed) == (0.2, {"camera": False}, 3)
+    assert CruiseSettings.from_env_kwargs("waypoint", None).occupancy == CruiseSettings().occupancy
+
+
 def test_other_settings_are_refused(garages, tmp_path):
-    run_cruise(garages[:1], 1, "waypoint", out_dir=tmp_path, env=FAST, progress=False)
+    run_cruise(garages[:1], 1, CruiseSettings("waypoint", env=FAST), tmp_path, compute=QUIET)
     with pytest.raises(CruiseError, match="other settings .*driver"):
-        run_cruise(garages[:1], 1, "vision", out_dir=tmp_path, env=FAST, progress=False)
+        run_cruise(garages[:1], 1, CruiseSettings("vision", env=FAST), tmp_path, compute=QUIET)
 
 
 def test_results_do_not_depend_on_the_worker_count(garages, tmp_path):
-    one = run_cruise(garages, 2, "vision", workers=1, out_dir=tmp_path / "w1", env=FAST, progress=False)
-    two = run_cruise(garages, 2, "vision", workers=2, out_dir=tmp_path / "w2", env=FAST, progress=False)
+    one = run_cruise(garages, 2, CruiseSettings("vision", env=FAST), tmp_path / "w1",
+                     compute=Compute(workers=1, progress=False))
+    two = run_cruise(garages, 2, CruiseSettings("vision", env=FAST), tmp_path / "w2",
+                     compute=Compute(workers=2, progress=False))
 
     def key(rows):
         return sorted(tuple(v for k, v in r.items() if k != "wall_s") for r in rows)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from garage_mj.core.backends import Compute
 from garage_mj.core.config import ConfigError
 from garage_mj.generation.library import Library
 from garage_mj.generation.protocol import load_protocol
@@ -46,13 +47,13 @@ def test_run_then_rerun_skips(tmp_path):
     path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 800\n"
                     "[dqn]\ncheckpoint_every = 400\nlearning_starts = 400\n")
     protocol = load_protocol(path)
-    first = run_experiment(protocol, tmp_path / "out", progress=False)
+    first = run_experiment(protocol, tmp_path / "out", compute=Compute(progress=False))
     assert sorted(first["trained"]) == [("tiny_7x11", 0), ("tiny_7x11", 1)] and first["skipped"] == []
     with Library(tmp_path / "out" / "library.sqlite") as lib:
         runs = {r.run for r in lib.query()}
         assert lib.count() == first["garages"]["tiny_7x11"] >= 1
     assert all(r.startswith("tiny_7x11_s") for r in runs)
     assert any(f.endswith("convergence.png") for f in first["figures"])
-    second = run_experiment(protocol, tmp_path / "out", progress=False)
+    second = run_experiment(protocol, tmp_path / "out", compute=Compute(progress=False))
     assert second["trained"] == [] and len(second["skipped"]) == 2
     assert second["garages"] == first["garages"]

@@ -519,7 +519,9 @@ def test_kill_9_during_the_first_cruise_test_then_resume(pack_dir, tmp_path):
 
 
 def test_an_empty_tests_csv_is_repaired_not_mangled(tiny, tmp_path):
+    from garage_mj.core.backends import Compute
     from garage_mj.driving.cruise import run_cruise
+    from garage_mj.driving.sources import CruiseSettings
 
     out = tmp_path / "c"
     out.mkdir()
@@ -527,7 +529,7 @@ def test_an_empty_tests_csv_is_repaired_not_mangled(tiny, tmp_path):
     (out / ".summary.csv.k1ll3d.tmp").write_text("half")  # a killed run's atomic-write temp file
     fast = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}
     for _ in range(3):
-        run_cruise([tiny], 2, "waypoint", out_dir=out, env=fast, progress=False)
+        run_cruise([tiny], 2, CruiseSettings("waypoint", env=fast), out, compute=Compute(progress=False))
     with open(out / "tests.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert [r["test"] for r in rows] == ["0", "1"]

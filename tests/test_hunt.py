@@ -10,15 +10,17 @@ import pytest
 
 from garage_mj.cli import main
 from garage_mj.cli.hunt import failure_summary
+from garage_mj.core.backends import Compute
 from garage_mj.driving.drivers import ActionTypeWarning
 from garage_mj.driving.hunt import FAILURE_COLUMNS, HuntConfig, HuntError, HuntResult, Scored, rerun
-from garage_mj.driving.sources import CruiseSource
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library
 from garage_mj.generation.search import replay
 from garage_mj.grid.painters import paint_garage
 from garage_mj.reporting.hunt import hunt
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
+QUIET = Compute(progress=False)  # one process, no progress bar
 CFG = HuntConfig(budget=16, tests=2, population=4, elites=2, worst=1)
 
 
@@ -27,8 +29,8 @@ def hunted(tmp_path_factory):
     out = tmp_path_factory.mktemp("hunt") / "h"
     # discrete actions make waypoint fail often (it is made for continuous ones): one warning for the whole hunt
     with pytest.warns(ActionTypeWarning, match="driver 'waypoint' is made for continuous actions") as caught:
-        res = hunt("waypoint", out, map="tiny_7x11", config=CFG, seed=3, action_type="discrete", env=FAST,
-                   progress=False, videos=False)
+        res = hunt(CruiseSettings("waypoint", seed=3, action_type="discrete", env=FAST), out, map="tiny_7x11",
+                   config=CFG, videos=False, compute=QUIET)
     assert len([w for w in caught if issubclass(w.category, ActionTypeWarning)]) == 1
     return out, res
 
@@ -78,14 +80,15 @@ def test_a_listed_failure_reproduces_and_a_rerun_resumes(hunted):
     assert (again["outcome"], again["time"], again["hit"]) == (row["outcome"], float(row["time"]), row["hit"])
     before = (out / "cruise" / "tests.csv").read_text()
     with pytest.warns(ActionTypeWarning):
-        res2 = hunt("waypoint", out, map="tiny_7x11", config=CFG, seed=3, action_type="discrete", env=FAST,
-                    progress=False, videos=False)
+        res2 = hunt(CruiseSettings("waypoint", seed=3, action_type="discrete", env=FAST), out, map="tiny_7x11",
+                    config=CFG, videos=False, compute=QUIET)
     assert (out / "cruise" / "tests.csv").read_text() == before  # nothing re-run
     assert [s.source.hash for s in res2.ranked] == [s.source.hash for s in res.ranked]
     with pytest.warns(ActionTypeWarning), pytest.raises(HuntError, match=r"other settings \(seed\)"):
-        hunt("waypoint", out, map="tiny_7x11", config=CFG, seed=4, action_type="discrete", env=FAST, progress=False)
+        hunt(CruiseSettings("waypoint", seed=4, action_type="discrete", env=FAST), out, map="tiny_7x11",
+             config=CFG, compute=QUIET)
     with pytest.raises(HuntError, match=r"other settings \(action_type\)"):  # waypoint's own: continuous
-        hunt("waypoint", out, map="tiny_7x11", config=CFG, seed=3, env=FAST, progress=False)
+        hunt(CruiseSettings("waypoint", seed=3, env=FAST), out, map="tiny_7x11", config=CFG, compute=QUIET)
 
 
 def test_cli_errors_are_one_line(tmp_path, capsys):

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
+from garage_mj.core.backends import Compute
 from garage_mj.driving.drivers import (
     DRIVERS,
     DriverError,
@@ -26,6 +27,7 @@ from garage_mj.driving.learning.observation import VECTOR_KEYS, learned_space
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction
+from garage_mj.driving.sources import CruiseSettings
 from garage_mj.reporting.cruise import run_cruise
 
 REPO = Path(__file__).resolve().parents[1]
@@ -262,7 +264,8 @@ def test_learned_alone_runs_the_shipped_model(tmp_path, monkeypatch, dqn_zip):
 
 def test_cruise_records_the_spec_and_builds_the_driver_from_it(dqn_zip, painted_tiny, tmp_path):
     spec = f"learned:{dqn_zip}"
-    res = run_cruise([painted_tiny], 2, spec, out_dir=tmp_path / "c", env=FAST, progress=False)
+    res = run_cruise([painted_tiny], 2, CruiseSettings(spec, env=FAST), tmp_path / "c",
+                     compute=Compute(progress=False))
     assert res.tests_run == 2
     settings = json.loads((tmp_path / "c" / "run.json").read_text())
     assert settings["driver"] == spec and settings["action_type"] == "discrete"

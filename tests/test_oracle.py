@@ -6,10 +6,11 @@ from pathlib import Path
 
 import pytest
 
+from garage_mj.core.backends import Compute
 from garage_mj.driving.cruise import run_cruise
 from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
-from garage_mj.driving.sources import CruiseSource
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.grid.garage import Garage
 
 SHAPES = Path(__file__).parent / "data" / "shapes"
@@ -28,7 +29,8 @@ def drive(env: GarageDriveEnv, seed: int):
 
 
 def test_oracle_succeeds_on_every_feasible_tiny_test_with_default_settings(painted_tiny, tmp_path):
-    res = run_cruise([painted_tiny], 8, driver="oracle", out_dir=tmp_path, progress=False)  # its own action type
+    res = run_cruise([painted_tiny], 8, CruiseSettings("oracle"), tmp_path,
+                     compute=Compute(progress=False))  # its own action type
     outcomes = [r["outcome"] for r in res.rows]
     assert "infeasible" not in outcomes  # the painted tiny garage is wholly drivable
     assert outcomes == ["success"] * 8, [(r["outcome"], r["reason"]) for r in res.rows]
@@ -63,8 +65,9 @@ def test_oracle_is_deterministic_and_stops_on_the_goal_pose(painted_tiny):
 
 def test_infeasible_tests_are_reported_not_driven(painted_tiny, tmp_path):
     # a car that cannot turn tighter than ~22 m: every test behind a turn is infeasible before the drive
-    res = run_cruise([painted_tiny], 6, driver="oracle", action_type="continuous", out_dir=tmp_path,
-                     env={"car": {"max_steer": 0.15}}, progress=False)
+    res = run_cruise([painted_tiny], 6,
+                     CruiseSettings("oracle", action_type="continuous", env={"car": {"max_steer": 0.15}}),
+                     tmp_path, compute=Compute(progress=False))
     infeasible = [r for r in res.rows if r["outcome"] == "infeasible"]
     assert infeasible and all(r["reason"] and float(r["time"]) == 0.0 and r["feasible"] == "0" for r in infeasible)
     assert all(r["feasible"] == "1" for r in res.rows if r["outcome"] != "infeasible")

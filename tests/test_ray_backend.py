@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from garage_mj.core.backends import BackendError, check_backend, map_unordered, ray_session
+from garage_mj.core.backends import BackendError, Compute, check_backend, map_unordered, ray_session
 from garage_mj.driving.cruise import run_cruise
+from garage_mj.driving.sources import CruiseSettings
 from garage_mj.generation.library import Library
 from garage_mj.generation.protocol import load_protocol
 from garage_mj.grid.painters import paint_garage
@@ -26,7 +27,7 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def ray2():
-    with ray_session(2) as ray:
+    with ray_session(Compute(workers=2, backend="ray")) as ray:
         yield ray
 
 
@@ -41,8 +42,9 @@ def rows_of(path: Path) -> list[tuple]:
         return sorted(tuple((k, v) for k, v in r.items() if k != "wall_s") for r in csv.DictReader(f))
 
 
-def _cruise(garages, out, **kw):
-    return run_cruise(garages, 2, "waypoint", 2, 3, out, action_type="continuous", env=FAST, progress=False, **kw)
+def _cruise(garages, out, backend="local", **kw):
+    return run_cruise(garages, 2, CruiseSettings("waypoint", seed=3, action_type="continuous", env=FAST), out,
+                      compute=Compute(workers=2, backend=backend, progress=False), **kw)
 
 
 def test_cruise_rows_equal_local_and_a_rerun_resumes(ray2, garages, tmp_path):
@@ -76,23 +78,24 @@ def _raise(job):
 def test_workers_get_the_env_and_a_lost_worker_is_retried_then_named(ray2, tmp_path, monkeypatch):
     monkeypatch.setenv("GARAGE_MJ_TEST_MARK", "seen")
     jobs = [str(tmp_path / n) for n in ("0die", "1", "2", "3", "4", "5")]
-    got = sorted(map_unordered(_die_once, jobs, 2, "ray", max_retries=1))
+    got = sorted(map_unordered(_die_once, jobs, compute=Compute(2, "ray"), max_retries=1))
     assert [g[0] for g in got] == ["0die", "1", "2", "3", "4", "5"]  # the lost job retried, once
     assert {g[1:3] for g in got} == {(os.environ["MUJOCO_GL"], "seen")}  # as in a spawned pool worker
     assert len({g[3] for g in got}) <= 3  # one process per worker slot (+1 restarted), not one per job
     with pytest.raises(BackendError, match="lost its worker 1 times.*run again to resume"):
-        list(map_unordered(_always_die, [0], 1, "ray", max_retries=0))
+        list(map_unordered(_always_die, [0], compute=Compute(1, "ray"), max_retries=0))
     with pytest.raises(ValueError, match="bad job 7"):  # the job's own error: as it is, no retry
-        list(map_unordered(_raise, [7], 1, "ray"))
+        list(map_unordered(_raise, [7], compute=Compute(1, "ray")))
 
 
 def test_bad_backend_fails_before_any_job():
     with pytest.raises(BackendError, match="unknown backend"):
-        check_backend("dask")
+        Compute(backend="dask")
     with pytest.raises(BackendError, match="--backend ray"):
-        check_backend("local", "10.0.0.1:6379")
+        Compute(backend="local", address="10.0.0.1:6379")
+    check_backend(Compute(backend="ray"))  # Ray is installed
     with pytest.raises(BackendError, match="cannot reach the Ray cluster at 127.0.0.1:1"):  # not minutes of retries
-        list(map_unordered(_raise, [0], 1, "ray", "127.0.0.1:1"))
+        list(map_unordered(_raise, [0], compute=Compute(1, "ray", "127.0.0.1:1")))
 
 
 def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
@@ -100,8 +103,9 @@ def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
     path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 200\n"
                     "[dqn]\ncheckpoint_every = 100\nlearning_starts = 100\n")
     protocol = load_protocol(path)
-    local = run_experiment(protocol, tmp_path / "local", progress=False)
-    remote = run_experiment(protocol, tmp_path / "ray", workers=2, progress=False, backend="ray")
+    local = run_experiment(protocol, tmp_path / "local", compute=Compute(progress=False))
+    remote = run_experiment(protocol, tmp_path / "ray",
+                            compute=Compute(workers=2, backend="ray", progress=False))
     assert sorted(remote["trained"]) == sorted(local["trained"]) == [("tiny_7x11", 0), ("tiny_7x11", 1)]
     assert remote["garages"] == local["garages"]
 
@@ -110,7 +114,8 @@ def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
             return sorted((r.run.rsplit("_", 2)[0], r.hash) for r in lib.query())
 
     assert found(tmp_path / "ray") == found(tmp_path / "local")
-    again = run_experiment(protocol, tmp_path / "ray", workers=2, progress=False, backend="ray")
+    again = run_experiment(protocol, tmp_path / "ray",
+                           compute=Compute(workers=2, backend="ray", progress=False))
     assert again["trained"] == [] and len(again["skipped"]) == 2
 
 
@@ -119,10 +124,11 @@ def test_hunt_on_ray_gives_the_local_hunt(ray2, tmp_path):
     from garage_mj.reporting.hunt import hunt
 
     cfg = HuntConfig(budget=10, tests=2, population=4, elites=1, worst=1)
-    kw = dict(map="tiny_7x11", config=cfg, seed=1, action_type="discrete", env=FAST, workers=2, progress=False,
-              videos=False)
-    local = hunt("waypoint", tmp_path / "local", **{**kw, "workers": 1})  # in-process: no pool to start
-    remote = hunt("waypoint", tmp_path / "ray", backend="ray", **kw)
+    settings = CruiseSettings("waypoint", seed=1, action_type="discrete", env=FAST)
+    kw = dict(map="tiny_7x11", config=cfg, videos=False)
+    local = hunt(settings, tmp_path / "local", compute=Compute(progress=False),
+                 **kw)  # in-process: no pool to start
+    remote = hunt(settings, tmp_path / "ray", compute=Compute(workers=2, backend="ray", progress=False), **kw)
     assert [(s.source.hash, len(s.rows), s.rate) for s in remote.ranked] == [
         (s.source.hash, len(s.rows), s.rate) for s in local.ranked]
     assert rows_of(tmp_path / "ray" / "cruise" / "tests.csv") == rows_of(tmp_path / "local" / "cruise" / "tests.csv")

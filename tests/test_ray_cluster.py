@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 
+from garage_mj.core.backends import Compute
 from garage_mj.generation.library import Library
 from garage_mj.generation.progress import protocol_progress
 from garage_mj.generation.protocol import LIBRARY, load_protocol, run_dir, run_protocol
@@ -73,9 +74,9 @@ def manifest(out: Path, seed: int) -> dict:
 def test_cluster_fills_the_library_the_local_pool_does(cluster, tmp_path, monkeypatch):
     monkeypatch.setenv(WORK_DIR_ENV, str(tmp_path / "workers"))
     protocol = _protocol(tmp_path, [0, 4], 3000, 1000)
-    local = run_protocol(protocol, tmp_path / "local", workers=2, progress=False)
+    local = run_protocol(protocol, tmp_path / "local", compute=Compute(workers=2, progress=False))
     head = tmp_path / "head"
-    remote = run_protocol(protocol, head, workers=2, progress=False, backend="ray", address=cluster.address)
+    remote = run_protocol(protocol, head, compute=Compute(2, "ray", cluster.address, progress=False))
     assert sorted(remote["trained"]) == sorted(local["trained"]) == [("tiny_7x11", 0), ("tiny_7x11", 4)]
     assert library_rows(head / LIBRARY) == library_rows(tmp_path / "local" / LIBRARY) != []
     nodes = {n["NodeID"] for n in ray.nodes() if n["Alive"]}
@@ -114,7 +115,7 @@ def test_a_lost_node_resumes_from_the_heads_checkpoint(cluster, tmp_path, monkey
     killer = threading.Thread(target=kill_when_checkpointed)
     killer.start()
     try:
-        summary = run_protocol(protocol, head, workers=2, progress=False, backend="ray", address=cluster.address)
+        summary = run_protocol(protocol, head, compute=Compute(2, "ray", cluster.address, progress=False))
     finally:
         ended.set()
         killer.join()

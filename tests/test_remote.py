@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from garage_mj.core.backends import Compute
 from garage_mj.core.errors import FolderBusy
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.generation.library import Library
@@ -67,11 +68,11 @@ def _keeper(protocol, out: Path) -> RunKeeper:
 
 def test_a_streamed_run_keeps_what_a_local_run_writes(protocol, tmp_path, monkeypatch):
     monkeypatch.setenv(WORK_DIR_ENV, str(tmp_path / "work"))
-    run_protocol(protocol, tmp_path / "local", progress=False)
+    run_protocol(protocol, tmp_path / "local", compute=Compute(progress=False))
     keeper = _keeper(protocol, tmp_path / "head")
     job = keeper.job()
     assert job.files == {} and str(tmp_path / "head") not in repr(job)  # a worker gets no path of the head's
-    (finished,) = run_remote([keeper], 1, backend="local")
+    (finished,) = run_remote([keeper], compute=Compute())  # local: here, the same stream
     assert library_rows(tmp_path / "head" / LIBRARY) == library_rows(tmp_path / "local" / LIBRARY) != []
     local, head = run_dir(tmp_path / "local", "tiny_7x11", 0), run_dir(tmp_path / "head", "tiny_7x11", 0)
     assert monitor_rows(head) == monitor_rows(local) != []
@@ -102,7 +103,7 @@ def test_a_stopped_stream_resumes_from_the_heads_checkpoint(protocol, tmp_path, 
     assert list((tmp_path / "work").iterdir()) == []
     (row,) = protocol_progress(protocol, out)
     assert (row.status, row.timesteps, row.target, row.garages) == ("resume", 500, 1500, len(before))
-    (finished,) = run_remote([_keeper(protocol, out)], 1, backend="local")
+    (finished,) = run_remote([_keeper(protocol, out)], compute=Compute())
     assert finished["status"] == "finished" and finished["timesteps"] == 1500
     assert [a["from_timesteps"] for a in finished["attempts"]] == [0, 500]
     folder = run_dir(out, "tiny_7x11", 0)
@@ -129,4 +130,4 @@ def test_status_view_and_one_protocol_per_folder(tmp_path, capsys):
     assert format_progress(rows).splitlines()[0].split() == ["map", "seed", "status", "timesteps", "garages",
                                                              "timesteps/s", "where"]
     with FolderLock(tmp_path / "busy", "another protocol"), pytest.raises(FolderBusy, match="another protocol"):
-        run_protocol(smoke, tmp_path / "busy", progress=False)
+        run_protocol(smoke, tmp_path / "busy", compute=Compute(progress=False))

@@ -9,14 +9,17 @@ import numpy as np
 import pytest
 
 from garage_mj.cli import main
+from garage_mj.core.backends import Compute
 from garage_mj.driving.difficulty import rating as route_rating
 from garage_mj.driving.difficulty.regression import pearson
+from garage_mj.driving.sources import CruiseSettings
 from garage_mj.grid.painters import paint_garage
 from garage_mj.reporting.cruise import cruise_figure, run_cruise
 from garage_mj.scene.route_difficulty import fit, load_route_model, route_difficulty
 from tests.test_route_difficulty import _synthetic
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits keep tests quick
+QUIET = Compute(progress=False)  # one process, no progress bar
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +39,7 @@ def _summary(out):
 
 def test_summary_has_route_difficulty_beside_the_papers_and_route_r(garages, shipped, tmp_path, monkeypatch):
     out = tmp_path / "run"
-    res = run_cruise(garages, 2, "waypoint", out_dir=out, env=FAST, progress=False)
+    res = run_cruise(garages, 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
     rows = _summary(out)
     header = list(rows[0])
     assert header[header.index("difficulty") + 1] == "route_difficulty"
@@ -58,7 +61,7 @@ def test_summary_has_route_difficulty_beside_the_papers_and_route_r(garages, shi
     # a re-run (here: a new process, nothing in memory) reads the values back instead of planning again
     monkeypatch.setattr(route_rating, "_MEMO", {})
     monkeypatch.setattr(route_rating, "route_difficulty", lambda *a: pytest.fail("route difficulty recomputed"))
-    again = run_cruise(garages, 2, "waypoint", out_dir=out, env=FAST, progress=False)
+    again = run_cruise(garages, 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
     assert again.tests_run == 0 and _summary(out) == rows and again.stats == stats
 
 
@@ -67,7 +70,7 @@ def test_summary_json_regresses_success_on_both_difficulties(garages, tmp_path):
 
     from garage_mj.driving.difficulty.regression import regression
     from garage_mj.driving.results import write_outputs
-    from garage_mj.driving.sources import CruiseSettings, CruiseSource
+    from garage_mj.driving.sources import CruiseSource
     from tests.test_cruise import fake_row
 
     srcs = [CruiseSource.from_garage(g) for g in garages]
@@ -91,7 +94,7 @@ def test_the_shipped_learned_driver_gets_its_own_route_model(garages, tmp_path):
     assert driver_route_model("learned") == "learned"
     assert driver_route_model("learned", {"model": "other.zip"}) is None  # another learned model: the default
     assert driver_route_model("vision") is None and driver_route_model("learned:other.zip") is None
-    res = run_cruise(garages[:1], 1, "learned", out_dir=tmp_path / "l", env=FAST, progress=False)
+    res = run_cruise(garages[:1], 1, CruiseSettings("learned", env=FAST), tmp_path / "l", compute=QUIET)
     own = load_route_model("learned")
     assert res.stats["route_model"] == own.key
     assert float(_summary(tmp_path / "l")[0]["route_difficulty"]) == pytest.approx(
@@ -102,12 +105,13 @@ def test_another_model_or_none(garages, shipped, tmp_path):
     mine = tmp_path / "mine.json"
     model = fit(*_synthetic())
     model.save(mine)
-    res = run_cruise(garages[:1], 1, "waypoint", out_dir=tmp_path / "mine", env=FAST, progress=False, route_model=mine)
+    res = run_cruise(garages[:1], 1, CruiseSettings("waypoint", env=FAST), tmp_path / "mine", route_model=mine,
+                     compute=QUIET)
     assert res.stats["route_model"] == model.key != shipped.key
     assert float(_summary(tmp_path / "mine")[0]["route_difficulty"]) == pytest.approx(
         route_difficulty(garages[0], model), abs=1e-4)
-    none = run_cruise(garages[:1], 1, "waypoint", out_dir=tmp_path / "none", env=FAST, progress=False,
-                      route_model=False)
+    none = run_cruise(garages[:1], 1, CruiseSettings("waypoint", env=FAST), tmp_path / "none",
+                      route_model=False, compute=QUIET)
     assert _summary(tmp_path / "none")[0]["route_difficulty"] == ""
     assert none.stats["route_r"] is None and none.stats["route_model"] is None
     assert not (tmp_path / "none" / "regression_route.png").exists()
@@ -115,7 +119,7 @@ def test_another_model_or_none(garages, shipped, tmp_path):
 
 def test_an_old_run_folder_still_draws(garages, tmp_path):
     out = tmp_path / "old"
-    run_cruise(garages[:2], 1, "waypoint", out_dir=out, env=FAST, progress=False)
+    run_cruise(garages[:2], 1, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
     rows = _summary(out)
     with open(out / "summary.csv", "w", newline="") as f:  # summary.csv as an older garage-mj wrote it
         w = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "route_difficulty"], extrasaction="ignore")

@@ -169,10 +169,13 @@ def test_shipped_models_load_by_name(tmp_path, monkeypatch, painted_tiny):
 
 @pytest.mark.filterwarnings("ignore::garage_mj.driving.drivers.ActionTypeWarning")
 def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage, capsys):
+    from garage_mj.core.backends import Compute
+    from garage_mj.driving.sources import CruiseSettings
     from garage_mj.reporting.cruise import run_cruise
 
     run = tmp_path / "run"
-    run_cruise([painted_tiny, junction_garage], 8, "waypoint", 1, 0, run, action_type="discrete", progress=False)
+    run_cruise([painted_tiny, junction_garage], 8, CruiseSettings("waypoint", seed=0, action_type="discrete"),
+               run, compute=Compute(workers=1, progress=False))
     assert (run / "garages.json").is_file()
     out = tmp_path / "mine.json"
     assert main(["difficulty", "fit", str(run), "--out", str(out)]) == 0
@@ -187,7 +190,8 @@ def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage
     assert "attainable_r" in score["waypoint"] and len(score["waypoint"]["attainable_r_ci95"]) == 2
     assert "between_drivers" not in score  # one driver: nothing to compare
     other = tmp_path / "oracle"
-    run_cruise([painted_tiny, junction_garage], 4, "oracle", 1, 0, other, progress=False)
+    run_cruise([painted_tiny, junction_garage], 4, CruiseSettings("oracle", seed=0), other,
+               compute=Compute(workers=1, progress=False))
     assert main(["difficulty", "score", str(run), str(other), "--json", str(tmp_path / "s2.json")]) == 0
     assert "between drivers" in capsys.readouterr().out
     pair = json.loads((tmp_path / "s2.json").read_text())["between_drivers"]["oracle+waypoint"]

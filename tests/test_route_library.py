@@ -9,6 +9,7 @@ import sqlite3
 import pytest
 
 from garage_mj.cli import main
+from garage_mj.core.backends import Compute
 from garage_mj.driving.difficulty import rating as route_rating
 from garage_mj.driving.difficulty.rating import rate_library
 from garage_mj.generation.library import SCHEMA_VERSION, Library, LibraryError
@@ -106,7 +107,7 @@ def test_rating_is_resumable_and_the_same_whatever_the_workers(tmp_path, garages
 
     monkeypatch.setattr(route_rating, "_rate", killed_on_the_third)
     with pytest.raises(KeyboardInterrupt):
-        rate_library(path, progress=False)
+        rate_library(path, compute=Compute(progress=False))
     monkeypatch.setattr(route_rating, "_rate", real)
     with Library(path, create=False) as lib:
         assert set(lib.route_difficulties(ids, shipped.key)) == set(ids[:2])  # both values before the kill kept
@@ -122,7 +123,7 @@ def test_rating_is_resumable_and_the_same_whatever_the_workers(tmp_path, garages
     # the same values from two workers in a fresh library
     other = tmp_path / "two.sqlite"
     _library(other, garages)
-    res = rate_library(other, shipped, workers=2, progress=False)
+    res = rate_library(other, shipped, compute=Compute(workers=2, progress=False))
     assert (res.rated, res.left, res.model_key) == (4, 0, shipped.key)
     with Library(other, create=False) as lib:
         assert lib.route_difficulties(ids, shipped.key) == one
@@ -186,7 +187,7 @@ def test_garage_set_from_library_takes_a_route_range(tmp_path, garages, shipped)
     ids = _library(path, garages)
     with pytest.raises(GarageSetError, match="garage-mj library rate"):
         GarageSet.from_library(path, route=(0.0, 1.0))
-    rate_library(path, progress=False)
+    rate_library(path, compute=Compute(progress=False))
     with Library(path, create=False) as lib:
         values = lib.route_difficulties(ids, shipped.key)
     lo = sorted(values.values())[1]

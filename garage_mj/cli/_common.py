@@ -1,4 +1,4 @@
-"""Helpers shared by the generation-stage subcommands (train, library, plot, show)."""
+"""Helpers shared by the subcommands: argument types, library filters, and the :class:`Compute` of a command."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from garage_mj.cli import UserError
+from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.scene.route_difficulty import load_route_model
 
@@ -29,6 +30,14 @@ def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse
             raise UserError(str(exc)) from None
 
     return wrapper
+
+
+def compute(args: argparse.Namespace) -> Compute:
+    """How a command runs its jobs, from its ``--workers``, ``--backend``, ``--address`` and ``--quiet`` (or
+    ``--no-progress``) flags; a flag the command does not have takes :class:`Compute`'s default."""
+    quiet = getattr(args, "quiet", False) or getattr(args, "no_progress", False)
+    return Compute(workers=getattr(args, "workers", 1), backend=getattr(args, "backend", "local"),
+                   address=getattr(args, "address", None), progress=not quiet)
 
 
 def unit_range(text: str) -> float:

@@ -14,6 +14,7 @@ from pathlib import Path
 from garage_mj.cli import UserError
 from garage_mj.cli._common import (
     add_filters,
+    compute,
     filters,
     non_negative_int,
     positive_int,
@@ -25,7 +26,7 @@ from garage_mj.core.fsutil import atomic_write, ensure_dir
 from garage_mj.driving.actors.config import load_scenario_config
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import TEST_COLUMNS
-from garage_mj.driving.sources import CruiseSource
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
 
@@ -193,9 +194,8 @@ def run(args: argparse.Namespace) -> int:
     if scen is not None:
         env["scenario"] = scen
     with action_warnings("cruise"):
-        res = run_cruise(srcs, args.tests, args.driver, args.workers, args.seed, args.out,
-                         action_type=args.action_type, occupancy=args.occupancy, progress=not args.quiet, env=env,
-                         xosc=args.xosc, backend=args.backend, address=args.address,
+        settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env)
+        res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)
     s = res.stats
     r = "n/a" if s["r"] is None else f"{s['r']:.3f}"

@@ -6,9 +6,10 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import positive_int, seed, unit_range
+from garage_mj.cli._common import compute, positive_int, seed, unit_range
 from garage_mj.cli.cruise import action_warnings, scenario
 from garage_mj.driving.hunt import HuntConfig, HuntResult
+from garage_mj.driving.sources import CruiseSettings
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,10 +68,9 @@ def run(args: argparse.Namespace) -> int:
     cfg = HuntConfig(budget=args.budget, tests=args.tests, population=args.population, elites=args.elites,
                      worst=args.worst)
     with action_warnings("hunt"):
-        res = hunt(args.driver, args.out, map=args.map if args.library is None else args.library_map,
-                   library=args.library, config=cfg, seed=args.seed, action_type=args.action_type,
-                   occupancy=args.occupancy, env=env, workers=args.workers, progress=not args.quiet,
-                   videos=not args.no_videos, backend=args.backend, address=args.address)
+        settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env)
+        res = hunt(settings, args.out, map=args.map if args.library is None else args.library_map,
+                   library=args.library, config=cfg, compute=compute(args), videos=not args.no_videos)
     print(failure_summary(res))
     print(f"ranking: {res.files['failures']}; report: {res.files['report']}")
     return 0

@@ -12,6 +12,7 @@ from garage_mj.cli import UserError
 from garage_mj.cli._common import (
     SHIPPED_ROUTE_MODELS,
     add_filters,
+    compute,
     filters,
     non_negative_int,
     positive_int,
@@ -191,8 +192,7 @@ def _rate(args: argparse.Namespace) -> int:
         maps = lib.maps()
     if args.map is not None and args.map not in maps:
         raise UserError(f"{args.library} has no garage of map {args.map!r}; maps in it: {', '.join(maps) or 'none'}")
-    res = rate_library(args.library, args.route_model, map=args.map, workers=args.workers, limit=args.limit,
-                       progress=not args.quiet)
+    res = rate_library(args.library, args.route_model, map=args.map, limit=args.limit, compute=compute(args))
     per = "" if res.seconds_per_garage is None else (
         f" in {res.seconds:.1f} s ({res.seconds_per_garage:.2f} s per garage, {res.workers} worker(s))")
     left = f"; {res.left} left (run it again)" if res.left else ""

@@ -1,4 +1,5 @@
-"""Where the long jobs run: :func:`map_unordered` over a local process pool or a Ray cluster.
+"""Where the long jobs run: :func:`map_unordered` over a local process pool or a Ray cluster, as a
+:class:`Compute` says (workers, backend, Ray address, progress bar).
 
 Used by ``garage-mj cruise`` (one job per test), ``generation/run.py`` (one job per DQN run)
 and meant for any batch of independent jobs (``garage-mj hunt``). Results come back as jobs
@@ -40,9 +41,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import multiprocessing as mp
+import numbers
 import os
 from collections import Counter, deque
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from garage_mj.core.errors import GarageMJError
@@ -63,13 +66,41 @@ class BackendError(GarageMJError):
     """The backend cannot run the batch (unknown backend, Ray missing or unreachable, a worker lost for good)."""
 
 
-def check_backend(backend: str, address: str | None = None) -> None:
-    """Fail fast, before any job, on an unknown backend, ``address`` without Ray, or Ray not installed."""
-    if backend not in BACKENDS:
-        raise BackendError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
-    if address is not None and backend != "ray":
-        raise BackendError("--address names a Ray cluster; use it with --backend ray")
-    if backend == "ray":
+@dataclass(frozen=True)
+class Compute:
+    """How a batch of jobs runs: how many at a time, where, and whether a progress bar shows.
+
+    Results never depend on it (every job carries its own seed). Built once (the CLI from
+    ``--workers``, ``--backend``, ``--address`` and ``--quiet``) and passed down whole. A bad value
+    is one :class:`BackendError` line, raised here; :func:`check_backend` also checks that Ray is there.
+    """
+
+    workers: int = 1  # processes at a time: the local pool's size, Ray actors or tasks
+    backend: str = "local"  # one of BACKENDS (module docstring)
+    address: str | None = None  # with backend "ray": a running cluster's HOST:PORT; None: a private local Ray
+    progress: bool = True  # a tqdm progress bar on stderr
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise BackendError(f"unknown backend {self.backend!r}; choose one of {', '.join(BACKENDS)}")
+        if self.address is not None and self.backend != "ray":
+            raise BackendError("--address names a Ray cluster; use it with --backend ray")
+        if self.address is not None and not isinstance(self.address, str):
+            raise BackendError(f"address must be a Ray cluster's HOST:PORT, got {self.address!r}")
+        if not isinstance(self.workers, numbers.Integral) or isinstance(self.workers, bool) or self.workers < 1:
+            raise BackendError(f"workers must be >= 1, got {self.workers!r}")
+        if not isinstance(self.progress, bool):
+            raise BackendError(f"progress must be True or False, got {self.progress!r}")
+
+
+#: One job at a time in this process, with a progress bar: what every long job does unless told otherwise.
+DEFAULT_COMPUTE = Compute()
+
+
+def check_backend(compute: Compute) -> None:
+    """Fail fast, before any job, when the backend cannot run: Ray not installed for ``backend="ray"``
+    (the values themselves were checked when ``compute`` was made)."""
+    if compute.backend == "ray":
         _ray()
 
 
@@ -82,28 +113,22 @@ def worker_env() -> dict[str, str]:
     return {k: v for k, v in os.environ.items() if k in WORKER_ENV or k.startswith(WORKER_ENV_PREFIX)}
 
 
-def _checked(jobs: Sequence[Any], workers: int, backend: str, address: str | None) -> list[Any]:
-    """``jobs`` as a list, once the backend, the address and the worker count are known to be valid."""
-    check_backend(backend, address)
-    if workers < 1:
-        raise BackendError(f"workers must be >= 1, got {workers}")
-    return list(jobs)
-
-
-def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 1, backend: str = "local",
-                  address: str | None = None, *, max_retries: int = 3) -> Iterator[Any]:
-    """``func(job)`` for every job, yielded as each ends (in no fixed order).
+def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], *, compute: Compute = DEFAULT_COMPUTE,
+                  max_retries: int = 3) -> Iterator[Any]:
+    """``func(job)`` for every job, yielded as each ends (in no fixed order), on ``compute``'s backend.
 
     ``func`` must be a module-level function (pickled by reference: a Ray node needs the same
-    package installed) and ``workers`` the number of processes (local pool size or Ray actors).
-    Closing the iterator early (an exception, Ctrl-C) stops the workers; what was yielded stays done.
+    package installed); ``compute.workers`` is the number of processes (local pool size or Ray
+    actors). ``compute.progress`` is the caller's to show. Closing the iterator early (an exception,
+    Ctrl-C) stops the workers; what was yielded stays done.
     """
-    jobs = _checked(jobs, workers, backend, address)
+    check_backend(compute)
+    jobs = list(jobs)
     if not jobs:
         return iter(())
-    if backend == "ray":
-        return _ray_map(func, jobs, workers, address, max_retries)
-    return _local_map(func, jobs, workers)
+    if compute.backend == "ray":
+        return _ray_map(func, jobs, compute, max_retries)
+    return _local_map(func, jobs, compute.workers)
 
 
 # -- local --------------------------------------------------------------------------------------------
@@ -127,7 +152,8 @@ def _ray():
 
 
 def _start(ray, workers: int, address: str | None, env: dict[str, str]) -> bool:
-    """Connect to ``address`` or start a private local Ray; True when this call started it (shut it down)."""
+    """Connect to ``address`` or start a private local Ray of ``workers`` CPUs; True when this call started it
+    (shut it down)."""
     if address is not None:
         _reachable(address)
     if ray.is_initialized():
@@ -170,13 +196,13 @@ class _Slot:
 
 
 @contextlib.contextmanager
-def ray_session(workers: int = 1, address: str | None = None) -> Iterator[Any]:
-    """Ray for a block of batches (yields the ``ray`` module): the cluster at ``address``, else a private
-    local instance of ``workers`` CPUs; shut down at the end if this call started it. Batches inside
-    (:func:`map_unordered` with ``backend="ray"``) reuse it instead of starting their own."""
+def ray_session(compute: Compute) -> Iterator[Any]:
+    """Ray for a block of batches (yields the ``ray`` module): the cluster at ``compute.address``, else a
+    private local instance of ``compute.workers`` CPUs; shut down at the end if this call started it.
+    Batches inside (:func:`map_unordered` with ``backend="ray"``) reuse it instead of starting their own."""
     ray = _ray()
     auth_mode = os.environ.get("RAY_AUTH_MODE")  # ray.init of a local instance sets it in this process
-    started = _start(ray, workers, address, worker_env())
+    started = _start(ray, compute.workers, compute.address, worker_env())
     try:
         yield ray
     finally:
@@ -188,10 +214,9 @@ def ray_session(workers: int = 1, address: str | None = None) -> Iterator[Any]:
                 os.environ["RAY_AUTH_MODE"] = auth_mode
 
 
-def _ray_map(func: Callable[[Any], Any], jobs: list, workers: int, address: str | None,
-             max_retries: int) -> Iterator[Any]:
-    with ray_session(workers, address) as ray:
-        yield from _ray_actors(ray, func, jobs, workers, max_retries)
+def _ray_map(func: Callable[[Any], Any], jobs: list, compute: Compute, max_retries: int) -> Iterator[Any]:
+    with ray_session(compute) as ray:
+        yield from _ray_actors(ray, func, jobs, compute.workers, max_retries)
 
 
 def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_retries: int) -> Iterator[Any]:
@@ -239,14 +264,15 @@ def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_r
 
 
 # -- streams ------------------------------------------------------------------------------------------
-def stream_unordered(func: Callable[[Any], Iterator[Any]], jobs: Sequence[Any], workers: int = 1,
-                     backend: str = "local", address: str | None = None, *,
-                     prepare: Callable[[Any], Any] | None = None, resume: Callable[[int, str], Any] | None = None,
-                     max_retries: int = 3, name: Callable[[int], str] | None = None) -> Iterator[tuple[int, Any]]:
+def stream_unordered(func: Callable[[Any], Iterator[Any]], jobs: Sequence[Any], *,
+                     compute: Compute = DEFAULT_COMPUTE, prepare: Callable[[Any], Any] | None = None,
+                     resume: Callable[[int, str], Any] | None = None, max_retries: int = 3,
+                     name: Callable[[int], str] | None = None) -> Iterator[tuple[int, Any]]:
     """``(job index, item)`` for every item the generator ``func(prepare(job))`` yields, as soon as it is made.
 
-    ``local``: the jobs one after another in this process. ``ray``: up to ``workers`` jobs at a time,
-    each a Ray task of one CPU on any node of the cluster at ``address`` (else a private local Ray);
+    ``compute.backend`` ``local``: the jobs one after another in this process. ``ray``: up to
+    ``compute.workers`` jobs at a time, each a Ray task of one CPU on any node of the cluster at
+    ``compute.address`` (else a private local Ray);
     the items of all of them arrive here as they are yielded. ``prepare`` (default: none) turns a job
     into what is sent, right before it is sent (so a job can carry what its folder holds then, and
     only the running jobs' payloads are in memory). A job whose worker process or node is lost (not
@@ -255,12 +281,13 @@ def stream_unordered(func: Callable[[Any], Iterator[Any]], jobs: Sequence[Any], 
     job as ``name(index)``. An exception the job raises is re-raised here as it is. Closing the
     iterator early cancels the running jobs.
     """
-    jobs = _checked(jobs, workers, backend, address)
+    check_backend(compute)
+    jobs = list(jobs)
     if not jobs:
         return iter(())
     prepare = prepare or (lambda job: job)
-    if backend == "ray":
-        return _ray_stream(func, jobs, workers, address, prepare, resume, max_retries, name or (lambda i: f"job {i}"))
+    if compute.backend == "ray":
+        return _ray_stream(func, jobs, compute, prepare, resume, max_retries, name or (lambda i: f"job {i}"))
     return ((i, item) for i, job in enumerate(jobs) for item in func(prepare(job)))
 
 
@@ -277,10 +304,11 @@ def _lost(ray) -> tuple[type, ...]:
             e.LocalRayletDiedError)
 
 
-def _ray_stream(func: Callable[[Any], Iterator[Any]], jobs: list, workers: int, address: str | None,
+def _ray_stream(func: Callable[[Any], Iterator[Any]], jobs: list, compute: Compute,
                 prepare: Callable[[Any], Any], resume: Callable[[int, str], Any] | None, max_retries: int,
                 name: Callable[[int], str]) -> Iterator[tuple[int, Any]]:
-    with ray_session(workers, address) as ray:
+    workers = compute.workers
+    with ray_session(compute) as ray:
         from ray.exceptions import RayError, RayTaskError
 
         lost, env = _lost(ray), worker_env()

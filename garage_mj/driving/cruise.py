@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from garage_mj.core.backends import check_backend, map_unordered
+from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, check_backend, map_unordered
 from garage_mj.core.fsutil import FolderLock, clean_temp, ensure_dir
 from garage_mj.driving.difficulty.rating import (
     cruise_route_difficulty,
@@ -102,14 +102,13 @@ def _jobs(sources: Sequence[CruiseSource], tests: int, done: set[tuple[str, int]
     return out
 
 
-def _results(jobs: list, workers: int, backend: str = "local", address: str | None = None
-             ) -> Iterator[dict[str, Any] | None]:
+def _results(jobs: list, compute: Compute) -> Iterator[dict[str, Any] | None]:
     """Rows as tests end (:func:`garage_mj.core.backends.map_unordered`: this process, a spawn pool or Ray actors);
     jobs come in garage order, so each worker builds each scene at most once."""
-    if backend == "ray":  # paths as this machine sees them (a cluster needs them on a shared filesystem)
+    if compute.backend == "ray":  # paths as this machine sees them (a cluster needs them on a shared filesystem)
         jobs = [(s, i, st, os.path.abspath(x) if x is not None else None, e) for s, i, st, x, e in jobs]
     try:
-        yield from map_unordered(_task, jobs, workers, backend, address)
+        yield from map_unordered(_task, jobs, compute=compute)
     finally:
         close_cached_env()  # the in-process loop's scene
 
@@ -117,63 +116,57 @@ def _results(jobs: list, workers: int, backend: str = "local", address: str | No
 def run_cruise(
     sources: Sequence[CruiseSource | Garage],
     tests: int,
-    driver: str = "vision",
-    workers: int = 1,
-    seed: int = 0,
+    settings: CruiseSettings | None = None,
     out_dir: str | Path = "cruise",
     *,
-    action_type: str | ActionChoice | None = None,
-    occupancy: float = 0.5,
-    env: dict[str, Any] | None = None,
-    driver_kwargs: dict[str, Any] | None = None,
+    compute: Compute = DEFAULT_COMPUTE,
+    choice: ActionChoice | None = None,
     max_tests: int | None = None,
-    progress: bool = True,
     xosc: bool = False,
-    backend: str = "local",
-    address: str | None = None,
     route_model: RouteDifficulty | str | Path | bool = True,
 ) -> CruiseResult:
-    """Run ``tests`` tests on every source with ``driver``; resumable (see the module docstring).
+    """Run ``tests`` tests on every source with ``settings`` (default :class:`CruiseSettings`: the
+    ``vision`` driver); resumable (see the module docstring).
 
-    ``action_type``: ``"continuous"`` or ``"discrete"``; None runs the driver with the one it declares
-    (:func:`garage_mj.driving.drivers.action_type_of`); another one than that is an
-    ``ActionTypeWarning``. An :class:`~garage_mj.driving.drivers.ActionChoice` (a caller that chose
-    already, as the hunt does once for all its runs) is used as is.
-    ``max_tests`` stops after that many new tests (a deliberate partial run); ``progress``
-    shows a tqdm bar. ``xosc`` also writes every test as OpenSCENARIO into ``out_dir/xosc/``
+    ``settings.action_type``: ``"continuous"`` or ``"discrete"``; None runs the driver with the one it
+    declares (:func:`garage_mj.driving.drivers.action_type_of`); another one than that is an
+    ``ActionTypeWarning``. ``choice``: an :class:`~garage_mj.driving.drivers.ActionChoice` made already
+    (a caller that chose once for many runs, as the hunt does) is used as is instead.
+    ``max_tests`` stops after that many new tests (a deliberate partial run). ``xosc`` also writes every
+    test as OpenSCENARIO into ``out_dir/xosc/``
     (``<garage hash 12>_<test>.xosc``, see :func:`garage_mj.driving.replay.replay_xosc`); garages without an asset pack get
-    one in ``out_dir/packs/`` for it to refer to. ``backend`` runs the tests in this process or a
-    spawn pool of ``workers`` (``"local"``) or on ``workers`` Ray actors (``"ray"``; ``address``: a
-    running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.core.backends`;
-    tests.csv gets the same rows either way. ``route_model``: the route difficulty model of
+    one in ``out_dir/packs/`` for it to refer to. ``compute`` runs the tests in this process or a
+    spawn pool of ``workers`` (backend ``"local"``) or on ``workers`` Ray actors (``"ray"``; ``address``: a
+    running cluster's ``HOST:PORT``, else a private local Ray), see :mod:`garage_mj.core.backends`, with a
+    tqdm bar when ``compute.progress``; tests.csv gets the same rows either way. ``route_model``: the route
+    difficulty model of
     ``summary.csv``'s ``route_difficulty`` column and ``summary.json``'s ``route_r`` (True: the shipped
     one of the driver, :func:`~garage_mj.driving.difficulty.rating.driver_route_model`: the learned driver's own
     for the shipped learned driver, else the default; a ``RouteDifficulty``, a model file or a shipped
     model's name; False: none, the column stays empty), planned for the
-    default car and world as the model was fitted, whatever ``env`` changes. Raises
-    :class:`CruiseError`, ``DriverError`` (bad driver), ``BackendError`` (bad backend, Ray missing),
+    default car and world as the model was fitted, whatever ``settings.env`` changes. Raises
+    :class:`CruiseError`, ``DriverError`` (bad driver), ``BackendError`` (Ray missing),
     ``RouteModelError`` (a bad model file) before any test.
     """
-    from garage_mj.driving.drivers import ActionChoice, choose_action_type
+    from garage_mj.driving.drivers import choose_action_type
 
     if tests < 1:
         raise ValueError(f"tests must be >= 1, got {tests}")
+    settings = settings if settings is not None else CruiseSettings()
     # fails fast, in this process, with the loader's one-line message on a bad driver
-    choice = action_type if isinstance(action_type, ActionChoice) else choose_action_type(driver, action_type)
-    check_backend(backend, address)
+    choice = choice if choice is not None else choose_action_type(settings.driver, settings.action_type)
+    check_backend(compute)
     if route_model is True:
-        route_model = driver_route_model(driver, driver_kwargs)
+        route_model = driver_route_model(settings.driver, settings.driver_kwargs)
     model = None if route_model is False else resolve_route_model(route_model)
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     hashes = [s.hash for s in srcs]
     if len(set(hashes)) != len(hashes):
         raise CruiseError("the same garage is listed twice; give each garage once")
-    settings = CruiseSettings(driver, int(seed), choice.action_type, float(occupancy), dict(env or {}),
-                              dict(driver_kwargs or {}))
+    settings = settings.resolved(choice.action_type)
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise"):  # a second run into `out` is refused, naming this one
-        return _run_locked(srcs, tests, workers, out, settings, choice, max_tests, progress, xosc, backend, address,
-                           model)
+        return _run_locked(srcs, tests, out, settings, choice, compute, max_tests, xosc, model)
 
 
 def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
@@ -200,9 +193,9 @@ def _write_garages(out: Path, srcs: Sequence[CruiseSource]) -> None:
         GarageSet(tuple(have + new), f"cruise run {out}").to_json(path)
 
 
-def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Path, settings: CruiseSettings,
-                choice: ActionChoice, max_tests: int | None, progress: bool, xosc: bool = False, backend: str = "local",
-                address: str | None = None, model: RouteDifficulty | None = None) -> CruiseResult:
+def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: CruiseSettings, choice: ActionChoice,
+                compute: Compute, max_tests: int | None, xosc: bool = False,
+                model: RouteDifficulty | None = None) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
     clean_temp(out)  # temp files of a killed run's atomic writes
     check_settings(out, settings, choice.source)
@@ -225,10 +218,10 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, workers: int, out: Pat
 
         if not csv_path.is_file():  # read_tests left an existing file with its header and whole lines
             write_csv(csv_path, TEST_COLUMNS, [])
-        with csv_path.open("a", newline="") as f, tqdm(total=len(jobs), disable=not progress,
+        with csv_path.open("a", newline="") as f, tqdm(total=len(jobs), disable=not compute.progress,
                                                        desc="cruise", unit="test") as bar:
             writer = csv.DictWriter(f, fieldnames=TEST_COLUMNS)
-            for row in _results(jobs, workers, backend, address):
+            for row in _results(jobs, compute):
                 if row is None:  # an export-only job
                     bar.update()
                     continue

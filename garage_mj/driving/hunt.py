@@ -38,11 +38,11 @@ import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from garage_mj.core.backends import check_backend, ray_session
+from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, check_backend, ray_session
 from garage_mj.core.config import refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir, write_json
@@ -53,6 +53,9 @@ from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library, LibraryError
 from garage_mj.generation.search import mutate, replay
 from garage_mj.grid.garage import Garage
+
+if TYPE_CHECKING:
+    from garage_mj.driving.drivers import ActionChoice
 
 #: The failure classes' count columns of ``failures.csv``, in alphabetical order (not the display order of the rest).
 _COUNTS = tuple(sorted(COUNT_COLUMNS.values()))
@@ -169,53 +172,51 @@ def _state_file(out: Path) -> Path:
     return out / "hunt.json"
 
 
-def hunt(driver: str, out_dir: str | Path, *, map: str | None = None, library: str | Path | None = None,
-         config: HuntConfig | None = None, seed: int = 0, action_type: str | None = None,
-         occupancy: float = 0.5, env: dict[str, Any] | None = None, workers: int = 1,
-         progress: bool = True, backend: str = "local", address: str | None = None,
-         **cruise_kwargs: Any) -> HuntResult:
-    """Hunt the garages where ``driver`` fails (module docstring); resumable in ``out_dir``.
+def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = None, library: str | Path | None = None,
+         config: HuntConfig | None = None, compute: Compute = DEFAULT_COMPUTE, **cruise_kwargs: Any) -> HuntResult:
+    """Hunt the garages where ``settings.driver`` fails (module docstring); resumable in ``out_dir``.
 
-    ``action_type``: None runs the driver with the one it declares; another one than that is an
-    ``ActionTypeWarning`` (once). ``hunt.json`` records the type and where it came from.
-    ``backend``/``address``: where the tests run (:mod:`garage_mj.core.backends`; one Ray session for
-    the whole hunt). The results do not depend on it. No videos: :func:`garage_mj.reporting.hunt.hunt`
-    records them after this.
+    ``settings``: the driver, the hunt's seed (start garages, mutations, test seeds), action type,
+    occupancy and env of every test. ``settings.action_type``: None runs the driver with the one it
+    declares; another one than that is an ``ActionTypeWarning`` (once). ``hunt.json`` records the type
+    and where it came from. ``compute``: where the tests run (:mod:`garage_mj.core.backends`; one Ray
+    session for the whole hunt) and the hunt's progress bar. The results do not depend on it. No
+    videos: :func:`garage_mj.reporting.hunt.hunt` records them after this.
     """
     from garage_mj.driving.drivers import choose_action_type
 
     cfg = config or HuntConfig()
     if map is None and library is None:
         raise HuntError("hunt: give a map (--map) or a library (--library)")
-    choice = choose_action_type(driver, action_type)  # a bad driver fails here; one warning for all the runs
-    action_type = choice.action_type
-    check_backend(backend, address)
-    cruise_kwargs = {**cruise_kwargs, "backend": backend, "address": address}
+    # a bad driver fails here; one warning for all the runs
+    choice = choose_action_type(settings.driver, settings.action_type)
+    settings = settings.resolved(choice.action_type)
+    check_backend(compute)
     out = ensure_dir(out_dir, "--out")
-    settings = {"driver": driver, "map": map, "library": str(Path(library).resolve()) if library else None,
-                "seed": int(seed), "action_type": action_type, "occupancy": float(occupancy), "env": env or {},
-                "config": asdict(cfg)}
-    session = ray_session(workers, address) if backend == "ray" else contextlib.nullcontext()
+    stored = {"driver": settings.driver, "map": map, "library": str(Path(library).resolve()) if library else None,
+              "seed": settings.seed, "action_type": settings.action_type, "occupancy": settings.occupancy,
+              "env": settings.env, "config": asdict(cfg)}
+    session = ray_session(compute) if compute.backend == "ray" else contextlib.nullcontext()
     with FolderLock(out, "garage-mj hunt"), session:
         state_path = _state_file(out)
         if state_path.is_file():
             old = json.loads(state_path.read_text()).get("settings") or {}
-            refuse_other_settings(old, settings, lambda diff: HuntError(
+            refuse_other_settings(old, stored, lambda diff: HuntError(
                 f"{out} holds a hunt with other settings ({', '.join(diff)}); use another --out or the same settings"))
         else:
-            write_json(state_path, {"settings": settings, "action_type_from": choice.source})
-        result = _hunt(driver, out, map, library, cfg, seed, choice, occupancy, env or {}, workers,
-                       progress, settings, cruise_kwargs)
+            write_json(state_path, {"settings": stored, "action_type_from": choice.source})
+        result = _hunt(settings, choice, out, map, library, cfg, compute, cruise_kwargs)
     result.action_type, result.action_label = choice.action_type, choice.label
     return result
 
 
-def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, choice, occupancy, env, workers,
-          progress, settings, cruise_kwargs) -> HuntResult:
+def _hunt(settings: CruiseSettings, choice: ActionChoice, out: Path, map_name: str | None,
+          library: str | Path | None, cfg: HuntConfig, compute: Compute, cruise_kwargs: dict[str, Any]) -> HuntResult:
     from tqdm import tqdm
 
-    action_type = choice.action_type
+    seed = settings.seed
     cruise_dir = out / "cruise"
+    quiet = dataclasses.replace(compute, progress=False)  # the hunt's own bar counts the tests
     scored: dict[str, Scored] = {}
     spent = 0  # tests asked for so far (finished or read back)
 
@@ -226,14 +227,14 @@ def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, choice, o
         for s, first in batch:
             by_count.setdefault(first + cfg.tests, []).append(s)
         for count, group in sorted(by_count.items()):
-            res = run_cruise([s.source for s in group], count, driver, workers, seed, cruise_dir,
-                             action_type=choice, occupancy=occupancy, env=env, progress=False, **cruise_kwargs)
+            res = run_cruise([s.source for s in group], count, settings, cruise_dir, compute=quiet, choice=choice,
+                             **cruise_kwargs)
             for s in group:
                 s.rows = [r for r in res.rows if r["garage_hash"] == s.source.hash]
         spent += cfg.tests * len(batch)
         bar.update(cfg.tests * len(batch))
 
-    bar = tqdm(total=cfg.budget, disable=not progress, desc="hunt", unit="test")
+    bar = tqdm(total=cfg.budget, disable=not compute.progress, desc="hunt", unit="test")
     start = _starting(map_name, library, cfg.population, seed)
     for s in start:
         scored[s.hash] = Scored(s)
@@ -265,7 +266,7 @@ def _hunt(driver, out: Path, map_name, library, cfg: HuntConfig, seed, choice, o
     bar.close()
     ranked = sorted(scored.values(), key=lambda s: (-(s.rate if s.feasible else -1.0), -len(s.feasible),
                                                       s.source.hash))
-    files, worst, table = _write_outputs(out, ranked, cfg, driver, seed, action_type, occupancy, env)
+    files, worst, table = _write_outputs(out, ranked, cfg, settings)
     state = json.loads(_state_file(out).read_text())
     state.update({"action_type_from": choice.source, "generations": generation,
                   "tests": sum(len(s.rows) for s in scored.values()),
@@ -285,15 +286,16 @@ def _where(rows: list[dict[str, str]]) -> str:
     return " ".join(out)
 
 
-def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str, seed: int, action_type: str,
-                   occupancy: float, env: dict) -> tuple[dict[str, Any], list[Scored], list[dict[str, Any]]]:
+def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, settings: CruiseSettings
+                   ) -> tuple[dict[str, Any], list[Scored], list[dict[str, Any]]]:
     """``hunt.sqlite``, ``failures.csv``, the worst garages' packs and .xosc files; the files, the worst
     garages and the rows of failures.csv."""
     lib_path = out / "hunt.sqlite"
     ids: dict[str, int] = {}
     with Library(lib_path) as lib:
         for s in ranked:
-            gid = lib.add(s.source.garage, map=s.source.garage.name or "garage", run=f"hunt:{driver}", seed=seed,
+            gid = lib.add(s.source.garage, map=s.source.garage.name or "garage", run=f"hunt:{settings.driver}",
+                          seed=settings.seed,
                           episode=0, timestep=0)
             ids[s.source.hash] = gid if gid is not None else (lib.id_of(s.source.hash) or -1)
     rows = []
@@ -320,16 +322,14 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, driver: str
     w.writerows(rows)
     atomic_write(out / "failures.csv", buf.getvalue())
     worst = [s for s in ranked if s.failures][: cfg.worst]
-    packs, xoscs = _export_worst(out, worst, driver, seed, action_type, occupancy, env)
+    packs, xoscs = _export_worst(out, worst, settings)
     return {"library": lib_path, "failures": out / "failures.csv", "packs": packs, "xosc": xoscs}, worst, rows
 
 
-def _export_worst(out: Path, worst: list[Scored], driver: str, seed: int, action_type: str, occupancy: float,
-                  env: dict) -> tuple[list[Path], list[Path]]:
-    """Pack and .xosc of every failing test, for each of the worst garages."""
+def _export_worst(out: Path, worst: list[Scored], settings: CruiseSettings) -> tuple[list[Path], list[Path]]:
+    """Pack and .xosc of every failing test, for each of the worst garages (``settings``: the hunt's, resolved)."""
     from garage_mj.export.pack import export_pack
 
-    settings = CruiseSettings(driver, int(seed), action_type, float(occupancy), dict(env), {})
     packs, xoscs = [], []
     try:
         for s in worst:
@@ -373,7 +373,7 @@ def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:
             raise HuntError(f"{out}/hunt.sqlite: garage {garage_hash} is not stored; run the hunt again to finish it")
         garage = lib.get(gid).garage
     src = CruiseSource.from_garage(garage, rows[0]["garage"])
-    settings = CruiseSettings(state["driver"], state["seed"], state["action_type"], state["occupancy"], state["env"], {})
+    settings = CruiseSettings.from_stored(state)
     try:
         return run_test(src, int(test), settings)
     finally:

@@ -64,14 +64,40 @@ class CruiseSource:
 
 @dataclass(frozen=True)
 class CruiseSettings:
-    """What makes two runs comparable; stored in ``run.json``."""
+    """What makes two runs comparable; stored in ``run.json`` (as :meth:`resolved` makes them).
+
+    ``occupancy`` is a setting of its own, never a key of ``env``.
+    """
 
     driver: str = "vision"  # built-in name or module:Class
     seed: int = 0
-    action_type: str = "continuous"  # as run_cruise resolved it: the driver's own unless given
-    occupancy: float = 0.5
+    action_type: str | None = None  # None: the driver's own; run_cruise stores the one it resolved
+    occupancy: float = 0.5  # share of non-target stalls with a parked car
     env: dict[str, Any] = field(default_factory=dict)  # more GarageDriveEnv keyword arguments
     driver_kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if "occupancy" in (self.env or {}):
+            raise CruiseError("env: occupancy is a cruise setting of its own (CruiseSettings.occupancy), not an "
+                              "env keyword; give it as occupancy=")
+
+    @classmethod
+    def from_env_kwargs(cls, driver: str, env_kwargs: dict[str, Any] | None, **fields: Any) -> CruiseSettings:
+        """Settings from GarageDriveEnv keyword arguments that may hold ``occupancy`` (a training run's):
+        that becomes the setting, the rest ``env``."""
+        env = dict(env_kwargs or {})
+        return cls(driver, occupancy=env.pop("occupancy", cls.occupancy), env=env, **fields)
+
+    @classmethod
+    def from_stored(cls, data: dict[str, Any]) -> CruiseSettings:
+        """The settings a run stored: ``run.json``, or the settings of a hunt's ``hunt.json`` (no driver kwargs)."""
+        return cls(data["driver"], data["seed"], data["action_type"], data["occupancy"], data.get("env") or {},
+                   data.get("driver_kwargs") or {})
+
+    def resolved(self, action_type: str) -> CruiseSettings:
+        """These settings as a run uses and stores them: ``action_type`` the one chosen, plain numbers and dicts."""
+        return CruiseSettings(self.driver, int(self.seed), action_type, float(self.occupancy), dict(self.env or {}),
+                              dict(self.driver_kwargs or {}))
 
 
 def painted_sources(map: str, n: int, seed: int = 0, oversample: int = 4) -> list[CruiseSource]:

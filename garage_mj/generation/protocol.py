@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from garage_mj.core.backends import check_backend, map_unordered
+from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, check_backend, map_unordered
 from garage_mj.core.config import ConfigError, read_toml
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.generation.library import Library
@@ -90,10 +90,10 @@ def run_dir(out: Path, map: str, seed: int) -> Path:
     return out / "runs" / Path(map).stem / f"seed_{seed}"
 
 
-def protocol_folder(out: str | Path, backend: str = "local") -> Path:
+def protocol_folder(out: str | Path, compute: Compute = DEFAULT_COMPUTE) -> Path:
     """The folder the runs write into: ``out``, made absolute for Ray (its workers start elsewhere)."""
     out = Path(out)
-    return out.absolute() if backend == "ray" else out
+    return out.absolute() if compute.backend == "ray" else out
 
 
 def run_status(folder: Path, timesteps: int) -> str:
@@ -117,22 +117,20 @@ def _job(args: tuple) -> dict[str, Any]:
     return _one_run(*args)
 
 
-def run_protocol(protocol: Protocol, out: str | Path, workers: int = 1, progress: bool = True,
-                 backend: str = "local", address: str | None = None) -> dict[str, Any]:
+def run_protocol(protocol: Protocol, out: str | Path, *, compute: Compute = DEFAULT_COMPUTE) -> dict[str, Any]:
     """Train every (map, seed) of ``protocol`` not yet finished, into ``out`` (:func:`protocol_folder`).
 
-    ``backend``: ``"local"`` (this process, or a spawn pool of ``workers``) or ``"ray"``
+    ``compute.backend``: ``"local"`` (this process, or a spawn pool of ``workers``) or ``"ray"``
     (``workers`` runs at a time as Ray tasks on any node; ``address``: a running cluster, else a
     private local Ray; this process alone writes ``out``, :mod:`garage_mj.generation.remote`); a
-    run's result does not depend on where it trains. Returns a summary: runs trained and skipped,
+    run's result does not depend on where it trains. ``compute.progress``: a bar of the runs (and,
+    with one local worker, each run's own). Returns a summary: runs trained and skipped,
     the library, garages per map, each trained run's throughput.
     """
     from tqdm import tqdm
 
-    if workers < 1:
-        raise ConfigError(f"--workers must be >= 1, got {workers}")
-    check_backend(backend, address)
-    out = protocol_folder(out, backend)
+    check_backend(compute)
+    out = protocol_folder(out, compute)
     for m in protocol.maps:
         load_map(m)  # fail on a bad map before any run starts
     out.mkdir(parents=True, exist_ok=True)
@@ -146,16 +144,16 @@ def run_protocol(protocol: Protocol, out: str | Path, workers: int = 1, progress
                 (skipped if run_status(folder, protocol.timesteps) == "finished" else jobs).append((m, s, folder))
         done: list[dict[str, Any]] = []
         if jobs:
-            bar = tqdm(total=len(jobs), desc=f"{protocol.name}: runs", unit="run", disable=not progress)
-            if backend == "ray":
+            bar = tqdm(total=len(jobs), desc=f"{protocol.name}: runs", unit="run", disable=not compute.progress)
+            if compute.backend == "ray":
                 keepers = [RunKeeper(f, m, s, protocol.timesteps, protocol.dqn.to_dict(), library) for m, s, f in jobs]
-                say = (lambda text: tqdm.write(text, file=sys.stderr)) if progress else None
-                results = run_remote(keepers, workers, address, say=say)
+                say = (lambda text: tqdm.write(text, file=sys.stderr)) if compute.progress else None
+                results = run_remote(keepers, compute=compute, say=say)
             else:
-                bars = progress and workers == 1  # a run's own bar, in this process only
+                bars = compute.progress and compute.workers == 1  # a run's own bar, in this process only
                 args = [(m, s, protocol.timesteps, str(f), str(library), protocol.dqn.to_dict(), bars)
                         for m, s, f in jobs]
-                results = map_unordered(_job, args, workers, backend, address)
+                results = map_unordered(_job, args, compute=compute)
             for result in results:
                 done.append(result)
                 bar.update()

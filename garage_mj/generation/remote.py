@@ -40,7 +40,7 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-from garage_mj.core.backends import stream_unordered
+from garage_mj.core.backends import Compute, stream_unordered
 from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.generation.library import Library
 from garage_mj.generation.runs import checkpoint_files, latest_checkpoint, prune_checkpoints
@@ -298,11 +298,11 @@ class RunKeeper:
             write_json(self.folder / MANIFEST, manifest)
 
 
-def run_remote(keepers: list[RunKeeper], workers: int, address: str | None = None, backend: str = "ray",
+def run_remote(keepers: list[RunKeeper], *, compute: Compute,
                say: Callable[[str], None] | None = None) -> Iterator[dict[str, Any]]:
-    """Train the runs of ``keepers`` on Ray (``backend="local"``: here, one after another, the same
-    stream); yields each run's final manifest as it ends. Only this process writes the library
-    (``keepers[i].library``) and the run folders. ``say(text)`` gets a line when a run loses its worker.
+    """Train the runs of ``keepers`` on Ray, ``compute.workers`` at a time (``compute.backend="local"``: here,
+    one after another, the same stream); yields each run's final manifest as it ends. Only this process
+    writes the library (``keepers[i].library``) and the run folders. ``say(text)`` gets a line when a run loses its worker.
     """
     def resume(index: int, why: str) -> int:
         k = keepers[index]
@@ -316,7 +316,7 @@ def run_remote(keepers: list[RunKeeper], workers: int, address: str | None = Non
     ok = False
     with Library(keepers[0].library) as lib:
         try:  # a job is a keeper's index; what it sends is read from the run folder right before it is sent
-            stream = stream_unordered(train_remote, range(len(keepers)), workers, backend, address,
+            stream = stream_unordered(train_remote, range(len(keepers)), compute=compute,
                                       prepare=lambda i: keepers[i].job(), resume=resume, max_retries=MAX_LOST,
                                       name=lambda i: f"{Path(keepers[i].map).stem} seed {keepers[i].seed}")
             for index, (event, payload) in stream:

@@ -23,7 +23,7 @@ from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving import cruise as driving_cruise
 from garage_mj.driving.cruise import CruiseResult
 from garage_mj.driving.sim.outcomes import FAILURES
-from garage_mj.driving.sources import CruiseSource
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.grid.garage import Garage
 from garage_mj.reporting.analysis import regression_plot
 
@@ -77,21 +77,17 @@ def record_cruise_videos(result: CruiseResult, sources: Sequence[CruiseSource | 
     """MP4s of up to ``n`` tests of ``result`` (:func:`pick_tests`) in ``OUT/videos/`` (:func:`video_name`),
     each driven again with the run's settings (``run.json``); a video already there is kept. Returns
     (path, tests.csv row) pairs."""
-    from garage_mj.driving.drivers import choose_action_type
     from garage_mj.reporting.video import record_video
 
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     by_hash = {s.hash: s for s in srcs}
-    settings = json.loads((result.out_dir / "run.json").read_text())
-    action = choose_action_type(settings["driver"], settings["action_type"], warn=False)  # the run warned
+    settings = CruiseSettings.from_stored(json.loads((result.out_dir / "run.json").read_text()))
     made = []
     with FolderLock(result.out_dir, "garage-mj cruise"):
         for row in pick_tests(result.rows, srcs, n):
             path = result.out_dir / "videos" / video_name(row)
             if not path.is_file():
-                record_video(by_hash[row["garage_hash"]], path, driver=settings["driver"], seed=settings["seed"],
-                             test=int(row["test"]), action_type=action, occupancy=settings["occupancy"],
-                             driver_kwargs=settings.get("driver_kwargs") or {}, env=settings.get("env") or {})
+                record_video(by_hash[row["garage_hash"]], path, settings, test=int(row["test"]))
             made.append((path, row))
     return made
 

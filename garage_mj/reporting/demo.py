@@ -12,12 +12,13 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from garage_mj.core.backends import Compute
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import write_json
 from garage_mj.driving.results import COUNT_COLUMNS, HIT_CLASSES, failed_tests
 from garage_mj.driving.sim.outcomes import HIT_KINDS, OUTCOMES, PAPER_CLASS, PAPER_CLASSES, OutcomeConfig
-from garage_mj.driving.sources import CruiseSource
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.export.artefacts import INDEX, PREVIEW
 from garage_mj.generation.library import Library
 from garage_mj.grid.map_io import load_map
@@ -227,8 +228,8 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
              f"{count_noun(len(sources), 'garage')}, {count_noun(cfg.workers, 'worker')}")
         folder = out / "cruise" / run_folder(driver, actors=bool(env))
         # xosc: every test as OpenSCENARIO, written as the test starts (cheap), so each failure shown links its own
-        result = run_cruise(sources, cfg.tests, driver=driver, workers=cfg.workers, seed=cfg.seed,
-                            out_dir=folder, action_type=choice, env=env, xosc=True)
+        result = run_cruise(sources, cfg.tests, CruiseSettings(driver, cfg.seed, env=env), folder,
+                            compute=Compute(workers=cfg.workers), choice=choice, xosc=True)
         fits[label] = result.stats
         kpis[f"{label} ({action} actions) success"] = (
             f"{fmt_percent(result.stats['success_pct'])} of {result.stats['feasible']} feasible"

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from garage_mj.core.backends import DEFAULT_COMPUTE, Compute
 from garage_mj.generation.library import Library
 from garage_mj.generation.protocol import (
     LIBRARY,
@@ -41,14 +42,13 @@ def draw_figures(protocol: Protocol, out: Path) -> list[Path]:
     return paths
 
 
-def run_experiment(protocol: Protocol, out: str | Path, workers: int = 1, progress: bool = True,
-                   backend: str = "local", address: str | None = None) -> dict[str, Any]:
+def run_experiment(protocol: Protocol, out: str | Path, *, compute: Compute = DEFAULT_COMPUTE) -> dict[str, Any]:
     """Train every (map, seed) of ``protocol`` not yet finished (:func:`run_protocol`), then draw the figures.
 
     Returns :func:`run_protocol`'s summary (runs trained and skipped, the library, garages per map,
     throughput) with the figure paths.
     """
-    summary = run_protocol(protocol, out, workers=workers, progress=progress, backend=backend, address=address)
-    figures = draw_figures(protocol, protocol_folder(out, backend))
+    summary = run_protocol(protocol, out, compute=compute)
+    figures = draw_figures(protocol, protocol_folder(out, compute))
     return {"trained": summary["trained"], "skipped": summary["skipped"], "library": summary["library"],
             "garages": summary["garages"], "figures": [str(f) for f in figures], "throughput": summary["throughput"]}

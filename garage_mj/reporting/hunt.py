@@ -19,21 +19,22 @@ from typing import Any
 from garage_mj.core.fsutil import FolderLock, atomic_write
 from garage_mj.driving import hunt as driving_hunt
 from garage_mj.driving.hunt import HuntResult, Scored, add_file, read_settings
+from garage_mj.driving.sources import CruiseSettings
 from garage_mj.export.artefacts import PREVIEW
 from garage_mj.reporting.cruise import cruise_figure
 from garage_mj.reporting.video import record_video
 
 
-def hunt(driver: str, out_dir: str | Path, *, videos: bool = True, **kwargs: Any) -> HuntResult:
+def hunt(settings: CruiseSettings, out_dir: str | Path, *, videos: bool = True, **kwargs: Any) -> HuntResult:
     """:func:`garage_mj.driving.hunt.hunt` (same arguments), then the cruise figure, with ``videos`` the MP4s
     of the worst garages' first failing tests, and ``report.html`` (``files["report"]``, named in hunt.json)."""
-    result = driving_hunt.hunt(driver, out_dir, **kwargs)
+    result = driving_hunt.hunt(settings, out_dir, **kwargs)
     out = result.out_dir
     with FolderLock(out, "garage-mj hunt"):
         cruise_figure(out / "cruise")
         mp4s = record_videos(result) if videos else []
         report = write_hunt_report(out, result.table, result.worst, result.files["packs"], result.files["xosc"],
-                                   mp4s, driver)
+                                   mp4s, settings.driver)
         add_file(out, "report", report)
     result.files.update(report=report, videos=mp4s)
     return result
@@ -42,10 +43,7 @@ def hunt(driver: str, out_dir: str | Path, *, videos: bool = True, **kwargs: Any
 def record_videos(result: HuntResult) -> list[Path]:
     """``OUT/videos/<hash 12>_<test>_<outcome>.mp4``: the first failing test of each of the worst garages (kept
     if there)."""
-    from garage_mj.driving.drivers import choose_action_type
-
-    settings = read_settings(result.out_dir)
-    action = choose_action_type(settings["driver"], settings["action_type"], warn=False)  # the hunt warned
+    settings = CruiseSettings.from_stored(read_settings(result.out_dir))
     mp4s = []
     for s in result.worst:
         if not s.failures:
@@ -53,8 +51,7 @@ def record_videos(result: HuntResult) -> list[Path]:
         i = int(s.failures[0]["test"])
         mp4 = result.out_dir / "videos" / f"{s.source.hash[:12]}_{i:05d}_{s.failures[0]['outcome']}.mp4"
         if not mp4.is_file():
-            record_video(s.source, mp4, driver=settings["driver"], seed=settings["seed"], test=i,
-                         action_type=action, occupancy=settings["occupancy"], env=settings["env"])
+            record_video(s.source, mp4, settings, test=i)
         mp4s.append(mp4)
     return mp4s
 

@@ -10,17 +10,14 @@ import math
 import os
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import mujoco
 import numpy as np
 
 from garage_mj.core.fsutil import public_mode
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
-from garage_mj.driving.sources import CruiseSource, cruise_seed
-
-if TYPE_CHECKING:
-    from garage_mj.driving.drivers import ActionChoice
+from garage_mj.driving.sources import CruiseSettings, CruiseSource, cruise_seed
 
 VIDEO_SIZE = (320, 240)  # [px] width, height
 ROUTE_BGR = (40, 200, 255)  # orange-yellow route line
@@ -66,31 +63,27 @@ def _draw(frame: np.ndarray, pixels: np.ndarray, lines: list[str]) -> np.ndarray
 def record_video(
     source: Any,
     path: str | Path,
-    driver: str = "vision",
-    seed: int = 0,
+    settings: CruiseSettings | None = None,
     test: int = 0,
     camera: str = "ego/top",
     size: tuple[int, int] = VIDEO_SIZE,
-    action_type: str | ActionChoice | None = None,
-    occupancy: float = 0.5,
-    driver_kwargs: dict[str, Any] | None = None,
-    env: dict[str, Any] | None = None,
 ) -> Path:
     """Drive test ``test`` of a :class:`~garage_mj.driving.sources.CruiseSource` (same seed as the batch) into an MP4.
 
-    ``action_type``: as :func:`garage_mj.driving.cruise.run_cruise` (None: the driver's own).
+    ``settings``: those of the run the test was in (default :class:`CruiseSettings`); an action type of
+    None is the driver's own, a given one is used as it is (the run warned about it already).
     """
     import cv2
 
-    from garage_mj.driving.drivers import ActionChoice, choose_action_type, load_driver
+    from garage_mj.driving.drivers import choose_action_type, load_driver
     from garage_mj.driving.sim.drive_env import GarageDriveEnv
 
+    settings = settings if settings is not None else CruiseSettings()
     src = source if isinstance(source, CruiseSource) else CruiseSource.from_garage(source)
-    choice = action_type if isinstance(action_type, ActionChoice) else choose_action_type(driver, action_type)
-    drv = load_driver(driver, **(driver_kwargs or {}))
-    env_kwargs = env
-    env = GarageDriveEnv(garage=src.garage, action_type=choice.action_type, occupancy=occupancy,
-                         infeasible="report", **(env_kwargs or {}))  # as the cruise runner: same seed, same test
+    choice = choose_action_type(settings.driver, settings.action_type, warn=False)
+    drv = load_driver(settings.driver, **(settings.driver_kwargs or {}))
+    env = GarageDriveEnv(garage=src.garage, action_type=choice.action_type, occupancy=settings.occupancy,
+                         infeasible="report", **(settings.env or {}))  # as the cruise runner: same seed, same test
     width, height = size
     cam = Camera(env.model, CameraConfig(camera=camera, width=width, height=height, rgb=True, depth=False,
                                          segmentation=False))
@@ -106,7 +99,7 @@ def record_video(
         cam.close()
         raise RuntimeError(f"opencv cannot write MP4 to {tmp}; install opencv-python-headless with FFmpeg")
     try:
-        test_seed = cruise_seed(seed, src.hash, test)
+        test_seed = cruise_seed(settings.seed, src.hash, test)
         obs, info = env.reset(seed=test_seed)
         drv.reset(env.driver_info(test_seed))
         route3 = np.column_stack([env.route.points, np.full(len(env.route.points), ROUTE_Z)])

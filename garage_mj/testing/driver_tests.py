@@ -12,6 +12,7 @@ as ``garage-mj cruise --videos``) and its ``.xosc`` (the runner's ``xosc=True``,
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 import warnings
@@ -19,16 +20,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.driving.cruise import CruiseResult, run_cruise
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests
-from garage_mj.driving.sources import CruiseSource
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.reporting.failures import run_failures
 from garage_mj.testing.garages import TINY_MAP, cruise_sources
 
 DEFAULT_TESTS = 3  # cruise tests per garage
 DEFAULT_VIDEOS = 5  # failed tests recorded as MP4 when an assertion fails
 LISTED = 20  # failed tests listed one by one in a message (the rest are in tests.csv)
+QUIET = Compute(progress=False)  # one worker, no progress bar: a test suite's output stays its own
 TABLE_COLUMNS = ("garage", "difficulty", "tests", "infeasible", "successes", *COUNT_COLUMNS.values(), "success_pct")
 
 
@@ -63,28 +66,25 @@ def run_driver_tests(
     tests: int = DEFAULT_TESTS,
     *,
     out_dir: str | Path,
-    workers: int = 1,
-    seed: int = 0,
+    settings: CruiseSettings | None = None,
+    compute: Compute = QUIET,
     per_map: int = 1,
-    action_type: str | None = None,
-    occupancy: float = 0.5,
-    driver_kwargs: dict[str, Any] | None = None,
-    env: dict[str, Any] | None = None,
 ) -> DriverTests:
     """Run ``tests`` cruise tests of ``driver`` on every garage of ``garages``; the results table.
 
     ``driver``: a class with ``reset(info)`` and ``act(obs)`` (README "Your own driver"), or a spec
-    (``waypoint``, ``module:Class``); built with ``driver_kwargs``. ``garages``: map names or map files
-    (``per_map`` painted garages each), pack folders, a library file, ``Garage`` objects or library
+    (``waypoint``, ``module:Class``); built with ``settings.driver_kwargs``. ``settings``: the seed,
+    action type, occupancy, env and driver kwargs of the tests (:class:`CruiseSettings`; its driver is
+    ``driver``). ``garages``: map names or map files (``per_map`` painted garages each, from
+    ``settings.seed``), pack folders, a library file, ``Garage`` objects or library
     records (:func:`garage_mj.testing.garages.cruise_sources`). ``out_dir`` receives what ``garage-mj
     cruise --out`` does; a second call into it resumes (same settings) or is refused (other settings).
-    Test seeds derive from (``seed``, garage, test index), so results do not depend on ``workers``.
+    ``compute``: the workers (default one, no progress bar). Test seeds derive from (seed, garage, test
+    index), so results do not depend on the workers.
     """
-    spec = driver_spec(driver)
-    sources = cruise_sources(garages, per_map, seed)
-    call = {"sources": sources, "tests": tests, "driver": spec, "workers": workers, "seed": seed,
-            "out_dir": out_dir, "action_type": action_type, "occupancy": occupancy,
-            "driver_kwargs": driver_kwargs, "env": env, "progress": False}
+    settings = dataclasses.replace(settings if settings is not None else CruiseSettings(), driver=driver_spec(driver))
+    sources = cruise_sources(garages, per_map, settings.seed)
+    call = {"sources": sources, "tests": tests, "settings": settings, "out_dir": out_dir, "compute": compute}
     return DriverTests(run_cruise(**call), tuple(sources), call)
 
 
@@ -117,7 +117,7 @@ class DriverTests:
 
     @property
     def driver(self) -> str:
-        return self._call["driver"]
+        return self._call["settings"].driver
 
     @property
     def rows(self) -> list[dict[str, str]]:

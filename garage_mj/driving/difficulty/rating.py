@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from garage_mj.core.backends import map_unordered
+from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, map_unordered
 from garage_mj.core.fsutil import write_json
 from garage_mj.generation.library import Library
 from garage_mj.scene.route_difficulty import RouteDifficulty, load_route_model, route_difficulty
@@ -78,12 +78,13 @@ class RatingResult:
         return self.seconds / self.rated if self.rated else None
 
 
-def rate_library(path: str | Path, model: RouteDifficulty | str | Path | None = None, map: str | None = None,
-                 workers: int = 1, limit: int | None = None, progress: bool = True) -> RatingResult:
+def rate_library(path: str | Path, model: RouteDifficulty | str | Path | None = None, map: str | None = None, *,
+                 limit: int | None = None, compute: Compute = DEFAULT_COMPUTE) -> RatingResult:
     """Rate every garage of the library ``path`` (of ``map``; at most ``limit``) not rated under ``model``.
 
-    ``model``: a :class:`RouteDifficulty`, a model file, or None for the shipped one. Each value is
-    stored as its garage ends (the library's own short transaction), so the rating is resumable.
+    ``model``: a :class:`RouteDifficulty`, a model file, or None for the shipped one. ``compute``: the
+    workers that rate and the progress bar (the values do not depend on it). Each value is stored as
+    its garage ends (the library's own short transaction), so the rating is resumable.
     """
     from tqdm import tqdm
 
@@ -93,13 +94,13 @@ def rate_library(path: str | Path, model: RouteDifficulty | str | Path | None = 
         ids = lib.unrated(key, map=map, limit=limit)
         jobs = [(i, lib.get(i).garage, m) for i in ids]
         start = time.perf_counter()
-        with tqdm(total=len(jobs), desc="route difficulty", unit="garage", disable=not progress) as bar:
-            for id_, value in map_unordered(_rate, jobs, workers):
+        with tqdm(total=len(jobs), desc="route difficulty", unit="garage", disable=not compute.progress) as bar:
+            for id_, value in map_unordered(_rate, jobs, compute=compute):
                 lib.set_route_difficulty(id_, key, value)
                 bar.update()
         seconds = time.perf_counter() - start
         left = len(lib.unrated(key, map=map))
-    return RatingResult(key, len(jobs), left, seconds, workers)
+    return RatingResult(key, len(jobs), left, seconds, compute.workers)
 
 
 # -- a cruise run's garages -----------------------------------------------------------------------------

@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from garage_mj.core.backends import Compute
 from garage_mj.core.config import load_config, refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_json
@@ -175,10 +176,10 @@ def _hunted(out: Path, it: int, sources: list[CruiseSource], cfg: DriverTrainCon
     map_name = Counter(garage_map(s) for s in sources).most_common(1)[0][0]
     model = (out / "checkpoints" / f"iter_{it - 1:03d}.zip").resolve()
     hunt_cfg = HuntConfig(budget=cfg.hunt_budget, tests=2, population=8, elites=2, worst=0)
-    env = {k: v for k, v in env_kwargs.items() if k != "occupancy"}
-    result = hunt(f"learned:{model}", out / "hunt" / f"iter_{it:03d}", map=map_name, config=hunt_cfg,
-                  seed=seed * 1_000 + it, action_type="discrete", occupancy=env_kwargs.get("occupancy", 0.5),
-                  env=env, workers=cfg.n_envs, progress=False)
+    settings = CruiseSettings.from_env_kwargs(f"learned:{model}", env_kwargs, seed=seed * 1_000 + it,
+                                              action_type="discrete")
+    result = hunt(settings, out / "hunt" / f"iter_{it:03d}", map=map_name, config=hunt_cfg,
+                  compute=Compute(workers=cfg.n_envs, progress=False))
     return [s.source for s in result.ranked if s.failures][: cfg.hunt_keep]
 
 
@@ -276,9 +277,8 @@ def validate(model_path: str | Path, sources: list[CruiseSource], tests: int, se
     round-robin over the garages: test ``k`` of a garage is cruise test ``k`` (:func:`~garage_mj.driving.cruise.run_test`
     with the driver ``learned:PATH``, as ``garage-mj cruise`` would drive it; ``infeasible`` counts the
     tests no driver could do, which are not driven)."""
-    env = dict(env_kwargs or {})
-    settings = CruiseSettings(driver=f"learned:{Path(model_path).resolve()}", seed=seed, action_type="discrete",
-                              occupancy=env.pop("occupancy", CruiseSettings.occupancy), env=env)
+    settings = CruiseSettings.from_env_kwargs(f"learned:{Path(model_path).resolve()}", env_kwargs, seed=seed,
+                                              action_type="discrete")
     counts: dict[str, int] = {}
     try:
         for g, src in enumerate(sources[:tests]):
