@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.driving.drivers import DriverError
+from garage_mj.driving.learning.model_file import ModelFileError, load_sb3
 from garage_mj.driving.learning.observation import learned_observation, learned_space
 from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction
 
@@ -98,7 +99,6 @@ def load_model(path: str | Path) -> Any:
     algo = _algorithm(path)
     import stable_baselines3  # heavy (torch): only when a learned driver is built
 
-    from garage_mj.driving.learning.model_file import ModelFileError, load_sb3
 
     try:  # the file read as data: weights and plain settings, nothing in it unpickled or run
         model = load_sb3(path, getattr(stable_baselines3, algo))

@@ -65,6 +65,7 @@ from garage_mj.driving.cruise import run_test
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
 from garage_mj.driving.hunt import HuntConfig, hunt
+from garage_mj.driving.learning.model_file import ModelFileError, load_sb3
 from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 
@@ -301,7 +302,6 @@ def _load_checkpoint(path: Path, venv):
     weights and plain settings, nothing in it unpickled or run)."""
     from stable_baselines3 import DQN
 
-    from garage_mj.driving.learning.model_file import ModelFileError, load_sb3
 
     try:
         return load_sb3(path, DQN, env=venv)
