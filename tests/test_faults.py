@@ -454,6 +454,16 @@ def test_writing_into_a_read_only_library_is_one_line(shared_tmp, where):
     assert snapshot(folder) == before
 
 
+def test_a_closed_stdout_ends_quietly(tmp_path):
+    """``garage-mj library ls | head -1``: the reader goes away, the command ends without a message."""
+    lib = make_library(tmp_path / "lib.sqlite", 2)
+    for argv in (["library", "ls", str(lib)], ["maps", "show", "tiny_7x11"], ["--help"]):
+        proc = subprocess.Popen([CLI, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc.stdout.close()  # before the command writes its first line
+        err = proc.stderr.read()
+        assert proc.wait(timeout=60) in (0, 141) and err == "", (argv, err)  # 141: as if killed by SIGPIPE
+
+
 # -- tests.csv repair ------------------------------------------------------------------------------
 def _row(i: int) -> dict[str, str]:
     return {c: f"{c}{i}" for c in TEST_COLUMNS} | {"garage_hash": f"h{i % 3}", "test": str(i), "outcome": "success",

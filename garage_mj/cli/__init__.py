@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import os
 import sys
 import traceback
 
@@ -76,6 +77,31 @@ def _close_progress_bars() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command of ``argv``; returns the exit status (0, 2 for a user error, 130 on Ctrl-C,
+    141 when the reader of stdout went away, as in ``garage-mj library ls | head``)."""
+    try:
+        try:
+            return _run(argv)
+        finally:
+            sys.stdout.flush()  # a closed pipe shows here, not at exit
+    except BrokenPipeError:
+        return _stdout_closed()
+
+
+def _stdout_closed() -> int:
+    """End quietly, as Unix tools do, when stdout's reader has gone (exit status 141, SIGPIPE's).
+
+    As Python's docs advise (the note on SIGPIPE in :mod:`signal`), stdout is pointed at
+    ``/dev/null`` so that the flush at exit does not fail again and print a message.
+    """
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout is not a file descriptor (captured in tests)
+        pass
+    return 141
+
+
+def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -91,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"the failure behind it:\n{exc.details}", file=sys.stderr, end="")
         print(f"garage-mj {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # stdout's reader went away: main ends quietly
+        raise
     except OSError as exc:  # the file system refused: read-only or full folder, a file in the way
         _close_progress_bars()
         if args.debug:
