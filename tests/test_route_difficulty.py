@@ -199,6 +199,15 @@ def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage
     # a folder that is not a cruise run: one line naming it
     assert main(["difficulty", "fit", str(tmp_path), "--out", str(out)]) == 2
     assert "holds no tests.csv" in capsys.readouterr().err
+    # an --out that cannot be written: one line, and neither the model nor its .fit.csv is written
+    (tmp_path / "taken").mkdir()
+    (tmp_path / "other.fit.csv").mkdir()
+    before = sorted(p for p in tmp_path.rglob("*"))
+    for bad in (tmp_path / "taken", tmp_path / "other.json", tmp_path / "mine.json" / "m.json"):
+        assert main(["difficulty", "fit", str(run), "--out", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"--out {bad}" in err and ("is a folder" in err or "is a file" in err), err
+    assert sorted(p for p in tmp_path.rglob("*")) == before
 
 
 def test_generate_by_route_difficulty_stores_rated_garages_in_the_band(tmp_path, capsys):

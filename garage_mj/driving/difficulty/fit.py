@@ -150,12 +150,26 @@ def read_records(path: str | Path) -> list[dict[str, Any]]:
              for k, v in r.items()} for r in rows]
 
 
+def _check_out(out: Path, data: Path) -> None:
+    """Refuse an ``out`` (or its ``.fit.csv``) that names a folder, or lies under a file."""
+    for path in (out, data):
+        if path.is_dir():
+            raise DifficultyFitError(f"--out {out}: {path} is a folder; give the path of the model file to write "
+                                     "(e.g. my_route_difficulty.json)")
+    above = next((p for p in out.parents if p.exists()), None)
+    if above is not None and not above.is_dir():
+        raise DifficultyFitError(f"--out {out}: {above} is a file, not a folder; give a path in a folder")
+
+
 def fit_runs(runs: Sequence[str | Path], out: str | Path, library: str | Path | None = None,
              features: Sequence[str] = FEATURES, progress: bool = True) -> tuple[RouteDifficulty, list[dict[str, Any]]]:
-    """Fit a route difficulty on the feasible tests of ``runs``; writes ``out`` and ``<out stem>.fit.csv``."""
-    records = test_records(runs, library, progress)
+    """Fit a route difficulty on the feasible tests of ``runs``; writes ``out`` and ``<out stem>.fit.csv``.
+
+    Both paths are checked before the runs are read, so a bad ``out`` writes neither."""
     out = Path(out)
     data = out.with_suffix(".fit.csv")
+    _check_out(out, data)
+    records = test_records(runs, library, progress)
     drivers = sorted({r["driver"] for r in records})
     try:
         model = fit(records, [r["failed"] for r in records], features,
