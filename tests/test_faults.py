@@ -339,7 +339,8 @@ def test_a_damaged_library_row_is_refused_with_its_id(tmp_path, capsys, how):
     before = snapshot(tmp_path)
     for argv in (["export", "--library", str(lib), "--out", str(tmp_path / "packs"), "--quiet"],
                  ["cruise", "--library", str(lib), "--tests", "1", "--driver", "waypoint",
-                  "--out", str(tmp_path / "cruise"), "--quiet"]):
+                  "--out", str(tmp_path / "cruise"), "--quiet"],
+                 ["library", "rate", str(lib), "--quiet"]):  # rates nothing of a library with an altered row
         line = one_line_error(capsys, argv)
         assert "row id 1" in line and str(lib) in line
     if how == "text_difficulty":  # aggregates and sampling would mix text into numbers

@@ -94,6 +94,59 @@ def test_an_old_library_without_the_table_opens_lists_and_gets_rated(tmp_path, g
     assert [r.split()[6] for r in rows[1:3]] == [f"{got[i]:.3f}" for i in ids]
 
 
+def _set(path, sql, *args) -> None:
+    con = sqlite3.connect(path)
+    con.execute(sql, args)
+    con.commit()
+    con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    con.close()
+
+
+def test_a_hand_edited_or_outlived_rating_is_not_read(tmp_path, garages, shipped, capsys):
+    path = tmp_path / "library.sqlite"
+    ids = _library(path, garages[:2])
+    assert main(["library", "rate", str(path), "--quiet"]) == 0
+    with Library(path, create=False) as lib:
+        true = lib.route_difficulties(ids, shipped.key)
+    _set(path, "UPDATE route_difficulty SET value = 0.01 WHERE garage_id = ?", ids[0])  # forged by hand
+    with Library(path, create=False) as lib:
+        assert lib.route_difficulties(ids, shipped.key) == {ids[1]: true[ids[1]]} and lib.unrated(shipped.key) == ids[:1]
+    capsys.readouterr()
+    assert main(["cruise", "--library", str(path), "--route-difficulty", "0", "0.05", "--tests", "1",
+                 "--driver", "waypoint", "--out", str(tmp_path / "c"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no longer matches its garage" in err and f"garage-mj library rate {path}" in err
+    assert main(["library", "rate", str(path), "--quiet"]) == 0  # rated again: the true value is back
+    assert "rated 1 garage(s)" in capsys.readouterr().out
+    with Library(path, create=False) as lib:
+        assert lib.route_difficulties(ids, shipped.key) == true
+    # a row that now holds another garage (its grid, hash and metrics consistent): its old rating is not read
+    other = tmp_path / "other.sqlite"
+    _library(other, garages[2:3])
+    cols = "grid, initial, hash, coverage, difficulty, stalls, mean_road_length, mean_intersection_degree"
+    con = sqlite3.connect(other)
+    row = con.execute(f"SELECT {cols} FROM garages").fetchone()
+    con.close()
+    _set(path, f"UPDATE garages SET ({cols}) = ({', '.join('?' * len(row))}) WHERE id = {ids[1]}", *row)
+    with Library(path, create=False) as lib:
+        assert lib.route_difficulties(ids, shipped.key) == {ids[0]: true[ids[0]]}
+
+
+def test_an_older_rating_table_without_checksums_is_rated_again(tmp_path, garages, shipped, capsys):
+    path = tmp_path / "library.sqlite"
+    ids = _library(path, garages[:2])
+    _set(path, "CREATE TABLE route_difficulty (garage_id INTEGER NOT NULL REFERENCES garages (id), model TEXT NOT "
+               "NULL, value REAL, rated_at TEXT NOT NULL, PRIMARY KEY (garage_id, model))")
+    _set(path, "INSERT INTO route_difficulty VALUES (?, ?, 0.01, 'then')", ids[0], shipped.key)
+    with Library(path, create=False) as lib:
+        assert lib.route_difficulties(ids, shipped.key) == {} and lib.unrated(shipped.key) == ids
+    assert main(["library", "rate", str(path), "--quiet"]) == 0
+    assert "rated 2 garage(s)" in capsys.readouterr().out
+    with Library(path, create=False) as lib:
+        got = lib.route_difficulties(ids, shipped.key)
+    assert got == {i: pytest.approx(route_difficulty(g, shipped), abs=1e-12) for i, g in zip(ids, garages[:2])}
+
+
 def test_rating_is_resumable_and_the_same_whatever_the_workers(tmp_path, garages, shipped, monkeypatch, capsys):
     path = tmp_path / "library.sqlite"
     ids = _library(path, garages)

@@ -14,8 +14,11 @@ the file and the fix, and nothing on disk changes (the check reads bytes, then o
 Beside ``garages`` a library may hold the side table ``route_difficulty`` (a number per garage and
 route difficulty model, the model named by its 12-hex key): ``garage-mj library rate`` computes the
 values in the later stages and stores them here (:meth:`Library.set_route_difficulty`); this module
-only stores and filters numbers. A library without the table (an older one) opens, lists and gets
-rated as any other; filtering it on the route difficulty asks for ``garage-mj library rate`` first.
+only stores and filters numbers. Each value is stored with a checksum over the garage's hash, the
+model key and the value, and only values whose checksum matches are read: a value edited by hand, or
+one left from before its garage row changed, reads as not rated (``library rate`` rates it again).
+A library without the table (an older one) opens, lists and gets rated as any other; filtering it
+on the route difficulty asks for ``garage-mj library rate`` first.
 """
 
 from __future__ import annotations
@@ -37,14 +40,17 @@ from garage_mj.generation.library_format import (
     COLUMNS,
     DRIVABILITY_SCHEMA,
     KINDS,
+    NO_ROUTE_ROWS,
     ROUTE_SCHEMA,
     SCHEMA,
     SCHEMA_VERSION,
+    VERIFIED_ROUTE_ROWS,
     GarageRecord,
     LibraryError,
     check_body,
     check_header,
     record_from_row,
+    route_checksum,
 )
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.metrics import evaluate
@@ -101,6 +107,7 @@ class Library:
         check_writable(self.path)
         try:
             self._con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
+            _register_functions(self._con)
             self._con.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
             if version < SCHEMA_VERSION:
                 self._create_schema()
@@ -123,6 +130,7 @@ class Library:
             try:
                 con = sqlite3.connect(f"{uri}?{query}", uri=True, timeout=BUSY_TIMEOUT_S, isolation_level=None)
                 con.execute("SELECT count(*) FROM garages").fetchone()
+                _register_functions(con)
                 return con
             except sqlite3.DatabaseError as exc:
                 err = exc
@@ -256,16 +264,27 @@ class Library:
         row = self._con.execute("SELECT name FROM sqlite_master WHERE type = 'table' AND name = 'route_difficulty'")
         return row.fetchone() is not None
 
+    def _route_rows(self) -> str:
+        """The ``route_difficulty`` rows to read: those whose checksum matches (none in a table without one)."""
+        cols = {r[1] for r in self._con.execute("PRAGMA table_info(route_difficulty)")}
+        return VERIFIED_ROUTE_ROWS if "checksum" in cols else NO_ROUTE_ROWS
+
     def set_route_difficulty(self, id: int, model: str, value: float) -> None:
-        """Store garage ``id``'s route difficulty under the model with key ``model`` (NaN: no feasible stall).
+        """Store garage ``id``'s route difficulty under the model with key ``model`` (NaN: no feasible stall),
+        with its checksum over the garage's stored hash (so it is read only while the garage is that one).
 
         Each value is its own transaction, so a rating killed midway keeps every value stored before.
         """
         self._con.execute(ROUTE_SCHEMA)
+        if "checksum" not in {r[1] for r in self._con.execute("PRAGMA table_info(route_difficulty)")}:
+            self._con.execute("ALTER TABLE route_difficulty ADD COLUMN checksum TEXT")  # an older library's table
         v = float(value)
-        self._con.execute("INSERT OR REPLACE INTO route_difficulty VALUES (?, ?, ?, ?)",
-                          (int(id), _model_key(model), None if math.isnan(v) else v,
-                           datetime.now(timezone.utc).isoformat(timespec="seconds")))
+        v_or_null = None if math.isnan(v) else v
+        key = _model_key(model)
+        self._con.execute("INSERT OR REPLACE INTO route_difficulty (garage_id, model, value, rated_at, checksum) "
+                          "SELECT id, ?, ?, ?, route_checksum(hash, ?, ?) FROM garages WHERE id = ?",
+                          (key, v_or_null, datetime.now(timezone.utc).isoformat(timespec="seconds"), key, v_or_null,
+                           int(id)))
 
     def route_difficulties(self, ids: Iterable[int], model: str) -> dict[int, float]:
         """id -> route difficulty under ``model`` of those of ``ids`` rated under it (NaN: no feasible stall).
@@ -280,7 +299,7 @@ class Library:
         for k in range(0, len(ids), _BATCH):
             chunk = ids[k:k + _BATCH]
             rows = self._con.execute(
-                f"SELECT garage_id, value FROM route_difficulty WHERE model = ? AND garage_id IN "
+                f"SELECT garage_id, value FROM ({self._route_rows()}) WHERE model = ? AND garage_id IN "
                 f"({', '.join('?' * len(chunk))})", [key, *chunk])
             out.update((int(i), math.nan if v is None else float(v)) for i, v in rows)
         return out
@@ -292,7 +311,7 @@ class Library:
         where, params = self._where(map, None, None, run)
         if self.has_route_difficulty():
             where += (" AND " if where else " WHERE ") + (
-                "id NOT IN (SELECT garage_id FROM route_difficulty WHERE model = ?)")
+                f"id NOT IN (SELECT garage_id FROM ({self._route_rows()}) WHERE model = ?)")
             params.append(key)
         sql = f"SELECT id FROM garages{where} ORDER BY id"
         if limit is not None:
@@ -351,16 +370,17 @@ class Library:
             joiner = " AND " if other else " WHERE "
             missing = self._con.execute(
                 f"SELECT count(*) FROM garages{other}{joiner}id NOT IN "
-                "(SELECT garage_id FROM route_difficulty WHERE model = ?)", [*params, key]).fetchone()[0]
+                f"(SELECT garage_id FROM ({self._route_rows()}) WHERE model = ?)", [*params, key]).fetchone()[0]
         else:
             missing = self._con.execute(f"SELECT count(*) FROM garages{other}", params).fetchone()[0]
         if missing:
             raise LibraryError(f"{self.path}: {missing} garage(s) matching the filters have no route difficulty under "
-                               f"model {key} yet; run 'garage-mj library rate {self.path}' first (with --model FILE "
-                               "for a model other than the shipped one)")
+                               f"model {key} yet (or one that no longer matches its garage); run "
+                               f"'garage-mj library rate {self.path}' first (with --model FILE for a model other than "
+                               "the shipped one)")
         if not self.has_route_difficulty():
             return "0", []  # no garage matches the other filters: none matches
-        return ("id IN (SELECT garage_id FROM route_difficulty WHERE model = ? AND value BETWEEN ? AND ?)",
+        return (f"id IN (SELECT garage_id FROM ({self._route_rows()}) WHERE model = ? AND value BETWEEN ? AND ?)",
                 [key, float(lo), float(hi)])
 
     def query(
@@ -405,7 +425,7 @@ class Library:
             x = "difficulty"
         else:
             where, params = self._where(map, None, None, route=(0.0, 1.0), route_model=route_model)
-            x = "(SELECT value FROM route_difficulty WHERE garage_id = garages.id AND model = ?)"
+            x = f"(SELECT value FROM ({self._route_rows()}) WHERE garage_id = garages.id AND model = ?)"
             params = [_model_key(route_model), *params]
         rows = self._con.execute(f"SELECT {x}, coverage FROM garages{where} ORDER BY id", params).fetchall()
         return np.array(rows, dtype=float).reshape(-1, 2)
@@ -482,7 +502,8 @@ class Library:
             key = _model_key(route_model)
             for row in self._con.execute(
                 "SELECT g.map, count(*), count(r.value), min(r.value), avg(r.value), max(r.value) FROM garages g "
-                "JOIN route_difficulty r ON r.garage_id = g.id AND r.model = ? GROUP BY g.map ORDER BY g.map", (key,)
+                f"JOIN ({self._route_rows()}) r ON r.garage_id = g.id AND r.model = ? GROUP BY g.map ORDER BY g.map",
+                (key,)
             ):
                 if row[0] in per_map:
                     per_map[row[0]]["route_difficulty"] = {"model": key, "rated": row[1], "with_value": row[2],
@@ -493,6 +514,11 @@ class Library:
 
 
 _BATCH = 500  # ids per IN (...) query (SQLite allows at least 999 parameters)
+
+
+def _register_functions(con: sqlite3.Connection) -> None:
+    """The SQL functions a library's queries use: ``route_checksum`` (:func:`route_checksum`)."""
+    con.create_function("route_checksum", 3, route_checksum, deterministic=True)
 
 
 def _model_key(model: str) -> str:

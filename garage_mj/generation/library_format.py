@@ -15,6 +15,7 @@ column holds its kind; :meth:`GarageRecord.verify` recomputes a row's hash and m
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import sqlite3
@@ -76,16 +77,32 @@ CREATE TABLE IF NOT EXISTS drivability (
 #: Optional table written by ``garage-mj library rate``: the route difficulty of a garage
 #: (:mod:`garage_mj.scene.route_difficulty`) under one fitted model, named by its 12-hex ``key``.
 #: ``value`` is NULL for a garage rated without a feasible stall (no route to rate); a garage
-#: without a row for a model is not rated under it yet.
+#: without a row for a model is not rated under it yet. ``checksum`` (:func:`route_checksum`) binds
+#: the value to the model and to the garage's content hash: a row whose checksum does not match
+#: (a value edited by hand, a garage row changed since, a table of an older garage-mj without the
+#: column) is read as not rated, so ``library rate`` rates that garage again.
 ROUTE_SCHEMA = """
 CREATE TABLE IF NOT EXISTS route_difficulty (
     garage_id INTEGER NOT NULL REFERENCES garages (id),
     model TEXT NOT NULL,
     value REAL,
     rated_at TEXT NOT NULL,
+    checksum TEXT,
     PRIMARY KEY (garage_id, model)
 )
 """
+#: The rows of ``route_difficulty`` whose checksum matches their garage's current hash (``route_checksum``
+#: is registered on every library connection): the only ones a library reads.
+VERIFIED_ROUTE_ROWS = ("SELECT r.garage_id AS garage_id, r.model AS model, r.value AS value FROM route_difficulty r "
+                       "JOIN garages g ON g.id = r.garage_id WHERE r.checksum = route_checksum(g.hash, r.model, r.value)")
+NO_ROUTE_ROWS = "SELECT NULL AS garage_id, NULL AS model, NULL AS value WHERE 0"  # a table without checksums
+
+
+def route_checksum(garage_hash: str | None, model: str | None, value: float | None) -> str:
+    """16 hex digits of SHA-256 over (garage content hash, model key, value): what a stored rating is checked by."""
+    return hashlib.sha256(json.dumps([garage_hash, model, value]).encode()).hexdigest()[:16]
+
+
 COLUMNS = (
     "id, map, run, seed, episode, timestep, hash, grid, initial, six_stall_axis, coverage, "
     "difficulty, stalls, mean_road_length, mean_intersection_degree, created_at"

@@ -9,8 +9,8 @@ rates the rest, and the values do not depend on the worker count (the computatio
 
 :func:`cruise_route_difficulty` gives a cruise run the route difficulty of its garages for
 ``summary.csv``: computed in the parent once per garage and kept in the run folder
-(``route_difficulty.json``, per model key and garage hash), so a re-run reads it back (and in
-memory, so the many runs of one process compute each garage once).
+(``route_difficulty.json``, per model key and garage hash, each value with its checksum), so a
+re-run reads it back (and in memory, so the many runs of one process compute each garage once).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, map_unordered
 from garage_mj.core.fsutil import write_json
 from garage_mj.generation.library import Library
+from garage_mj.generation.library_format import route_checksum
 from garage_mj.scene.route_difficulty import RouteDifficulty, load_route_model, route_difficulty
 
 if TYPE_CHECKING:
@@ -84,7 +85,9 @@ def rate_library(path: str | Path, model: RouteDifficulty | str | Path | None = 
 
     ``model``: a :class:`RouteDifficulty`, a model file, or None for the shipped one. ``compute``: the
     workers that rate and the progress bar (the values do not depend on it). Each value is stored as
-    its garage ends (the library's own short transaction), so the rating is resumable.
+    its garage ends (the library's own short transaction), so the rating is resumable. Each row is
+    first checked against its hash and metrics (:meth:`Library.verified`): an altered row is a
+    :class:`LibraryError` naming its id, and nothing is stored.
     """
     from tqdm import tqdm
 
@@ -92,7 +95,9 @@ def rate_library(path: str | Path, model: RouteDifficulty | str | Path | None = 
     key = m.key
     with Library(path, create=False, readonly=False) as lib:
         ids = lib.unrated(key, map=map, limit=limit)
-        jobs = [(i, lib.get(i).garage, m) for i in ids]
+        # each row checked against its hash and metrics first (as export and cruise do): an altered row is
+        # refused, naming its id, before any value is stored
+        jobs = [(r.id, r.garage, m) for r in lib.verified([lib.get(i) for i in ids])]
         start = time.perf_counter()
         with tqdm(total=len(jobs), desc="route difficulty", unit="garage", disable=not compute.progress) as bar:
             for id_, value in map_unordered(_rate, jobs, compute=compute):
@@ -105,7 +110,7 @@ def rate_library(path: str | Path, model: RouteDifficulty | str | Path | None = 
 
 # -- a cruise run's garages -----------------------------------------------------------------------------
 def _read_cache(path: Path) -> dict[str, dict[str, Any]]:
-    """model key -> {garage hash: value or None}; an unreadable or foreign file is treated as empty."""
+    """model key -> {garage hash: [value or None, checksum]}; an unreadable or foreign file is treated as empty."""
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError, UnicodeDecodeError):
@@ -115,10 +120,25 @@ def _read_cache(path: Path) -> dict[str, dict[str, Any]]:
     return {k: v for k, v in data["models"].items() if isinstance(v, dict)}
 
 
+def _cached(entry: Any, model_key: str, garage_hash: str) -> float | None | str:
+    """The value of a cache entry ``[value, checksum]`` (None: no feasible stall), or ``"missing"`` when the
+    entry is absent, not of that form, or its checksum is not that of (garage hash, model key, value)."""
+    if not isinstance(entry, list) or len(entry) != 2:
+        return "missing"
+    v, check = entry
+    if isinstance(v, bool) or not (v is None or isinstance(v, float)) or check != route_checksum(garage_hash, model_key, v):
+        return "missing"
+    return v
+
+
 def cruise_route_difficulty(out_dir: str | Path, sources: Sequence[CruiseSource],
                             model: RouteDifficulty | str | Path | None = None) -> dict[str, float]:
     """garage hash -> route difficulty under ``model`` (NaN: no feasible stall) of every source; values
-    not in the run folder's ``route_difficulty.json`` yet are computed here and added to it."""
+    not in the run folder's ``route_difficulty.json`` yet are computed here and added to it.
+
+    Each value is kept with its checksum over (garage hash, model key, value)
+    (:func:`~garage_mj.generation.library_format.route_checksum`, as a library stores it): a value
+    edited by hand does not match and is computed again."""
     m = resolve_route_model(model)
     path = Path(out_dir) / CACHE_FILE
     cache = _read_cache(path)
@@ -126,12 +146,13 @@ def cruise_route_difficulty(out_dir: str | Path, sources: Sequence[CruiseSource]
     out: dict[str, float] = {}
     new = False
     for s in sources:
-        v = mine.get(s.hash, "missing")
-        if v == "missing" or isinstance(v, bool) or not (v is None or isinstance(v, (int, float))):
+        v = _cached(mine.get(s.hash), m.key, s.hash)
+        if v == "missing":
             value = _MEMO.get((m.key, s.hash))
             if value is None:
                 value = _MEMO[(m.key, s.hash)] = route_difficulty(s.garage, m)
-            mine[s.hash] = v = None if math.isnan(value) else round(value, 6)
+            v = None if math.isnan(value) else round(value, 6)
+            mine[s.hash] = [v, route_checksum(s.hash, m.key, v)]
             new = True
         out[s.hash] = math.nan if v is None else float(v)
     if new:
