@@ -12,7 +12,7 @@ from garage_mj.cli import main
 from garage_mj.core.backends import Compute
 from garage_mj.driving.difficulty import rating as route_rating
 from garage_mj.driving.difficulty.regression import pearson
-from garage_mj.driving.sources import CruiseSettings
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.grid.painters import paint_garage
 from garage_mj.reporting.cruise import cruise_figure, run_cruise
 from garage_mj.scene.route_difficulty import fit, load_route_model, route_difficulty
@@ -63,6 +63,16 @@ def test_summary_has_route_difficulty_beside_the_papers_and_route_r(garages, shi
     monkeypatch.setattr(route_rating, "route_difficulty", lambda *a: pytest.fail("route difficulty recomputed"))
     again = run_cruise(garages, 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
     assert again.tests_run == 0 and _summary(out) == rows and again.stats == stats
+
+    # a value edited by hand in the cache does not match its checksum: computed again, not read
+    cache = json.loads((out / route_rating.CACHE_FILE).read_text())
+    first = garages[0].canonical_hash()
+    cache["models"][shipped.key][first][0] = 0.01
+    (out / route_rating.CACHE_FILE).write_text(json.dumps(cache))
+    monkeypatch.setattr(route_rating, "route_difficulty", route_difficulty)
+    got = route_rating.cruise_route_difficulty(out, [CruiseSource.from_garage(g) for g in garages], shipped)
+    assert got[first] == pytest.approx(route_difficulty(garages[0], shipped), abs=1e-6) != 0.01
+    assert json.loads((out / route_rating.CACHE_FILE).read_text())["models"][shipped.key][first][0] != 0.01
 
 
 def test_summary_json_regresses_success_on_both_difficulties(garages, tmp_path):
