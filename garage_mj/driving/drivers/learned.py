@@ -99,7 +99,6 @@ def load_model(path: str | Path) -> Any:
     algo = _algorithm(path)
     import stable_baselines3  # heavy (torch): only when a learned driver is built
 
-
     try:  # the file read as data: weights and plain settings, nothing in it unpickled or run
         model = load_sb3(path, getattr(stable_baselines3, algo))
     except ModelFileError as exc:

@@ -302,7 +302,6 @@ def _load_checkpoint(path: Path, venv):
     weights and plain settings, nothing in it unpickled or run)."""
     from stable_baselines3 import DQN
 
-
     try:
         return load_sb3(path, DQN, env=venv)
     except ModelFileError as exc:
