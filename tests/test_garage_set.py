@@ -271,6 +271,28 @@ def test_bad_json_files_are_refused_by_name(library, tmp_path):
         GarageSet.from_json(bad)
 
 
+@pytest.mark.parametrize("key", ["difficulty", "mean_road_length", "mean_intersection_degree"])
+def test_a_set_or_export_with_altered_metrics_is_refused_by_garage(library, tmp_path, key):
+    good, bad = tmp_path / "good.json", tmp_path / "bad.json"
+    gs = GarageSet.from_library(library, n=2, seed=0)
+    gs.to_json(good)
+    data = json.loads(good.read_text())
+    data["garages"][1][key] += 0.25  # a hand edit: the grid says otherwise
+    bad.write_text(json.dumps(data))
+    with pytest.raises(GarageSetError, match=rf"bad.json, garage 1 \({gs[1].name}\): stored {key} .* is not the "
+                                             r"grid's .*the file was altered: write the file again") as exc:
+        GarageSet.from_json(bad)
+    _one_line(exc)
+    assert GarageSet.from_json(good).hashes == gs.hashes  # the file as written still loads
+    assert main(["library", "export-json", str(library), "--out", str(good)]) == 0
+    rows = json.loads(good.read_text())
+    rows[0][key] = 0.01
+    bad.write_text(json.dumps(rows))
+    with pytest.raises(GarageSetError, match=rf"bad.json, garage 0 \({rows[0]['map']}#{rows[0]['id']}\): stored "
+                                             rf"{key} 0.01 is not the grid's .*export it again") as exc:
+        GarageSet.from_json(bad)
+
+
 def test_an_altered_library_row_is_refused_by_id(library, tmp_path):
     import shutil
     import sqlite3

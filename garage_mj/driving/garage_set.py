@@ -38,6 +38,7 @@ from garage_mj.generation.library import Library, stratified_ids
 from garage_mj.generation.library_format import GarageRecord, LibraryError
 from garage_mj.grid.garage import Garage, MapError
 from garage_mj.grid.map_io import list_maps, load_map
+from garage_mj.grid.metrics import evaluate
 
 if TYPE_CHECKING:
     from garage_mj.scene.car import CarGeometry
@@ -53,6 +54,9 @@ DEFAULT_PAINTED = 32
 _RUN_SEED = re.compile(r"_s(\d+)(?=_|$)")
 #: Keys of one garage in the set's JSON besides the grid (``GarageRecord.to_dict``'s grid form).
 _ENTRY_KEYS = ("name", "hash", "difficulty", "mean_road_length", "mean_intersection_degree", "map")
+#: The metrics a garage's JSON entry may state, each recomputed from its grid when the file is read
+#: (:func:`~garage_mj.grid.metrics.evaluate`; equal within 1e-9, as a library row is checked).
+_METRICS = ("coverage", "difficulty", "stalls", "mean_road_length", "mean_intersection_degree")
 
 
 class GarageSetError(GarageMJError):
@@ -213,8 +217,9 @@ class GarageSet:
     def from_json(cls, path: str | Path) -> GarageSet:
         """Read what :meth:`to_json` writes, or the list ``garage-mj library export-json`` writes.
 
-        Every garage's grid is checked against its stored hash; a set file's metrics are taken as
-        written (they are the ones computed when it was made), an export's are the library's.
+        Every garage's grid is checked against its stored hash, and the metrics the file states
+        (difficulty, E[X], E[Y], and an export's coverage and stalls) are recomputed from the grid: a
+        file whose stored metric differs is refused, naming the file and the garage.
         """
         path = Path(path)
         if not path.is_file():
@@ -436,6 +441,17 @@ def _number(path: Path, i: int, d: dict, key: str) -> float:
     return float(v)
 
 
+def _check_metrics(path: Path, i: int, name: str, garage: Garage, d: dict, fix: str) -> None:
+    """Refuse garage ``i`` when a metric its entry states is not the one its grid gives (the file was altered)."""
+    m = evaluate(garage)
+    for key in _METRICS:
+        if key in d:
+            v = _number(path, i, d, key)
+            if not math.isclose(v, getattr(m, key), rel_tol=1e-9, abs_tol=1e-9):
+                raise GarageSetError(f"{path}, garage {i} ({name}): stored {key} {v:g} is not the grid's "
+                                     f"({getattr(m, key):g}); the file was altered: {fix}")
+
+
 def _set_source(path: Path, i: int, d: Any) -> CruiseSource:
     """Garage ``i`` of a file :meth:`GarageSet.to_json` wrote."""
     if not isinstance(d, dict) or any(k not in d for k in _ENTRY_KEYS):
@@ -446,6 +462,7 @@ def _set_source(path: Path, i: int, d: Any) -> CruiseSource:
     if not all(isinstance(v, str) for v in (name, gname, pack)):
         raise GarageSetError(f"{path}, garage {i}: name, garage_name and pack must be strings; write the file again")
     garage = _entry_garage(path, i, d, gname)
+    _check_metrics(path, i, name, garage, d, "write the file again with GarageSet.to_json")
     return CruiseSource(name, garage, *(_number(path, i, d, k) for k in _ENTRY_KEYS[2:5]), pack=pack)
 
 
@@ -457,4 +474,5 @@ def _export_source(path: Path, i: int, d: Any) -> CruiseSource:
                              "garage-mj library export-json")
     name = f"{d['map']}#{d['id']}"
     garage = _entry_garage(path, i, d, name)
+    _check_metrics(path, i, name, garage, d, "export it again with garage-mj library export-json")
     return CruiseSource(name, garage, *(_number(path, i, d, k) for k in _ENTRY_KEYS[2:5]))
