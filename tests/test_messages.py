@@ -61,6 +61,36 @@ def test_a_crashing_driver_is_one_line_and_debug_shows_its_traceback(packs, tmp_
     assert err.rstrip().splitlines()[-1].startswith("garage-mj cruise: error: driver 'crashy_driver:Crash'")
 
 
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_a_driver_that_cannot_be_built_is_one_line_and_writes_nothing(packs, tmp_path, capsys, monkeypatch, workers):
+    """A raising ``__init__`` or a missing or corrupt learned model stops cruise before --out is touched."""
+    (tmp_path / "unbuildable_driver.py").write_text(textwrap.dedent("""
+        class Unbuildable:
+            def __init__(self):
+                raise RuntimeError("no licence for this car")
+
+            def reset(self, info):
+                pass
+
+            def act(self, obs):
+                return 0
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    (tmp_path / "corrupt.zip").write_bytes(b"not a zip")
+    out = tmp_path / "run"
+    base = ["cruise", "--packs", str(packs), "--tests", "1", "--workers", workers, "--quiet", "--out", str(out)]
+    for driver, words in (("unbuildable_driver:Unbuildable", "RuntimeError: no licence for this car"),
+                          (f"learned:{tmp_path / 'missing.zip'}", "missing.zip"),
+                          (f"learned:{tmp_path / 'corrupt.zip'}", "corrupt.zip")):
+        assert main([*base, "--driver", driver]) == 2
+        lines = _err_lines(capsys)
+        assert len(lines) == 1 and words in lines[0], lines
+        assert driver.startswith("learned") or f"driver {driver!r} cannot be built" in lines[0], lines
+        assert not out.exists()
+    sys.modules.pop("unbuildable_driver", None)
+    assert main([*base, "--driver", "oracle"]) == 0  # the corrected command runs into the same folder
+
+
 def test_a_missing_library_names_the_fix_for_a_positional_path(tmp_path, capsys):
     assert main(["library", "ls", str(tmp_path / "nope.sqlite")]) == 2
     (line,) = _err_lines(capsys)

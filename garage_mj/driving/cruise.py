@@ -36,7 +36,7 @@ from garage_mj.driving.difficulty.rating import (
     driver_route_model,
     resolve_route_model,
 )
-from garage_mj.driving.episode import cached_env, close_cached_env, drive_test
+from garage_mj.driving.episode import cached_env, check_driver, close_cached_env, drive_test
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.replay import write_test_xosc
 from garage_mj.driving.results import TEST_COLUMNS, check_settings, read_tests, write_csv, write_outputs
@@ -164,6 +164,7 @@ def run_cruise(
     if len(set(hashes)) != len(hashes):
         raise CruiseError("the same garage is listed twice; give each garage once")
     settings = settings.resolved(choice.action_type)
+    check_driver(settings)  # a driver that cannot be built stops the run before anything is written
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise"):  # a second run into `out` is refused, naming this one
         return _run_locked(srcs, tests, out, settings, choice, compute, max_tests, xosc, model)

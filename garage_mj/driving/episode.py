@@ -15,6 +15,7 @@ import time
 import traceback
 from typing import Any
 
+from garage_mj.core.errors import GarageMJError
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
 _CACHE: dict[str, Any] = {}
@@ -43,13 +44,29 @@ def close_cached_env() -> None:
 
 
 def _driver_for(settings: CruiseSettings):
+    """This process's driver for ``settings`` (built once); one that cannot be built is a :class:`CruiseError`
+    naming it and its error (its traceback kept for ``--debug``), in a worker process too."""
     from garage_mj.driving.drivers import load_driver
 
     key = (settings.driver, json.dumps(settings.driver_kwargs, sort_keys=True))
     if _CACHE.get("driver_key") != key:
-        _CACHE["driver"] = load_driver(settings.driver, **settings.driver_kwargs)
+        try:
+            _CACHE["driver"] = load_driver(settings.driver, **settings.driver_kwargs)
+        except GarageMJError:
+            raise  # a bad spec or model file: its message names it already
+        except Exception as exc:  # a user's driver's __init__ may raise anything
+            err = CruiseError(f"driver {settings.driver!r} cannot be built: {type(exc).__name__}: {exc} "
+                              "(put --debug before the command for its traceback)")
+            err.details = "".join(traceback.format_exception(exc))
+            raise err from exc
         _CACHE["driver_key"] = key
     return _CACHE["driver"]
+
+
+def check_driver(settings: CruiseSettings) -> None:
+    """Build the driver of ``settings`` in this process now, before a run writes anything or starts workers:
+    a missing or corrupt model or a raising ``__init__`` is one line, and the tests run here reuse it."""
+    _driver_for(settings)
 
 
 def drive_test(env, obs, info, seed: int, settings: CruiseSettings, source: CruiseSource, index: int,
