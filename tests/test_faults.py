@@ -465,6 +465,29 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
         assert proc.wait(timeout=60) in (0, 141) and err == "", (argv, err)  # 141: as if killed by SIGPIPE
 
 
+def test_a_read_only_carla_package_target_is_one_line_naming_it(shared_tmp, tiny):
+    from garage_mj.export.fbx import fbx_problem
+
+    if fbx_problem() is not None:
+        pytest.skip(fbx_problem())
+    garage = shared_tmp / "g.json"
+    garage.write_text(tiny.to_json())
+    (shared_tmp / "ro").mkdir()
+    os.chmod(shared_tmp / "ro", 0o555)
+    ours = shared_tmp / "pkgs" / "carla"  # a package of ours, read-only: it cannot be moved aside
+    assert main(["export", "--garage", str(garage), "--carla-package", str(ours), "--quiet"]) == 0
+    os.chmod(shared_tmp / "pkgs", 0o777)
+    os.chmod(ours, 0o555)
+    before = snapshot(shared_tmp)
+    for target in (shared_tmp / "ro" / "carla", ours):
+        done = _unprivileged(["export", "--garage", str(garage), "--out", str(shared_tmp / "packs"),
+                              "--carla-package", str(target), "--quiet"], shared_tmp)
+        err = [ln for ln in done.stderr.splitlines() if ln.strip()]
+        assert done.returncode == 2 and len(err) == 1, done.stderr
+        assert f"--carla-package {target}:" in err[0] and "read-only" in err[0] and ".tmp" not in err[0], err[0]
+    assert snapshot(shared_tmp) == before and sorted(p.name for p in (shared_tmp / "pkgs").iterdir()) == ["carla"]
+
+
 # -- tests.csv repair ------------------------------------------------------------------------------
 def _row(i: int) -> dict[str, str]:
     return {c: f"{c}{i}" for c in TEST_COLUMNS} | {"garage_hash": f"h{i % 3}", "test": str(i), "outcome": "success",

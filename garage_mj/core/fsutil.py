@@ -66,7 +66,11 @@ def swap_in_dir(tmp: Path, final: Path) -> None:
     is first moved aside into a temp folder, then dropped, so ``final`` is never half-written."""
     if final.exists():
         old = make_temp_dir(final.parent, f".{final.name}.", ".old")
-        final.rename(old / final.name)
+        try:
+            final.rename(old / final.name)
+        except OSError:
+            old.rmdir()  # left empty: no trace of the failed swap
+            raise
         tmp.rename(final)
         shutil.rmtree(old, ignore_errors=True)
     else:

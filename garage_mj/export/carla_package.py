@@ -37,6 +37,7 @@ The folder is built beside ``DIR`` and then renamed into place (a previous packa
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 from collections.abc import Iterable
@@ -106,7 +107,18 @@ def check_target(out_dir: str | Path) -> Path:
         raise CarlaPackageError(
             f"--carla-package {out_dir} holds files that are not a garage-mj CARLA package (CARLA would "
             "import any .json there as a package); give a new or empty folder")
+    _check_writable(out_dir)
     return out_dir
+
+
+def _check_writable(out_dir: Path) -> None:
+    """Refuse a package folder this process cannot write: the package is built beside it and renamed in
+    (so its folder must be writable), and a package there already is moved aside (so it must be too)."""
+    above = next((p for p in out_dir.resolve().parents if p.exists()), None)
+    for folder in ([out_dir] if out_dir.is_dir() else []) + ([above] if above is not None else []):
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise CarlaPackageError(f"--carla-package {out_dir}: the folder {folder} is read-only; make it writable "
+                                    "or choose another folder")
 
 
 def write_carla_package(garages: Iterable[Garage], out_dir: str | Path, *, use_carla_materials: bool = True) -> Path:
@@ -122,7 +134,11 @@ def write_carla_package(garages: Iterable[Garage], out_dir: str | Path, *, use_c
     parent = out_dir.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
     package = out_dir.resolve().name
-    tmp = make_temp_dir(parent, f".{package}.", ".tmp")
+    try:
+        tmp = make_temp_dir(parent, f".{package}.", ".tmp")
+    except OSError as exc:  # name the package folder, not the temp folder beside it
+        raise CarlaPackageError(f"--carla-package {out_dir}: cannot write in {parent} ({exc.strerror}); make it "
+                                "writable or choose another folder") from None
     try:
         maps, seen = [], set()
         for garage in garages:
@@ -139,7 +155,11 @@ def write_carla_package(garages: Iterable[Garage], out_dir: str | Path, *, use_c
                          "use_carla_materials": use_carla_materials, "xodr": f"./{name}/{name}.xodr"})
         atomic_write(tmp / f"{package}.json", json.dumps({"maps": maps, "props": []}, indent=2) + "\n")
         final = parent / package
-        swap_in_dir(tmp, final)
+        try:
+            swap_in_dir(tmp, final)
+        except OSError as exc:
+            raise CarlaPackageError(f"--carla-package {out_dir}: cannot replace it ({exc.strerror}); make it and "
+                                    f"{parent} writable or choose another folder") from None
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
