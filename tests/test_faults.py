@@ -671,3 +671,32 @@ def test_every_long_job_refuses_a_locked_out_folder(pack_dir, tmp_path, capsys, 
         line = one_line_error(capsys, [*argv, "--out", str(out)])
         assert f"{out} is in use by garage-mj test (pid {os.getpid()})" in line
         assert snapshot(out) == before
+
+
+def test_a_lock_that_removes_its_file_is_never_held_twice(tmp_path, monkeypatch):
+    import fcntl
+
+    from garage_mj.core.errors import FolderBusy
+    from garage_mj.core.fsutil import LOCK_NAME, FolderLock
+
+    out = tmp_path / "pkg"
+    first = FolderLock(out, "garage-mj export", remove=True).acquire()
+    real, jobs = fcntl.flock, []
+
+    def first_lets_go_then_third_comes(fd, op):  # between the second job's open and its flock
+        if not jobs:
+            jobs.append(FolderLock(out, "garage-mj export (third)", remove=True))
+            first.release()  # deletes the file the second job has just opened
+            jobs[0].acquire()
+        return real(fd, op)
+
+    monkeypatch.setattr(fcntl, "flock", first_lets_go_then_third_comes)
+    with pytest.raises(FolderBusy, match=r"is in use by garage-mj export \(third\)"):
+        FolderLock(out, "garage-mj export", remove=True).acquire()  # not the deleted file's lock
+    monkeypatch.undo()
+    jobs[0].release()
+    assert not (out / LOCK_NAME).exists()  # the lock file goes with the job
+    with FolderLock(out, "garage-mj export", remove=True):
+        with pytest.raises(FolderBusy, match=f"{out} is in use by garage-mj export"):
+            FolderLock(out, "garage-mj export", remove=True).acquire()
+    assert os.listdir(out) == []

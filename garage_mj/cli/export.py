@@ -3,8 +3,9 @@
 ``--garage garage.json`` exports one garage; ``--library FILE`` exports the library's garages
 that pass the filters. Packs land in ``--out DIR`` (one folder each, plus ``index.json``);
 complete packs are skipped, partial ones repaired. ``--carla-package DIR`` (with or without
-``--out``) lays the same garages out as a package for CARLA's ``make import``
-(:mod:`garage_mj.export.carla_package`). Without Assimp (no wheel for the platform) packs are
+``--out``) adds the same garages to a package for CARLA's ``make import``
+(:mod:`garage_mj.export.carla_package`), whose lock it holds for the whole export; maps
+already in the package stay, complete ones are not rebuilt. Without Assimp (no wheel for the platform) packs are
 written without ``garage.fbx`` and one line says so; a CARLA package is refused.
 """
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from contextlib import ExitStack
 from pathlib import Path
 
 from garage_mj.cli import UserError
@@ -26,8 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "export",
         help=f"export garages as asset packs ({formats()}) and CARLA import packages",
         description=f"Write one asset pack folder per garage under --out, plus {INDEX}. Re-running skips\n"
-        "complete packs and repairs partial ones. --carla-package DIR lays the garages out for\n"
-        "CARLA's map import: copy DIR into CARLA's Import/ folder and run `make import`.",
+        "complete packs and repairs partial ones. --carla-package DIR adds the garages to a package\n"
+        "for CARLA's map import (maps already in it stay): copy DIR into CARLA's Import/ folder and\n"
+        "run `make import`.",
         epilog=f"Each asset pack holds:\n{contents()}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -42,9 +45,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--limit", type=int, help="library filter: at most N garages")
     p.add_argument("--out", type=Path, metavar="DIR", help="folder for the asset packs")
     p.add_argument("--carla-package", type=Path, metavar="DIR",
-                   help="also (or only) write a CARLA import package here: DIR/DIR.json and one <map>.fbx + "
-                   "<map>.xodr folder per garage; the folder's name is the package name")
-    p.add_argument("--force", action="store_true", help="rebuild packs that are already complete")
+                   help="also (or only) add the garages to a CARLA import package here: DIR/DIR.json and one "
+                   "<map>.fbx + <map>.xodr folder per garage (maps already in DIR stay); the folder's name is "
+                   "the package name")
+    p.add_argument("--force", action="store_true", help="rebuild packs and CARLA maps that are already complete")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -74,20 +78,34 @@ def _from_library(args: argparse.Namespace) -> list:
 def run(args: argparse.Namespace) -> int:
     if args.out is None and args.carla_package is None:
         raise UserError("give --out DIR (asset packs), --carla-package DIR (a CARLA import package), or both")
-    if args.carla_package is not None:
-        from garage_mj.export.carla_package import check_target
+    if args.out is not None and args.carla_package is not None and \
+            args.out.resolve() == args.carla_package.resolve():
+        raise UserError(f"--out and --carla-package both name {args.out}; give the package a folder of its own")
+    with ExitStack() as stack:
+        if args.carla_package is not None:
+            from garage_mj.export.carla_package import package_lock
 
-        check_target(args.carla_package)  # a bad folder is refused before any work
-    if args.garage is not None:
-        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.feasible, args.limit)):
-            raise UserError("--map, --difficulty, --coverage, --feasible and --limit filter a --library, not a --garage")
-        try:
-            text = args.garage.read_bytes()
-        except OSError as exc:
-            raise UserError(f"cannot read {args.garage}: {exc.strerror}") from None
-        garages = [Garage.from_json(text, source=str(args.garage), usable=True)]
-    else:
-        garages = _from_library(args)
+            # a bad or busy folder is refused before any work; the lock is held to the end
+            stack.enter_context(package_lock(args.carla_package))
+        _export(args, _garages(args))
+    return 0
+
+
+def _garages(args: argparse.Namespace) -> list[Garage]:
+    """The garages to export: the ``--garage`` file, or the ``--library`` rows that pass the filters."""
+    if args.library is not None:
+        return _from_library(args)
+    if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.feasible, args.limit)):
+        raise UserError("--map, --difficulty, --coverage, --feasible and --limit filter a --library, not a --garage")
+    try:
+        text = args.garage.read_bytes()
+    except OSError as exc:
+        raise UserError(f"cannot read {args.garage}: {exc.strerror}") from None
+    return [Garage.from_json(text, source=str(args.garage), usable=True)]
+
+
+def _export(args: argparse.Namespace, garages: list[Garage]) -> None:
+    """Write the packs and/or the CARLA package (whose lock the caller holds)."""
     if args.out is not None:
         from garage_mj.export.pack import export_packs
 
@@ -100,8 +118,7 @@ def run(args: argparse.Namespace) -> int:
     if args.carla_package is not None:
         from garage_mj.export.carla_package import write_carla_package
 
-        description = write_carla_package(garages, args.carla_package)
+        description = write_carla_package(garages, args.carla_package, force=args.force, locked=True)
         count = len(json.loads(description.read_text())["maps"])
         print(f"CARLA package {description.parent.name}: {count} map(s) in {args.carla_package}; copy the folder "
               "into CARLA's Import/ folder and run `make import`")
-    return 0

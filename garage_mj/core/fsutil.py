@@ -7,7 +7,9 @@
 * :class:`FolderLock` marks an output folder as in use by one long job (``cruise``, ``export``,
   ``train``, ``demo``); a second job into the same folder is refused with one line naming the
   first one's pid. The lock is an ``flock`` on ``.garage-mj.lock``, so the kernel drops it when
-  its process dies, even by ``kill -9``: a stale lock file never blocks a later run.
+  its process dies, even by ``kill -9``: a stale lock file never blocks a later run. With
+  ``remove=True`` the lock file is deleted when the job ends (a CARLA package folder holds only
+  the package).
 """
 
 from __future__ import annotations
@@ -189,26 +191,42 @@ class FolderLock:
 
     ``what`` names the job (``"garage-mj cruise"``); a second holder gets :class:`FolderBusy`:
     "FOLDER is in use by garage-mj cruise (pid 1234); wait for it to finish or use another folder".
+    ``remove=True`` deletes the lock file on release (while still holding it); a job that then
+    locks the deleted file notices that the name now leads elsewhere and locks afresh.
     """
 
-    def __init__(self, folder: str | Path, what: str) -> None:
+    def __init__(self, folder: str | Path, what: str, *, remove: bool = False) -> None:
         self.folder = Path(folder)
         self.what = what
+        self.remove = remove
         self._fd: int | None = None
 
     def acquire(self) -> FolderLock:
         ensure_dir(self.folder)
         path = self.folder / LOCK_NAME
-        try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, public_mode())
-        except OSError as exc:
-            raise write_error(path, exc) from None
+        while True:
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, public_mode())
+            except OSError as exc:
+                raise write_error(path, exc) from None
+            self._wait(fd)
+            if self._still_named(fd, path):
+                break
+            os.close(fd)  # its holder deleted the file as it let go: lock the file the name leads to now
+        info = json.dumps({"pid": os.getpid(), "what": self.what, "argv": sys.argv[1:8]}).encode()
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, info, 0)
+        self._fd = fd
+        return self
+
+    def _wait(self, fd: int) -> None:
+        """``flock`` ``fd``, or close it and raise :class:`FolderBusy` naming the holder."""
         holder: dict = {}
         deadline = time.monotonic() + HOLDER_WAIT
         while True:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
+                return
             except BlockingIOError:
                 try:
                     holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
@@ -222,19 +240,28 @@ class FolderLock:
                 raise FolderBusy(f"{self.folder} is in use by {who}; wait for it to finish or use "
                                  "another output folder") from None
             time.sleep(0.02)
-        info = json.dumps({"pid": os.getpid(), "what": self.what, "argv": sys.argv[1:8]}).encode()
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, info, 0)
-        self._fd = fd
-        return self
+
+    def _still_named(self, fd: int, path: Path) -> bool:
+        """Whether ``path`` still names the file ``fd`` locked (a removing holder may have deleted it)."""
+        if not self.remove:
+            return True
+        try:
+            now = os.stat(path, follow_symlinks=False)
+        except FileNotFoundError:
+            return False
+        mine = os.fstat(fd)
+        return (now.st_dev, now.st_ino) == (mine.st_dev, mine.st_ino)
 
     def release(self) -> None:
         if self._fd is not None:
             try:
-                os.ftruncate(self._fd, 0)
+                if self.remove:
+                    os.unlink(self.folder / LOCK_NAME)  # still held: no one else can hold this file now
+                else:
+                    os.ftruncate(self._fd, 0)
             except OSError:
                 pass
-            os.close(self._fd)  # closing drops the flock; the empty file stays (harmless)
+            os.close(self._fd)  # closing drops the flock; without remove the empty file stays (harmless)
             self._fd = None
 
     def __enter__(self) -> FolderLock:
