@@ -206,6 +206,128 @@ def _logic_path(xosc_path: Path, xodr: Path) -> str:
     except ValueError:  # another drive (Windows)
         return xodr.resolve().as_posix()
 
+def _checked_minor(osc_minor: int) -> int:
+    minor = int(osc_minor)
+    if minor not in (0, 1, 2):
+        raise XoscError(f"OpenSCENARIO 1.{minor} is not written here; use 1.0, 1.1 or 1.2")
+    return minor
+
+
+def _with_garage_hash(meta: Mapping[str, Any] | None, pack_dir: Path) -> dict[str, Any]:
+    """A copy of ``meta``; without a ``garage_hash``, the one of the pack's manifest (when it can be read)."""
+    meta = dict(meta or {})
+    if "garage_hash" not in meta:
+        try:
+            meta["garage_hash"] = json.loads((pack_dir / MANIFEST).read_text())["garage_hash"]
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    return meta
+
+
+def _route_points(route: Any) -> np.ndarray:
+    """The route as (N, 2) finite points, N >= 2 (extra columns dropped)."""
+    pts = np.asarray(route, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] < 2 or len(pts) < 2 or not np.isfinite(pts[:, :2]).all():
+        raise XoscError(f"route must be (N, 2) finite points with N >= 2, got shape {pts.shape}")
+    return pts[:, :2]
+
+
+def _checked_actors(actors: Sequence[ActorSpec]) -> list[ActorSpec]:
+    actors = list(actors)
+    names = [a.name for a in actors]
+    for a in actors:
+        _check_actor(a)
+    if len(set(names)) != len(names):
+        raise XoscError(f"actor names must be unique, got {names}")
+    return actors
+
+
+def _parameters(xosc, minor: int, target: int, occupied: list[int], actors: list[ActorSpec],
+                meta: Mapping[str, Any]):
+    """The ``gmj_`` parameter declarations: the test's stalls, its actors, then every meta entry."""
+    params = xosc.ParameterDeclarations()
+    plist = [("gmj_format", "integer", str(FORMAT)), ("gmj_target_stall", "integer", str(target)),
+             ("gmj_occupied", "string", ",".join(map(str, occupied))),
+             ("gmj_actors", "string", ",".join(a.name for a in actors))]
+    for a in actors:
+        plist += [(f"gmj_actor_{a.name}_kind", "string", a.kind),
+                  (f"gmj_actor_{a.name}_behaviour", "string", a.behaviour),
+                  (f"gmj_actor_{a.name}_stall", "integer", str(int(a.stall)))]
+    plist += _meta_params(meta)
+    for name, typ, value in plist:
+        if typ == "integer" and minor >= 2:
+            typ = "int"  # renamed in OpenSCENARIO 1.2
+        params.add_parameter(xosc.Parameter(name, getattr(xosc.ParameterType, typ), value))
+    return params
+
+
+def _add_ego(xosc, entities, init, start: tuple[float, float, float], pts: np.ndarray) -> None:
+    """The ego: its entity, its start pose and its planned route (a Polyline without timing)."""
+    entities.add_scenario_object(EGO, _car(xosc, EGO, *EGO_SIZE))
+    init.add_init_action(EGO, xosc.TeleportAction(_wpos(xosc, *start)))
+    ego_traj = xosc.Trajectory("ego_route", False)
+    d = np.diff(pts, axis=0)
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    heading = np.append(heading, heading[-1])  # the route's direction at each point (informative)
+    ego_traj.add_shape(xosc.Polyline([], [_wpos(xosc, x, y, h) for (x, y), h in zip(pts, heading)]))
+    init.add_init_action(EGO, xosc.FollowTrajectoryAction(ego_traj, xosc.FollowingMode.position))
+
+
+def _add_parked(xosc, entities, init, occupied: list[int], parked: dict[int, tuple[float, float, float]]) -> None:
+    """A parked car entity, at its pose, in every occupied stall."""
+    for s in occupied:
+        name = f"{PARKED_PREFIX}{s}"
+        hx, hy, hz = SHAPE_SIZE["car"]
+        entities.add_scenario_object(name, _car(xosc, name, 2 * hx, 2 * hy, 2 * hz))
+        init.add_init_action(name, xosc.TeleportAction(_wpos(xosc, *parked[s])))
+
+
+def _actor_group(xosc, minor: int, a: ActorSpec, w: np.ndarray):
+    """A moving actor's ManeuverGroup: one Event following its timed trajectory, started near the trigger."""
+    traj = xosc.Trajectory(f"{a.name}_trajectory", False)
+    traj.add_shape(xosc.Polyline([float(t) for t in w[:, 0]], [_wpos(xosc, *row[1:]) for row in w]))
+    follow = xosc.FollowTrajectoryAction(traj, xosc.FollowingMode.position, xosc.ReferenceContext.relative,
+                                         1.0, 0.0)
+    trig = xosc.EntityTrigger(
+        f"{a.name}_trigger", 0, xosc.ConditionEdge.rising,
+        _near(xosc, minor, _wpos(xosc, float(a.trigger[0]), float(a.trigger[1]), 0.0), float(a.trigger_radius)),
+        EGO)
+    event = xosc.Event(f"{a.name}_event", xosc.Priority.parallel)  # the only event of its maneuver
+    event.add_action(f"{a.name}_follow", follow)
+    event.add_trigger(trig)
+    man = xosc.Maneuver(f"{a.name}_maneuver")
+    man.add_event(event)
+    group = xosc.ManeuverGroup(f"{a.name}_group")
+    group.add_actor(a.name)
+    group.add_maneuver(man)
+    return group
+
+
+def _add_actors(xosc, minor: int, entities, init, actors: list[ActorSpec]):
+    """Every actor's entity and first pose; the Act holding the moving ones' maneuver groups."""
+    act = xosc.Act("gmj_actors", xosc.ValueTrigger(
+        "gmj_start", 0, xosc.ConditionEdge.none,
+        xosc.SimulationTimeCondition(0, xosc.Rule.greaterOrEqual if minor >= 2 else xosc.Rule.greaterThan)))
+    for a in actors:
+        w = np.asarray(a.waypoints, dtype=float)
+        entities.add_scenario_object(a.name, _actor_entity(xosc, a))
+        init.add_init_action(a.name, xosc.TeleportAction(_wpos(xosc, *w[0, 1:])))
+        if a.trigger is not None:
+            act.add_maneuver_group(_actor_group(xosc, minor, a, w))
+    return act
+
+
+def _storyboard(xosc, minor: int, init, act, goal: tuple[float, float, float]):
+    """Init, the actors' story (when one moves) and the stop trigger: the ego near the goal."""
+    stop = xosc.EntityTrigger("gmj_goal", 0, xosc.ConditionEdge.rising,
+                              _near(xosc, minor, _wpos(xosc, *goal), GOAL_TOLERANCE), EGO, triggeringpoint="stop")
+    board = xosc.StoryBoard(init, stop)
+    if act.maneuvergroup:
+        story = xosc.Story("gmj_test", xosc.ParameterDeclarations())
+        story.add_act(act)
+        board.add_story(story)
+    return board
+
 
 def write_xosc(
     path: str | Path,
@@ -232,101 +354,29 @@ def write_xosc(
     """
     from scenariogeneration import xosc
 
-    minor = int(osc_minor)
-    if minor not in (0, 1, 2):
-        raise XoscError(f"OpenSCENARIO 1.{minor} is not written here; use 1.0, 1.1 or 1.2")
+    minor = _checked_minor(osc_minor)
     path = Path(path)
     pack_dir = Path(pack_dir)
     xodr = Path(xodr_path) if xodr_path is not None else pack_dir / XODR
-    meta = dict(meta or {})
-    if "garage_hash" not in meta:
-        try:
-            meta["garage_hash"] = json.loads((pack_dir / MANIFEST).read_text())["garage_hash"]
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
+    meta = _with_garage_hash(meta, pack_dir)
     occ = sorted({int(s) for s in occupied})
     target = int(target_stall)
     if target in occ:
         raise XoscError(f"the target stall {target} is among the occupied stalls")
     start_p, goal_p = _pose(start, "start"), _pose(goal, "goal")
-    pts = np.asarray(route, dtype=float)
-    if pts.ndim != 2 or pts.shape[1] < 2 or len(pts) < 2 or not np.isfinite(pts[:, :2]).all():
-        raise XoscError(f"route must be (N, 2) finite points with N >= 2, got shape {pts.shape}")
-    pts = pts[:, :2]
+    pts = _route_points(route)
     parked = _parked_table(parked_poses)
     missing = [s for s in occ if s not in parked]
     if missing:
         raise XoscError(f"no parked-car pose for occupied stall(s) {missing}")
-    actors = list(actors)
-    names = [a.name for a in actors]
-    for a in actors:
-        _check_actor(a)
-    if len(set(names)) != len(names):
-        raise XoscError(f"actor names must be unique, got {names}")
+    actors = _checked_actors(actors)
 
-    # parameters
-    params = xosc.ParameterDeclarations()
-    plist = [("gmj_format", "integer", str(FORMAT)), ("gmj_target_stall", "integer", str(target)),
-             ("gmj_occupied", "string", ",".join(map(str, occ))), ("gmj_actors", "string", ",".join(names))]
-    for a in actors:
-        plist += [(f"gmj_actor_{a.name}_kind", "string", a.kind),
-                  (f"gmj_actor_{a.name}_behaviour", "string", a.behaviour),
-                  (f"gmj_actor_{a.name}_stall", "integer", str(int(a.stall)))]
-    plist += _meta_params(meta)
-    for name, typ, value in plist:
-        if typ == "integer" and minor >= 2:
-            typ = "int"  # renamed in OpenSCENARIO 1.2
-        params.add_parameter(xosc.Parameter(name, getattr(xosc.ParameterType, typ), value))
-
-    # entities and their start poses
-    entities = xosc.Entities()
-    init = xosc.Init()
-    entities.add_scenario_object(EGO, _car(xosc, EGO, *EGO_SIZE))
-    init.add_init_action(EGO, xosc.TeleportAction(_wpos(xosc, *start_p)))
-    ego_traj = xosc.Trajectory("ego_route", False)
-    d = np.diff(pts, axis=0)
-    heading = np.arctan2(d[:, 1], d[:, 0])
-    heading = np.append(heading, heading[-1])  # the route's direction at each point (informative)
-    ego_traj.add_shape(xosc.Polyline([], [_wpos(xosc, x, y, h) for (x, y), h in zip(pts, heading)]))
-    init.add_init_action(EGO, xosc.FollowTrajectoryAction(ego_traj, xosc.FollowingMode.position))
-    for s in occ:
-        name = f"{PARKED_PREFIX}{s}"
-        hx, hy, hz = SHAPE_SIZE["car"]
-        entities.add_scenario_object(name, _car(xosc, name, 2 * hx, 2 * hy, 2 * hz))
-        init.add_init_action(name, xosc.TeleportAction(_wpos(xosc, *parked[s])))
-    act = xosc.Act("gmj_actors", xosc.ValueTrigger(
-        "gmj_start", 0, xosc.ConditionEdge.none,
-        xosc.SimulationTimeCondition(0, xosc.Rule.greaterOrEqual if minor >= 2 else xosc.Rule.greaterThan)))
-    for a in actors:
-        w = np.asarray(a.waypoints, dtype=float)
-        entities.add_scenario_object(a.name, _actor_entity(xosc, a))
-        init.add_init_action(a.name, xosc.TeleportAction(_wpos(xosc, *w[0, 1:])))
-        if a.trigger is None:
-            continue
-        traj = xosc.Trajectory(f"{a.name}_trajectory", False)
-        traj.add_shape(xosc.Polyline([float(t) for t in w[:, 0]], [_wpos(xosc, *row[1:]) for row in w]))
-        follow = xosc.FollowTrajectoryAction(traj, xosc.FollowingMode.position, xosc.ReferenceContext.relative,
-                                             1.0, 0.0)
-        trig = xosc.EntityTrigger(
-            f"{a.name}_trigger", 0, xosc.ConditionEdge.rising,
-            _near(xosc, minor, _wpos(xosc, float(a.trigger[0]), float(a.trigger[1]), 0.0), float(a.trigger_radius)),
-            EGO)
-        event = xosc.Event(f"{a.name}_event", xosc.Priority.parallel)  # the only event of its maneuver
-        event.add_action(f"{a.name}_follow", follow)
-        event.add_trigger(trig)
-        man = xosc.Maneuver(f"{a.name}_maneuver")
-        man.add_event(event)
-        group = xosc.ManeuverGroup(f"{a.name}_group")
-        group.add_actor(a.name)
-        group.add_maneuver(man)
-        act.add_maneuver_group(group)
-    stop = xosc.EntityTrigger("gmj_goal", 0, xosc.ConditionEdge.rising,
-                              _near(xosc, minor, _wpos(xosc, *goal_p), GOAL_TOLERANCE), EGO, triggeringpoint="stop")
-    board = xosc.StoryBoard(init, stop)
-    if act.maneuvergroup:
-        story = xosc.Story("gmj_test", xosc.ParameterDeclarations())
-        story.add_act(act)
-        board.add_story(story)
+    params = _parameters(xosc, minor, target, occ, actors, meta)
+    entities, init = xosc.Entities(), xosc.Init()
+    _add_ego(xosc, entities, init, start_p, pts)
+    _add_parked(xosc, entities, init, occ, parked)
+    act = _add_actors(xosc, minor, entities, init, actors)
+    board = _storyboard(xosc, minor, init, act, goal_p)
     road = xosc.RoadNetwork(roadfile=_logic_path(path, xodr))
     sce = xosc.Scenario(f"garage-mj cruise test: stall {target}", "garage-mj", params, entities, board, road,
                         xosc.Catalog(), osc_minor_version=minor)
@@ -334,7 +384,6 @@ def write_xosc(
     ET.indent(el)
     path.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write(path, ET.tostring(el, encoding="utf-8", xml_declaration=True))
-
 
 
 __all__ = ["XoscError", "write_xosc", "EGO", "PARKED_PREFIX"]

@@ -160,7 +160,44 @@ def _int_list(name: str, text: str) -> list[int]:
         raise _Bad(f"parameter {name}: {text[:40]!r} is not a comma-separated list of stall ids") from None
 
 
-def _read(path: Path) -> XoscTest:
+class _Params:
+    """The file's typed ``gmj_`` parameters; the reader takes each one it uses out of :attr:`left`."""
+
+    def __init__(self, root) -> None:
+        self.left = {name: _typed(name, typ, value) for name, (typ, value) in _params(root).items()}
+
+    def need(self, name: str, kind: type) -> Any:
+        """Take out the required parameter ``name``, an ``int`` or a ``str``."""
+        if name not in self.left:
+            raise _Bad(f"parameter {name} is missing; not a garage-mj cruise test")
+        v = self.left.pop(name)
+        if kind is int and (not isinstance(v, int) or isinstance(v, bool)):
+            raise _Bad(f"parameter {name} must be an integer")
+        if kind is str and not isinstance(v, str):
+            raise _Bad(f"parameter {name} must be a string")
+        return v
+
+    def promoted(self) -> dict[str, Any]:
+        """The optional fields of :class:`XoscTest` (:data:`KNOWN_META`) and ``meta``: every parameter left."""
+        meta = self.left
+        garage_hash = meta.pop("gmj_garage_hash", None)
+        seed = meta.pop("gmj_seed", None)
+        driver = meta.pop("gmj_driver", None)
+        action_type = meta.pop("gmj_action_type", None)
+        if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool)):
+            raise _Bad("parameter gmj_seed must be an integer")
+        for n, v in (("gmj_garage_hash", garage_hash), ("gmj_driver", driver), ("gmj_action_type", action_type)):
+            if v is not None and not isinstance(v, str):
+                raise _Bad(f"parameter {n} must be a string")
+        leftover = [n for n in meta if n.startswith("gmj_actor_")]
+        if leftover:
+            raise _Bad(f"parameters {leftover[:3]} name no actor of gmj_actors")
+        rest = {(n[len("gmj_json_"):] if n.startswith("gmj_json_") else n[len("gmj_"):]): v for n, v in meta.items()}
+        return {"garage_hash": garage_hash, "seed": seed, "driver": driver, "action_type": action_type, "meta": rest}
+
+
+def _root(path: Path):
+    """The ``OpenSCENARIO`` root element of a 1.x file."""
     try:
         root = etree.parse(str(path), _SAFE_PARSER).getroot()
     except etree.XMLSyntaxError as exc:
@@ -170,29 +207,11 @@ def _read(path: Path) -> XoscTest:
     hdr = root.find("FileHeader")
     if hdr is None or hdr.get("revMajor") != "1":
         raise _Bad("no FileHeader of OpenSCENARIO 1.x")
-    raw = _params(root)
-    meta = {}
-    for name, (typ, value) in raw.items():
-        meta[name] = _typed(name, typ, value)
+    return root
 
-    def need(name: str, kind: type):
-        if name not in meta:
-            raise _Bad(f"parameter {name} is missing; not a garage-mj cruise test")
-        v = meta.pop(name)
-        if kind is int and (not isinstance(v, int) or isinstance(v, bool)):
-            raise _Bad(f"parameter {name} must be an integer")
-        if kind is str and not isinstance(v, str):
-            raise _Bad(f"parameter {name} must be a string")
-        return v
 
-    fmt = need("gmj_format", int)
-    if fmt != FORMAT:
-        raise _Bad(f"gmj_format {fmt} is not the supported {FORMAT}")
-    target = need("gmj_target_stall", int)
-    occupied = _int_list("gmj_occupied", need("gmj_occupied", str))
-    actor_names = [n for n in need("gmj_actors", str).split(",") if n]
-
-    # road network -> pack
+def _road_network(root, path: Path) -> Path:
+    """The OpenDRIVE file the scenario names (relative to the ``.xosc``); its folder is the pack."""
     lf = root.find("RoadNetwork/LogicFile")
     if lf is None or not lf.get("filepath"):
         raise _Bad("RoadNetwork/LogicFile@filepath is missing")
@@ -200,8 +219,11 @@ def _read(path: Path) -> XoscTest:
     xodr = (fp if fp.is_absolute() else path.resolve().parent / fp).resolve()
     if not xodr.is_file():
         raise _Bad(f"its road network {lf.get('filepath')} ({xodr}) does not exist")
+    return xodr
 
-    # entities
+
+def _entities(root) -> dict[str, str]:
+    """Entity name -> its tag (Vehicle, Pedestrian or MiscObject); the ego must be a Vehicle."""
     ents: dict[str, str] = {}
     for so in root.findall("Entities/ScenarioObject"):
         name = so.get("name")
@@ -214,8 +236,11 @@ def _read(path: Path) -> XoscTest:
         ents[name] = tag
     if ents.get(EGO) != "Vehicle":
         raise _Bad("no Vehicle entity named 'ego'")
+    return ents
 
-    # init: poses and the ego's route
+
+def _init(root, ents: dict[str, str]) -> tuple[dict[str, tuple[float, float, float]], np.ndarray]:
+    """From ``Init``: every entity's start pose, and the ego's route."""
     poses: dict[str, tuple[float, float, float]] = {}
     route = None
     for priv in root.findall("Storyboard/Init/Actions/Private"):
@@ -233,16 +258,23 @@ def _read(path: Path) -> XoscTest:
         raise _Bad(f"no Init TeleportAction for {missing[:5]}")
     if route is None:
         raise _Bad("the ego has no FollowTrajectoryAction (its route) in Init")
+    return poses, route
 
-    # the goal
+
+def _goal(root) -> tuple[float, float, float]:
+    """The goal pose: the StopTrigger's condition on the ego."""
     stop = root.find("Storyboard/StopTrigger")
     if stop is None:
         raise _Bad("the Storyboard has no StopTrigger (the goal)")
-    goal, tol, who = _reach(stop, "the StopTrigger")
+    goal, _, who = _reach(stop, "the StopTrigger")
     if who != EGO:
         raise _Bad(f"the goal condition is on {who or 'no single entity'}, not on the ego")
+    return goal
 
-    # parked cars
+
+def _parked(ents: dict[str, str], poses: dict[str, tuple[float, float, float]],
+            occupied: list[int]) -> dict[int, tuple[float, float, float]]:
+    """Stall -> pose of its parked car, which must be the stalls of ``gmj_occupied``."""
     parked: dict[int, tuple[float, float, float]] = {}
     for name in ents:
         if name.startswith(PARKED_PREFIX):
@@ -253,8 +285,11 @@ def _read(path: Path) -> XoscTest:
             parked[sid] = poses[name]
     if sorted(parked) != occupied:
         raise _Bad(f"gmj_occupied {occupied} does not match the parked cars {sorted(parked)}")
+    return parked
 
-    # actors
+
+def _actor_events(root, actor_names: list[str]) -> dict[str, Any]:
+    """Actor -> the one Event of its ManeuverGroup (moving actors only)."""
     events: dict[str, Any] = {}
     for group in root.findall("Storyboard/Story/Act/ManeuverGroup"):
         refs = [e.get("entityRef") for e in group.findall("Actors/EntityRef")]
@@ -264,62 +299,84 @@ def _read(path: Path) -> XoscTest:
         if len(evs) != 1 or refs[0] in events:
             raise _Bad(f"actor {refs[0]} needs exactly one Event")
         events[refs[0]] = evs[0]
+    return events
+
+
+def _check_all_known(ents: dict[str, str], actor_names: list[str]) -> None:
     known = {EGO, *(n for n in ents if n.startswith(PARKED_PREFIX))}
     extra = [n for n in ents if n not in known and n not in actor_names]
     if extra:
         raise _Bad(f"entities {extra[:5]} are neither the ego, parked cars nor listed in gmj_actors")
-    actors = []
-    for name in actor_names:
-        if name not in ents:
-            raise _Bad(f"actor {name!r} of gmj_actors has no entity")
-        kind = need(f"gmj_actor_{name}_kind", str)
-        behaviour = need(f"gmj_actor_{name}_behaviour", str)
-        stall = need(f"gmj_actor_{name}_stall", int)
-        if kind not in KINDS or behaviour not in BEHAVIOURS[kind]:
-            raise _Bad(f"actor {name}: unknown kind/behaviour {kind!r}/{behaviour!r}")
-        if ents[name] != _ENTITY_TAG[kind]:
-            raise _Bad(f"actor {name} ({kind}) is a {ents[name]}, expected a {_ENTITY_TAG[kind]}")
-        ev = events.get(name)
-        if ev is None:
-            w = np.array([[0.0, *poses[name]]])
-            actors.append(ActorSpec(name, kind, behaviour, w, None, 0.0, stall))
-            continue
-        fts = ev.findall("Action/PrivateAction/RoutingAction/FollowTrajectoryAction")
-        if len(fts) != 1:
-            raise _Bad(f"actor {name}: its Event needs one FollowTrajectoryAction")
-        tr = fts[0].find("TimeReference/Timing")
-        if tr is None or tr.get("domainAbsoluteRelative") != "relative" \
-                or _attr_f(tr, "scale", f"actor {name} Timing") != 1.0 \
-                or _attr_f(tr, "offset", f"actor {name} Timing") != 0.0:
-            raise _Bad(f"actor {name}: its trajectory timing must be relative, scale 1, offset 0")
-        w = _polyline(fts[0], f"actor {name}'s trajectory", timed=True)
-        if (np.diff(w[:, 0]) < 0).any():
-            raise _Bad(f"actor {name}: vertex times decrease")
-        if not np.allclose(w[0, 1:], poses[name], atol=1e-9):
-            raise _Bad(f"actor {name}: its TeleportAction is not its first waypoint")
-        st = ev.find("StartTrigger")
-        if st is None:
-            raise _Bad(f"actor {name}: its Event has no StartTrigger")
-        (tx, ty, _), radius, who = _reach(st, f"actor {name}'s StartTrigger")
-        if who != EGO:
-            raise _Bad(f"actor {name}: its trigger watches {who or 'no single entity'}, not the ego")
-        actors.append(ActorSpec(name, kind, behaviour, w, (tx, ty), radius, stall))
-    garage_hash = meta.pop("gmj_garage_hash", None)
-    seed = meta.pop("gmj_seed", None)
-    driver = meta.pop("gmj_driver", None)
-    action_type = meta.pop("gmj_action_type", None)
-    if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool)):
-        raise _Bad("parameter gmj_seed must be an integer")
-    for n, v in (("gmj_garage_hash", garage_hash), ("gmj_driver", driver), ("gmj_action_type", action_type)):
-        if v is not None and not isinstance(v, str):
-            raise _Bad(f"parameter {n} must be a string")
-    leftover = [n for n in meta if n.startswith("gmj_actor_")]
-    if leftover:
-        raise _Bad(f"parameters {leftover[:3]} name no actor of gmj_actors")
-    rest = {(n[len("gmj_json_"):] if n.startswith("gmj_json_") else n[len("gmj_"):]): v for n, v in meta.items()}
-    return XoscTest(path=path, pack_dir=xodr.parent, xodr_path=xodr, garage_hash=garage_hash, target_stall=target,
-                    occupied=occupied, start=poses[EGO], goal=goal, route=route, actors=actors, parked=parked,
-                    seed=seed, driver=driver, action_type=action_type, meta=rest)
+
+
+def _trajectory(name: str, ev, first: tuple[float, float, float]) -> np.ndarray:
+    """A moving actor's (K, 4) waypoints (t, x, y, yaw) from its Event's timed trajectory."""
+    fts = ev.findall("Action/PrivateAction/RoutingAction/FollowTrajectoryAction")
+    if len(fts) != 1:
+        raise _Bad(f"actor {name}: its Event needs one FollowTrajectoryAction")
+    tr = fts[0].find("TimeReference/Timing")
+    if tr is None or tr.get("domainAbsoluteRelative") != "relative" \
+            or _attr_f(tr, "scale", f"actor {name} Timing") != 1.0 \
+            or _attr_f(tr, "offset", f"actor {name} Timing") != 0.0:
+        raise _Bad(f"actor {name}: its trajectory timing must be relative, scale 1, offset 0")
+    w = _polyline(fts[0], f"actor {name}'s trajectory", timed=True)
+    if (np.diff(w[:, 0]) < 0).any():
+        raise _Bad(f"actor {name}: vertex times decrease")
+    if not np.allclose(w[0, 1:], first, atol=1e-9):
+        raise _Bad(f"actor {name}: its TeleportAction is not its first waypoint")
+    return w
+
+
+def _trigger(name: str, ev) -> tuple[tuple[float, float], float]:
+    """A moving actor's trigger point and radius: its Event's StartTrigger, a condition on the ego."""
+    st = ev.find("StartTrigger")
+    if st is None:
+        raise _Bad(f"actor {name}: its Event has no StartTrigger")
+    (tx, ty, _), radius, who = _reach(st, f"actor {name}'s StartTrigger")
+    if who != EGO:
+        raise _Bad(f"actor {name}: its trigger watches {who or 'no single entity'}, not the ego")
+    return (tx, ty), radius
+
+
+def _actor(name: str, ents: dict[str, str], poses: dict[str, tuple[float, float, float]], events: dict[str, Any],
+           params: _Params) -> ActorSpec:
+    """One actor of ``gmj_actors``: its parameters, its entity and, when it moves, its Event."""
+    if name not in ents:
+        raise _Bad(f"actor {name!r} of gmj_actors has no entity")
+    kind = params.need(f"gmj_actor_{name}_kind", str)
+    behaviour = params.need(f"gmj_actor_{name}_behaviour", str)
+    stall = params.need(f"gmj_actor_{name}_stall", int)
+    if kind not in KINDS or behaviour not in BEHAVIOURS[kind]:
+        raise _Bad(f"actor {name}: unknown kind/behaviour {kind!r}/{behaviour!r}")
+    if ents[name] != _ENTITY_TAG[kind]:
+        raise _Bad(f"actor {name} ({kind}) is a {ents[name]}, expected a {_ENTITY_TAG[kind]}")
+    ev = events.get(name)
+    if ev is None:
+        return ActorSpec(name, kind, behaviour, np.array([[0.0, *poses[name]]]), None, 0.0, stall)
+    w = _trajectory(name, ev, poses[name])
+    trigger, radius = _trigger(name, ev)
+    return ActorSpec(name, kind, behaviour, w, trigger, radius, stall)
+
+
+def _read(path: Path) -> XoscTest:
+    root = _root(path)
+    params = _Params(root)
+    fmt = params.need("gmj_format", int)
+    if fmt != FORMAT:
+        raise _Bad(f"gmj_format {fmt} is not the supported {FORMAT}")
+    target = params.need("gmj_target_stall", int)
+    occupied = _int_list("gmj_occupied", params.need("gmj_occupied", str))
+    actor_names = [n for n in params.need("gmj_actors", str).split(",") if n]
+    xodr = _road_network(root, path)
+    ents = _entities(root)
+    poses, route = _init(root, ents)
+    goal = _goal(root)
+    parked = _parked(ents, poses, occupied)
+    events = _actor_events(root, actor_names)
+    _check_all_known(ents, actor_names)
+    actors = [_actor(name, ents, poses, events, params) for name in actor_names]
+    return XoscTest(path=path, pack_dir=xodr.parent, xodr_path=xodr, target_stall=target, occupied=occupied,
+                    start=poses[EGO], goal=goal, route=route, actors=actors, parked=parked, **params.promoted())
 
 
 def read_xosc(path: str | Path) -> XoscTest:
