@@ -44,9 +44,6 @@ from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.drivable import drivability
 from garage_mj.scene.garage_scene import GarageScene
 
-__all__ = ["INDEX", "MANIFEST", "OPTIONAL_FILES", "PACK_FILES", "Pack", "PackError", "export_pack", "export_packs",
-           "load_pack", "pack_name", "write_index"]
-
 PACK_FORMAT = 1
 #: Files every pack holds besides the manifest (scene assets, if any, are listed in the manifest).
 PACK_FILES = table.pack_files()
