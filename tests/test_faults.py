@@ -386,6 +386,17 @@ def test_a_map_file_name_with_a_control_character_is_one_line(tmp_path, capsys):
     assert out.startswith("INVALID") and "\x1b" not in out
 
 
+def test_a_pack_folder_name_with_a_control_character_is_one_line(pack_dir, tmp_path, capsys):
+    packs = copy_packs(pack_dir, tmp_path / "packs")
+    pack = next(p for p in packs.iterdir() if p.is_dir())
+    pack.rename(packs / ("\x1b[2J" + pack.name))
+    before = snapshot(packs)
+    line = one_line_error(capsys, ["cruise", "--packs", str(packs), "--tests", "1", "--driver", "waypoint",
+                                   "--out", str(tmp_path / "cruise"), "--quiet"])
+    assert "control character" in line and "rename it" in line
+    assert snapshot(packs) == before and not (tmp_path / "cruise").exists()
+
+
 def _unprivileged(argv: list[str], home: Path) -> subprocess.CompletedProcess:
     """Run the CLI as a user that write permissions apply to (``nobody`` via setpriv when we are root).
 

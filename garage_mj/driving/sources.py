@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.core.errors import GarageMJError
+from garage_mj.core.errors import GarageMJError, control_character
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.metrics import evaluate
 
@@ -52,7 +52,12 @@ class CruiseSource:
         from garage_mj.export.pack import load_pack
 
         pack = load_pack(path)
-        src = cls.from_garage(pack.garage, Path(pack.path).name)
+        name = Path(pack.path).name  # the row key of its tests, printed in every summary
+        if control_character(name) is not None:
+            raise CruiseError(f"pack {str(path)!r}: its folder name holds the control character "
+                              f"{control_character(name)!r}; rename it as garage-mj export names packs "
+                              "(<name>_<hash12>)")
+        src = cls.from_garage(pack.garage, name)
         return dataclasses.replace(src, pack=str(Path(pack.path).resolve()))
 
     @classmethod
