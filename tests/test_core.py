@@ -75,3 +75,66 @@ def test_refuse_other_settings_refuses_a_key_one_side_lacks():
         refuse_other_settings({"a": 1}, {"a": 1, "new": 0}, _refuse)
     with pytest.raises(Refused):  # held as None on one side only: the mappings differ, though no value does
         refuse_other_settings({"a": 1, "gone": None}, {"a": 1}, _refuse)
+
+
+# -- load_config: every value checked against its field's type and declared bounds ---------------------
+def _bounded_config():
+    from dataclasses import dataclass
+
+    from garage_mj.core.config import bounded
+
+    @dataclass(frozen=True)
+    class Toy:
+        count: int = bounded(2, ge=1, le=10)
+        share: float = bounded(0.5, ge=0.0, le=1.0)
+        rate: float = 1e-3  # no bounds: only finite
+        widths: tuple[int, ...] = bounded((8, 8), ge=1, min_items=1)
+        kind: str = bounded("a", choices=("a", "b"))
+        table: dict[int, float] = None  # type: ignore[assignment]
+
+    return Toy
+
+
+@pytest.mark.parametrize("line, key, allowed", [
+    ("count = 0", "count", "an integer in [1, 10]"), ("count = 11", "count", "an integer in [1, 10]"),
+    ("count = 2.5", "count", "an integer in [1, 10]"), ("share = 5.0", "share", "a finite number in [0, 1]"),
+    ("share = nan", "share", "a finite number"), ("rate = inf", "rate", "a finite number"),
+    ("rate = -inf", "rate", "a finite number"), ("widths = [0]", "widths", "a non-empty list of integers, each >= 1"),
+    ('widths = ["a"]', "widths", "each >= 1"), ("widths = []", "widths", "non-empty"),
+    ("widths = 3", "widths", "list of integers"), ('kind = "c"', "kind", "one of a, b"),
+    ("table = {1 = nan}", "table", "table = {1 = nan}"), ("count = true", "count", "an integer"),
+])
+def test_load_config_refuses_a_value_outside_its_type_or_bounds_naming_file_key_value(tmp_path, line, key, allowed):
+    from garage_mj.core.config import ConfigError, load_config, read_toml
+
+    toy = _bounded_config()
+    path = tmp_path / "toy.toml"
+    path.write_text(line + "\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(toy, path)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(f"{path}: {key} = ") and allowed in msg
+    with pytest.raises(ConfigError, match=f"^Toy: {key} = "):  # a mapping is named by the class
+        load_config(toy, read_toml(path))
+
+
+def test_load_config_coerces_lists_to_tuples_and_a_built_config_can_be_held_to_its_bounds():
+    from dataclasses import dataclass
+
+    from garage_mj.core.config import ConfigError, bounded, check_bounds, load_config
+
+    toy = _bounded_config()
+    cfg = load_config(toy, {"widths": [4, 5], "share": 1})
+    assert cfg.widths == (4, 5) and cfg.share == 1.0 and isinstance(cfg.share, float)
+    with pytest.raises(ConfigError, match=r"^Toy: count = 0 is not allowed: count must be an integer in \[1, 10\]"):
+        load_config(toy, {}, count=0)  # an override is named by the class, not the file
+
+    @dataclass(frozen=True)
+    class Checked:
+        n: int = bounded(1, ge=1)
+
+        def __post_init__(self) -> None:
+            check_bounds(self)
+
+    with pytest.raises(ConfigError, match="Checked: n = -1 is not allowed"):
+        Checked(n=-1)

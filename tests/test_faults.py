@@ -227,6 +227,38 @@ def test_train_refuses_a_bad_config_in_one_line(tmp_path, capsys, line):
     assert not out.exists()
 
 
+BAD_DRIVER_CONFIGS = ["val_tests = -3", "learning_rate = inf", "learning_rate = nan", "net_arch = [0]",
+                      "hunt_share = 5.0", "torch_threads = -1", 'net_arch = ["a", "b"]', 'curriculum = "x"',
+                      "iterations = 1.5", "cnn_channels = [8, 16]", "stop_weight = 0.0", "occupancy = -0.1"]
+
+
+@pytest.mark.parametrize("line", BAD_DRIVER_CONFIGS)
+def test_train_driver_refuses_a_bad_config_naming_file_key_value_and_range(tmp_path, capsys, line):
+    cfg = tmp_path / "driver.toml"
+    cfg.write_text(line + "\n")
+    out = tmp_path / "run"
+    msg = one_line_error(capsys, ["train-driver", "tiny_7x11", "-n", "1", "--config", str(cfg), "--out", str(out),
+                                  "--no-progress"])
+    key, value = (part.strip() for part in line.split("="))
+    assert str(cfg) in msg and f"{key} = {value} is not allowed: {key} must be " in msg, msg
+    assert not out.exists()
+
+
+def test_actor_counts_are_capped_in_one_line(pack_dir, tmp_path, capsys):
+    from garage_mj.driving.actors.config import MAX_ACTORS
+
+    out = tmp_path / "c"
+    msg = one_line_error(capsys, ["cruise", "--packs", str(pack_dir), "--tests", "1", "--pedestrians", "100000",
+                                  "--out", str(out), "--quiet"])
+    assert "pedestrians = 100000" in msg and f"[0, {MAX_ACTORS}]" in msg
+    scenario = tmp_path / "scenario.toml"
+    scenario.write_text(f"[scenario]\nclutter = {MAX_ACTORS + 1}\n")
+    msg = one_line_error(capsys, ["cruise", "--packs", str(pack_dir), "--tests", "1", "--scenario", str(scenario),
+                                  "--out", str(out), "--quiet"])
+    assert str(scenario) in msg and f"clutter = {MAX_ACTORS + 1}" in msg
+    assert not out.exists()
+
+
 def test_bad_arguments_are_one_line(tmp_path, capsys, pack_dir):
     lib = make_library(tmp_path / "lib.sqlite", 1)
     a_file = tmp_path / "file"

@@ -205,7 +205,7 @@ def test_train_driver_with_actors_labels_the_oracles_yield(tmp_path):
 def test_a_network_config_without_three_filter_counts_is_refused(channels):
     from garage_mj.driving.learning.train import DriverTrainConfig
 
-    with pytest.raises(ValueError, match="cnn_channels must be 3 positive filter counts"):
+    with pytest.raises(ValueError, match="cnn_channels must be a list of 3 integers"):
         DriverTrainConfig(cnn_channels=tuple(channels))
 
 

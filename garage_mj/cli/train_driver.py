@@ -17,7 +17,7 @@ from garage_mj.cli._common import (
     user_errors,
 )
 from garage_mj.cli.cruise import scenario
-from garage_mj.core.config import load_config, read_toml
+from garage_mj.core.config import load_config
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.learning.train import CURRICULA, DriverTrainConfig, train_driver
@@ -75,14 +75,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 @user_errors
 def run(args: argparse.Namespace) -> int:
-    data = read_toml(args.config) if args.config is not None else {}
-    for key, value in (("iterations", args.iterations), ("steps_per_iteration", args.steps),
-                       ("curriculum", args.curriculum), ("rl_timesteps", args.rl_timesteps),
-                       ("n_envs", args.workers)):
-        if value is not None:
-            data[key] = value
+    flags = {key: value for key, value in (("iterations", args.iterations), ("steps_per_iteration", args.steps),
+                                           ("curriculum", args.curriculum), ("rl_timesteps", args.rl_timesteps),
+                                           ("n_envs", args.workers)) if value is not None}
     try:
-        config = load_config(DriverTrainConfig, data)
+        config = load_config(DriverTrainConfig, args.config, **flags)  # a bad value: the file (or flag), key, range
     except ValueError as exc:
         raise UserError(f"driver training config: {exc}") from None
     garages = load_garage_set(args.garages, map=args.map, difficulty=checked_range(args.difficulty, "difficulty"),

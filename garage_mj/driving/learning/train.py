@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.backends import Compute
-from garage_mj.core.config import load_config, refuse_other_settings
+from garage_mj.core.config import bounded, check_bounds, load_config, refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.driving.cruise import run_test
@@ -88,43 +88,38 @@ class TrainDriverError(GarageMJError):
 class DriverTrainConfig:
     """How a learned driver is trained (TOML-loadable, unknown keys rejected)."""
 
-    iterations: int = 6  # DAgger iterations
-    steps_per_iteration: int = 6000  # [env steps] driven (and labelled) per iteration
-    beta0: float = 1.0  # share of steps the oracle drives in iteration 0 ...
-    beta_decay: float = 0.5  # ... and beta0 * beta_decay**i in iteration i (0: the model drives from iteration 1)
-    epochs: int = 10  # passes over all states so far, per iteration (3 underfit: 69% agreement, no success)
-    batch_size: int = 128
-    learning_rate: float = 1e-3
-    n_envs: int = 2  # worker processes driving
-    val_tests: int = 20  # validation tests per iteration (the curve)
-    curriculum: str = "uniform"
-    rl_timesteps: int = 0  # DQN fine-tuning after imitation
-    occupancy: float = 0.5  # share of non-target stalls with a parked car
-    torch_threads: int = 2
-    hunt_budget: int = 40  # [cruise tests] per iteration the hunt spends (curriculum "hunt")
-    hunt_keep: int = 8  # hunted garages (with a failure, worst first) added per iteration
-    hunt_share: float = 0.5  # share of an iteration's draws that go to the hunted garages
+    iterations: int = bounded(6, ge=1, le=10_000)  # DAgger iterations
+    steps_per_iteration: int = bounded(6000, ge=1, le=10_000_000)  # [env steps] driven (and labelled) per iteration
+    beta0: float = bounded(1.0, ge=0.0, le=1.0)  # share of steps the oracle drives in iteration 0 ...
+    # ... and beta0 * beta_decay**i in iteration i (0: the model drives from iteration 1)
+    beta_decay: float = bounded(0.5, ge=0.0, le=1.0)
+    # passes over all states so far, per iteration (3 underfit: 69% agreement, no success)
+    epochs: int = bounded(10, ge=1, le=10_000)
+    batch_size: int = bounded(128, ge=1, le=1_000_000)
+    learning_rate: float = bounded(1e-3, gt=0.0, le=1.0)
+    n_envs: int = bounded(2, ge=1, le=256)  # worker processes driving
+    val_tests: int = bounded(20, ge=0, le=1_000_000)  # validation tests per iteration (the curve)
+    curriculum: str = bounded("uniform", choices=CURRICULA)
+    rl_timesteps: int = bounded(0, ge=0, le=10**10)  # DQN fine-tuning after imitation
+    occupancy: float = bounded(0.5, ge=0.0, le=1.0)  # share of non-target stalls with a parked car
+    torch_threads: int = bounded(2, ge=1, le=1024)
+    hunt_budget: int = bounded(40, ge=1, le=10_000_000)  # [cruise tests] per iteration the hunt spends (curriculum "hunt")
+    hunt_keep: int = bounded(8, ge=1, le=100_000)  # hunted garages (with a failure, worst first) added per iteration
+    hunt_share: float = bounded(0.5, ge=0.0, le=1.0)  # share of an iteration's draws that go to the hunted garages
     # the network (garage_mj.driving.learning.network): NatureCNN-shaped convolutions with cnn_channels filters over
     # the image to cnn_features, concatenated with the vector, then net_arch. A narrow image feature keeps the 5
     # route/speed numbers from being drowned by 256 image features (with 256: 94% agreement with the oracle but
     # 35-50% validation success)
-    cnn_features: int = 32
-    cnn_channels: tuple[int, ...] = (32, 64, 64)  # filters of the 3 convolutions (NatureCNN's)
+    cnn_features: int = bounded(32, ge=1, le=65_536)
+    # filters of the 3 convolutions (NatureCNN's)
+    cnn_channels: tuple[int, ...] = bounded((32, 64, 64), ge=1, le=4096, length=3, why="one per convolution")
     # weight of the states within 2 m of the goal in the imitation loss: the stop is a tenth of the states but,
     # at weight 1, all of the shipped model's held-out failures (stops 1 m short of or past the goal)
-    stop_weight: float = 4.0
-    net_arch: tuple[int, ...] = (128, 128)
+    stop_weight: float = bounded(4.0, gt=0.0, le=1e6)
+    net_arch: tuple[int, ...] = bounded((128, 128), ge=1, le=65_536)  # hidden layer widths after the features
 
     def __post_init__(self) -> None:
-        if self.curriculum not in CURRICULA:
-            raise ValueError(f"curriculum must be one of {', '.join(CURRICULA)}, got {self.curriculum!r}")
-        for name in ("iterations", "steps_per_iteration", "epochs", "batch_size", "n_envs"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if len(self.cnn_channels) != 3 or any(not isinstance(c, int) or c < 1 for c in self.cnn_channels):
-            raise ValueError(f"cnn_channels must be 3 positive filter counts (one per convolution), got {self.cnn_channels!r}")
-        if not 0.0 <= self.beta0 <= 1.0 or not 0.0 <= self.beta_decay <= 1.0:
-            raise ValueError("beta0 and beta_decay must be in [0, 1]")
+        check_bounds(self)  # built in code, held to the ranges a loaded config is (load_config checks them first)
 
 
 def _weights(cfg: DriverTrainConfig, sources: list[CruiseSource], iteration: int,
