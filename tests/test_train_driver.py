@@ -225,3 +225,32 @@ def test_the_network_body_is_its_layers_called_in_order():
         with torch.no_grad():
             image = torch.nn.Sequential(*layers)(obs["image"] / 255.0)
             assert torch.equal(net(obs), torch.cat((image, obs["vector"]), dim=1))
+
+
+def test_a_failed_start_leaves_the_folder_as_it_was_and_a_new_run_writes_its_own_garages(tmp_path, monkeypatch):
+    """Ctrl-C (or any error) before the first iteration is done undoes what the start wrote; a new run in a
+    folder where a killed start left another garages.json writes its own."""
+    from garage_mj.cli import main
+    from garage_mj.driving.learning import train as td
+
+    seen = []
+
+    def interrupted(*args, **kwargs):  # the start is made: the run's garage set is in the folder
+        seen.append([g["hash"] for g in json.loads((out / "garages.json").read_text())["garages"]])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(td, "_collect", interrupted)
+    config = tmp_path / "driver.toml"
+    config.write_text("epochs = 1\nbatch_size = 32\nval_tests = 0\n")
+    out = tmp_path / "run"
+    argv = ["train-driver", "tiny_7x11", "--iterations", "1", "--steps", "20", "--workers", "1",
+            "--config", str(config), "--out", str(out), "--no-progress"]
+    assert main([*argv, "-n", "2"]) == 130
+    assert not out.exists()  # a new folder is not left behind
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    (out / "garages.json").write_text("left by a start that was killed")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main([*argv, "-n", "1", "--seed", "3"]) == 130
+    assert len(seen) == 2 and len(seen[1]) == 1 and seen[1] != seen[0][:1]  # its own garage, not the stale file
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.name != ".garage-mj.lock"} == before

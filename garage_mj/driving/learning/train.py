@@ -43,12 +43,14 @@ the last finished one, with the same result; resuming with more ``iterations`` o
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import io
 import json
 import math
 import os
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -366,18 +368,19 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
     env_kwargs.setdefault("occupancy", cfg.occupancy)
     manifest = _new_manifest(garages, validation, sources, cfg, seed, env_kwargs)
     state = _resumed_state(out, manifest, cfg, resume)
-    _prepare_folder(out, garages, validation)
-
-    torch.set_num_threads(cfg.torch_threads)
-    workers = _Workers(sources, cfg.n_envs, env_kwargs)  # the garages the worker envs draw from (the hunt adds some)
-    try:
-        model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed)
-        state = _dagger(model, workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs, progress)
-        state["selected_iteration"] = _selected(state["curve"])
-        _write_manifest(out, manifest, state)
-        _final_model(workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs, progress)
-    finally:
-        workers.close()
+    with _undone_if_no_run(out):
+        _prepare_folder(out, garages, validation)
+        torch.set_num_threads(cfg.torch_threads)
+        workers = _Workers(sources, cfg.n_envs, env_kwargs)  # the garages the worker envs draw from (the hunt adds some)
+        try:
+            model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed)
+            state = _dagger(model, workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs,
+                            progress)
+            state["selected_iteration"] = _selected(state["curve"])
+            _write_manifest(out, manifest, state)
+            _final_model(workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs, progress)
+        finally:
+            workers.close()
     return out / MODEL
 
 
@@ -423,14 +426,45 @@ def _resumed_state(out: Path, manifest: dict[str, Any], cfg: DriverTrainConfig, 
     return state
 
 
+#: What a run writes into its folder before its first ``run.json``.
+_GARAGE_SETS = ("garages.json", "validation_garages.json")
+_SUBFOLDERS = ("data", "checkpoints", "hunt")
+
+
 def _prepare_folder(out: Path, garages, validation) -> None:
-    """The run folder with ``data/`` and ``checkpoints/``, and the garage sets it trains and validates on."""
+    """The run folder with ``data/`` and ``checkpoints/``, and the garage sets it trains and validates on
+    (a new run writes them anew: another run's start that failed or was killed may have left others)."""
+    fresh = not (out / MANIFEST).exists()
     out.mkdir(parents=True, exist_ok=True)
     (out / "data").mkdir(exist_ok=True)
     (out / "checkpoints").mkdir(exist_ok=True)
-    for name, group in (("garages.json", garages), ("validation_garages.json", validation)):
-        if group is not None and hasattr(group, "to_json") and not (out / name).exists():
+    for name, group in zip(_GARAGE_SETS, (garages, validation)):
+        if group is not None and hasattr(group, "to_json") and (fresh or not (out / name).exists()):
             group.to_json(out / name)
+
+
+@contextlib.contextmanager
+def _undone_if_no_run(out: Path):
+    """A start that fails leaves the folder as it was: when the body raises (Ctrl-C included) before the
+    run's first ``run.json``, the garage sets get back what they held (or go), and ``data/``,
+    ``checkpoints/``, ``hunt/`` and ``out`` itself go when this start made them."""
+    if (out / MANIFEST).exists():
+        yield
+        return
+    made = [p for p in (out, *(out / n for n in _SUBFOLDERS)) if not p.exists()]
+    held = {n: (out / n).read_bytes() if (out / n).is_file() else None for n in _GARAGE_SETS}
+    try:
+        yield
+    except BaseException:
+        if not (out / MANIFEST).exists():
+            for name, data in held.items():
+                if data is None:
+                    (out / name).unlink(missing_ok=True)
+                elif not (out / name).is_file() or (out / name).read_bytes() != data:
+                    atomic_write(out / name, data)
+            for path in made:
+                shutil.rmtree(path, ignore_errors=True)
+        raise
 
 
 def _start_model(out: Path, done: int, venv, cfg: DriverTrainConfig, seed: int):
