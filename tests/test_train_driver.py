@@ -254,3 +254,43 @@ def test_a_failed_start_leaves_the_folder_as_it_was_and_a_new_run_writes_its_own
     assert main([*argv, "-n", "1", "--seed", "3"]) == 130
     assert len(seen) == 2 and len(seen[1]) == 1 and seen[1] != seen[0][:1]  # its own garage, not the stale file
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.name != ".garage-mj.lock"} == before
+
+
+@pytest.fixture(scope="module")
+def one_iteration_run(tmp_path_factory):
+    """The argv and folder of a finished one-iteration run of train-driver (copied, never changed, by the tests)."""
+    from garage_mj.cli import main
+
+    root = tmp_path_factory.mktemp("driver_run")
+    config = root / "driver.toml"
+    config.write_text("epochs = 1\nbatch_size = 32\nval_tests = 0\n")
+    argv = ["train-driver", "tiny_7x11", "-n", "1", "--iterations", "1", "--steps", "20", "--workers", "1",
+            "--config", str(config), "--no-progress"]
+    assert main([*argv, "--out", str(root / "run")]) == 0
+    return argv, root / "run"
+
+
+@pytest.mark.parametrize("how", ["truncated", "garbage", "empty", "missing", "other_arrays"])
+def test_resume_over_a_damaged_data_shard_is_one_line_naming_it(one_iteration_run, tmp_path, capsys, how):
+    import shutil
+
+    from garage_mj.cli import main
+
+    argv, run = one_iteration_run
+    out = tmp_path / "run"
+    shutil.copytree(run, out)
+    shard = out / "data" / "iter_000.npz"
+    data = shard.read_bytes()
+    if how == "missing":
+        shard.unlink()
+    elif how == "other_arrays":
+        np.savez(shard, image=np.zeros((3, 2, 8, 8), np.uint8), vector=np.zeros((3, 8), np.float32))
+    else:
+        shard.write_bytes({"truncated": data[: len(data) // 2], "garbage": b"\x93NUMPY garbage" * 50,
+                           "empty": b""}[how])
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out), "--resume"]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1 and str(shard) in err[0] and "another --out" in err[0], err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before

@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
         config = load_config(DriverTrainConfig, args.config, **flags)  # a bad value: the file (or flag), key, range
     except ValueError as exc:
         raise UserError(f"driver training config: {exc}") from None
+    scen = scenario(args)  # bad actor settings are refused before any garage is drawn
     garages = load_garage_set(args.garages, map=args.map, difficulty=checked_range(args.difficulty, "difficulty"),
                               run_seeds=args.run_seeds, n=args.n, seed=args.seed)
     validation = None
@@ -98,7 +99,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {len(overlap)} validation garage(s) are also training garages")
     print(f"training on {len(garages)} garages ({garages.origin}); validating on "
           f"{len(validation) if validation is not None else len(garages)}")
-    scen = scenario(args)
     made = not args.out.exists()
     try:
         with FolderLock(args.out, "garage-mj train-driver"):

@@ -491,7 +491,7 @@ def _dagger(model, workers: _Workers, out: Path, manifest: dict[str, Any], state
     import torch
 
     done = state["iterations_done"]
-    shards = [np.load(out / "data" / f"iter_{i:03d}.npz") for i in range(done)]
+    shards = [_load_shard(out / "data" / f"iter_{i:03d}.npz", out) for i in range(done)]
     images = [s["image"] for s in shards]
     vectors = [s["vector"] for s in shards]
     labels = [s["label"] for s in shards]
@@ -542,6 +542,28 @@ def _dagger(model, workers: _Workers, out: Path, manifest: dict[str, Any], state
     if bar is not None:
         bar.close()
     return state
+
+
+#: The arrays of a data shard (``data/iter_NNN.npz``) and how many axes each has.
+_SHARD_ARRAYS = {"image": 4, "vector": 2, "label": 1}
+
+
+def _load_shard(path: Path, out: Path) -> dict[str, np.ndarray]:
+    """The states and labels of a finished iteration, read whole; a shard that is missing, truncated or not
+    one (other arrays, shapes or lengths) is a :class:`TrainDriverError` naming it and the fix."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: np.asarray(z[k]) for k in _SHARD_ARRAYS}
+        if any(a.ndim != _SHARD_ARRAYS[k] or a.dtype.kind not in "biuf" for k, a in arrays.items()):
+            raise ValueError("arrays of other shapes or types")
+        if len({len(a) for a in arrays.values()}) != 1:
+            raise ValueError("arrays of unequal lengths")
+    except Exception as exc:  # noqa: BLE001  (zip, zlib, npy header and key errors: the file is damaged)
+        detail = " ".join(str(exc).split())[:160]
+        why = "missing" if isinstance(exc, FileNotFoundError) else f"damaged ({type(exc).__name__}: {detail})"
+        raise TrainDriverError(f"{path} is {why}: the run cannot resume without its iteration's states; "
+                               f"start it again in another --out (or remove {out})") from None
+    return arrays
 
 
 def _curve_row(it: int, states: int, beta: float, loss: float, agreement: float,
