@@ -87,6 +87,9 @@ def test_a_driver_that_cannot_be_built_is_one_line_and_writes_nothing(packs, tmp
         assert len(lines) == 1 and words in lines[0], lines
         assert driver.startswith("learned") or f"driver {driver!r} cannot be built" in lines[0], lines
         assert not out.exists()
+        hunt = ["hunt", "--map", "tiny_7x11", "--driver", driver, "--workers", workers, "--quiet", "--out", str(out)]
+        assert main(hunt) == 2 and words in _err_lines(capsys)[0]
+        assert not out.exists()
     sys.modules.pop("unbuildable_driver", None)
     assert main([*base, "--driver", "oracle"]) == 0  # the corrected command runs into the same folder
 

@@ -47,7 +47,7 @@ from garage_mj.core.config import refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir, write_json
 from garage_mj.driving.cruise import run_cruise, run_test, xosc_name
-from garage_mj.driving.episode import close_cached_env
+from garage_mj.driving.episode import check_driver, close_cached_env
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests, failure_counts, read_tests
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library, LibraryError
@@ -192,6 +192,7 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
     choice = choose_action_type(settings.driver, settings.action_type)
     settings = settings.resolved(choice.action_type)
     check_backend(compute)
+    check_driver(settings)  # a driver that cannot be built stops the hunt before hunt.json is written
     out = ensure_dir(out_dir, "--out")
     stored = {"driver": settings.driver, "map": map, "library": str(Path(library).resolve()) if library else None,
               "seed": settings.seed, "action_type": settings.action_type, "occupancy": settings.occupancy,
