@@ -26,7 +26,7 @@ PITCH_DECIMALS = 4
 
 @dataclass(frozen=True)
 class CarConfig:
-    """Limits of the ego car in a garage (SPEC section 7 cruise tests)."""
+    """Limits of the ego car in a garage (SPEC section 7 cruise tests; reverse: section 8 park tests)."""
 
     max_speed: float = 4.0  # [m/s] garage speed limit (~15 km/h)
     max_accel: float = 2.0  # [m/s^2] full throttle
@@ -35,6 +35,8 @@ class CarConfig:
     steer_rate: float = 0.8  # [rad/s] how fast the road wheels turn
     speed_lead: float = 1.0  # [m/s] most the cruise speed may run ahead of the real speed (no windup)
     brake_gain: float = 1.0  # wheel brake ctrl at full brake, 0..1 (the damper actuators)
+    max_reverse_speed: float = 1.5  # [m/s] top speed in reverse (park and AVP tests only)
+    gear_change_speed: float = 0.1  # [m/s] below this |speed| the car is at rest: drive <-> reverse allowed
 
 
 @dataclass(frozen=True)

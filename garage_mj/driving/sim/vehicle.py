@@ -3,9 +3,31 @@
 Commands are a throttle/brake pedal ``throttle`` in [-1, 1] and a steering request ``steer`` in
 [-1, 1] (positive = left). The pedal is an acceleration request: +1 raises the cruise speed at
 ``max_accel``, -1 lowers it at ``max_decel`` and also applies the wheel brakes, 0 holds the current
-speed. The car never reverses. Steering moves toward ``steer * max_steer`` at ``steer_rate`` and is
-split into Ackermann angles for the two front wheels; the rear wheels get per-side speeds (an
-electronic differential). The paper's discrete actions map onto the same commands.
+speed. Steering moves toward ``steer * max_steer`` at ``steer_rate`` and is split into Ackermann
+angles for the two front wheels; the rear wheels get per-side speeds (an electronic differential).
+
+Gears (SPEC section 8). The car is in drive (:attr:`Gear.D`) or reverse (:attr:`Gear.R`) and starts
+every test in D. The pedal means the same in both: the cruise speed is a speed along the gear's
+direction, so in R +1 accelerates backwards (up to ``max_reverse_speed``), -1 brakes, 0 holds the
+speed. Steering is the same in both, as in a real car: steering left while reversing swings the
+rear to the left (the heading turns clockwise). :meth:`Car.speed` is signed, negative in reverse.
+A gear change is honoured only at rest (``|speed| < gear_change_speed``); a request for the other
+gear while moving brakes in full (the pedal is overridden to -1, the steering still applies) until
+the car is at rest, then the gear changes and the pedal acts in the new gear from that control
+period on. The cruise speed restarts from 0 at a change.
+
+Action spaces. Cruise tests (the paper's): :class:`DiscreteAction` (4 actions) or continuous
+``[throttle, steer]``, through :func:`command_from_action` and :meth:`Car.act`; they have no gear,
+so a cruise test always drives in D, exactly as before reverse existed. Park and AVP tests only:
+:func:`park_action_space` and :func:`park_command_from_action`, used by :meth:`Car.park_act`:
+
+- discrete, :class:`ParkAction`: ``ACCELERATE``, ``TURN_LEFT``, ``TURN_RIGHT``, ``BRAKE`` are the
+  cruise actions with the same numbers and keep the gear (in R, ``ACCELERATE`` speeds up backwards
+  and ``TURN_LEFT`` turns the front wheels left); ``SELECT_REVERSE`` (4) and ``SELECT_DRIVE`` (5)
+  brake in full with the wheels straightening, and request R or D (the gear changes once at rest;
+  a request for the gear already in is just ``BRAKE``);
+- continuous: ``[pedal, steer, gear]`` in [-1, 1]; ``gear < 0`` requests R, ``gear >= 0`` requests D,
+  at every step (so an agent holds a gear by holding its sign).
 """
 
 from __future__ import annotations
@@ -20,6 +42,18 @@ import numpy as np
 from garage_mj.scene.car import CarConfig, car_xml_path
 
 EGO_NAME = "ego"  # attachment name: every ego geom becomes "ego/..." (semantics: EGO_CAR)
+
+
+class Gear(enum.Enum):
+    """The car's gear: ``D`` drives forward, ``R`` backward (park and AVP tests only)."""
+
+    D = 1
+    R = -1
+
+    @property
+    def sign(self) -> float:
+        """+1.0 in D, -1.0 in R: the direction of travel along the car's x axis."""
+        return float(self.value)
 
 
 class DiscreteAction(enum.IntEnum):
@@ -40,6 +74,26 @@ DISCRETE_COMMANDS: dict[DiscreteAction, tuple[float, float]] = {
 }
 
 
+class ParkAction(enum.IntEnum):
+    """Discrete actions of park and AVP tests: the cruise actions (same numbers) and two gear selections."""
+
+    ACCELERATE = 0
+    TURN_LEFT = 1
+    TURN_RIGHT = 2
+    BRAKE = 3
+    SELECT_REVERSE = 4
+    SELECT_DRIVE = 5
+
+
+#: (throttle, steer, gear request) per park action: ``None`` keeps the gear; a selection brakes.
+PARK_DISCRETE_COMMANDS: dict[ParkAction, tuple[float, float, Gear | None]] = {
+    **{ParkAction(a): (*DISCRETE_COMMANDS[a], None) for a in DiscreteAction},
+    ParkAction.SELECT_REVERSE: (*DISCRETE_COMMANDS[DiscreteAction.BRAKE], Gear.R),
+    ParkAction.SELECT_DRIVE: (*DISCRETE_COMMANDS[DiscreteAction.BRAKE], Gear.D),
+}
+PARK_CONTINUOUS_SIZE = 3  # [pedal, steer, gear]
+
+
 def clip(x: float, lo: float, hi: float) -> float:
     """``x`` limited to [lo, hi], as ``np.clip`` does for a finite scalar (which costs ~2 us a call)."""
     return min(max(float(x), lo), hi)
@@ -56,6 +110,34 @@ def command_from_action(action) -> tuple[float, float]:
     if arr.shape != (2,):
         raise ValueError(f"continuous action must be [throttle, steer], got shape {arr.shape}")
     return clip(arr[0], -1.0, 1.0), clip(arr[1], -1.0, 1.0)
+
+
+def park_command_from_action(action) -> tuple[float, float, Gear | None]:
+    """``(throttle, steer, gear request)`` from a :class:`ParkAction` or a continuous ``[pedal, steer, gear]``.
+
+    The request is ``None`` (keep the gear) for the discrete driving actions; a continuous action
+    always requests one: R when ``gear < 0``, D otherwise.
+    """
+    arr = np.asarray(action)
+    if arr.ndim == 0:
+        try:
+            return PARK_DISCRETE_COMMANDS[ParkAction(int(arr))]
+        except ValueError:
+            raise ValueError(f"park action {action!r} is not one of 0..{len(ParkAction) - 1}") from None
+    if arr.shape != (PARK_CONTINUOUS_SIZE,):
+        raise ValueError(f"continuous park action must be [pedal, steer, gear], got shape {arr.shape}")
+    return clip(arr[0], -1.0, 1.0), clip(arr[1], -1.0, 1.0), Gear.R if arr[2] < 0 else Gear.D
+
+
+def park_action_space(action_type: str):
+    """The gymnasium action space of park and AVP tests: ``"discrete"`` or ``"continuous"``."""
+    from gymnasium import spaces
+
+    if action_type == "discrete":
+        return spaces.Discrete(len(ParkAction))
+    if action_type == "continuous":
+        return spaces.Box(-1.0, 1.0, (PARK_CONTINUOUS_SIZE,), np.float32)
+    raise ValueError(f"park action type {action_type!r} is not 'discrete' or 'continuous'")
 
 
 def car_mjcf(name: str = EGO_NAME):
@@ -92,7 +174,7 @@ def compile_mjcf(root) -> mujoco.MjModel:
 class Car:
     """A car inside a compiled model, found by name prefix (``"ego/"`` attached, ``""`` standalone).
 
-    Holds the controller state (cruise speed, steering angle); :meth:`control` writes ``data.ctrl``.
+    Holds the controller state (gear, cruise speed, steering angle); :meth:`control` writes ``data.ctrl``.
     """
 
     def __init__(self, model: mujoco.MjModel, config: CarConfig | None = None, prefix: str = f"{EGO_NAME}/"):
@@ -133,7 +215,8 @@ class Car:
         self.bodies = frozenset(subtree)
         self.geoms = frozenset(int(g) for g in np.flatnonzero(np.isin(model.geom_bodyid, list(subtree))))
         self.geom_mask = np.isin(model.geom_bodyid, list(subtree))  # (ngeom,) bool: the car's geoms
-        self.cruise_speed = 0.0  # [m/s]
+        self.gear = Gear.D
+        self.cruise_speed = 0.0  # [m/s] along the gear's direction, >= 0
         self.steer_angle = 0.0  # [rad] bicycle-model angle
         self._vel = np.empty(6)  # mj_objectVelocity's output, reused
 
@@ -144,13 +227,13 @@ class Car:
         return float(data.xpos[self.chassis, 0]), float(data.xpos[self.chassis, 1]), math.atan2(xmat[3], xmat[0])
 
     def speed(self, data: mujoco.MjData) -> float:
-        """Signed forward speed [m/s] of the chassis."""
+        """Signed forward speed [m/s] of the chassis (negative when reversing)."""
         vel = self._vel
         mujoco.mj_objectVelocity(self.model, data, mujoco.mjtObj.mjOBJ_XBODY, self.chassis, vel, 1)
         return float(vel[3])
 
     def reset(self, data: mujoco.MjData, x: float, y: float, yaw: float) -> None:
-        """Place the car at rest at ground pose (x, y, yaw), wheels straight; clears controller state."""
+        """Place the car at rest at ground pose (x, y, yaw), wheels straight, in D; clears the controller."""
         q = self._qadr
         # every car joint (wheels, steering) back to its reference, then the free joint pose
         for b in self.bodies:
@@ -163,6 +246,7 @@ class Car:
             d0, dn = int(self.model.body_dofadr[b]), int(self.model.body_dofnum[b])
             if dn:
                 data.qvel[d0 : d0 + dn] = 0.0
+        self.gear = Gear.D
         self.cruise_speed = 0.0
         self.steer_angle = 0.0
         data.ctrl[self._steer + self._drive + self._brake] = 0.0
@@ -170,13 +254,15 @@ class Car:
 
     # -- control ---------------------------------------------------------------------------------
     def control(self, data: mujoco.MjData, throttle: float, steer: float, dt: float) -> None:
-        """Apply one control period of ``dt`` seconds: update cruise speed and steering, write ctrl."""
+        """One control period of ``dt`` s in the current gear: update cruise speed and steering, write ctrl."""
         cfg = self.config
         u = clip(throttle, -1.0, 1.0)
         s = clip(steer, -1.0, 1.0)
         rate = cfg.max_accel if u >= 0 else cfg.max_decel
         v = self.cruise_speed + u * rate * dt
-        ceiling = min(cfg.max_speed, max(self.speed(data), 0.0) + cfg.speed_lead)
+        sign = self.gear.sign  # 1.0 in D: the products below are then exactly the forward-only ones
+        top = cfg.max_speed if self.gear is Gear.D else cfg.max_reverse_speed
+        ceiling = min(top, max(sign * self.speed(data), 0.0) + cfg.speed_lead)
         self.cruise_speed = clip(v, 0.0, max(ceiling, 0.0))
         step = cfg.steer_rate * dt
         self.steer_angle += clip(s * cfg.max_steer - self.steer_angle, -step, step)
@@ -185,7 +271,7 @@ class Car:
         # Ackermann: both front wheels point at the same turning centre on the rear axle line
         data.ctrl[self._steer[0]] = math.atan(self.wheelbase * tan_d / (self.wheelbase - half * tan_d))
         data.ctrl[self._steer[1]] = math.atan(self.wheelbase * tan_d / (self.wheelbase + half * tan_d))
-        omega = self.cruise_speed / self.wheel_radius  # [rad/s]
+        omega = sign * self.cruise_speed / self.wheel_radius  # [rad/s], negative in R
         curvature = tan_d / self.wheelbase  # [1/m]
         data.ctrl[self._drive[0]] = omega * (1 - half * curvature)
         data.ctrl[self._drive[1]] = omega * (1 + half * curvature)
@@ -194,3 +280,22 @@ class Car:
     def act(self, data: mujoco.MjData, action, dt: float) -> None:
         """:meth:`control` from a discrete action or a continuous ``[throttle, steer]``."""
         self.control(data, *command_from_action(action), dt)
+
+    def park_control(self, data: mujoco.MjData, throttle: float, steer: float, gear: Gear | None,
+                     dt: float) -> None:
+        """:meth:`control` with a gear request (park and AVP tests): ``None`` or the current gear keeps it.
+
+        The other gear is engaged only at rest (``|speed| < gear_change_speed``), with the cruise speed
+        back to 0; while the car moves, the request brakes in full instead (steering still applies).
+        """
+        if gear is not None and gear is not self.gear:
+            if abs(self.speed(data)) < self.config.gear_change_speed:
+                self.gear = gear
+                self.cruise_speed = 0.0
+            else:
+                throttle = -1.0
+        self.control(data, throttle, steer, dt)
+
+    def park_act(self, data: mujoco.MjData, action, dt: float) -> None:
+        """:meth:`park_control` from a :class:`ParkAction` or a continuous ``[pedal, steer, gear]``."""
+        self.park_control(data, *park_command_from_action(action), dt)
