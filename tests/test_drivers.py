@@ -22,6 +22,7 @@ from garage_mj.driving.drivers.vision import VisionDriver
 from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sim.vehicle import DiscreteAction
 from garage_mj.scene.semantics import NUM_CLASSES
+from garage_mj.testing import driver_spec
 from tests._scenes import run_test
 
 L_ROUTE = [(0.0, 0.0), (14.0, 0.0), (14.0, 12.0)]  # a left turn at 14 m
@@ -225,3 +226,70 @@ def test_drivers_are_deterministic_under_a_seed(name):
     runs = [run_test([], L_ROUTE, load_driver(name, noise=noise), seed=7) for _ in range(2)]
     (o1, t1), (o2, t2) = runs
     assert o1 == o2 and np.array_equal(t1, t2)
+
+
+USER_DRIVER = """
+class MyDriver:
+    action_type = "discrete"
+    def reset(self, info):
+        pass
+    def act(self, obs):
+        return 3
+"""
+
+
+def test_user_driver_from_a_file_or_the_current_folder_without_pythonpath(tmp_path, monkeypatch):
+    """``path/to/file.py:Class`` loads the file; ``module:Class`` finds a module in the current folder."""
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "file_driver.py").write_text(USER_DRIVER)
+    (tmp_path / "here_driver.py").write_text(USER_DRIVER)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", ".", str(tmp_path))])
+    try:
+        assert resolve_driver("sub/file_driver.py:MyDriver").__name__ == "MyDriver"
+        cls = resolve_driver("./sub/file_driver.py:MyDriver")
+        assert cls is resolve_driver("sub/file_driver.py:MyDriver")
+        assert resolve_driver(driver_spec(cls)) is cls  # the pytest plugin's spec of a class loaded from a file
+        assert load_driver("here_driver:MyDriver").act({}) == 3
+    finally:
+        sys.modules.pop("here_driver", None)
+    with pytest.raises(DriverError, match=r"^driver './nope\.py:MyDriver': no file './nope\.py'"):
+        resolve_driver("./nope.py:MyDriver")
+    with pytest.raises(DriverError, match=r"file 'sub/file_driver\.py' has no attribute 'Nope'"):
+        resolve_driver("sub/file_driver.py:Nope")
+    with pytest.raises(DriverError, match=r"cannot import module 'nowhere_driver': no such module in the current"):
+        resolve_driver("nowhere_driver:MyDriver")
+    (tmp_path / "broken.py").write_text("def oops(:\n")
+    with pytest.raises(DriverError, match=r"running broken\.py failed: SyntaxError"):
+        resolve_driver("broken.py:MyDriver")
+
+
+def test_cli_user_driver_by_file_and_by_module_in_two_workers(tmp_path):
+    """What a new user types, from the folder of their driver, no PYTHONPATH for it (``-P``: the current
+    folder is not on the path, as with the installed ``garage-mj`` script); workers load it too."""
+    import os
+    import subprocess
+
+    from garage_mj.generation.library import Library
+    from garage_mj.grid.painters import paint_garage
+
+    (tmp_path / "my_driver.py").write_text(USER_DRIVER)
+    with Library(tmp_path / "lib.sqlite") as lib:
+        for i in range(2):
+            lib.add(paint_garage("tiny_7x11", seed=i + 1), map="tiny_7x11", run="test", seed=i, episode=0,
+                    timestep=0)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p and p != str(tmp_path))}
+
+    def cruise(driver, out):
+        return subprocess.run([sys.executable, "-P", "-m", "garage_mj", "cruise", "--library", "lib.sqlite",
+                               "--tests", "1", "--workers", "2", "--quiet", "--driver", driver, "--out", out],
+                              cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+
+    for driver, out in (("my_driver:MyDriver", "a"), ("./my_driver.py:MyDriver", "b")):
+        done = cruise(driver, out)
+        assert done.returncode == 0, done.stderr
+        assert "2 tests on 2 garages (2 new)" in done.stdout
+    done = cruise("./missing.py:MyDriver", "c")
+    assert done.returncode == 2
+    assert done.stderr.strip() == (f"garage-mj cruise: error: driver './missing.py:MyDriver': no file "
+                                   f"'./missing.py' (from the current folder {tmp_path})")

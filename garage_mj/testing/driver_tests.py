@@ -23,6 +23,7 @@ from typing import Any
 from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.driving.cruise import CruiseResult, run_cruise
+from garage_mj.driving.drivers import USER_FILE_MODULE
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.reporting.failures import run_failures
@@ -57,6 +58,8 @@ def driver_spec(driver: type | str) -> str:
     if getattr(sys.modules.get(module), name, None) is not driver:
         raise DriverTestError(f"driver {name}: {module}.{name} is not this class; define it at the top level of "
                               "an importable module")
+    if module.startswith(USER_FILE_MODULE):  # loaded from path/to/file.py:Class: workers load the file too
+        return f"{sys.modules[module].__file__}:{name}"
     return f"{module}:{name}"
 
 

@@ -1,4 +1,5 @@
-"""Drivers: the algorithms a cruise test drives with. Built-ins by name, user drivers as ``module:Class``.
+"""Drivers: the algorithms a cruise test drives with. Built-ins by name, user drivers as ``module:Class``
+(a module on the Python path or in the current folder) or ``path/to/file.py:Class``.
 
 Usage: ``driver = load_driver("waypoint", noise={"steer_std": 0.05})``, then per test
 ``driver.reset({"seed": 0, "action_type": "continuous"})`` and per step ``driver.act(obs)``.
@@ -17,9 +18,15 @@ otherwise (:func:`choose_action_type`), and warn when told otherwise.
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import importlib.util
+import os
+import sys
 import warnings
 from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 from garage_mj.core.errors import GarageMJError
@@ -38,6 +45,8 @@ DRIVERS: dict[str, str] = {
     "waypoint": "garage_mj.driving.drivers.waypoint:WaypointDriver",
     "vision": "garage_mj.driving.drivers.vision:VisionDriver",
 }
+#: The name prefix of a module imported from a ``path/to/file.py:Class`` spec (its ``__file__`` is the path).
+USER_FILE_MODULE = "garage_mj_user_driver_"
 #: The learned built-in: ``learned`` (the shipped model) or ``learned:PATH`` (a model zip).
 LEARNED = "learned"
 LEARNED_DRIVER = "garage_mj.driving.drivers.learned:LearnedDriver"
@@ -55,6 +64,7 @@ __all__ = [
     "ActionTypeWarning",
     "DriverNoiseConfig",
     "UNDECLARED_ACTION_TYPE",
+    "USER_FILE_MODULE",
     "action_type_of",
     "choose_action_type",
     "discretize",
@@ -88,22 +98,66 @@ def learned_model(spec: str) -> str | None:
     return path
 
 
+def _is_file_spec(module: str) -> bool:
+    """Whether the part before the colon of ``path/to/file.py:Class`` names a file, not a module."""
+    return module.endswith(".py") or "/" in module or os.sep in module
+
+
+def _import_file(spec: str, path: str) -> ModuleType:
+    """The module in file ``path`` (relative to the current folder), imported once under a name made from
+    its absolute path, so a spawned worker that loads the same spec gets the same classes."""
+    file = Path(path).expanduser().resolve()
+    if not file.is_file():
+        raise DriverError(f"driver {spec!r}: no file {path!r} (from the current folder {os.getcwd()})")
+    name = USER_FILE_MODULE + hashlib.sha1(str(file).encode()).hexdigest()[:12]
+    if name in sys.modules:
+        return sys.modules[name]
+    module_spec = importlib.util.spec_from_file_location(name, file)
+    if module_spec is None or module_spec.loader is None:
+        raise DriverError(f"driver {spec!r}: {path!r} is not a Python file")
+    module = importlib.util.module_from_spec(module_spec)
+    sys.modules[name] = module
+    try:
+        module_spec.loader.exec_module(module)
+    except Exception as exc:  # the user's code: say what failed in one line
+        del sys.modules[name]
+        raise DriverError(f"driver {spec!r}: running {path} failed: {type(exc).__name__}: {exc}") from None
+    return module
+
+
+def _import_module(spec: str, name: str) -> ModuleType:
+    """Module ``name``, found on the Python path or in the current folder (as ``python`` finds a script's
+    neighbours), without setting PYTHONPATH; the folder goes last so it shadows no installed package."""
+    here = os.getcwd()
+    if here not in sys.path:
+        sys.path.append(here)
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        if exc.name and (name == exc.name or name.startswith(exc.name + ".")):  # the driver's module itself, not one it imports
+            raise DriverError(f"driver {spec!r}: cannot import module {name!r}: no such module in the current "
+                              "folder or on the Python path (or give a file: path/to/file.py:Class)") from None
+        raise DriverError(f"driver {spec!r}: cannot import module {name!r} ({exc})") from None
+    except Exception as exc:  # the user's code: say what failed in one line
+        raise DriverError(f"driver {spec!r}: importing {name} failed: {type(exc).__name__}: {exc}") from None
+
+
 def resolve_driver(spec: str) -> type:
-    """The driver class for a built-in name, ``learned[:PATH]`` or a ``module:Class`` spec."""
+    """The driver class for a built-in name, ``learned[:PATH]``, ``module:Class`` (a module on the Python
+    path or in the current folder) or ``path/to/file.py:Class``."""
     target = LEARNED_DRIVER if learned_model(spec) is not None else DRIVERS.get(spec, spec)
-    module_name, sep, class_name = target.partition(":")
+    module_name, sep, class_name = target.rpartition(":")
     if not sep or not module_name or not class_name:
         raise DriverError(
             f"unknown driver {spec!r}: use a built-in ({', '.join(DRIVERS)}, {LEARNED} or {LEARNED}:PATH) "
-            "or module:Class for your own"
+            "or module:Class (or path/to/file.py:Class) for your own"
         )
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise DriverError(f"driver {spec!r}: cannot import module {module_name!r} ({exc})") from None
+    is_file = _is_file_spec(module_name)
+    module = _import_file(spec, module_name) if is_file else _import_module(spec, module_name)
     cls = getattr(module, class_name, None)
     if cls is None:
-        raise DriverError(f"driver {spec!r}: module {module_name!r} has no attribute {class_name!r}")
+        where = f"file {module_name!r}" if is_file else f"module {module_name!r}"
+        raise DriverError(f"driver {spec!r}: {where} has no attribute {class_name!r}")
     if not isinstance(cls, type) or not all(callable(getattr(cls, m, None)) for m in ("reset", "act")):
         raise DriverError(f"driver {spec!r}: {class_name} must be a class with reset(info) and act(obs)")
     return cls
