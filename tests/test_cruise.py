@@ -327,3 +327,37 @@ def test_no_one_difficulty_beats_the_joint_bound_of_two_drivers():
     r = pearson([100, 80, 50, 90], [50, 70, 100, 90])
     assert got["garages"] == 4 and got["r_between"] == pytest.approx(r, abs=1e-4)
     assert got["best_joint_abs_r"] == pytest.approx(joint_r_bound(r), abs=1e-4)
+
+
+def test_a_driver_with_non_finite_actions_fails_as_the_drivers_error_not_a_deadlock(garages, tmp_path, capsys,
+                                                                                    monkeypatch):
+    """A NaN action is the driver's error, reported as one line like a driver that raises; no row is written."""
+    import sys
+    import textwrap
+
+    from garage_mj.cli import main
+    from garage_mj.export.pack import export_pack
+
+    (tmp_path / "nan_driver.py").write_text(textwrap.dedent("""
+        class NaNDriver:
+            action_type = "continuous"
+
+            def reset(self, info):
+                self.steps = 0
+
+            def act(self, obs):
+                self.steps += 1
+                return [0.5, 0.0] if self.steps < 5 else [float("nan"), 0.0]
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    packs = tmp_path / "packs"
+    export_pack(garages[0], packs)
+    out = tmp_path / "run"
+    assert main(["cruise", "--packs", str(packs), "--tests", "1", "--driver", "nan_driver:NaNDriver", "--quiet",
+                 "--out", str(out)]) == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "driver 'nan_driver:NaNDriver' failed on" in lines[0], lines
+    assert "ValueError: the driver's action [nan, 0.0] is not finite" in lines[0]
+    tests_csv = out / "tests.csv"
+    assert not tests_csv.exists() or "deadlock" not in tests_csv.read_text()
+    sys.modules.pop("nan_driver", None)

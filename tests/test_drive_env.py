@@ -272,6 +272,31 @@ def test_bad_arguments_are_one_clear_error(painted_tiny):
         GarageDriveEnv(garage=painted_tiny, car={"max_sped": 3.0})
 
 
+@pytest.mark.parametrize("action", [[np.nan, 0.0], [0.5, np.inf], [-np.inf, np.nan]])
+def test_a_non_finite_action_is_refused_naming_it_before_anything_moves(env, action):
+    env.reset(seed=0)
+    env.step(FULL)
+    sim = env.unwrapped
+    before = (sim.data.time, sim.car.pose(sim.data), sim.monitor.progress)
+    with pytest.raises(ValueError, match=r"the driver's action \[.*\] is not finite \(NaN or infinity\)"):
+        env.step(np.array(action, np.float32))
+    assert (sim.data.time, sim.car.pose(sim.data), sim.monitor.progress) == before
+    _, _, term, trunc, info = env.step(FULL)  # a finite action drives on
+    assert sim.data.time > before[0] and not (term or trunc)
+
+
+def test_a_non_finite_discrete_action_is_refused(painted_tiny):
+    env = GarageDriveEnv(garage=painted_tiny, action_type="discrete")
+    env.reset(seed=0)
+    for action in (np.float64(np.nan), float("inf"), np.float32(-np.inf)):
+        with pytest.raises(ValueError, match="is not finite"):
+            env.step(action)
+    with pytest.raises(ValueError, match="is not one of 0..3"):
+        env.step(7)
+    env.step(0)
+    env.close()
+
+
 def test_sb3_trains_ppo_on_image_observations_through_make_vec_env(painted_tiny):
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env

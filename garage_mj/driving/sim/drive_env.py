@@ -63,7 +63,7 @@ from garage_mj.driving.sim.outcomes import (
     ego_contacts,
 )
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
-from garage_mj.driving.sim.vehicle import Car, DiscreteAction, attach_car, compile_mjcf
+from garage_mj.driving.sim.vehicle import Car, DiscreteAction, attach_car, command_from_action, compile_mjcf
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies
 from garage_mj.scene.actor_spec import ActorSpec
@@ -379,16 +379,19 @@ class GarageDriveEnv(gym.Env):
         return moving
 
     def step(self, action):
+        """One control step; an action outside the action space (NaN or infinite included) is a ValueError
+        naming it, raised before anything moves (a driver's bad action is its error, never an outcome)."""
         if self.monitor is None:
             raise RuntimeError("call reset() before step()")
         if self.outcome is not None:
             raise RuntimeError("the episode is over; call reset()")
+        command = command_from_action(action)  # a bad or non-finite action is refused before anything moves
         before = self.monitor.progress
         moving = False
         if self.scenario.actors:
             x0, y0, _ = self.car.pose(self.data)
             moving = self._move_actors(x0, y0)
-        self.car.act(self.data, action, self.dt)
+        self.car.control(self.data, *command, self.dt)
         contacts = []
         model, data, hittable = self.model, self.data, self._hittable
         if self._hit_counts is not None:  # the wheels touch the floor at every step: count the rest

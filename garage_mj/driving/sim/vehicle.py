@@ -100,16 +100,27 @@ def clip(x: float, lo: float, hi: float) -> float:
 
 
 def command_from_action(action) -> tuple[float, float]:
-    """``(throttle, steer)`` from a discrete action (int) or a continuous ``[throttle, steer]``."""
+    """``(throttle, steer)`` from a discrete action (int) or a continuous ``[throttle, steer]``; a driver's
+    action that is neither (NaN or infinite included) is a ``ValueError`` naming it, never a command."""
     arr = np.asarray(action)
     if arr.ndim == 0:
+        if arr.dtype.kind == "f" and not math.isfinite(arr):
+            raise ValueError(f"the driver's action {action!r} is not finite (NaN or infinity); a discrete action "
+                             f"is one of 0..{len(DiscreteAction) - 1}")
         try:
             return DISCRETE_COMMANDS[DiscreteAction(int(arr))]
-        except ValueError:
+        except (ValueError, TypeError):
             raise ValueError(f"discrete action {action!r} is not one of 0..{len(DiscreteAction) - 1}") from None
     if arr.shape != (2,):
         raise ValueError(f"continuous action must be [throttle, steer], got shape {arr.shape}")
-    return clip(arr[0], -1.0, 1.0), clip(arr[1], -1.0, 1.0)
+    try:
+        throttle, steer = float(arr[0]), float(arr[1])
+    except (ValueError, TypeError):
+        raise ValueError(f"continuous action {action!r} must be two numbers [throttle, steer]") from None
+    if not (math.isfinite(throttle) and math.isfinite(steer)):
+        raise ValueError(f"the driver's action {[throttle, steer]} is not finite (NaN or infinity); a continuous "
+                         "action is [throttle, steer], each in [-1, 1]")
+    return clip(throttle, -1.0, 1.0), clip(steer, -1.0, 1.0)
 
 
 def park_command_from_action(action) -> tuple[float, float, Gear | None]:
