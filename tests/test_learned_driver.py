@@ -220,6 +220,24 @@ def test_a_model_with_other_actions_is_refused(tmp_path):
         load_driver(f"learned:{path}")
 
 
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_a_model_with_non_finite_weights_is_refused_naming_the_file(tmp_path, dqn_zip, bad):
+    """A diverged model's NaN Q-values would argmax to one constant action that passes as its driving."""
+    import torch
+    from stable_baselines3 import DQN
+
+    model = DQN.load(dqn_zip, device="cpu")
+    with torch.no_grad():
+        for p in model.policy.parameters():
+            p.fill_(bad)
+    path = tmp_path / "diverged.zip"
+    model.save(path)
+    with pytest.raises(DriverError, match=rf"learned driver model {path}: its weight .* holds NaN or infinite "
+                                          r"values \(the training diverged\); retrain it") as err:
+        load_driver(f"learned:{path}")
+    assert "\n" not in str(err.value)
+
+
 def test_missing_or_corrupt_models_name_the_file_and_the_fix(tmp_path, dqn_zip):
     missing = tmp_path / "missing.zip"
     with pytest.raises(DriverError, match=NO_MODEL.format(missing)):

@@ -109,10 +109,20 @@ def load_model(path: str | Path) -> Any:
     if type(space).__name__ != "Discrete" or int(space.n) != N_ACTIONS or int(getattr(space, "start", 0)) != 0:
         raise DriverError(f"learned driver model {path}: its actions are {space}, the paper's are Discrete({N_ACTIONS}); "
                           "train it on a discrete GarageDriveEnv (garage-mj train-driver)")
+    _check_finite_weights(model, path)
     while len(_MODELS) >= _MODEL_CACHE_SIZE:
         _MODELS.pop(next(iter(_MODELS)))
     _MODELS[key] = model
     return model
+
+
+def _check_finite_weights(model: Any, path: Path) -> None:
+    """Refuse a model with a NaN or infinite weight (a run that diverged): its Q-values would be NaN and
+    its argmax a constant action, which would pass as the model's driving."""
+    for name, tensor in model.policy.state_dict().items():
+        if tensor.is_floating_point() and not bool(tensor.isfinite().all()):
+            raise DriverError(f"learned driver model {path}: its weight {name} holds NaN or infinite values (the "
+                              "training diverged); retrain it (garage-mj train-driver) or use another model")
 
 
 def _space_difference(got, want) -> str | None:
