@@ -285,9 +285,12 @@ def test_cli_videos_of_the_batch_in_out(library, tmp_path, capsys):
 
 def test_cli_video_file_name_is_one_line(library, tmp_path, capsys):
     with pytest.raises(SystemExit):
-        main(["cruise", "--library", str(library), "--video", str(tmp_path / "one.mp4")])
+        main(["cruise", "--library", str(library), "--videos", str(tmp_path / "one.mp4")])
     err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith(("usage:", " "))]
     assert len(err) == 1 and "give how many tests to record into OUT/videos/ (e.g. --videos 3)" in err[0]
+    with pytest.raises(SystemExit):  # no prefix matching: --video is not --videos
+        main(["cruise", "--library", str(library), "--video", "3"])
+    assert capsys.readouterr().err.strip().endswith("unrecognized arguments: --video 3; did you mean --videos?")
 
 
 def test_sources_carry_the_metrics(garages):

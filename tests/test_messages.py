@@ -136,3 +136,39 @@ def test_a_generate_error_starts_its_own_line(tmp_path, capsys):
     err = capsys.readouterr().err
     last = err.rstrip("\n").split("\n")[-1]
     assert last.startswith("garage-mj generate: error: found 0 of 2"), repr(last[-300:])
+
+
+def _walk_parsers(parser):
+    """``parser`` and every subcommand parser under it."""
+    import argparse
+
+    yield parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                yield from _walk_parsers(sub)
+
+
+def test_no_parser_takes_a_prefix_of_an_option():
+    parsers = list(_walk_parsers(build_parser()))
+    assert len(parsers) > 20 and all(p.allow_abbrev is False for p in parsers)
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["cruise", "--packs", "p", "--driv", "vision"])
+
+
+@pytest.mark.parametrize("argv, usage, hint", [
+    (["cruise", "--packs", "p", "--driv", "vision"], "usage: garage-mj cruise ",
+     "garage-mj cruise: error: unrecognized arguments: --driv vision; did you mean --driver?"),
+    (["cruise", "--packs", "p", "--tset=3"], "usage: garage-mj cruise ",
+     "garage-mj cruise: error: unrecognized arguments: --tset=3; did you mean --tests?"),
+    (["library", "ls", "lib.sqlite", "--mapp", "m"], "usage: garage-mj library ls ",
+     "garage-mj library ls: error: unrecognized arguments: --mapp m; did you mean --map?"),
+    (["--debgu"], "usage: garage-mj ",
+     "garage-mj: error: unrecognized arguments: --debgu; did you mean --debug?"),
+])
+def test_a_mistyped_option_gets_its_commands_usage_and_a_suggestion(argv, usage, hint, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(usage) and err.strip().splitlines()[-1] == hint

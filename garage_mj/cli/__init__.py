@@ -32,6 +32,7 @@ import os
 import sys
 import traceback
 
+from garage_mj.cli._parser import CLIParser
 from garage_mj.core import __version__
 from garage_mj.core.errors import GarageMJError, printable
 
@@ -45,7 +46,9 @@ class UserError(GarageMJError):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    """The ``garage-mj`` parser: every (sub)command a :class:`CLIParser` (no prefix matching; a mistyped
+    option is answered with the command's own usage and the closest option it has)."""
+    parser = CLIParser(
         prog="garage-mj",
         description=(
             "Generate adverse underground-garage scenarios with deep RL, export them as "
@@ -56,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true",
                         help="on an error, print its full traceback (and that of a failing driver) before the "
                              "one-line message: for bug reports and for debugging your own driver")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")  # CLIParsers: no prefixes, own usage
     for name in COMMANDS:
         importlib.import_module(f"garage_mj.cli.{name}").register(sub)
     return parser
