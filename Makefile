@@ -18,7 +18,7 @@ BLENDER_STAMP := $(BLENDER_VENV)/.installed
 BPY := bpy==5.0.1
 export MUJOCO_GL ?= egl
 
-.PHONY: install browser test demo bench lint clean
+.PHONY: install browser test demo bench lint docs clean
 
 install: $(STAMP) $(QC_STAMP) $(BLENDER_STAMP)
 
@@ -60,8 +60,12 @@ demo: install
 bench: install
 	$(PY) eval/bench_env.py
 
+# The documentation site (mkdocs.yml, sources in docs/) into site/; tests/test_docs.py builds it with --strict.
+docs: install
+	$(VENV)/bin/mkdocs build --strict --site-dir site
+
 lint: install
 	$(VENV)/bin/ruff check garage_mj tests eval generation pytest_garage_mj.py docs/pytest_example
 
 clean:
-	rm -rf $(VENV) $(QC_VENV) $(BLENDER_VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) $(QC_VENV) $(BLENDER_VENV) build site *.egg-info .pytest_cache

@@ -23,7 +23,7 @@ import garage_mj  # noqa: F401  (MUJOCO_GL, registers the envs)
 from garage_mj.driving.drivers import action_type_of, load_driver
 from garage_mj.grid.painters import paint_garage
 
-PAPER_TESTS = 2500  # 50 garages x 50 tests (SPEC section 5)
+PAPER_TESTS = 2500  # 50 garages x 50 tests (docs/spec.md section 5)
 TARGET_MIN = 30.0  # [min] issue 5 target on 2 cores
 _ENV = {}  # per worker process: the env, built once
 

@@ -8,7 +8,7 @@ one, ``generate --metric route --count 20`` runs into a fresh library with a CPU
 the CPU seconds, and writes them as JSON. Maps run in parallel (``--workers``), each in its own process.
 
     .venv/bin/python eval/bench_generate_route.py --library runs/paper_10pct/library.sqlite \\
-        --workers 2 --json docs/bench_generate_route.json
+        --workers 2 --json docs/route_difficulty/bench_generate_route.json
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The learned cruise driver on garages it never trained on (issue 20), next to ``vision`` and ``waypoint``.
+"""The learned cruise driver on garages it never trained on, next to ``vision`` and ``waypoint``.
 
 The full benchmark (the README's Results table; resumable: re-run the same command after a Ctrl-C):
 
@@ -348,7 +348,7 @@ def markdown(report: dict[str, Any]) -> str:
         lines += ["Each run's first test in each worker process includes starting the driver (for `learned`: "
                   "importing torch and loading the model, 2-3 s); taken as the run's `--workers` slowest tests."]
     if report["targets"]:
-        lines += ["", "Targets (issue 20):"]
+        lines += ["", "Targets:"]
         lines += [f"- {t['what']}: {t['value']} (target {t['target']}): {'met' if t['met'] else 'NOT met'}"
                   for t in report["targets"]]
     return "\n".join(lines) + "\n"

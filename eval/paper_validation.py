@@ -1,4 +1,4 @@
-"""The paper's difficulty validation (SPEC sections 5 and 7): cruise tests vs. garage difficulty.
+"""The paper's difficulty validation (docs/spec.md sections 5 and 7): cruise tests vs. garage difficulty.
 
 50 garages of ``m5_13x13_aligned`` stratified by difficulty (from ``--library``, or painted by the
 scripted painter when none is given), 50 cruise tests each with ``--driver``; prints Pearson

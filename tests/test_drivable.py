@@ -1,4 +1,4 @@
-"""Drivability (SPEC section 7): goal pose on the lane, curvature and clearance checks, infeasible tests."""
+"""Drivability (docs/spec.md section 7): goal pose on the lane, curvature and clearance checks, infeasible tests."""
 
 from __future__ import annotations
 

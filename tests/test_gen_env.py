@@ -1,4 +1,4 @@
-"""GarageGenEnv: the MDP of SPEC section 3, checked step by step."""
+"""GarageGenEnv: the MDP of docs/spec.md section 3, checked step by step."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ from garage_mj import Block, Garage, difficulty, evaluate
 from garage_mj.grid.road_segments import Tile, analyse
 from garage_mj.grid.rules import apply_stall_rule
 
-# SPEC section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 tested garages.
+# docs/spec.md section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 tested garages.
 PAPER_ROWS = [
     (3.8, 6, 0.033, 86), (3.25, 6, 0.124, 80), (3.6, 5.4, 0.167, 86), (3.167, 4.833, 0.333, 90),
     (3.667, 5.75, 0.097, 84), (3.2, 4.833, 0.328, 86), (3.333, 5, 0.278, 98), (2.8, 4.833, 0.394, 96),

@@ -1,4 +1,4 @@
-"""The reverse gear (SPEC section 8): park actions back the car up, gears change only at rest, cruise is untouched."""
+"""The reverse gear (docs/spec.md section 8): park actions back the car up, gears change only at rest, cruise is untouched."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``garage-mj cruise``: batch cruise tests of a driver over packs or library garages (SPEC section 7)."""
+"""``garage-mj cruise``: batch cruise tests of a driver over packs or library garages (docs/spec.md section 7)."""
 
 from __future__ import annotations
 

@@ -8,4 +8,4 @@
 - ``lazy``: ``lazy_exports``, the lazy re-exports of a stage's public names (``scene``, ``export``).
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

@@ -1,4 +1,4 @@
-"""Loading typed configuration objects (SPEC: every number is a default living in one config).
+"""Loading typed configuration objects (docs/spec.md: every number is a default living in one config).
 
 Each config is a frozen dataclass that lives beside the code it configures (for example
 :class:`garage_mj.grid.metrics.DifficultyConfig`, :class:`garage_mj.grid.reward.RewardConfig`).

@@ -1,6 +1,6 @@
 """Grid directions shared by the generation env, the road graph and the exporters.
 
-Row 0 is north and column 0 is west (SPEC section 2). Directions are indexed like the
+Row 0 is north and column 0 is west (docs/spec.md section 2). Directions are indexed like the
 generation env's actions: 0 west, 1 east, 2 north, 3 south.
 """
 

@@ -1,4 +1,4 @@
-"""Batch cruise evaluation (SPEC section 7): N tests per garage with a driver, over a process pool.
+"""Batch cruise evaluation (docs/spec.md section 7): N tests per garage with a driver, over a process pool.
 
 Each test is one episode of ``garage_mj/GarageDrive-v0`` whose seed derives from (run seed,
 garage hash, test index) (:mod:`garage_mj.driving.sources`), so results do not depend on the

@@ -148,7 +148,7 @@ def to_tree(model: RoadModel) -> etree._ElementTree:
         west=0.0,
         vendor=VENDOR,
     )
-    # Local metric frame: x east, y north, origin at the grid's south-west corner (SPEC section 6).
+    # Local metric frame: x east, y north, origin at the grid's south-west corner (docs/spec.md section 6).
     etree.SubElement(header, "geoReference").text = etree.CDATA("+proj=tmerc +lat_0=0 +lon_0=0 +units=m")
     by_road: dict[int, list[ParkingSpace]] = {}
     for p in model.parking:

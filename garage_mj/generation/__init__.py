@@ -1,6 +1,6 @@
 """Generation: the painter MDP, DQN training, conditioned generation, the search and the library.
 
-- ``gen_env``: ``GarageGen-v0``, the turtle-style painter of SPEC section 3, and its reward config.
+- ``gen_env``: ``GarageGen-v0``, the turtle-style painter of docs/spec.md section 3, and its reward config.
 - ``cond_env``: ``GarageGenCond-v0``, the painter conditioned on a difficulty target.
 - ``runs``: the lifecycle of a resumable DQN run (run folder, checkpoints, resume, Ctrl-C) both trainings share.
 - ``training``: DQN on the painter; every usable garage goes to the library as it is found.

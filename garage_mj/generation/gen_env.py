@@ -1,4 +1,4 @@
-"""GarageGenEnv: the turtle-style painter MDP of SPEC section 3.
+"""GarageGenEnv: the turtle-style painter MDP of docs/spec.md section 3.
 
 A car starts on the ENTRANCE heading inward and moves west/east/north/south. Every cell it
 drives onto becomes ROAD and its neighbours are recoloured by the stall rule; the episode ends

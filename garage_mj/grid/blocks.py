@@ -1,4 +1,4 @@
-"""Block codes of the encoding matrix (paper Table "taxonomy of blocks", SPEC section 1)."""
+"""Block codes of the encoding matrix (paper Table "taxonomy of blocks", docs/spec.md section 1)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ class Block(IntEnum):
 
 NUM_CODES = len(Block)
 
-#: The axis along which a cell between two roads holds six stalls (SPEC section 3's stall rule).
+#: The axis along which a cell between two roads holds six stalls (docs/spec.md section 3's stall rule).
 Axis = Literal["NS", "EW"]
 AXES: tuple[Axis, ...] = ("NS", "EW")
 
@@ -51,7 +51,7 @@ ROAD_LIKE_TABLE[[Block.ROAD, Block.ENTRANCE, Block.EXIT]] = True
 #: Stall codes (including the obstructed variants).
 STALL_CODES = frozenset(STALLS_PER_BLOCK)
 
-#: Codes allowed in an initial map (SPEC section 2).
+#: Codes allowed in an initial map (docs/spec.md section 2).
 INITIAL_CODES = frozenset({Block.FREE, Block.OBSTACLE, Block.ENTRANCE, Block.EXIT})
 
 #: Codes the stall rule may (re)colour.

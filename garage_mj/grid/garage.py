@@ -23,7 +23,7 @@ MAX_NAME = 128  # [characters] of a garage name (it becomes part of a pack's fol
 
 
 class MapError(GarageMJError, ValueError):
-    """A map or garage breaks a rule of SPEC section 2. The message names where and which."""
+    """A map or garage breaks a rule of docs/spec.md section 2. The message names where and which."""
 
 
 def _where(source: str, r: int | None = None, c: int | None = None) -> str:
@@ -37,7 +37,7 @@ def _where(source: str, r: int | None = None, c: int | None = None) -> str:
 def find_gates(grid: np.ndarray, source: str = "map") -> tuple[tuple[int, int], tuple[int, int]]:
     """Locate and validate the ENTRANCE and EXIT of ``grid``; returns their (row, col).
 
-    Rules (SPEC section 2): exactly one of each, on the outer ring but not in a corner, each with
+    Rules (docs/spec.md section 2): exactly one of each, on the outer ring but not in a corner, each with
     exactly one in-grid neighbour that is not OBSTACLE.
     """
     h, w = grid.shape
@@ -81,7 +81,7 @@ def find_gates(grid: np.ndarray, source: str = "map") -> tuple[tuple[int, int], 
 
 
 def validate_initial(grid: np.ndarray, source: str = "map") -> None:
-    """Raise :class:`MapError` unless ``grid`` is a valid initial map (SPEC section 2)."""
+    """Raise :class:`MapError` unless ``grid`` is a valid initial map (docs/spec.md section 2)."""
     if grid.ndim != 2 or grid.size == 0:
         raise MapError(f"{source}: the map is empty; write one row of codes per line")
     h, w = grid.shape

@@ -1,4 +1,4 @@
-"""Initial maps: the ``maps/*.txt`` format (SPEC section 2) and the shipped maps.
+"""Initial maps: the ``maps/*.txt`` format (docs/spec.md section 2) and the shipped maps.
 
 Format: one grid row per line, whitespace-separated block codes, ``#`` starts a comment. The
 shipped maps live in the package data ``garage_mj.maps`` and are found through

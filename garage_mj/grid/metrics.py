@@ -1,4 +1,4 @@
-"""Garage metrics (SPEC section 4): coverage, difficulty, stalls and road statistics.
+"""Garage metrics (docs/spec.md section 4): coverage, difficulty, stalls and road statistics.
 
 ``difficulty(E[Y], E[X])`` is the paper's lambda with the weights of its table of 16 garages;
 ``evaluate(garage)`` computes every metric the library stores and the reports show, from the grid
@@ -22,10 +22,10 @@ from garage_mj.grid.rules import road_squares, stall_rule_violations
 
 @dataclass(frozen=True)
 class DifficultyConfig:
-    """Difficulty lambda (SPEC section 4) and the ranges of X and Y.
+    """Difficulty lambda (docs/spec.md section 4) and the ranges of X and Y.
 
     The intersection term carries 0.33 and road length 0.67, as the paper's table of 16 garages
-    requires (its text says the opposite; SPEC follows the table).
+    requires (its text says the opposite; docs/spec.md follows the table).
     """
 
     w_intersection: float = 0.33
@@ -70,7 +70,7 @@ def coverage(grid: np.ndarray, initial: np.ndarray) -> float:
 def utility_values(
     stalls: int, free0: int, x_hist: dict[int, int], y_hist: dict[int, int], reward: RewardConfig
 ) -> tuple[float, float, float]:
-    """Performance values (P_s, P_r, P_c) of the utility rules (SPEC section 4).
+    """Performance values (P_s, P_r, P_c) of the utility rules (docs/spec.md section 4).
 
     P_s = stalls per initial FREE cell; P_r = sum_x P(X=x) w_x[x]; P_c = sum_y P(Y=y) w_y[y].
     """

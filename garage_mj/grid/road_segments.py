@@ -1,4 +1,4 @@
-"""Road graph, tile classification and road segments (SPEC section 4).
+"""Road graph, tile classification and road segments (docs/spec.md section 4).
 
 Nodes are road-like cells (ROAD, ENTRANCE, EXIT), edges join 4-adjacent road-like cells. Each
 road-like cell is a tile by its degree: dead end (1), straight (2, opposite), curve (2,

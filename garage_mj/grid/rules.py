@@ -1,4 +1,4 @@
-"""The painter's rules (SPEC section 3): the stall rule and the 2x2 road-square rule.
+"""The painter's rules (docs/spec.md section 3): the stall rule and the 2x2 road-square rule.
 
 Pure functions over a grid; the generation env applies them locally after each move, and the
 validity check applies them to a whole grid.

@@ -26,7 +26,7 @@ PITCH_DECIMALS = 4
 
 @dataclass(frozen=True)
 class CarConfig:
-    """Limits of the ego car in a garage (SPEC section 7 cruise tests; reverse: section 8 park tests)."""
+    """Limits of the ego car in a garage (docs/spec.md section 7 cruise tests; reverse: section 8 park tests)."""
 
     max_speed: float = 4.0  # [m/s] garage speed limit (~15 km/h)
     max_accel: float = 2.0  # [m/s^2] full throttle

@@ -1,4 +1,4 @@
-"""How far the ego car's body stays from what it may not touch, along a path (SPEC section 7).
+"""How far the ego car's body stays from what it may not touch, along a path (docs/spec.md section 7).
 
 The obstacles of a scene are axis-aligned rectangles: walls, obstacle blocks, pillars and every
 stall's outline (parked cars lie wholly inside stall outlines, so any occupancy is covered).

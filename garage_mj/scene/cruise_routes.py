@@ -1,4 +1,4 @@
-"""Forward routes of the ego car on the road network matrix, as filleted right-hand lane lines (SPEC section 7).
+"""Forward routes of the ego car on the road network matrix, as filleted right-hand lane lines (docs/spec.md section 7).
 
 A route is planned on the road network matrix, not on the OpenDRIVE lanes: a Dijkstra search
 over (cell, heading) from the entrance finds every forward route (no U-turns; a turn costs a

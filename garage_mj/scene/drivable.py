@@ -1,4 +1,4 @@
-"""Drivable tests for the ego car, and the checks that prove a cruise test can be driven (SPEC section 7).
+"""Drivable tests for the ego car, and the checks that prove a cruise test can be driven (docs/spec.md section 7).
 
 The route to a stall is a forward route of :mod:`garage_mj.scene.cruise_routes` (right-hand lane
 centre lines filleted into turns the car can steer, the path of the rear-axle midpoint); the

@@ -140,7 +140,7 @@ def build_scene(
 
     Args:
         garage: a :class:`Garage`, or a :class:`GarageScene` (its world and its layout, built once, apply).
-        world: 3D conventions (SPEC section 6).
+        world: 3D conventions (docs/spec.md section 6).
         parked: stall ids with a parked car in place; ``None`` fills every stall. Cars of the
             other stalls wait below the floor (see :func:`set_parked`).
         ceiling: add the ceiling slab (geom group 4, hidden by default in renders).

@@ -1,4 +1,4 @@
-"""Semantic classes of SPEC section 6 and the MJCF naming rule that carries them.
+"""Semantic classes of docs/spec.md section 6 and the MJCF naming rule that carries them.
 
 Every exporter and the segmentation camera share this one rule, so a segmentation image maps to
 classes, never to raw geom ids.
@@ -44,7 +44,7 @@ import numpy as np
 
 
 class Semantic(enum.IntEnum):
-    """Segmentation class ids (SPEC section 6), 0 = nothing rendered / unclassified."""
+    """Segmentation class ids (docs/spec.md section 6), 0 = nothing rendered / unclassified."""
 
     BACKGROUND = 0
     FLOOR = 1
@@ -86,7 +86,7 @@ PREFIXES: dict[str, Semantic] = {
 DRIVABLE = frozenset(
     {Semantic.FLOOR, Semantic.ROAD_MARKING, Semantic.STALL_MARKING, Semantic.ENTRANCE, Semantic.EXIT}
 )
-#: Classes whose contact with the ego car is a collision (SPEC section 7).
+#: Classes whose contact with the ego car is a collision (docs/spec.md section 7).
 COLLIDABLE = frozenset({Semantic.WALL, Semantic.PILLAR, Semantic.OBSTACLE, Semantic.PARKED_CAR,
                         Semantic.PEDESTRIAN, Semantic.MOVING_CAR, Semantic.CLUTTER})
 

@@ -1,4 +1,4 @@
-"""Stall geometry: where every parking stall of a garage lies in the world (SPEC section 6).
+"""Stall geometry: where every parking stall of a garage lies in the world (docs/spec.md section 6).
 
 Pure: garage in, stalls out. A block is 9 m x 9 m; a row of three 2.5 m x 4.5 m stalls sits
 against the block edge that touches a ROAD cell, centred along it, each stall facing that road.

@@ -1,4 +1,4 @@
-"""3D conventions (SPEC section 6): world frame, block size and the sizes of roads, stalls, pillars.
+"""3D conventions (docs/spec.md section 6): world frame, block size and the sizes of roads, stalls, pillars.
 
 World frame: x east, y north, z up, origin at the grid's south-west corner. Cell (row r, col c)
 of an H-row grid has its centre at x = B c + B/2, y = B (H - 1 - r) + B/2 with B the block edge.

@@ -51,7 +51,7 @@ def driver_route_model(driver: Any, driver_kwargs: dict[str, Any] | None = None)
     for the shipped learned driver), else None (the default model, fitted on the rule-based drivers).
 
     Drivers fail for different reasons: on fresh garages the learned driver's success and ``vision``'s
-    are uncorrelated (r -0.05), so no one difficulty predicts both (``docs/route_difficulty/fresh_s10.json``).
+    are uncorrelated (r -0.05), so no one difficulty predicts both (``docs/route_difficulty/fresh.json``).
     """
     if driver == "learned" and not (driver_kwargs or {}).get("model"):
         return "learned"

@@ -1,7 +1,7 @@
 """Pearson r and the linear regression of success rate on difficulty, and the paper's table.
 
 The paper validates its difficulty metric with r(difficulty, success %) = -0.638 over 16 garages
-of the 13x13 aligned map (SPEC section 5, :data:`PAPER_TABLE`). :func:`regression` computes the
+of the 13x13 aligned map (docs/spec.md section 5, :data:`PAPER_TABLE`). :func:`regression` computes the
 same numbers from any ``(difficulty, success %)`` pairs, numpy only: the cruise runner writes them
 to ``summary.json``; :func:`garage_mj.reporting.analysis.regression_plot` draws them.
 """
@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-#: SPEC section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 garages.
+#: docs/spec.md section 5: (E[Y], E[X], difficulty, success %) of the paper's 16 garages.
 PAPER_TABLE: tuple[tuple[float, float, float, float], ...] = (
     (3.8, 6, 0.033, 86), (3.25, 6, 0.124, 80), (3.6, 5.4, 0.167, 86), (3.167, 4.833, 0.333, 90),
     (3.667, 5.75, 0.097, 84), (3.2, 4.833, 0.328, 86), (3.333, 5, 0.278, 98), (2.8, 4.833, 0.394, 96),

@@ -1,4 +1,4 @@
-"""GarageDriveEnv: one cruise test (SPEC section 7) in a MuJoCo garage with the camera car.
+"""GarageDriveEnv: one cruise test (docs/spec.md section 7) in a MuJoCo garage with the camera car.
 
 The scene (garage + every stall's parked car + the ego car) is built and compiled ONCE per env.
 ``reset(seed)`` then draws, from the seed alone: the target stall, which other stalls hold a

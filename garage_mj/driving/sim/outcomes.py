@@ -1,4 +1,4 @@
-"""Outcome of one cruise test, decided by the environment (SPEC section 7), never by the driver.
+"""Outcome of one cruise test, decided by the environment (docs/spec.md section 7), never by the driver.
 
 Every outcome kind is declared once, in :data:`OUTCOMES` (one :class:`OutcomeSpec` each, in display
 order): its name in ``tests.csv``, its count column in ``summary.csv``, whether it is a failure and
@@ -20,7 +20,7 @@ the goal: the car meant to park there and ended outside the tolerance, it was no
 (``time_limit = route length / min_mean_speed + time_slack``).
 
 The paper has three failure classes (collision, timeout, deadlock); in them a missed goal counts as
-a deadlock (:data:`PAPER_CLASS`), as it did here before it had a class of its own.
+a deadlock (:data:`PAPER_CLASS`).
 
 ``infeasible`` is not decided here: the drive env gives it before the drive, from the scene alone
 (:mod:`garage_mj.scene.drivable`), and such a test is never driven.

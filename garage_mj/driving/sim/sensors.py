@@ -1,4 +1,4 @@
-"""Offscreen camera sensor: RGB, depth in metres and SPEC section 6 segmentation.
+"""Offscreen camera sensor: RGB, depth in metres and docs/spec.md section 6 segmentation.
 
 Rendering is headless. ``MUJOCO_GL`` defaults to ``egl`` (set here if this module is the first to
 import MuJoCo; ``garage_mj`` sets it too); when EGL cannot start, OSMesa is tried, and when

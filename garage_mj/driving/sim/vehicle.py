@@ -6,7 +6,7 @@ Commands are a throttle/brake pedal ``throttle`` in [-1, 1] and a steering reque
 speed. Steering moves toward ``steer * max_steer`` at ``steer_rate`` and is split into Ackermann
 angles for the two front wheels; the rear wheels get per-side speeds (an electronic differential).
 
-Gears (SPEC section 8). The car is in drive (:attr:`Gear.D`) or reverse (:attr:`Gear.R`) and starts
+Gears (docs/spec.md section 8). The car is in drive (:attr:`Gear.D`) or reverse (:attr:`Gear.R`) and starts
 every test in D. The pedal means the same in both: the cruise speed is a speed along the gear's
 direction, so in R +1 accelerates backwards (up to ``max_reverse_speed``), -1 brakes, 0 holds the
 speed. Steering is the same in both, as in a real car: steering left while reversing swings the
