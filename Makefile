@@ -62,7 +62,7 @@ bench: install
 
 # The documentation site (mkdocs.yml, sources in docs/) into site/; tests/test_docs.py builds it with --strict.
 docs: install
-	$(VENV)/bin/mkdocs build --strict --site-dir site
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
 
 lint: install
 	$(VENV)/bin/ruff check garage_mj tests eval generation pytest_garage_mj.py docs/pytest_example

@@ -1,4 +1,4 @@
-"""Adverse events (issue 12): the oracle with actors, replay of exported .xosc files, vision vs actor density.
+"""Adverse events: the oracle with actors, replay of exported .xosc files, vision vs actor density.
 
     .venv/bin/python eval/bench_actors.py [--parts oracle replay density] [--workers 2]
         [--garages 5] [--tests 25] [--replays 100] [--density-garages 10] [--density-tests 10]

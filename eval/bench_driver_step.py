@@ -1,4 +1,4 @@
-"""What a driver costs per control step, on the same observations (issue 20: learned <= 1.3x vision).
+"""What a driver costs per control step, on the same observations (target: learned <= 1.3x vision).
 
 A cruise test's wall time depends on how long the driver keeps the car going: a driver that crashes
 early finishes its tests sooner. This benchmark takes that out: it drives ``--tests`` tests of the

@@ -1,4 +1,4 @@
-"""Issue 21's generation target: ``generate --metric route`` fills every route-difficulty bin a map admits.
+"""The route-difficulty generation target: ``generate --metric route`` fills every route-difficulty bin a map admits.
 
 Per 13x13 map: which bins of width 0.1 the map admits is estimated from the route difficulty of
 ``--sample`` garages of ``--library`` (stratified by the paper's difficulty, seeded) and from what

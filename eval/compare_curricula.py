@@ -1,4 +1,4 @@
-"""What are generated garages worth for training? (issue 20, item 6): one budget, three curricula, >= 3 seeds.
+"""What are generated garages worth for training? One budget, three curricula, >= 3 seeds.
 
 The experiment (resumable: re-run the same command after a Ctrl-C; every training run and every
 evaluation continues where it stopped):

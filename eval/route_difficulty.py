@@ -1,4 +1,4 @@
-"""Issue 21's validation of the route-aware difficulty: fit on some garages and drivers, test on others.
+"""Validation of the route-aware difficulty: fit on some garages and drivers, test on others.
 
 Protocol (fixed before any result was seen; nothing is tuned on the held-out sets):
 
