@@ -1,13 +1,13 @@
 """Benchmark: cruise tests with the camera on, and the projected wall time of the paper experiment.
 
     python eval/bench_cruise.py [--map m5_13x13_aligned] [--tests 10] [--workers 2] [--driver vision]
-        [--pedestrians 2 --moving-cars 1 --clutter 2]     # with actors (issue 12)
+        [--pedestrians 2 --moving-cars 1 --clutter 2]     # with actors
 
 Runs ``--tests`` seeded tests of ``garage_mj/GarageDrive-v0`` (built-in ``--driver`` with the action
 type it declares, depth + segmentation 64x64 at 10 Hz) in ``--workers`` processes, one env per worker, and prints seconds
 per test, simulated seconds per wall second, camera frames per second (render only, and
 depth+segmentation on their own over the recorded states) and the projected wall time of the
-paper experiment (issue 5: 2,500 tests in <= 30 minutes on 2 cores). Env build time is reported
+paper experiment (target: 2,500 tests in <= 30 minutes on 2 cores). Env build time is reported
 apart: the experiment builds one env per garage per worker, not per test.
 """
 
@@ -24,7 +24,7 @@ from garage_mj.driving.drivers import action_type_of, load_driver
 from garage_mj.grid.painters import paint_garage
 
 PAPER_TESTS = 2500  # 50 garages x 50 tests (docs/spec.md section 5)
-TARGET_MIN = 30.0  # [min] issue 5 target on 2 cores
+TARGET_MIN = 30.0  # [min] target on 2 cores
 _ENV = {}  # per worker process: the env, built once
 
 

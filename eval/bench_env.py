@@ -3,7 +3,7 @@
     python eval/bench_env.py [--map m5_13x13_aligned] [--steps 200000] [--seed 0]
 
 Reports both the raw env (``env.unwrapped``) and the ``gym.make`` env with its default
-wrappers (what SB3 sees). Target (issue 2): >= 20,000 steps/s on m5_13x13_aligned.
+wrappers (what SB3 sees). Target: >= 20,000 steps/s on m5_13x13_aligned.
 """
 
 from __future__ import annotations

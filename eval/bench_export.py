@@ -5,7 +5,7 @@
 Garages come from the scripted painter (deterministic). Each format is timed in memory (no disk):
 ``xodr`` (road model + OpenDRIVE text), ``lanes`` (road model + lane graph), ``mjcf`` (dm_control build + XML + MuJoCo compile),
 ``meshes`` (trimesh scene + GLB and OBJ bytes), ``preview`` (the PNG picture), and ``pack`` (a
-whole asset pack on disk, hashes included). Target (issue 4): xodr + mjcf < 100 ms.
+whole asset pack on disk, hashes included). Target: xodr + mjcf < 100 ms.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ GLB -> Assimp import -> FBX blob -> atomic file write) plus the manifest's sha25
 median over rounds of the mean per garage. As a check, whole packs are also written with FBX and
 with FBX switched off (as without Assimp), interleaved so that load from other jobs falls on both
 alike; their difference is noisier than the FBX's own cost on a loaded machine.
-Target (issue 22): FBX adds <= 200 ms per 13x13 garage to a pack.
+Target: FBX adds <= 200 ms per 13x13 garage to a pack.
 """
 
 from __future__ import annotations

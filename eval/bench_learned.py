@@ -80,7 +80,7 @@ DRIVERS = ("learned", "vision", "waypoint")
 ACTION_TYPE = "discrete"  # the paper's protocol, for every driver
 OCCUPANCY = 0.5  # share of stalls with a parked car (garage-mj cruise's default)
 Z95 = 1.959964  # two-sided 95% normal quantile
-#: Issue 20's targets: learned success % over feasible static tests, and its wall time per test over vision's.
+#: The targets: learned success % over feasible static tests, and its wall time per test over vision's.
 TARGET_M5 = 90.0
 TARGET_OTHER = 80.0
 TARGET_WALL_RATIO = 1.3

@@ -20,7 +20,7 @@ run folder). What the curricula draw (:mod:`garage_mj.driving.learning.train`):
 - ``uniform``: every training garage equally often;
 - ``difficulty``: iteration ``i`` of ``n`` draws from the easiest ``(i + 1) / n`` of the set, by the
   library's difficulty (easy to hard);
-- ``hunt`` (the issue's adversarial arm, unsupervised environment design): before each iteration
+- ``hunt`` (the adversarial arm, unsupervised environment design): before each iteration
   after the first, ``garage-mj hunt`` against the current model searches mutated garages of the
   set's map for ones it fails on; the worst join the draw with half its weight;
 - ``adversarial`` (not in the default comparison): failure-prioritised replay; the garages where the
@@ -67,7 +67,7 @@ from garage_mj.core.fsutil import FolderLock, atomic_write, write_json
 from garage_mj.driving.garage_set import GarageSet, load_garage_set
 from garage_mj.driving.learning.train import CURRICULA, MANIFEST, MODEL, DriverTrainConfig
 
-COMPARED = ("uniform", "difficulty", "hunt")  # the (a), (b) and (c)
+COMPARED = ("uniform", "difficulty", "hunt")  # the three arms compared
 
 try:  # run as a script: eval/ is on sys.path
     import bench_learned as bench

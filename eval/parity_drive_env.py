@@ -1,6 +1,6 @@
 """Parity of the drive env across a change: the same fixed tests, outcome by outcome, before and after.
 
-Two fixed sets (issue 19: a faster env must keep the outcomes):
+Two fixed sets (a faster env must keep the outcomes):
 
 - ``vision``: 500 tests of the ``vision`` driver with continuous actions (its declared type), 10
   ``m5_13x13_aligned`` garages painted by ``painted_sources("m5_13x13_aligned", 10, seed=0)`` x 50
@@ -13,7 +13,7 @@ Two fixed sets (issue 19: a faster env must keep the outcomes):
 record that tree) into ``OUT/vision`` and ``OUT/oracle`` (ordinary cruise folders, resumable);
 ``compare`` matches two such records test by test on (garage hash, test index) and lists every test
 whose outcome changed, and how many end at the same simulated time and path length (the rows' 1 ms and
-1 mm resolution) having hit the same geom. ``missed_goal`` (split from ``deadlock`` by issue 19's other part) is compared
+1 mm resolution) having hit the same geom. ``missed_goal`` (once counted as ``deadlock``) is compared
 as ``deadlock``, so a record made before the split compares with one made after it.
 
     PYTHONPATH=/tmp/before_speed .venv/bin/python eval/parity_drive_env.py run --out /tmp/before_speed_rows

@@ -11,12 +11,12 @@ Protocol (fixed before any result was seen; nothing is tuned on the held-out set
   4; no fit garage comes from it), 50 tests each, exactly ``eval/paper_validation.py --run-seeds 4``.
 * **held-out driver**: ``learned`` (the shipped deep-RL model, never in the fit) on the held-out
   garages; the fit drivers on the held-out garages are the garage-only hold-out.
-* **leave one driver out** (``--lodo-drivers``, default ``vision,waypoint,learned``; added in session 9
+* **leave one driver out** (``--lodo-drivers``, default ``vision,waypoint,learned``; added
   before any of its models was scored): the fit set is also driven by ``learned``, and for each of
   these drivers a model is fitted on the fit-set tests of the others only and scored on that
   driver's held-out tests, so both its garages and the driver are unseen by the model.
 
-* **fresh held-out set** (``--only fresh`` collects it, ``--fresh-report`` scores it; session 10, fixed
+* **fresh held-out set** (``--only fresh`` collects it, ``--fresh-report`` scores it; fixed
   before any of its tests was scored): 50 more m5 garages of training seed 4 (stratified sample seed
   ``--fresh-sample-seed``, none of the first held-out set's), no earlier run drove any of them; ``learned``
   150 tests each (at 50 its attainable |r| is too low to judge r <= -0.8), ``vision`` and ``waypoint`` 50.
@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="leave-one-driver-out: these drivers also drive the fit set, and each is scored by a model "
                         "fitted on the others ('' for none)")
     p.add_argument("--fresh-sample-seed", type=int, default=1,
-                   help="fresh held-out set (session 10): the sample seed of its m5 garages of --heldout-run-seed, "
+                   help="fresh held-out set (set B): the sample seed of its m5 garages of --heldout-run-seed, "
                         "drawn from those the held-out set above did not take (default 1)")
     p.add_argument("--fresh-garages", type=positive_int, default=50)
     p.add_argument("--fresh-tests", type=_driver_counts, default="learned=150,vision=50,waypoint=50",
@@ -213,7 +213,7 @@ def report(args) -> int:
     """Fit on the fit runs, score on the held-out runs, print and write the figures.
 
     Its models are fitted on the shipped default model's features (the 14 of the route), as the protocol
-    of sessions 7-9 was: the garage terms added in session 10 belong to the fresh report only."""
+    of held-out set A was: the garage terms added for set B belong to the fresh report only."""
     from garage_mj.driving.difficulty.fit import fit_runs, load_runs, score
     from garage_mj.scene.route_difficulty import load_route_model
 
@@ -267,7 +267,7 @@ def report(args) -> int:
 
 
 def report_fresh(args) -> int:
-    """Fit the session-10 models on the development runs and score them on the fresh held-out set."""
+    """Fit the set-B models on the development runs and score them on the fresh held-out set."""
 
     from garage_mj.driving.difficulty.fit import driver_agreement, fit_runs, load_runs, score
     from garage_mj.scene.route_difficulty import load_route_model

@@ -1,4 +1,4 @@
-"""Adverse events (issue 12): actors drawn from the seed, judged avoidable from the scene, seen, hit, replayed."""
+"""Adverse events: actors drawn from the seed, judged avoidable from the scene, seen, hit, replayed."""
 
 from __future__ import annotations
 

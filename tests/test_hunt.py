@@ -1,4 +1,4 @@
-"""garage-mj hunt (issue 13): ranked failures, valid mutated garages, reproducible failures, resume."""
+"""garage-mj hunt: ranked failures, valid mutated garages, reproducible failures, resume."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""What a newcomer reads when something goes wrong or a figure is printed (issue 18, point 6).
+"""What a newcomer reads when something goes wrong or a figure is printed.
 
 Each test runs the real CLI entry point (:func:`garage_mj.cli.main`) and reads what it prints.
 """

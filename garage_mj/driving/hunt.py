@@ -1,4 +1,4 @@
-"""Hunt: spend a budget of cruise tests to find the garages where a driver fails (issue 13).
+"""Hunt: spend a budget of cruise tests to find the garages where a driver fails.
 
 The search is an elitist evolution over garages, with the driver's failure rate as fitness:
 

@@ -1,4 +1,4 @@
-"""Search baseline: which difficulties a map admits under the painter's rules (issue 11, item 2).
+"""Search baseline: which difficulties a map admits under the painter's rules.
 
 A painted garage is fixed by its set of ROAD cells: the stall rule colours the rest, and difficulty
 depends on the roads alone. The painter (``GarageGenEnv``) can make exactly the road sets R that

@@ -17,7 +17,7 @@ the other stalls :data:`HIDDEN_DEPTH` below the floor (what a reader of ``scene.
 pillars, bodies without joints, become geoms of the world body, with the same geom names. Static
 geoms of one body are never tested against each other, and the car meets the whole static scene
 as one body with one bounding-volume tree: on a 13x13 garage 9 bodies instead of 121 and a
-physics step about 0.6 of the time, with the same contacts (issue 19). The compiled model then
+physics step about 0.6 of the time, with the same contacts. The compiled model then
 has no ``parkedcar_*`` bodies; :func:`parked_car_geoms` and :func:`set_parked` work either way.
 
 Geom groups: 0 solid geoms that draw and collide (floor, walls, obstacles, pillars, parked cars),
@@ -25,7 +25,7 @@ Geom groups: 0 solid geoms that draw and collide (floor, walls, obstacles, pilla
 pipeline), 4 the ceiling (hidden by default so the ``overview`` camera sees the floor; enable
 ``scene_option.geomgroup[4]`` to draw it).
 
-Speed (issue 4: XODR + MJCF < 100 ms per 13x13 garage, ``eval/bench_export.py``): ``dm_control``
+Speed (target: XODR + MJCF < 100 ms per 13x13 garage, ``eval/bench_export.py``): ``dm_control``
 costs about 60 us per element, 1 ms per ``default`` class, and as much again per array attribute
 written to XML, so the scene draws all painted lines of one class as one mesh geom (``stallmark``,
 ``roadmark``: the top face of each line, 4 corners and 2 triangles; the 2 mm sides never cover a

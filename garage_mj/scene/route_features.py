@@ -33,7 +33,7 @@ oriented so that a larger value is a harder drive:
     the whole garage's two terms of the paper's difficulty (:func:`garage_mj.grid.metrics.difficulty`),
     the same for every test of a garage: ``1 - n_X`` (short road segments, E[X] of 2 cells -> 1,
     6 -> 0) and ``1 - n_Y`` (junctions where few roads meet, E[Y] of 2 -> 1, 4 -> 0). Some drivers
-    fail by the garage as a whole rather than by their route (the learned driver, session 10).
+    fail by the garage as a whole rather than by their route (the learned driver, on the fresh held-out set).
 
 :func:`garage_features` gives the features of every stall of a garage; cruise draws the target
 stall uniformly and counts success over the feasible ones, so the expectation of a per-test

@@ -10,7 +10,7 @@ is a single tile, so llvmpipe's rasterizer threads gain nothing, and handing eac
 costs a sleep and a wake-up: between two frames the drive env steps the physics for a millisecond
 and the threads fall asleep. On the 2-core machine with other jobs running that cost 0.25-1 ms a
 frame (2 threads, the default, or 1), against a steady 0.25-0.3 ms in the calling thread; with one
-cruise worker per core it also keeps workers from competing with each other's threads (issue 19).
+cruise worker per core it also keeps workers from competing with each other's threads.
 A GPU ignores the variable; set it yourself for large software renders on many cores.
 
 Speed (software GL renders most frames of a cruise test): the camera drives MuJoCo's renderer
