@@ -26,3 +26,11 @@ def test_the_site_builds_strict(tmp_path):
                           "-d", str(tmp_path / "site")], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
     assert out.returncode == 0, out.stdout + out.stderr
 
+
+
+def test_the_readme_python_example_runs(capsys):
+    text = (ROOT / "README.md").read_text()
+    start = text.index("```python\n") + len("```python\n")
+    code = text[start:text.index("```", start)]
+    exec(compile(code, "README.md", "exec"), {})
+    assert "True" in capsys.readouterr().out  # the painted garage is usable
