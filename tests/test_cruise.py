@@ -364,3 +364,34 @@ def test_a_driver_with_non_finite_actions_fails_as_the_drivers_error_not_a_deadl
     tests_csv = out / "tests.csv"
     assert not tests_csv.exists() or "deadlock" not in tests_csv.read_text()
     sys.modules.pop("nan_driver", None)
+
+
+def test_library_ids_export_and_cruise_and_export_json_lists(library, tmp_path, capsys):
+    """export --garage reads what library export-json writes; --ids picks library rows for export and cruise."""
+    dump = tmp_path / "lib.json"
+    assert main(["library", "export-json", str(library), "--out", str(dump)]) == 0
+    assert main(["export", "--garage", str(dump), "--out", str(tmp_path / "from_json"), "--quiet"]) == 0
+    assert main(["export", "--library", str(library), "--out", str(tmp_path / "from_lib"), "--quiet"]) == 0
+    packs = sorted(p.name for p in (tmp_path / "from_json").iterdir() if p.is_dir())
+    assert len(packs) == 2 and packs == sorted(p.name for p in (tmp_path / "from_lib").iterdir() if p.is_dir())
+    assert main(["export", "--library", str(library), "--ids", "2", "--out", str(tmp_path / "two"), "--quiet"]) == 0
+    assert [p.name for p in (tmp_path / "two").iterdir() if p.is_dir()] == [packs[1]]
+    capsys.readouterr()
+    assert main(["cruise", "--library", str(library), "--ids", "2", "2", "--tests", "1", "--driver", "waypoint",
+                 "--out", str(tmp_path / "c"), "--quiet"]) == 0
+    assert {r["garage"] for r in rows_of(tmp_path / "c" / "tests.csv")} == {"tiny_7x11#2"}
+    capsys.readouterr()
+    for argv, message in (
+        (["export", "--library", str(library), "--ids", "9", "--out", str(tmp_path / "x")], "has no garage with id 9"),
+        (["cruise", "--library", str(library), "--ids", "1", "--map", "tiny_7x11", "--out", str(tmp_path / "x")],
+         "--ids picks garages by row id; leave out --map"),
+        (["export", "--garage", str(dump), "--ids", "1", "--out", str(tmp_path / "x")], "pick garages of a --library"),
+    ):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and "\n" not in err
+    data = json.loads(dump.read_text())
+    data[1]["hash"] = "0" * 64
+    dump.write_text(json.dumps(data))
+    assert main(["export", "--garage", str(dump), "--out", str(tmp_path / "y")]) == 2
+    assert f"{dump}, garage 2 of 2: the grid does not match its stored hash" in capsys.readouterr().err

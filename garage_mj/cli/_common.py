@@ -6,6 +6,7 @@ import argparse
 import functools
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from garage_mj.cli import UserError
 from garage_mj.core.backends import Compute
@@ -112,6 +113,27 @@ def add_filters(p: argparse.ArgumentParser) -> None:
                    help="only garages whose share of stalls with a feasible cruise test is in [LO, HI] "
                    "(stored by 'garage-mj check --library FILE --store')")
     p.add_argument("--limit", type=non_negative_int, help="at most N garages")
+
+
+#: The options that select library garages by their metrics (attribute -> flag); --ids leaves them out.
+SELECTORS = {"map": "--map", "difficulty": "--difficulty", "route_difficulty": "--route-difficulty",
+             "coverage": "--coverage", "feasible": "--feasible", "limit": "--limit", "sample": "--sample"}
+
+
+def add_ids(p: argparse.ArgumentParser) -> None:
+    """``--ids ID [ID ...]``: library garages chosen by row id (the first column of ``library ls``)."""
+    p.add_argument("--ids", type=positive_int, nargs="+", metavar="ID",
+                   help="with --library: exactly these garages, by row id (the first column of 'garage-mj library "
+                        "ls'), in the order given; instead of the filters")
+
+
+def records_by_id(lib: Any, args: argparse.Namespace) -> list:
+    """The library records of ``--ids`` (each once, in the order given), checked by their hash; a filter given
+    beside them, or an id the library lacks, is a one-line error."""
+    given = [flag for attr, flag in SELECTORS.items() if getattr(args, attr, None) is not None]
+    if given:
+        raise UserError(f"--ids picks garages by row id; leave out {', '.join(given)} (or --ids, to filter)")
+    return lib.verified([lib.get(i) for i in dict.fromkeys(args.ids)])
 
 
 def filters(args: argparse.Namespace) -> dict:

@@ -14,10 +14,12 @@ from pathlib import Path
 from garage_mj.cli import UserError
 from garage_mj.cli._common import (
     add_filters,
+    add_ids,
     compute,
     filters,
     non_negative_int,
     positive_int,
+    records_by_id,
     seed,
     unit_range,
     user_errors,
@@ -47,12 +49,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="replay tests written with --xosc (OpenSCENARIO): same garage, parked cars, start, "
                           "actors; prints each outcome and writes replay.csv into --out")
     add_filters(p)
+    add_ids(p)
     p.add_argument("--sample", type=positive_int, metavar="N",
                    help="with --library: N garages stratified by difficulty (seeded by --seed)")
     p.add_argument("--tests", type=positive_int, default=50, help="tests per garage (default 50)")
     p.add_argument("--driver", help="built-in driver (oracle, waypoint, vision; learned: the shipped deep-RL "
-                                    "model), learned:PATH (a model zip of garage-mj train-driver) or module:Class "
-                                    "(default vision; with --scenario-file: the one the file records)")
+                                    "model), learned:PATH (a model zip of garage-mj train-driver), module:Class (a module "
+                                    "on the Python path or in the current folder) or path/to/file.py:Class (default vision; with --scenario-file: the one the file records)")
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local: this process or a process pool (default); ray: --workers Ray actors, on a private "
@@ -122,8 +125,10 @@ def sources(args: argparse.Namespace) -> list:
     if args.packs is not None:
         if not args.packs.is_dir():
             raise UserError(f"--packs {args.packs}: no such folder; export packs with garage-mj export")
-        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.route_difficulty, args.sample)):
-            raise UserError("--map/--difficulty/--coverage/--route-difficulty/--sample filter a --library, not --packs")
+        if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.route_difficulty, args.sample,
+                                       args.ids)):
+            raise UserError("--map/--difficulty/--coverage/--route-difficulty/--sample/--ids filter a --library, "
+                            "not --packs")
         dirs = sorted(d for d in args.packs.iterdir() if (d / MANIFEST).is_file())
         if args.limit is not None:
             dirs = dirs[: args.limit]
@@ -133,12 +138,14 @@ def sources(args: argparse.Namespace) -> list:
             raise LibraryError(f"{args.library}: no such library file; build one with garage-mj train")
         with Library(args.library, create=False) as lib:
             f = filters(args)
-            if args.sample is not None:
+            if args.ids is not None:
+                records = records_by_id(lib, args)
+            elif args.sample is not None:
                 records = lib.sample(args.sample, args.seed, **f)
                 records = records[: args.limit] if args.limit is not None else records
             else:
                 records = lib.query(limit=args.limit, **f)
-            records = lib.verified(records)  # hash and metrics recomputed: an altered row is refused by id
+            records = lib.verified(records) if args.ids is None else records  # hash and metrics recomputed: an altered row is refused by id
         found = [CruiseSource.from_record(r) for r in records]
     if not found:
         raise UserError("no garages match; check the source folder or loosen the filters")
@@ -160,6 +167,8 @@ def scenario(args: argparse.Namespace) -> dict | None:
 def replay(args: argparse.Namespace) -> int:
     if args.videos:
         raise UserError("--videos records tests of a batch (--packs or --library), not --scenario-file replays")
+    if args.ids is not None:
+        raise UserError("--ids picks garages of a --library, not --scenario-file replays")
     if args.action_type is not None:
         raise UserError("--action-type: a --scenario-file replay runs with the action type the file records "
                         "(another --driver: that driver's own); leave it out")

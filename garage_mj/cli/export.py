@@ -1,7 +1,7 @@
 """``garage-mj export``: asset packs (OpenDRIVE, MJCF, GLB/OBJ/FBX, preview) and CARLA import packages.
 
-``--garage garage.json`` exports one garage; ``--library FILE`` exports the library's garages
-that pass the filters. Packs land in ``--out DIR`` (one folder each, plus ``index.json``);
+``--garage garage.json`` exports one garage (or each of a ``library export-json`` list); ``--library FILE``
+exports the library's garages that pass the filters, or those of ``--ids``. Packs land in ``--out DIR`` (one folder each, plus ``index.json``);
 complete packs are skipped, partial ones repaired. ``--carla-package DIR`` (with or without
 ``--out``) adds the same garages to a package for CARLA's ``make import``
 (:mod:`garage_mj.export.carla_package`), whose lock it holds for the whole export; maps
@@ -18,8 +18,9 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from garage_mj.cli import UserError
+from garage_mj.cli._common import add_ids, records_by_id
 from garage_mj.export.artefacts import INDEX, contents, formats, left_out_here
-from garage_mj.generation.library import Library, LibraryError
+from garage_mj.generation.library import Library, LibraryError, garages_from_json
 from garage_mj.grid.garage import Garage
 
 
@@ -35,7 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--garage", type=Path, metavar="FILE", help="a garage JSON file (Garage.to_json)")
+    src.add_argument("--garage", type=Path, metavar="FILE",
+                     help="a garage JSON file (Garage.to_json), or the list of garages 'garage-mj library export-json' "
+                          "writes")
     src.add_argument("--library", type=Path, metavar="FILE", help="a scenario library (library.sqlite)")
     p.add_argument("--map", help="library filter: map name")
     p.add_argument("--difficulty", type=float, nargs=2, metavar=("LO", "HI"), help="library filter, inclusive")
@@ -43,6 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--feasible", type=float, nargs=2, metavar=("LO", "HI"),
                    help="library filter: share of stalls with a feasible cruise test (garage-mj check --store)")
     p.add_argument("--limit", type=int, help="library filter: at most N garages")
+    add_ids(p)
     p.add_argument("--out", type=Path, metavar="DIR", help="folder for the asset packs")
     p.add_argument("--carla-package", type=Path, metavar="DIR",
                    help="also (or only) add the garages to a CARLA import package here: DIR/DIR.json and one "
@@ -59,6 +63,8 @@ def _from_library(args: argparse.Namespace) -> list:
     except LibraryError as exc:
         raise UserError(str(exc)) from None
     with lib:
+        if args.ids is not None:
+            return [r.garage for r in records_by_id(lib, args)]
         try:
             records = lib.query(
                 map=args.map,
@@ -92,16 +98,18 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _garages(args: argparse.Namespace) -> list[Garage]:
-    """The garages to export: the ``--garage`` file, or the ``--library`` rows that pass the filters."""
+    """The garages to export: the ``--garage`` file (one garage or a ``library export-json`` list), or the
+    ``--library`` rows that pass the filters or have the ``--ids``."""
     if args.library is not None:
         return _from_library(args)
-    if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.feasible, args.limit)):
-        raise UserError("--map, --difficulty, --coverage, --feasible and --limit filter a --library, not a --garage")
+    if any(v is not None for v in (args.map, args.difficulty, args.coverage, args.feasible, args.limit, args.ids)):
+        raise UserError("--map, --difficulty, --coverage, --feasible, --limit and --ids pick garages of a --library, "
+                        "not of a --garage file")
     try:
         text = args.garage.read_bytes()
     except OSError as exc:
         raise UserError(f"cannot read {args.garage}: {exc.strerror}") from None
-    return [Garage.from_json(text, source=str(args.garage), usable=True)]
+    return garages_from_json(text, source=str(args.garage))
 
 
 def _export(args: argparse.Namespace, garages: list[Garage]) -> None:

@@ -49,6 +49,7 @@ from garage_mj.generation.library_format import (
     LibraryError,
     check_body,
     check_header,
+    garages_from_json,  # noqa: F401  (re-exported: export --garage reads library export-json lists)
     record_from_row,
     route_checksum,
 )

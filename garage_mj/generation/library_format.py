@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.errors import GarageMJError, control_character
-from garage_mj.grid.garage import Garage, MapError, validate_garage
+from garage_mj.grid.garage import Garage, MapError, decode_json, validate_garage
 from garage_mj.grid.metrics import evaluate
 
 #: Schema version written to ``PRAGMA user_version``; bump it with a migration.
@@ -248,3 +248,32 @@ def record_from_row(row: tuple, path: Path) -> GarageRecord:
             raise LibraryError(f"{where}: column {name} holds {v[:30]!r}, with the control character "
                                f"{control_character(v)!r}; {fix}")
     return GarageRecord(*values)
+
+
+def garages_from_json(text: str | bytes, source: str = "garage JSON") -> list[Garage]:
+    """The garages of a JSON file: one garage (:meth:`Garage.to_json`) or the list ``garage-mj library
+    export-json`` writes (each row named ``<map>#<id>`` as the library names it, checked against its hash).
+
+    Each garage is checked as export and cruise need (:func:`validate_garage`); a problem is a
+    :class:`MapError` naming the file and the garage's place in the list.
+    """
+    data = decode_json(text, source)
+    if isinstance(data, dict):
+        return [Garage.from_json(data, source, usable=True)]
+    if not isinstance(data, list) or not data:
+        raise MapError(f"{source}: expected a garage (an object with grid and initial) or a non-empty list of "
+                       "them, as 'garage-mj library export-json' writes")
+    garages = []
+    for i, item in enumerate(data):
+        where = f"{source}, garage {i + 1} of {len(data)}"
+        if isinstance(item, dict) and "name" not in item and isinstance(item.get("map"), str) \
+                and isinstance(item.get("id"), int):
+            item = {**item, "name": f"{item['map']}#{item['id']}"}
+        garage = Garage.from_json(item, where, usable=True) if isinstance(item, dict) else None
+        if garage is None:
+            raise MapError(f"{where}: expected an object with grid and initial, not {type(item).__name__}")
+        if "hash" in item and garage.canonical_hash() != item["hash"]:
+            raise MapError(f"{where}: the grid does not match its stored hash; the file was altered after it "
+                           "was written: export it again with garage-mj library export-json")
+        garages.append(garage)
+    return garages

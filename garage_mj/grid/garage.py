@@ -114,6 +114,17 @@ def _parse_int(digits: str) -> int | _LongInteger:
     return int(digits) if len(digits) <= 20 else _LongInteger(digits)
 
 
+def decode_json(text: str | bytes, source: str = "garage JSON") -> Any:
+    """The decoded JSON of a garage file (integers of over 20 digits kept as text for the messages); a file that
+    is not JSON is a :class:`MapError` naming ``source``."""
+    try:
+        return json.loads(text, parse_int=_parse_int)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise MapError(f"{source} is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise MapError(f"{source} is not a garage: JSON nested too deeply") from None
+
+
 def _shown(v: Any) -> str:
     """A cell's value as the message quotes it (a long integer by its first digits and its length)."""
     if isinstance(v, _LongInteger):
@@ -237,15 +248,7 @@ class Garage:
         Always checks the shape limits, the codes (JSON integers 0-9), gates and fixed cells;
         ``usable=True`` also applies :func:`validate_garage` (what export and cruise need).
         """
-        if isinstance(text, dict):
-            data = text
-        else:
-            try:
-                data = json.loads(text, parse_int=_parse_int)
-            except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-                raise MapError(f"{source} is not valid JSON: {exc}") from None
-            except RecursionError:
-                raise MapError(f"{source} is not a garage: JSON nested too deeply") from None
+        data = text if isinstance(text, dict) else decode_json(text, source)
         if not isinstance(data, dict):
             raise MapError(f"{source}: expected an object with name, grid, initial, six_stall_axis")
         missing = [k for k in ("grid", "initial") if k not in data]
