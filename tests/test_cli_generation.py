@@ -38,6 +38,7 @@ def test_train_writes_run_and_library(trained, capsys):
     manifest = json.loads((trained / "run.json").read_text())
     # 8 envs step together, so the run stops at the first multiple of 8 timesteps >= 1500
     assert manifest["status"] == "finished" and 1500 <= manifest["timesteps"] < 1500 + 8
+    assert not (trained / ".garage-mj.lock").exists()  # the run's lock goes when it ends
     with Library(trained / "library.sqlite") as lib:
         assert lib.count() == manifest["garages_stored"] >= 1
 

@@ -380,6 +380,7 @@ def test_library_ids_export_and_cruise_and_export_json_lists(library, tmp_path, 
     assert main(["cruise", "--library", str(library), "--ids", "2", "2", "--tests", "1", "--driver", "waypoint",
                  "--out", str(tmp_path / "c"), "--quiet"]) == 0
     assert {r["garage"] for r in rows_of(tmp_path / "c" / "tests.csv")} == {"tiny_7x11#2"}
+    assert not list(tmp_path.rglob(".garage-mj.lock"))  # export's and cruise's locks go when they end
     capsys.readouterr()
     for argv, message in (
         (["export", "--library", str(library), "--ids", "9", "--out", str(tmp_path / "x")], "has no garage with id 9"),

@@ -716,7 +716,8 @@ def test_every_long_job_refuses_a_locked_out_folder(pack_dir, tmp_path, capsys, 
         assert snapshot(out) == before
 
 
-def test_a_lock_that_removes_its_file_is_never_held_twice(tmp_path, monkeypatch):
+@pytest.mark.parametrize("second_removes", [True, False])
+def test_a_lock_that_removes_its_file_is_never_held_twice(tmp_path, monkeypatch, second_removes):
     import fcntl
 
     from garage_mj.core.errors import FolderBusy
@@ -735,7 +736,7 @@ def test_a_lock_that_removes_its_file_is_never_held_twice(tmp_path, monkeypatch)
 
     monkeypatch.setattr(fcntl, "flock", first_lets_go_then_third_comes)
     with pytest.raises(FolderBusy, match=r"is in use by garage-mj export \(third\)"):
-        FolderLock(out, "garage-mj export", remove=True).acquire()  # not the deleted file's lock
+        FolderLock(out, "garage-mj export", remove=second_removes).acquire()  # not the deleted file's lock
     monkeypatch.undo()
     jobs[0].release()
     assert not (out / LOCK_NAME).exists()  # the lock file goes with the job

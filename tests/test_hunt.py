@@ -42,6 +42,7 @@ def test_the_action_type_is_recorded(hunted):
     run = json.loads((out / "cruise" / "run.json").read_text())
     assert (run["action_type"], run["action_type_from"]) == ("discrete", "--action-type")
     assert res.action_label == "discrete actions from --action-type; the driver's own: continuous"
+    assert not list(out.rglob(".garage-mj.lock"))  # the locks of the hunt, its cruise and packs go when it ends
 
 
 def test_outputs_ranked_and_budget_kept(hunted):

@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     cfg = demo_config(map=args.map, timesteps=args.timesteps, garages=args.garages, tests=args.tests,
                       failure_videos=args.videos, workers=args.workers, seed=args.seed, out=args.out)
-    with FolderLock(cfg.out, "garage-mj demo"):  # a second demo into the same --out is refused
+    with FolderLock(cfg.out, "garage-mj demo", remove=True):  # a second demo into the same --out is refused
         report = run_demo(cfg)
     print(f"open {report} in a browser")
     return 0

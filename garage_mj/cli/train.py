@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     config = load_dqn_config(args.config, **overrides) if (args.config or overrides) else None
     if args.resume and config is not None and args.config is None:
         raise UserError("--checkpoint-every cannot change a resumed run; drop it or start a new --out")
-    with FolderLock(args.out, "garage-mj train"):  # a second run into the same --out is refused
+    with FolderLock(args.out, "garage-mj train", remove=True):  # a second run into the same --out is refused
         m = train(args.map, args.timesteps, args.seed, args.out, config=config, resume=args.resume,
                   library_path=args.library, progress=not args.no_progress)
     s = m.get("last_session")

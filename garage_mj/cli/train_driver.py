@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
           f"{len(validation) if validation is not None else len(garages)}")
     made = not args.out.exists()
     try:
-        with FolderLock(args.out, "garage-mj train-driver"):
+        with FolderLock(args.out, "garage-mj train-driver", remove=True):
             model = train_driver(garages, args.out, validation=validation, config=config, seed=args.seed,
                                  resume=args.resume, progress=not args.no_progress,
                                  env_kwargs=None if scen is None else {"scenario": scen})

@@ -192,7 +192,8 @@ class FolderLock:
     ``what`` names the job (``"garage-mj cruise"``); a second holder gets :class:`FolderBusy`:
     "FOLDER is in use by garage-mj cruise (pid 1234); wait for it to finish or use another folder".
     ``remove=True`` deletes the lock file on release (while still holding it); a job that then
-    locks the deleted file notices that the name now leads elsewhere and locks afresh.
+    locks the deleted file notices that the name now leads elsewhere and locks afresh. Every job
+    that holds its folder's lock from start to end passes it, so no lock file stays behind.
     """
 
     def __init__(self, folder: str | Path, what: str, *, remove: bool = False) -> None:
@@ -242,9 +243,8 @@ class FolderLock:
             time.sleep(0.02)
 
     def _still_named(self, fd: int, path: Path) -> bool:
-        """Whether ``path`` still names the file ``fd`` locked (a removing holder may have deleted it)."""
-        if not self.remove:
-            return True
+        """Whether ``path`` still names the file ``fd`` locked (a removing holder may have deleted it; checked
+        with or without ``remove``, so a lock that keeps its file is safe beside one that removes it)."""
         try:
             now = os.stat(path, follow_symlinks=False)
         except FileNotFoundError:

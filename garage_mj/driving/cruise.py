@@ -166,7 +166,7 @@ def run_cruise(
     settings = settings.resolved(choice.action_type)
     check_driver(settings)  # a driver that cannot be built stops the run before anything is written
     out = ensure_dir(out_dir, "--out")
-    with FolderLock(out, "garage-mj cruise"):  # a second run into `out` is refused, naming this one
+    with FolderLock(out, "garage-mj cruise", remove=True):  # a second run into `out` is refused, naming this one
         return _run_locked(srcs, tests, out, settings, choice, compute, max_tests, xosc, model)
 
 

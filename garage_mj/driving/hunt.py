@@ -198,7 +198,7 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
               "seed": settings.seed, "action_type": settings.action_type, "occupancy": settings.occupancy,
               "env": settings.env, "config": asdict(cfg)}
     session = ray_session(compute) if compute.backend == "ray" else contextlib.nullcontext()
-    with FolderLock(out, "garage-mj hunt"), session:
+    with FolderLock(out, "garage-mj hunt", remove=True), session:
         state_path = _state_file(out)
         if state_path.is_file():
             old = json.loads(state_path.read_text()).get("settings") or {}

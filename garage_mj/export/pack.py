@@ -252,7 +252,7 @@ def export_packs(
     """
     garages = [validate_garage(g) for g in garages]
     out_dir = ensure_dir(out_dir, "--out")
-    with FolderLock(out_dir, "garage-mj export"):
+    with FolderLock(out_dir, "garage-mj export", remove=True):
         clean_temp(out_dir)
         paths = []
         for garage in tqdm(garages, total=total, desc="export", unit="pack", disable=not progress):

@@ -135,7 +135,7 @@ def run_protocol(protocol: Protocol, out: str | Path, *, compute: Compute = DEFA
         load_map(m)  # fail on a bad map before any run starts
     out.mkdir(parents=True, exist_ok=True)
     library = out / LIBRARY
-    with FolderLock(out, f"generation protocol {protocol.name}"):
+    with FolderLock(out, f"generation protocol {protocol.name}", remove=True):
         Library(library).close()  # create it once, before the workers race to
         jobs, skipped = [], []
         for m in protocol.maps:

@@ -83,7 +83,7 @@ def record_cruise_videos(result: CruiseResult, sources: Sequence[CruiseSource | 
     by_hash = {s.hash: s for s in srcs}
     settings = CruiseSettings.from_stored(json.loads((result.out_dir / "run.json").read_text()))
     made = []
-    with FolderLock(result.out_dir, "garage-mj cruise"):
+    with FolderLock(result.out_dir, "garage-mj cruise", remove=True):
         for row in pick_tests(result.rows, srcs, n):
             path = result.out_dir / "videos" / video_name(row)
             if not path.is_file():

@@ -30,7 +30,7 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, videos: bool = True, 
     of the worst garages' first failing tests, and ``report.html`` (``files["report"]``, named in hunt.json)."""
     result = driving_hunt.hunt(settings, out_dir, **kwargs)
     out = result.out_dir
-    with FolderLock(out, "garage-mj hunt"):
+    with FolderLock(out, "garage-mj hunt", remove=True):
         cruise_figure(out / "cruise")
         mp4s = record_videos(result) if videos else []
         report = write_hunt_report(out, result.table, result.worst, result.files["packs"], result.files["xosc"],
