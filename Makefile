@@ -1,7 +1,9 @@
-# garage-mj: `make test` and `make demo` install what they need on a fresh clone.
+# garage-mj: `make test` and `make demo` install what they need on a fresh clone: the demo only the
+# package in .venv; the tests also their tools, the ASAM checkers (.venv-qc) and Blender (.venv-blender).
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
+MAIN_STAMP := $(VENV)/.installed-main
 STAMP := $(VENV)/.installed
 TORCH := torch==2.13.0
 # The ASAM OpenDRIVE checker pins numpy < 2, so it gets its own virtualenv (garage_mj/export/validate.py),
@@ -22,13 +24,18 @@ export MUJOCO_GL ?= egl
 
 install: $(STAMP) $(QC_STAMP) $(BLENDER_STAMP)
 
-# torch first, pinned to the CPU build, so nothing later pulls the multi-GB CUDA wheels.
-# Then the package with its test tools and Ray core (--backend ray; tests/test_ray_backend.py).
-# Then CARLA's OpenDRIVE parser for the XODR tests (34 MB wheel, CPython 3.10-3.12, Linux/Windows).
-$(STAMP): pyproject.toml
+# What the demo runs: torch first, pinned to the CPU build, so nothing later pulls the multi-GB CUDA
+# wheels; then the package.
+$(MAIN_STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q $(TORCH)
+	$(PY) -m pip install -q -e .
+	touch $(MAIN_STAMP)
+
+# What the tests add: the test and docs tools and Ray core (--backend ray; tests/test_ray_backend.py),
+# then CARLA's OpenDRIVE parser for the XODR tests (34 MB wheel, CPython 3.10-3.12, Linux/Windows).
+$(STAMP): $(MAIN_STAMP)
 	$(PY) -m pip install -q -e '.[dev,ray]'
 	$(PY) -m pip install -q -e '.[carla]' || echo "warning: no carla wheel for this Python/platform; the XODR CARLA test will fail with a hint"
 	touch $(STAMP)
@@ -54,17 +61,17 @@ browser:
 test: install browser
 	$(PY) -m pytest -q
 
-demo: install
+demo: $(MAIN_STAMP)
 	$(VENV)/bin/garage-mj demo
 
-bench: install
+bench: $(MAIN_STAMP)
 	$(PY) eval/bench_env.py
 
 # The documentation site (mkdocs.yml, sources in docs/) into site/; tests/test_docs.py builds it with --strict.
-docs: install
+docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
 
-lint: install
+lint: $(STAMP)
 	$(VENV)/bin/ruff check garage_mj tests eval generation pytest_garage_mj.py docs/pytest_example
 
 clean:

@@ -169,3 +169,23 @@ def test_every_stage_documents_its_modules(stage):
     missing += [p.name for p in sorted((PACKAGE / stage).iterdir())
                 if p.is_dir() and (p / "__init__.py").exists() and f"``{p.name}``" not in doc]
     assert not missing, f"garage_mj/{stage}/__init__.py does not describe: {', '.join(missing)}"
+
+
+def _make_plan(target: str) -> str:
+    """The commands ``make TARGET`` would run on a fresh clone (``-n -B``: print, run nothing, all out of date)."""
+    import shutil
+    import subprocess
+
+    if shutil.which("make") is None:
+        pytest.skip("no make on this machine")
+    root = Path(__file__).resolve().parents[1]
+    return subprocess.run(["make", "-n", "-B", "-C", str(root), target], capture_output=True, text=True,
+                          check=True).stdout
+
+
+def test_make_demo_installs_only_what_the_demo_runs():
+    demo, test = _make_plan("demo"), _make_plan("test")
+    assert "-m pip install -q -e ." in demo and "garage-mj demo" in demo
+    for tests_only in (".venv-blender", ".venv-qc", "[dev", "[carla]", "chromium"):
+        assert tests_only not in demo and tests_only in test
+    assert "-m pip install -q -e ." in test and "pytest" in test
