@@ -19,8 +19,9 @@ Fixtures:
   failed test with how it failed, its MP4 and its ``.xosc``). Output in the test's ``tmp_path``.
 
 What ``garage_cruise`` tests, from the command line (``pytest --garage-tests 20``), else the marker
-``@pytest.mark.garage_mj(maps=[...], per_map=N, tests=N, workers=N)``, else the defaults; an argument
-given to ``garage_cruise(...)`` in the test itself wins over both.
+``@pytest.mark.garage_mj(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS)``, else the
+defaults; an argument given to ``garage_cruise(...)`` in the test itself wins over both. A test that runs
+past ``test_timeout`` (default 120 s) fails as ``driver_timeout`` and the others still run.
 """
 
 from __future__ import annotations
@@ -34,10 +35,11 @@ import pytest
 
 MARKER = "garage_mj"
 #: What the options and the marker choose, with the defaults: maps to paint garages of, garages per map,
-#: cruise tests per garage, worker processes.
-DEFAULTS: dict[str, Any] = {"maps": ["tiny_7x11"], "per_map": 1, "tests": 3, "workers": 1}
+#: cruise tests per garage, worker processes, wall time a test may take [s] (garage_mj's DEFAULT_TEST_TIMEOUT).
+DEFAULTS: dict[str, Any] = {"maps": ["tiny_7x11"], "per_map": 1, "tests": 3, "workers": 1, "test_timeout": 120.0}
 _CLI_HINT = " (put --debug before the command for its traceback)"  # the command line's advice; the traceback follows here
-_OPTIONS = {"maps": "garage_maps", "per_map": "garage_per_map", "tests": "garage_tests", "workers": "garage_workers"}
+_OPTIONS = {"maps": "garage_maps", "per_map": "garage_per_map", "tests": "garage_tests", "workers": "garage_workers",
+            "test_timeout": "garage_test_timeout"}
 
 
 def _positive(text: str) -> int:
@@ -47,6 +49,16 @@ def _positive(text: str) -> int:
         value = 0
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: give a whole number >= 1")
+    return value
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = 0.0
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a number of seconds > 0")
     return value
 
 
@@ -65,10 +77,12 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--garage-per-map", type=_positive, metavar="N", help="painted garages per map (default 1)")
     group.addoption("--garage-tests", type=_positive, metavar="N", help="cruise tests per garage (default 3)")
     group.addoption("--garage-workers", type=_positive, metavar="N", help="worker processes (default 1)")
+    group.addoption("--garage-test-timeout", type=_seconds, metavar="SECONDS",
+                    help="wall time a cruise test may take before it fails as driver_timeout (default 120)")
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", f"{MARKER}(maps=[...], per_map=N, tests=N, workers=N): what the "
+    config.addinivalue_line("markers", f"{MARKER}(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS): what the "
                                        "garage_cruise fixture tests by default (--garage-* options override it)")
 
 
@@ -140,6 +154,7 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
     runs = itertools.count()
 
     def garage_cruise(driver, garages=None, *, tests: int | None = None, workers: int | None = None,
+                      test_timeout: float | None = None,
                       per_map: int | None = None, seed: int = 0, action_type: str | None = None,
                       occupancy: float = 0.5, driver_kwargs: dict[str, Any] | None = None,
                       env: dict[str, Any] | None = None):
@@ -157,7 +172,8 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
             return run_driver_tests(
                 driver, chosen["maps"] if garages is None else garages, chosen["tests"] if tests is None else tests,
                 out_dir=tmp_path / ("cruise" if k == 0 else f"cruise_{k}"), settings=settings, compute=compute,
-                per_map=chosen["per_map"] if per_map is None else per_map)
+                per_map=chosen["per_map"] if per_map is None else per_map,
+                test_timeout=chosen["test_timeout"] if test_timeout is None else test_timeout)
         except GarageMJError as exc:  # a bad map, driver or garage list, or a driver that raised: one message
             message = str(exc).replace(_CLI_HINT, "")
             if exc.details:  # the driver's own traceback, from whichever process ran it

@@ -155,17 +155,20 @@ def test_missed_goals_are_counted_and_old_deadlock_rows_load(garages, tmp_path):
     header = (tmp_path / "summary.csv").read_text().splitlines()[0].split(",")
     assert header == list(SUMMARY_COLUMNS) and header.index("missed_goals") == header.index("deadlocks") + 1
     assert (summary[0]["deadlocks"], summary[0]["missed_goals"], summary[0]["success_pct"]) == (1, 2, 20.0)
-    assert stats["failures"] == {"collision": 1, "timeout": 0, "deadlock": 1, "missed_goal": 2}
+    assert stats["failures"] == {"collision": 1, "timeout": 0, "deadlock": 1, "missed_goal": 2, "driver_crash": 0,
+                                 "driver_timeout": 0}
     assert stats["paper_failures"] == {"collision": 1, "timeout": 0, "deadlock": 3}  # missed goals are deadlocks
 
 
 def test_videos_show_failures_first(garages):
     a, b = (CruiseSource.from_garage(g) for g in garages)
     rows = [fake_row(b, 0, "collision"), fake_row(a, 1, "success"), fake_row(a, 0, "infeasible"),
-            fake_row(a, 2, "missed_goal"), fake_row(a, 0, "success") | {"garage_hash": "elsewhere"}]
+            fake_row(a, 2, "missed_goal"), fake_row(a, 0, "success") | {"garage_hash": "elsewhere"},
+            fake_row(a, 3, "driver_crash"), fake_row(b, 1, "driver_timeout")]
     picked = pick_tests(rows, [a, b], 5)
     assert [(r["garage_hash"], r["outcome"]) for r in picked] == [
-        (a.hash, "missed_goal"), (b.hash, "collision"), (a.hash, "success")]  # never an infeasible one
+        (a.hash, "missed_goal"), (b.hash, "collision"), (a.hash, "success")]  # never an infeasible one, nor one
+    # whose driver crashed or hung (driven again, it would again)
     assert pick_tests(rows, [a, b], 1) == picked[:1]
     assert video_name({"garage": "m5#12", "test": 3, "outcome": "missed_goal"}) == "m5-12_00003_missed_goal.mp4"
 

@@ -744,3 +744,73 @@ def test_a_lock_that_removes_its_file_is_never_held_twice(tmp_path, monkeypatch,
         with pytest.raises(FolderBusy, match=f"{out} is in use by garage-mj export"):
             FolderLock(out, "garage-mj export", remove=True).acquire()
     assert os.listdir(out) == []
+
+
+# -- a driver that crashes its process or never returns ---------------------------------------------------
+FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _cruise(tiny, out: Path, driver: str, workers: int, tests: int = 1, timeout: float = 120.0):
+    from garage_mj.core.backends import Compute
+    from garage_mj.driving.cruise import run_cruise
+    from garage_mj.driving.sources import CruiseSettings
+
+    return run_cruise([tiny], tests, CruiseSettings(driver, env=FAST, test_timeout=timeout), out,
+                      compute=Compute(workers=workers, progress=False), route_model=False)
+
+
+def test_a_driver_that_segfaults_is_a_driver_crash_and_the_run_ends(tiny, tmp_path):
+    """--workers 2: the worker's death is noticed, the test given once more to a fresh worker, then recorded."""
+    start = time.monotonic()
+    res = _cruise(tiny, tmp_path / "c", "tests._crashing:SegfaultDriver", workers=2)
+    assert time.monotonic() - start < 15
+    (row,) = res.rows
+    assert row["outcome"] == "driver_crash" and row["feasible"] == "" and row["time"] == ""
+    assert row["reason"] == ("driver tests._crashing:SegfaultDriver: its process was killed by signal SIGSEGV on "
+                             "each of 2 tries")
+    assert res.stats["failures"]["driver_crash"] == 1 and res.stats["paper_failures"]["deadlock"] == 1
+    assert res.stats["success_pct"] == 0.0 and res.stats["seconds_per_test"] is None
+    with open(tmp_path / "c" / "summary.csv", newline="") as f:
+        assert [r["driver_crashes"] for r in csv.DictReader(f)] == ["1"]
+
+
+def test_a_driver_that_segfaults_with_one_worker_names_the_signal_and_the_line(pack_dir, tmp_path):
+    """--workers 1 runs the tests in the command's own process: a segfault ends it, saying where."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([CLI, "cruise", "--packs", str(pack_dir), "--tests", "1", "--quiet", "--driver",
+                           "tests._crashing:SegfaultDriver", "--out", str(tmp_path / "c")],
+                          capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == -signal.SIGSEGV
+    assert "Segmentation fault" in proc.stderr and "_crashing.py" in proc.stderr and "in act" in proc.stderr
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_driver_whose_act_never_returns_is_a_driver_timeout(tiny, tmp_path, workers):
+    """The same row with any worker count (wall_s apart): in this process an interval timer stops it, in a pool
+    the worker is killed and replaced; the next test still runs."""
+    start = time.monotonic()
+    res = _cruise(tiny, tmp_path / "c", "tests._crashing:SleepDriver", workers=workers, tests=2, timeout=1.0)
+    assert time.monotonic() - start < 15
+    assert [(r["test"], r["outcome"], r["reason"]) for r in res.rows] == [
+        (str(i), "driver_timeout", "driver tests._crashing:SleepDriver: ran past the time limit of 1 s of wall time")
+        for i in (0, 1)]
+    assert all(1.0 <= float(r["wall_s"]) < 5 for r in res.rows)
+    assert res.stats["failures"]["driver_timeout"] == 2 and res.stats["paper_failures"]["timeout"] == 2
+
+
+def test_the_test_timeout_is_a_stored_setting_and_old_runs_resume(pack_dir, tmp_path, capsys):
+    out = tmp_path / "c"
+    args = ["cruise", "--packs", str(pack_dir), "--tests", "1", "--quiet", "--out", str(out), "--driver",
+            "tests._crashing:SleepDriver"]
+    assert main([*args, "--test-timeout", "0.5", "--workers", "2"]) == 0
+    assert "1 driver_timeout: the driver's process died or hung" in capsys.readouterr().out
+    run = json.loads((out / "run.json").read_text())
+    assert run["test_timeout"] == 0.5
+    assert main(args) == 2 and "test_timeout 0.5 there, 120.0 now" in capsys.readouterr().err
+    # a run.json written before the setting existed holds the default: the same command resumes it
+    del run["test_timeout"]
+    (out / "run.json").write_text(json.dumps(run))
+    assert main([*args, "--test-timeout", "120"]) == 0 and "(0 new)" in capsys.readouterr().out
+    assert "error: argument --test-timeout: 0 must be a number of seconds > 0" in one_line_error(
+        capsys, [*args, "--test-timeout", "0"])

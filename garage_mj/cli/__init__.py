@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import faulthandler
 import importlib
 import os
 import sys
@@ -110,6 +111,8 @@ def _run(argv: list[str] | None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    if not faulthandler.is_enabled():  # a crash in this process (a driver's segfault with --workers 1) names the
+        faulthandler.enable()  # signal and the line it came from, not a bare exit code
     try:
         return int(args.func(args) or 0)
     except GarageMJError as exc:

@@ -19,6 +19,7 @@ from garage_mj.cli._common import (
     filters,
     non_negative_int,
     positive_int,
+    positive_seconds,
     records_by_id,
     seed,
     unit_range,
@@ -28,7 +29,8 @@ from garage_mj.core.fsutil import atomic_write, ensure_dir
 from garage_mj.driving.actors.config import load_scenario_config
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import TEST_COLUMNS
-from garage_mj.driving.sources import CruiseSettings, CruiseSource
+from garage_mj.driving.sim.outcomes import RUNNER_KINDS
+from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings, CruiseSource
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
 
@@ -70,6 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "action_type attribute is taken as discrete); another one than the driver's own is "
                         "warned about")
     p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
+    p.add_argument("--test-timeout", type=positive_seconds, default=DEFAULT_TEST_TIMEOUT, metavar="SECONDS",
+                   help=f"wall time a test may take (default {DEFAULT_TEST_TIMEOUT:g} s, far above any honest test); "
+                        "a test past it is a driver_timeout (its worker is stopped) and the run goes on; stored in "
+                        "run.json like the seed")
     p.add_argument("--videos", type=video_count, default=0, metavar="N",
                    help="after the tests, MP4s of N of them (failures first, then successes, in garage and test "
                         "order) into OUT/videos/<garage>_<test>_<outcome>.mp4; re-run on a finished --out to only "
@@ -191,6 +197,11 @@ def replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def runner_failures(failures: dict[str, int]) -> str:
+    """``1 driver_crash, 2 driver_timeout``: the tests whose driver's process died or hung, by kind ("" for none)."""
+    return ", ".join(f"{failures[k.value]} {k.value}" for k in RUNNER_KINDS if failures.get(k.value))
+
+
 def run(args: argparse.Namespace) -> int:
     from garage_mj.reporting.cruise import run_cruise  # matplotlib, for regression.png
 
@@ -203,7 +214,8 @@ def run(args: argparse.Namespace) -> int:
     if scen is not None:
         env["scenario"] = scen
     with action_warnings("cruise"):
-        settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env)
+        settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
+                                  test_timeout=args.test_timeout)
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)
     s = res.stats
@@ -213,6 +225,9 @@ def run(args: argparse.Namespace) -> int:
           f"(excluded), success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
           f"Pearson r(difficulty, success) = {r} (paper {s['paper_r']}), r(route difficulty, success) = {route_r}; "
           f"results in {res.out_dir}")
+    lost = runner_failures(s["failures"])
+    if lost:
+        print(f"{lost}: the driver's process died or hung (reasons in {res.out_dir / 'tests.csv'})")
     if args.videos:
         from garage_mj.reporting.cruise import record_cruise_videos
 

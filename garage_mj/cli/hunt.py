@@ -6,10 +6,10 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import compute, positive_int, seed, unit_range
-from garage_mj.cli.cruise import action_warnings, scenario
+from garage_mj.cli._common import compute, positive_int, positive_seconds, seed, unit_range
+from garage_mj.cli.cruise import action_warnings, runner_failures, scenario
 from garage_mj.driving.hunt import HuntConfig, HuntResult
-from garage_mj.driving.sources import CruiseSettings
+from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,6 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "built-ins are made for continuous, learned for discrete, a module:Class without an "
                         "action_type attribute is taken as discrete); another one than the driver's own is warned about")
     p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
+    p.add_argument("--test-timeout", type=positive_seconds, default=DEFAULT_TEST_TIMEOUT, metavar="SECONDS",
+                   help=f"wall time a test may take (default {DEFAULT_TEST_TIMEOUT:g} s); past it the test is a "
+                        "driver_timeout, as garage-mj cruise")
     p.add_argument("--pedestrians", type=int, metavar="N", help="actors per test, as garage-mj cruise")
     p.add_argument("--moving-cars", type=int, metavar="M")
     p.add_argument("--clutter", type=int, metavar="K")
@@ -68,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = HuntConfig(budget=args.budget, tests=args.tests, population=args.population, elites=args.elites,
                      worst=args.worst)
     with action_warnings("hunt"):
-        settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env)
+        settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
+                                  test_timeout=args.test_timeout)
         res = hunt(settings, args.out, map=args.map if args.library is None else args.library_map,
                    library=args.library, config=cfg, compute=compute(args), videos=not args.no_videos)
     print(failure_summary(res))
@@ -91,4 +95,8 @@ def failure_summary(res: HuntResult, show: int = 5) -> str:
         head += ":"
     lines = [head] + [f"  {s.source.name}: {len(s.failures)} of {len(s.feasible)} feasible tests failed "
                       f"({100 * s.rate:.0f}%)" for s in failing[:show]]
+    kinds = [r["outcome"] for s in res.ranked for r in s.failures]
+    lost = runner_failures({k: kinds.count(k) for k in set(kinds)})
+    if lost:
+        lines.append(f"{lost}: the driver's process died or hung (reasons in {res.out_dir / 'cruise' / 'tests.csv'})")
     return "\n".join(lines)

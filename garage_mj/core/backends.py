@@ -10,9 +10,14 @@ job carries its own seed.
 Backends:
 
 ``local`` (default)
-    ``workers <= 1``: the jobs run one after another in this process. Otherwise a ``spawn``
-    process pool (each worker imports the package afresh, so it opens its own GL context),
-    one job at a time per worker, jobs handed out in the given order.
+    ``workers <= 1``: the jobs run one after another in this process (a crash of a job is a crash
+    of this process; a time limit is an interval timer, SIGALRM, on the main thread). Otherwise a
+    supervised pool of ``spawn`` processes (each worker imports the package afresh, so it opens its
+    own GL context), one job at a time per worker, jobs handed out in the given order. The parent
+    waits on the workers' pipes and process sentinels, so a worker that dies (a segfault, the OOM
+    killer, ``kill -9``) is noticed at once: it is replaced and its job given again, once
+    (:data:`LOCAL_RETRIES`); a job past its time limit has its worker killed and replaced. A job
+    lost so is the caller's ``on_lost`` to record (:class:`LostJob`), else one :class:`BackendError` line.
 ``ray``
     One Ray actor per worker slot (a long-lived process, ``num_cpus=1``), so per-process caches
     (cruise keeps one compiled MuJoCo scene per garage) survive from job to job as in a pool
@@ -25,8 +30,9 @@ Backends:
     Workers get the parent's :data:`WORKER_ENV` variables (``MUJOCO_GL`` ...) through the
     runtime env, as spawned pool workers inherit them. A job whose worker process or node dies
     is retried on a restarted actor up to ``max_retries`` times (Ray's actor restarts), then the
-    batch stops with one :class:`BackendError` line; an exception the job itself raises is
-    re-raised here as it is, without retry.
+    batch stops with one :class:`BackendError` line (or the caller's ``on_lost`` records it); an
+    exception the job itself raises is re-raised here as it is, without retry. A time limit is the
+    actor's interval timer, as in this process.
 
 :func:`stream_unordered` is for long jobs that report as they go (a DQN run sends each garage
 and checkpoint as it is made, :mod:`garage_mj.generation.remote`): the job is a generator, and
@@ -43,9 +49,13 @@ import logging
 import multiprocessing as mp
 import numbers
 import os
+import signal
+import threading
+import time
 from collections import Counter, deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from multiprocessing import connection
 from typing import Any
 
 from garage_mj.core.errors import GarageMJError
@@ -59,6 +69,8 @@ WORKER_ENV_PREFIX = "GARAGE_MJ_"
 #: The private local Ray: workers at the parent's priority (Ray's default niceness 15 starves them on a machine
 #: busy with other jobs, where pool workers would compete as equals), and no idle workers started ahead (the
 #: actors need their own, with the runtime env).
+#: How many times the local pool gives a job again after its worker process died (a segfault, the OOM killer, kill -9).
+LOCAL_RETRIES = 1
 _LOCAL_CONFIG = {"worker_niceness": 0, "prestart_worker_first_driver": False, "enable_worker_prestart": False}
 
 
@@ -114,32 +126,237 @@ def worker_env() -> dict[str, str]:
 
 
 def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], *, compute: Compute = DEFAULT_COMPUTE,
-                  max_retries: int = 3) -> Iterator[Any]:
+                  max_retries: int = 3, timeout: float | None = None,
+                  on_lost: Callable[[Any, LostJob], Any] | None = None) -> Iterator[Any]:
     """``func(job)`` for every job, yielded as each ends (in no fixed order), on ``compute``'s backend.
 
     ``func`` must be a module-level function (pickled by reference: a Ray node needs the same
     package installed); ``compute.workers`` is the number of processes (local pool size or Ray
     actors). ``compute.progress`` is the caller's to show. Closing the iterator early (an exception,
     Ctrl-C) stops the workers; what was yielded stays done.
+
+    ``timeout`` [s]: the wall time a job may take (None: no limit). A job that the backend loses (its
+    worker died again after the retries, or it ran past ``timeout``) yields ``on_lost(job,`` a
+    :class:`LostJob` ``)`` in place of its result; without ``on_lost`` it stops the batch with one
+    :class:`BackendError` line. A job's own exception is re-raised here as it is, never retried.
     """
     check_backend(compute)
     jobs = list(jobs)
     if not jobs:
         return iter(())
     if compute.backend == "ray":
-        return _ray_map(func, jobs, compute, max_retries)
-    return _local_map(func, jobs, compute.workers)
+        return _ray_map(func, jobs, compute, max_retries, timeout, on_lost)
+    return _local_map(func, jobs, compute.workers, timeout, on_lost)
 
 
 # -- local --------------------------------------------------------------------------------------------
-def _local_map(func: Callable[[Any], Any], jobs: list, workers: int) -> Iterator[Any]:
-    if workers <= 1 or len(jobs) <= 1:
-        for job in jobs:
-            yield func(job)
+@dataclass(frozen=True)
+class LostJob:
+    """A job the local backend gave up on: its worker process died twice (``kind`` ``"crash"``), or it ran
+    past the time limit (``"timeout"``). What :func:`map_unordered`'s ``on_lost`` gets, with the job."""
+
+    kind: str  # "crash" or "timeout"
+    reason: str  # one line: the signal or exit code, or the limit
+    seconds: float  # [s] wall time of its last try
+
+
+class _JobTimeout(BaseException):
+    """Raised inside a job run in this process when its time is up (a BaseException: a job's ``except
+    Exception`` does not swallow it)."""
+
+
+def timeout_reason(seconds: float) -> str:
+    """What a job that ran past ``seconds`` is told, the same wherever it ran."""
+    return f"ran past the time limit of {seconds:g} s of wall time"
+
+
+@contextlib.contextmanager
+def _time_limit(seconds: float | None) -> Iterator[None]:
+    """Raise :class:`_JobTimeout` in this block after ``seconds`` of wall time (an interval timer, SIGALRM:
+    only on the main thread of a POSIX process; elsewhere no limit). Interrupts Python code and waits
+    (``time.sleep``, locks, sockets), not a C call that never returns: a pool worker is killed for that."""
+    usable = (seconds is not None and hasattr(signal, "setitimer")
+              and threading.current_thread() is threading.main_thread())
+    if not usable:
+        yield
         return
-    # spawn: each worker opens its own GL context; jobs in the given order, one at a time
-    with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
-        yield from pool.imap_unordered(func, jobs, chunksize=1)
+
+    def expire(signum, frame):  # noqa: ARG001
+        raise _JobTimeout
+
+    old = signal.signal(signal.SIGALRM, expire)
+    start = time.monotonic()
+    outer, _ = signal.setitimer(signal.ITIMER_REAL, seconds)  # a timer of the caller's (pytest-timeout ...)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+        if outer > 0:  # the caller's timer goes on with what it had left
+            signal.setitimer(signal.ITIMER_REAL, max(outer - (time.monotonic() - start), 1e-3))
+
+
+def _limited(func: Callable[[Any], Any], job: Any, timeout: float | None) -> Any:
+    """``func(job)``, or a :class:`LostJob` of kind ``"timeout"`` when it runs past ``timeout`` seconds."""
+    start = time.perf_counter()
+    try:
+        with _time_limit(timeout):
+            return func(job)
+    except _JobTimeout:
+        return LostJob("timeout", timeout_reason(timeout), time.perf_counter() - start)
+
+
+def _died(exitcode: int | None) -> str:
+    """How a worker process ended, in words (``was killed by signal SIGSEGV``, ``exited with code 3``)."""
+    if exitcode is not None and exitcode < 0:
+        try:
+            return f"was killed by signal {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"was killed by signal {-exitcode}"
+    return f"exited with code {exitcode}"
+
+
+def _serve(conn, func: Callable[[Any], Any]) -> None:
+    """A pool worker: run the jobs that arrive on ``conn`` one at a time, sending ("start", i) as each begins
+    and ("done", i, ok, result or exception) as it ends, until None arrives."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's: it stops the workers
+    while True:
+        try:
+            msg = conn.recv()
+        except EOFError:
+            return
+        if msg is None:
+            return
+        index, job = msg
+        conn.send(("start", index))
+        try:
+            reply = ("done", index, True, func(job))
+        except Exception as exc:  # noqa: BLE001  (the job's own error: re-raised in the parent)
+            reply = ("done", index, False, exc)
+        try:
+            conn.send(reply)
+        except Exception as exc:  # noqa: BLE001  (a result or error that does not pickle)
+            conn.send(("done", index, False, BackendError(f"job {index}: its result cannot be sent back to the "
+                                                          f"parent process: {_first_line(exc)}")))
+
+
+class _Worker:
+    """One spawned worker process of the supervised local pool, and the job it is running."""
+
+    def __init__(self, ctx, func: Callable[[Any], Any]) -> None:
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_serve, args=(child, func), daemon=True)
+        self.proc.start()
+        child.close()
+        self.job: int | None = None  # the index of the job it was given
+        self.since: float | None = None  # when that job started (the worker said so)
+
+    def give(self, index: int, job: Any) -> None:
+        self.job, self.since = index, None
+        self.conn.send((index, job))
+
+    def read(self) -> tuple[str, Any] | None:
+        """What became of its job: ("done", (ok, result or exception)), ("died", how), or None (still running)."""
+        try:
+            while self.conn.poll():
+                msg = self.conn.recv()
+                if msg[0] == "start":
+                    self.since = time.monotonic()
+                    continue
+                self.job = None
+                return "done", (msg[2], msg[3])
+        except (EOFError, OSError):
+            pass
+        if self.proc.is_alive():
+            return None
+        self.proc.join()
+        return "died", _died(self.proc.exitcode)
+
+    def overdue(self, timeout: float | None) -> bool:
+        return timeout is not None and self.since is not None and time.monotonic() - self.since >= timeout
+
+    def stop(self, kill: bool = False) -> None:
+        if kill:
+            self.proc.kill()
+        else:
+            with contextlib.suppress(OSError):
+                self.conn.send(None)
+        self.proc.join(5.0)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+        self.conn.close()
+
+
+def _local_map(func: Callable[[Any], Any], jobs: list, workers: int, timeout: float | None,
+               on_lost: Callable[[Any, LostJob], Any] | None) -> Iterator[Any]:
+    lost = on_lost if on_lost is not None else _stop_batch
+    if workers <= 1:  # in this process (a kill of it is a kill of the batch)
+        for job in jobs:
+            result = _limited(func, job, timeout)
+            yield lost(job, result) if isinstance(result, LostJob) else result
+        return
+    yield from _supervised(func, jobs, min(workers, len(jobs)), timeout, lost)
+
+
+def _stop_batch(job: Any, why: LostJob) -> Any:
+    """Without ``on_lost``: a lost job stops the batch, in one line."""
+    raise BackendError(f"local: a job was lost ({why.reason}); finished jobs are saved, run again to resume")
+
+
+def _supervised(func: Callable[[Any], Any], jobs: list, size: int, timeout: float | None,
+                lost: Callable[[Any, LostJob], Any]) -> Iterator[Any]:
+    """The jobs over ``size`` spawned workers (each opens its own GL context), handed out in the given order,
+    one at a time per worker. A worker that dies is replaced at once and its job given again, at the front of
+    the queue, once (:data:`LOCAL_RETRIES`); a job past ``timeout`` has its worker killed and replaced."""
+    ctx = mp.get_context("spawn")
+    queue, losses, unborn = deque(range(len(jobs))), Counter(), 0
+    pool = [_Worker(ctx, func) for _ in range(size)]
+    try:
+        while queue or any(w.job is not None for w in pool):
+            for w in pool:
+                if w.job is None and queue:
+                    w.give(queue[0], jobs[queue.popleft()])
+            busy = [w for w in pool if w.job is not None]
+            started = [w.since for w in busy if w.since is not None]
+            wait_s = None if timeout is None or not started else max(0.0, min(started) + timeout - time.monotonic())
+            connection.wait([w.conn for w in busy] + [w.proc.sentinel for w in busy], wait_s)
+            for k, w in enumerate(pool):
+                index, since = w.job, w.since
+                if index is None:
+                    continue
+                event = w.read()
+                if event is not None and event[0] == "done":
+                    ok, value = event[1]
+                    if not ok:
+                        raise value  # the job's own error, as it raised it
+                    yield value
+                    continue
+                seconds = time.monotonic() - (w.since or since or time.monotonic())
+                if event is not None and w.since is None:  # died before it began the job: not the job's doing
+                    w.stop(kill=True)
+                    unborn += 1
+                    if unborn > size + LOCAL_RETRIES:
+                        raise BackendError(f"local: worker processes end before their first job (the last one "
+                                           f"{event[1]}); check that the package imports in a fresh process")
+                    pool[k] = _Worker(ctx, func)
+                    queue.appendleft(index)
+                elif event is not None:  # the process is gone: a fresh one, and the job again (once)
+                    w.stop(kill=True)
+                    pool[k] = _Worker(ctx, func)
+                    losses[index] += 1
+                    if losses[index] <= LOCAL_RETRIES:
+                        queue.appendleft(index)
+                    else:
+                        yield lost(jobs[index], LostJob("crash", f"its process {event[1]} on each of {losses[index]} tries",
+                                                                 seconds))
+                elif w.overdue(timeout):
+                    w.stop(kill=True)
+                    pool[k] = _Worker(ctx, func)
+                    yield lost(jobs[index], LostJob("timeout", timeout_reason(timeout), seconds))
+    finally:
+        for w in pool:
+            w.stop(kill=w.job is not None)
 
 
 # -- ray ----------------------------------------------------------------------------------------------
@@ -191,8 +408,8 @@ def _reachable(address: str, timeout: float = 10.0) -> None:
 class _Slot:
     """One worker slot: a long-lived process that runs jobs (its module-level caches survive between jobs)."""
 
-    def run(self, func: Callable[[Any], Any], job: Any) -> Any:
-        return func(job)
+    def run(self, func: Callable[[Any], Any], job: Any, timeout: float | None = None) -> Any:
+        return _limited(func, job, timeout)
 
 
 @contextlib.contextmanager
@@ -214,12 +431,14 @@ def ray_session(compute: Compute) -> Iterator[Any]:
                 os.environ["RAY_AUTH_MODE"] = auth_mode
 
 
-def _ray_map(func: Callable[[Any], Any], jobs: list, compute: Compute, max_retries: int) -> Iterator[Any]:
+def _ray_map(func: Callable[[Any], Any], jobs: list, compute: Compute, max_retries: int, timeout: float | None,
+             on_lost: Callable[[Any, LostJob], Any] | None) -> Iterator[Any]:
     with ray_session(compute) as ray:
-        yield from _ray_actors(ray, func, jobs, compute.workers, max_retries)
+        yield from _ray_actors(ray, func, jobs, compute.workers, max_retries, timeout, on_lost)
 
 
-def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_retries: int) -> Iterator[Any]:
+def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_retries: int, timeout: float | None,
+                on_lost: Callable[[Any, LostJob], Any] | None) -> Iterator[Any]:
     from ray.exceptions import RayActorError, RayTaskError
 
     env = worker_env()
@@ -237,7 +456,7 @@ def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_r
             nxt = next(todo, None)
             if nxt is None:
                 return False
-            pending[actors[a].run.remote(fn, nxt[1])] = (nxt[0], a)
+            pending[actors[a].run.remote(fn, nxt[1], timeout)] = (nxt[0], a)
             return True
 
         for a in range(len(actors)):
@@ -251,9 +470,15 @@ def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_r
             except RayTaskError as exc:  # the job raised: its own exception, one line, no retry
                 _raise_own(exc)
             except RayActorError as exc:  # its process or node died, more than max_retries times
-                raise BackendError(f"ray: job {index} lost its worker {max_retries + 1} times (node or process "
-                                   f"died: {_first_line(exc)}); finished jobs are saved, run again to resume") from None
+                if on_lost is None:
+                    raise BackendError(f"ray: job {index} lost its worker {max_retries + 1} times (node or process "
+                                       f"died: {_first_line(exc)}); finished jobs are saved, run again to resume"
+                                       ) from None
+                result = LostJob("crash", f"its process or node died ({max_retries + 1} tries): {_first_line(exc)}",
+                                 0.0)
             submit(a)
+            if isinstance(result, LostJob):
+                result = (on_lost or _stop_batch)(jobs[index], result)
             yield result
     finally:
         for actor in actors:

@@ -29,17 +29,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, check_backend, map_unordered
+from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, LostJob, check_backend, map_unordered
 from garage_mj.core.fsutil import FolderLock, clean_temp, ensure_dir
 from garage_mj.driving.difficulty.rating import (
     cruise_route_difficulty,
     driver_route_model,
     resolve_route_model,
 )
-from garage_mj.driving.episode import cached_env, check_driver, close_cached_env, drive_test
+from garage_mj.driving.episode import cached_env, check_driver, close_cached_env, drive_test, forget_cached
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.replay import write_test_xosc
 from garage_mj.driving.results import TEST_COLUMNS, check_settings, read_tests, write_csv, write_outputs
+from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
 
@@ -82,6 +83,23 @@ def _task(job: tuple[CruiseSource, int, CruiseSettings, str | None, bool]) -> di
     return run_test(*job)
 
 
+def lost_row(job: tuple[CruiseSource, int, CruiseSettings, str | None, bool], why: LostJob) -> dict[str, Any] | None:
+    """The row of a test the backend gave up on (:func:`garage_mj.core.backends.map_unordered`'s ``on_lost``):
+    ``driver_crash`` when the process driving it died on every try (a segfault, the OOM killer, ``kill -9``),
+    ``driver_timeout`` when it ran past ``settings.test_timeout``. Nothing of the drive is known, so the
+    stall, feasibility, times and actors stay empty. The same test gives the same row with any worker count."""
+    source, index, settings, _, export_only = job
+    forget_cached()  # an interrupted driver or scene in this process is not used again
+    if export_only:
+        raise CruiseError(f"writing the .xosc of {source.name} test {index}: {why.reason}; run again to resume")
+    kind = OutcomeKind.DRIVER_TIMEOUT if why.kind == "timeout" else OutcomeKind.DRIVER_CRASH
+    return {**dict.fromkeys(TEST_COLUMNS, ""), "garage": source.name, "garage_hash": source.hash, "test": index,
+            "seed": cruise_seed(settings.seed, source.hash, index), "driver": settings.driver,
+            "outcome": kind.value, "reason": f"driver {settings.driver}: {why.reason}", "difficulty": source.difficulty,
+            "mean_road_length": source.mean_road_length, "mean_intersection_degree": source.mean_intersection_degree,
+            "wall_s": round(why.seconds, 3)}
+
+
 # -- OpenSCENARIO export --------------------------------------------------------------------------------
 def xosc_name(source: CruiseSource, index: int) -> str:
     """File name of test ``index`` on ``source`` (``<garage hash 12>_<test>.xosc``)."""
@@ -107,8 +125,9 @@ def _results(jobs: list, compute: Compute) -> Iterator[dict[str, Any] | None]:
     jobs come in garage order, so each worker builds each scene at most once."""
     if compute.backend == "ray":  # paths as this machine sees them (a cluster needs them on a shared filesystem)
         jobs = [(s, i, st, os.path.abspath(x) if x is not None else None, e) for s, i, st, x, e in jobs]
+    timeout = jobs[0][2].test_timeout if jobs else None  # every job has the run's settings
     try:
-        yield from map_unordered(_task, jobs, compute=compute)
+        yield from map_unordered(_task, jobs, compute=compute, timeout=timeout, on_lost=lost_row)
     finally:
         close_cached_env()  # the in-process loop's scene
 

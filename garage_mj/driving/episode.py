@@ -43,6 +43,14 @@ def close_cached_env() -> None:
         _CACHE.pop("hash", None)
 
 
+def forget_cached() -> None:
+    """Close the scene and drop the driver this process keeps: a test that ran past its time limit was
+    interrupted inside them, so neither is used again."""
+    close_cached_env()
+    _CACHE.pop("driver", None)
+    _CACHE.pop("driver_key", None)
+
+
 def _driver_for(settings: CruiseSettings):
     """This process's driver for ``settings`` (built once); one that cannot be built is a :class:`CruiseError`
     naming it and its error (its traceback kept for ``--debug``), in a worker process too."""

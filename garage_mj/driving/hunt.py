@@ -49,7 +49,7 @@ from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir, write_js
 from garage_mj.driving.cruise import run_cruise, run_test, xosc_name
 from garage_mj.driving.episode import check_driver, close_cached_env
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests, failure_counts, read_tests
-from garage_mj.driving.sources import CruiseSettings, CruiseSource
+from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library, LibraryError
 from garage_mj.generation.search import mutate, replay
 from garage_mj.grid.garage import Garage
@@ -196,12 +196,14 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
     out = ensure_dir(out_dir, "--out")
     stored = {"driver": settings.driver, "map": map, "library": str(Path(library).resolve()) if library else None,
               "seed": settings.seed, "action_type": settings.action_type, "occupancy": settings.occupancy,
-              "env": settings.env, "config": asdict(cfg)}
+              "env": settings.env, "test_timeout": settings.test_timeout, "config": asdict(cfg)}
     session = ray_session(compute) if compute.backend == "ray" else contextlib.nullcontext()
     with FolderLock(out, "garage-mj hunt", remove=True), session:
         state_path = _state_file(out)
         if state_path.is_file():
             old = json.loads(state_path.read_text()).get("settings") or {}
+            if isinstance(old, dict):  # a hunt.json from before the setting holds the default
+                old.setdefault("test_timeout", DEFAULT_TEST_TIMEOUT)
             refuse_other_settings(old, stored, lambda diff: HuntError(
                 f"{out} holds a hunt with other settings ({', '.join(diff)}); use another --out or the same settings"))
         else:

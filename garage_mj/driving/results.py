@@ -36,7 +36,7 @@ from garage_mj.core.config import refuse_other_settings
 from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.driving.difficulty.regression import PAPER_R, regression
 from garage_mj.driving.sim.outcomes import FAILURES, HIT_KINDS, OUTCOMES, PAPER_CLASS, OutcomeKind
-from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
+from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseError, CruiseSettings, CruiseSource
 
 TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",
                 "hit_geom", "reason", "time", "path_length", "route_length", "difficulty", "mean_road_length",
@@ -138,6 +138,7 @@ def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--ac
             theirs = record  # no test was recorded under it: nothing to lose, write it afresh
             write_json(path, record)
         theirs = {k: v for k, v in theirs.items() if k not in PROVENANCE_KEYS}
+        theirs.setdefault("test_timeout", DEFAULT_TEST_TIMEOUT)  # a run.json from before the setting: the default
 
         def refuse(diff: list[str]) -> CruiseError:
             shown = ", ".join(f"{k} {_shown(theirs.get(k))} there, {_shown(mine.get(k))} now" for k in diff)
@@ -227,8 +228,9 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
     on_route = [r for r in rated if r["route_difficulty"] is not None]
     route_fit = regression([r["route_difficulty"] for r in on_route], [r["success_pct"] for r in on_route])
     driven = driven_tests(rows)
-    walls = [float(r["wall_s"]) for r in driven]
-    sims = [float(r["time"]) for r in driven]
+    timed = [r for r in driven if r["time"] != ""]  # not the tests whose driver crashed or hung: nothing was timed
+    walls = [float(r["wall_s"]) for r in timed]
+    sims = [float(r["time"]) for r in timed]
     kinds = [r["outcome"] for r in rows]
     failures = failure_counts(rows)
     stats = {**fit.as_dict(), "paper_r": PAPER_R,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,7 +23,7 @@ from garage_mj.grid.metrics import evaluate
 
 
 class CruiseError(GarageMJError):
-    """A cruise run cannot go on (settings differ from the out dir's run, a driver crashed)."""
+    """A cruise run cannot go on (settings differ from the out dir's run, a driver raised)."""
 
 
 @dataclass(frozen=True)
@@ -67,11 +68,18 @@ class CruiseSource:
                    record.mean_intersection_degree)
 
 
+#: [s] Wall time a test may take before it ends as ``driver_timeout`` (``--test-timeout``): far above any honest
+#: test (the slowest, the learned driver on a 13x13 garage, takes a few seconds), so only a driver that hangs meets it.
+DEFAULT_TEST_TIMEOUT = 120.0
+
+
 @dataclass(frozen=True)
 class CruiseSettings:
     """What makes two runs comparable; stored in ``run.json`` (as :meth:`resolved` makes them).
 
-    ``occupancy`` is a setting of its own, never a key of ``env``.
+    ``occupancy`` is a setting of its own, never a key of ``env``. ``test_timeout`` can change a test's
+    outcome (``driver_timeout``), so it is stored and compared too; a ``run.json`` written before it
+    existed holds the default.
     """
 
     driver: str = "vision"  # built-in name or module:Class
@@ -80,11 +88,16 @@ class CruiseSettings:
     occupancy: float = 0.5  # share of non-target stalls with a parked car
     env: dict[str, Any] = field(default_factory=dict)  # more GarageDriveEnv keyword arguments
     driver_kwargs: dict[str, Any] = field(default_factory=dict)
+    test_timeout: float = DEFAULT_TEST_TIMEOUT  # [s] wall time per test; past it the test is a driver_timeout
 
     def __post_init__(self) -> None:
         if "occupancy" in (self.env or {}):
             raise CruiseError("env: occupancy is a cruise setting of its own (CruiseSettings.occupancy), not an "
                               "env keyword; give it as occupancy=")
+        t = self.test_timeout
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t <= 0:
+            raise CruiseError(f"test_timeout must be a number of seconds > 0, got {t!r}; give --test-timeout "
+                              f"SECONDS (default {DEFAULT_TEST_TIMEOUT:g})")
 
     @classmethod
     def from_env_kwargs(cls, driver: str, env_kwargs: dict[str, Any] | None, **fields: Any) -> CruiseSettings:
@@ -97,12 +110,12 @@ class CruiseSettings:
     def from_stored(cls, data: dict[str, Any]) -> CruiseSettings:
         """The settings a run stored: ``run.json``, or the settings of a hunt's ``hunt.json`` (no driver kwargs)."""
         return cls(data["driver"], data["seed"], data["action_type"], data["occupancy"], data.get("env") or {},
-                   data.get("driver_kwargs") or {})
+                   data.get("driver_kwargs") or {}, data.get("test_timeout", DEFAULT_TEST_TIMEOUT))
 
     def resolved(self, action_type: str) -> CruiseSettings:
         """These settings as a run uses and stores them: ``action_type`` the one chosen, plain numbers and dicts."""
         return CruiseSettings(self.driver, int(self.seed), action_type, float(self.occupancy), dict(self.env or {}),
-                              dict(self.driver_kwargs or {}))
+                              dict(self.driver_kwargs or {}), float(self.test_timeout))
 
 
 def painted_sources(map: str, n: int, seed: int = 0, oversample: int = 4) -> list[CruiseSource]:

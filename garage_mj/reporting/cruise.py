@@ -22,12 +22,13 @@ from typing import Any
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving import cruise as driving_cruise
 from garage_mj.driving.cruise import CruiseResult
-from garage_mj.driving.sim.outcomes import FAILURES
+from garage_mj.driving.sim.outcomes import FAILURES, RUNNER_KINDS
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.grid.garage import Garage
 from garage_mj.reporting.analysis import regression_plot
 
 _FAILED = {k.value for k in FAILURES}
+_UNWATCHABLE = {"infeasible", *(k.value for k in RUNNER_KINDS)}  # never driven, or its driver would crash or hang again
 
 
 #: The figure of each metric in a cruise run's folder, and the summary.csv column it reads.
@@ -65,9 +66,10 @@ def video_name(row: dict[str, Any]) -> str:
 
 def pick_tests(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource], n: int) -> list[dict[str, Any]]:
     """Up to ``n`` driven tests to watch: the failures first, then the successes, each in garage and test
-    order (infeasible tests were never driven: nothing to watch)."""
+    order (infeasible tests were never driven: nothing to watch; a test whose driver crashed or hung would
+    again)."""
     order = {s.hash: k for k, s in enumerate(sources)}
-    driven = sorted((r for r in rows if r["outcome"] != "infeasible" and r["garage_hash"] in order),
+    driven = sorted((r for r in rows if r["outcome"] not in _UNWATCHABLE and r["garage_hash"] in order),
                     key=lambda r: (r["outcome"] not in _FAILED, order[r["garage_hash"]], int(r["test"])))
     return driven[:n]
 

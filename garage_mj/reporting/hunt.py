@@ -19,6 +19,7 @@ from typing import Any
 from garage_mj.core.fsutil import FolderLock, atomic_write
 from garage_mj.driving import hunt as driving_hunt
 from garage_mj.driving.hunt import HuntResult, Scored, add_file, read_settings
+from garage_mj.driving.sim.outcomes import RUNNER_KINDS
 from garage_mj.driving.sources import CruiseSettings
 from garage_mj.export.artefacts import PREVIEW
 from garage_mj.reporting.cruise import cruise_figure
@@ -42,14 +43,16 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, videos: bool = True, 
 
 def record_videos(result: HuntResult) -> list[Path]:
     """``OUT/videos/<hash 12>_<test>_<outcome>.mp4``: the first failing test of each of the worst garages (kept
-    if there)."""
+    if there); not a test whose driver crashed or hung (driven again, it would again)."""
     settings = CruiseSettings.from_stored(read_settings(result.out_dir))
+    unwatchable = {k.value for k in RUNNER_KINDS}
     mp4s = []
     for s in result.worst:
-        if not s.failures:
+        first = next((r for r in s.failures if r["outcome"] not in unwatchable), None)
+        if first is None:
             continue
-        i = int(s.failures[0]["test"])
-        mp4 = result.out_dir / "videos" / f"{s.source.hash[:12]}_{i:05d}_{s.failures[0]['outcome']}.mp4"
+        i = int(first["test"])
+        mp4 = result.out_dir / "videos" / f"{s.source.hash[:12]}_{i:05d}_{first['outcome']}.mp4"
         if not mp4.is_file():
             record_video(s.source, mp4, settings, test=i)
         mp4s.append(mp4)

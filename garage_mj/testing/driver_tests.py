@@ -72,6 +72,7 @@ def run_driver_tests(
     settings: CruiseSettings | None = None,
     compute: Compute = QUIET,
     per_map: int = 1,
+    test_timeout: float | None = None,
 ) -> DriverTests:
     """Run ``tests`` cruise tests of ``driver`` on every garage of ``garages``; the results table.
 
@@ -83,9 +84,13 @@ def run_driver_tests(
     records (:func:`garage_mj.testing.garages.cruise_sources`). ``out_dir`` receives what ``garage-mj
     cruise --out`` does; a second call into it resumes (same settings) or is refused (other settings).
     ``compute``: the workers (default one, no progress bar). Test seeds derive from (seed, garage, test
-    index), so results do not depend on the workers.
+    index), so results do not depend on the workers. ``test_timeout`` [s]: the wall time a test may take
+    (default ``settings.test_timeout``, :data:`~garage_mj.driving.sources.DEFAULT_TEST_TIMEOUT`); a test past it
+    is a ``driver_timeout`` failure and the others still run.
     """
-    settings = dataclasses.replace(settings if settings is not None else CruiseSettings(), driver=driver_spec(driver))
+    settings = settings if settings is not None else CruiseSettings()
+    timeout = settings.test_timeout if test_timeout is None else test_timeout
+    settings = dataclasses.replace(settings, driver=driver_spec(driver), test_timeout=timeout)
     sources = cruise_sources(garages, per_map, settings.seed)
     call = {"sources": sources, "tests": tests, "settings": settings, "out_dir": out_dir, "compute": compute}
     return DriverTests(run_cruise(**call), tuple(sources), call)

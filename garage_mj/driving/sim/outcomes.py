@@ -5,7 +5,7 @@ order): its name in ``tests.csv``, its count column in ``summary.csv``, whether 
 its class among the paper's three, and what the report says of it. :class:`OutcomeKind`,
 :data:`FAILURES`, :data:`PAPER_CLASS` and the other tables here are derived from it, and so is every
 column, count and table of failures elsewhere; a new kind is one entry there and its check in
-:class:`OutcomeMonitor`.
+:class:`OutcomeMonitor` (or, for a kind the runner decides, where the runner decides it).
 
 :class:`OutcomeMonitor` is pure: ``update(time, position, speed, contacts)`` looks at the car's
 state and the contacts of this step and returns an :class:`Outcome` once the test is over.
@@ -21,6 +21,12 @@ the goal: the car meant to park there and ended outside the tolerance, it was no
 
 The paper has three failure classes (collision, timeout, deadlock); in them a missed goal counts as
 a deadlock (:data:`PAPER_CLASS`).
+
+``driver_crash`` and ``driver_timeout`` are not decided here either: the cruise runner
+(:mod:`garage_mj.driving.cruise`) gives them when the process driving a test dies on every try, or
+the test runs past its wall-clock limit (``CruiseSettings.test_timeout``). They are failures of the
+driver, not of the garage; in the paper's classes a crash counts as a deadlock (the car stops where
+it is) and a wall-clock overrun as a timeout.
 
 ``infeasible`` is not decided here: the drive env gives it before the drive, from the scene alone
 (:mod:`garage_mj.scene.drivable`), and such a test is never driven.
@@ -50,6 +56,7 @@ class OutcomeSpec:
     paper_class: str | None = None  # a failure's class among the paper's three
     hit: bool = False  # it ends on touching something: tests.csv's hit and hit_geom say what
     truncates: bool = False  # the drive env truncates the episode (a time limit) instead of terminating it
+    runner: bool = False  # decided by the cruise runner (the driver's process died or hung), not the env: never replayed
     note: str = ""  # what the report explains of it, with {OutcomeConfig field} slots ("": its name says it)
 
 
@@ -68,6 +75,14 @@ OUTCOMES = (
                 failure=True, paper_class="deadlock",
                 note="it stopped within {missed_goal_radius:g} m of the goal but outside the parking tolerance "
                      "({goal_tolerance:g} m, {goal_heading_tolerance:g} rad)"),
+    OutcomeSpec("driver_crash", "driver_crashes", "the driver's process died (a signal or an exit) on every try",
+                failure=True, paper_class="deadlock", runner=True,
+                note="the process running the driver died (a segfault, the OOM killer, kill -9) on each try: "
+                     "the car stopped where it was; the reason names the signal or exit code"),
+    OutcomeSpec("driver_timeout", "driver_timeouts", "the test ran past its wall-clock limit (--test-timeout)",
+                failure=True, paper_class="timeout", runner=True,
+                note="the test ran past its wall-clock limit (a driver whose act() blocks); its process was "
+                     "stopped and the run went on"),
     OutcomeSpec("infeasible", "infeasible", "no driver of this car can drive it; decided from the scene, "
                 "never driven, excluded from rates"),
 )
@@ -87,6 +102,8 @@ PAPER_CLASSES = tuple(dict.fromkeys(PAPER_CLASS.values()))
 HIT_KINDS = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.hit)
 #: The kinds on which the drive env truncates the episode instead of terminating it.
 TRUNCATING = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.truncates)
+#: The kinds the cruise runner decides when the driver's process dies or hangs (no video, no replay: it would again).
+RUNNER_KINDS = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.runner)
 
 
 @dataclass(frozen=True)
