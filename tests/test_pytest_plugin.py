@@ -107,3 +107,42 @@ def test_a_driver_class_must_be_importable_by_name():
     with pytest.raises(DriverTestError, match="top level of its module"):
         driver_spec(Local)
     assert driver_spec("waypoint") == "waypoint"
+
+
+SLEEPING = """
+import time
+
+import numpy as np
+
+
+class Sleepy:
+    action_type = "continuous"
+
+    def reset(self, info):
+        pass
+
+    def act(self, obs):
+        time.sleep(3600)  # never returns
+
+
+def test_sleepy(garage_cruise):
+    garage_cruise(Sleepy, tests=1).assert_success()
+"""
+
+
+def test_a_driver_that_never_returns_fails_as_driver_timeout(pytester):
+    """--garage-test-timeout: the test that hangs fails with driver_timeout named, within the limit."""
+    pytester.makepyfile(test_sleepy=SLEEPING)
+    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--garage-test-timeout", "1")
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    assert "driver_timeout 1: driver test_sleepy:Sleepy: ran past the time limit of 1 s of wall time" in text, text
+    assert "video:" not in text  # driven again it would hang again: no MP4 of it
+
+
+def test_run_driver_tests_takes_a_time_limit(tmp_path):
+    from garage_mj.testing import run_driver_tests
+
+    res = run_driver_tests("tests._crashing:SleepDriver", tests=1, out_dir=tmp_path, test_timeout=0.5)
+    assert [r["outcome"] for r in res.rows] == ["driver_timeout"] and res.success_rate == 0.0
+    assert "driver_timeout 1" in res.failure_report(videos=0)

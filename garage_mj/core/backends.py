@@ -126,7 +126,7 @@ def worker_env() -> dict[str, str]:
 
 
 def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], *, compute: Compute = DEFAULT_COMPUTE,
-                  max_retries: int = 3, timeout: float | None = None,
+                  max_retries: int = 3, timeout: float | Callable[[Any], float | None] | None = None,
                   on_lost: Callable[[Any, LostJob], Any] | None = None) -> Iterator[Any]:
     """``func(job)`` for every job, yielded as each ends (in no fixed order), on ``compute``'s backend.
 
@@ -135,8 +135,8 @@ def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], *, compute: C
     actors). ``compute.progress`` is the caller's to show. Closing the iterator early (an exception,
     Ctrl-C) stops the workers; what was yielded stays done.
 
-    ``timeout`` [s]: the wall time a job may take (None: no limit). A job that the backend loses (its
-    worker died again after the retries, or it ran past ``timeout``) yields ``on_lost(job,`` a
+    ``timeout`` [s]: the wall time a job may take (None: no limit; a function: each job's own). A job
+    that the backend loses (its worker died again after the retries, or it ran past its time) yields ``on_lost(job,`` a
     :class:`LostJob` ``)`` in place of its result; without ``on_lost`` it stops the batch with one
     :class:`BackendError` line. A job's own exception is re-raised here as it is, never retried.
     """
@@ -144,9 +144,10 @@ def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], *, compute: C
     jobs = list(jobs)
     if not jobs:
         return iter(())
+    limits = [timeout(job) if callable(timeout) else timeout for job in jobs]
     if compute.backend == "ray":
-        return _ray_map(func, jobs, compute, max_retries, timeout, on_lost)
-    return _local_map(func, jobs, compute.workers, timeout, on_lost)
+        return _ray_map(func, jobs, compute, max_retries, limits, on_lost)
+    return _local_map(func, jobs, compute.workers, limits, on_lost)
 
 
 # -- local --------------------------------------------------------------------------------------------
@@ -158,6 +159,9 @@ class LostJob:
     kind: str  # "crash" or "timeout"
     reason: str  # one line: the signal or exit code, or the limit
     seconds: float  # [s] wall time of its last try
+
+
+_REPEAT_S = 0.25  # [s] how often a time limit that ran out raises again, until the job gives way
 
 
 class _JobTimeout(BaseException):
@@ -174,26 +178,36 @@ def timeout_reason(seconds: float) -> str:
 def _time_limit(seconds: float | None) -> Iterator[None]:
     """Raise :class:`_JobTimeout` in this block after ``seconds`` of wall time (an interval timer, SIGALRM:
     only on the main thread of a POSIX process; elsewhere no limit). Interrupts Python code and waits
-    (``time.sleep``, locks, sockets), not a C call that never returns: a pool worker is killed for that."""
+    (``time.sleep``, locks, sockets), not a C call that never returns: a pool worker is killed for that.
+    The timer repeats every :data:`_REPEAT_S` until the block ends, since a raise that lands in a
+    ``__del__`` or a callback is swallowed there."""
     usable = (seconds is not None and hasattr(signal, "setitimer")
               and threading.current_thread() is threading.main_thread())
     if not usable:
         yield
         return
+    armed = [True]
 
     def expire(signum, frame):  # noqa: ARG001
-        raise _JobTimeout
+        if armed[0]:
+            raise _JobTimeout
 
     old = signal.signal(signal.SIGALRM, expire)
     start = time.monotonic()
-    outer, _ = signal.setitimer(signal.ITIMER_REAL, seconds)  # a timer of the caller's (pytest-timeout ...)
+    outer, _ = signal.setitimer(signal.ITIMER_REAL, seconds, _REPEAT_S)  # a timer of the caller's (pytest-timeout)
     try:
         yield
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
-        if outer > 0:  # the caller's timer goes on with what it had left
-            signal.setitimer(signal.ITIMER_REAL, max(outer - (time.monotonic() - start), 1e-3))
+        while True:  # a last alarm may land in here: disarm, then put everything back
+            try:
+                armed[0] = False
+                signal.setitimer(signal.ITIMER_REAL, 0)
+                signal.signal(signal.SIGALRM, old)
+                if outer > 0:  # the caller's timer goes on with what it had left
+                    signal.setitimer(signal.ITIMER_REAL, max(outer - (time.monotonic() - start), 1e-3))
+                break
+            except _JobTimeout:
+                continue
 
 
 def _limited(func: Callable[[Any], Any], job: Any, timeout: float | None) -> Any:
@@ -272,8 +286,8 @@ class _Worker:
         self.proc.join()
         return "died", _died(self.proc.exitcode)
 
-    def overdue(self, timeout: float | None) -> bool:
-        return timeout is not None and self.since is not None and time.monotonic() - self.since >= timeout
+    def overdue(self, limit: float | None) -> bool:
+        return limit is not None and self.since is not None and time.monotonic() - self.since >= limit
 
     def stop(self, kill: bool = False) -> None:
         if kill:
@@ -288,15 +302,15 @@ class _Worker:
         self.conn.close()
 
 
-def _local_map(func: Callable[[Any], Any], jobs: list, workers: int, timeout: float | None,
+def _local_map(func: Callable[[Any], Any], jobs: list, workers: int, limits: list[float | None],
                on_lost: Callable[[Any, LostJob], Any] | None) -> Iterator[Any]:
     lost = on_lost if on_lost is not None else _stop_batch
     if workers <= 1:  # in this process (a kill of it is a kill of the batch)
-        for job in jobs:
-            result = _limited(func, job, timeout)
+        for job, limit in zip(jobs, limits):
+            result = _limited(func, job, limit)
             yield lost(job, result) if isinstance(result, LostJob) else result
         return
-    yield from _supervised(func, jobs, min(workers, len(jobs)), timeout, lost)
+    yield from _supervised(func, jobs, min(workers, len(jobs)), limits, lost)
 
 
 def _stop_batch(job: Any, why: LostJob) -> Any:
@@ -304,11 +318,11 @@ def _stop_batch(job: Any, why: LostJob) -> Any:
     raise BackendError(f"local: a job was lost ({why.reason}); finished jobs are saved, run again to resume")
 
 
-def _supervised(func: Callable[[Any], Any], jobs: list, size: int, timeout: float | None,
+def _supervised(func: Callable[[Any], Any], jobs: list, size: int, limits: list[float | None],
                 lost: Callable[[Any, LostJob], Any]) -> Iterator[Any]:
     """The jobs over ``size`` spawned workers (each opens its own GL context), handed out in the given order,
     one at a time per worker. A worker that dies is replaced at once and its job given again, at the front of
-    the queue, once (:data:`LOCAL_RETRIES`); a job past ``timeout`` has its worker killed and replaced."""
+    the queue, once (:data:`LOCAL_RETRIES`); a job past its limit (``limits``) has its worker killed and replaced."""
     ctx = mp.get_context("spawn")
     queue, losses, unborn = deque(range(len(jobs))), Counter(), 0
     pool = [_Worker(ctx, func) for _ in range(size)]
@@ -318,8 +332,8 @@ def _supervised(func: Callable[[Any], Any], jobs: list, size: int, timeout: floa
                 if w.job is None and queue:
                     w.give(queue[0], jobs[queue.popleft()])
             busy = [w for w in pool if w.job is not None]
-            started = [w.since for w in busy if w.since is not None]
-            wait_s = None if timeout is None or not started else max(0.0, min(started) + timeout - time.monotonic())
+            ends = [w.since + limits[w.job] for w in busy if w.since is not None and limits[w.job] is not None]
+            wait_s = max(0.0, min(ends) - time.monotonic()) if ends else None
             connection.wait([w.conn for w in busy] + [w.proc.sentinel for w in busy], wait_s)
             for k, w in enumerate(pool):
                 index, since = w.job, w.since
@@ -350,10 +364,10 @@ def _supervised(func: Callable[[Any], Any], jobs: list, size: int, timeout: floa
                     else:
                         yield lost(jobs[index], LostJob("crash", f"its process {event[1]} on each of {losses[index]} tries",
                                                                  seconds))
-                elif w.overdue(timeout):
+                elif w.overdue(limits[index]):
                     w.stop(kill=True)
                     pool[k] = _Worker(ctx, func)
-                    yield lost(jobs[index], LostJob("timeout", timeout_reason(timeout), seconds))
+                    yield lost(jobs[index], LostJob("timeout", timeout_reason(limits[index]), seconds))
     finally:
         for w in pool:
             w.stop(kill=w.job is not None)
@@ -431,14 +445,14 @@ def ray_session(compute: Compute) -> Iterator[Any]:
                 os.environ["RAY_AUTH_MODE"] = auth_mode
 
 
-def _ray_map(func: Callable[[Any], Any], jobs: list, compute: Compute, max_retries: int, timeout: float | None,
-             on_lost: Callable[[Any, LostJob], Any] | None) -> Iterator[Any]:
+def _ray_map(func: Callable[[Any], Any], jobs: list, compute: Compute, max_retries: int,
+             limits: list[float | None], on_lost: Callable[[Any, LostJob], Any] | None) -> Iterator[Any]:
     with ray_session(compute) as ray:
-        yield from _ray_actors(ray, func, jobs, compute.workers, max_retries, timeout, on_lost)
+        yield from _ray_actors(ray, func, jobs, compute.workers, max_retries, limits, on_lost)
 
 
-def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_retries: int, timeout: float | None,
-                on_lost: Callable[[Any, LostJob], Any] | None) -> Iterator[Any]:
+def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_retries: int,
+                limits: list[float | None], on_lost: Callable[[Any, LostJob], Any] | None) -> Iterator[Any]:
     from ray.exceptions import RayActorError, RayTaskError
 
     env = worker_env()
@@ -456,7 +470,7 @@ def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_r
             nxt = next(todo, None)
             if nxt is None:
                 return False
-            pending[actors[a].run.remote(fn, nxt[1], timeout)] = (nxt[0], a)
+            pending[actors[a].run.remote(fn, nxt[1], limits[nxt[0]])] = (nxt[0], a)
             return True
 
         for a in range(len(actors)):

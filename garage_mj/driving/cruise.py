@@ -83,6 +83,11 @@ def _task(job: tuple[CruiseSource, int, CruiseSettings, str | None, bool]) -> di
     return run_test(*job)
 
 
+def _time_limit(job: tuple[CruiseSource, int, CruiseSettings, str | None, bool]) -> float | None:
+    """The wall time [s] a test may take (its settings' ``test_timeout``); an export-only job drives nothing: none."""
+    return None if job[4] else job[2].test_timeout
+
+
 def lost_row(job: tuple[CruiseSource, int, CruiseSettings, str | None, bool], why: LostJob) -> dict[str, Any] | None:
     """The row of a test the backend gave up on (:func:`garage_mj.core.backends.map_unordered`'s ``on_lost``):
     ``driver_crash`` when the process driving it died on every try (a segfault, the OOM killer, ``kill -9``),
@@ -125,9 +130,8 @@ def _results(jobs: list, compute: Compute) -> Iterator[dict[str, Any] | None]:
     jobs come in garage order, so each worker builds each scene at most once."""
     if compute.backend == "ray":  # paths as this machine sees them (a cluster needs them on a shared filesystem)
         jobs = [(s, i, st, os.path.abspath(x) if x is not None else None, e) for s, i, st, x, e in jobs]
-    timeout = jobs[0][2].test_timeout if jobs else None  # every job has the run's settings
     try:
-        yield from map_unordered(_task, jobs, compute=compute, timeout=timeout, on_lost=lost_row)
+        yield from map_unordered(_task, jobs, compute=compute, timeout=_time_limit, on_lost=lost_row)
     finally:
         close_cached_env()  # the in-process loop's scene
 
