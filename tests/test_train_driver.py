@@ -3,7 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -294,3 +300,43 @@ def test_resume_over_a_damaged_data_shard_is_one_line_naming_it(one_iteration_ru
     err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert len(err) == 1 and str(shard) in err[0] and "another --out" in err[0], err
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def _children(pid: int) -> list[int]:
+    """The process ids whose parent is ``pid`` (read from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds the worker processes through /proc")
+def test_a_killed_env_worker_is_one_line_that_says_resume(tmp_path):
+    """kill -9 of a process driving the training envs: one line naming it, and --resume continues."""
+    out = tmp_path / "run"
+    proc = subprocess.Popen([str(Path(sys.executable).with_name("garage-mj")), "train-driver", "tiny_7x11", "-n", "1",
+                             "--iterations", "1", "--steps", "100000", "--workers", "2", "--out", str(out),
+                             "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        start, workers = time.monotonic(), []
+        while not workers:  # the forkserver's children drive the envs
+            assert proc.poll() is None and time.monotonic() - start < 90, proc.communicate()
+            time.sleep(0.2)
+            workers = [w for fs in _children(proc.pid) if "forkserver" in Path(f"/proc/{fs}/cmdline").read_text()
+                       for w in _children(fs)]
+        time.sleep(3.0)  # started, most likely stepping
+        os.kill(workers[0], signal.SIGKILL)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    lines = err.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, err
+    assert lines[0].startswith("garage-mj train-driver: error: a worker process driving the training envs died")
+    assert lines[0].endswith("run the same command with --resume to continue")
+    if "(worker " in lines[0]:  # killed while the envs stepped (not while they started): it is named
+        assert "was killed by signal SIGKILL" in lines[0]

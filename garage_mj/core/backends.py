@@ -220,7 +220,7 @@ def _limited(func: Callable[[Any], Any], job: Any, timeout: float | None) -> Any
         return LostJob("timeout", timeout_reason(timeout), time.perf_counter() - start)
 
 
-def _died(exitcode: int | None) -> str:
+def process_end(exitcode: int | None) -> str:
     """How a worker process ended, in words (``was killed by signal SIGSEGV``, ``exited with code 3``)."""
     if exitcode is not None and exitcode < 0:
         try:
@@ -284,7 +284,7 @@ class _Worker:
         if self.proc.is_alive():
             return None
         self.proc.join()
-        return "died", _died(self.proc.exitcode)
+        return "died", process_end(self.proc.exitcode)
 
     def overdue(self, limit: float | None) -> bool:
         return limit is not None and self.since is not None and time.monotonic() - self.since >= limit

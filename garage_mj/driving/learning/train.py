@@ -59,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.core.backends import Compute
+from garage_mj.core.backends import Compute, process_end
 from garage_mj.core.config import bounded, check_bounds, load_config, refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_json
@@ -326,27 +326,59 @@ def _write_manifest(out: Path, manifest: dict[str, Any], state: dict[str, Any]) 
 
 
 class _Workers:
-    """The worker envs a run drives, made again when the garages they draw from change; closed once at the end."""
+    """The worker envs a run drives, made again when the garages they draw from change; closed once at the end.
+    A worker process that dies under the run (``kill -9``, the OOM killer, a segfault) is :meth:`lost`: one line."""
 
     def __init__(self, pool: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any]) -> None:
         self.pool, self.n_envs, self.env_kwargs = pool, n_envs, env_kwargs
-        self.venv = _make_venv(pool, n_envs, env_kwargs, expert=True)
+        self.venv = None
+        self.venv = self._open(lambda: _make_venv(pool, n_envs, env_kwargs, expert=True))
+
+    def _open(self, make: Callable[[], Any]) -> Any:
+        try:
+            return make()
+        except _LOST:  # one died while they started
+            raise self.lost() from None
 
     def draw_from(self, pool: list[CruiseSource]) -> None:
         """Expert-labelled workers over ``pool`` (the same ones when they already draw from it)."""
         if pool is not self.pool:  # the workers hold other garages than this iteration draws from
             self.pool = pool
-            self.venv.close()
-            self.venv = _make_venv(pool, self.n_envs, self.env_kwargs, expert=True)
+            self.close()
+            self.venv = self._open(lambda: _make_venv(pool, self.n_envs, self.env_kwargs, expert=True))
 
     def remake(self, make: Callable[[], Any]) -> Any:
         """Close the workers, then run on those ``make()`` returns."""
-        self.venv.close()
-        self.venv = make()
+        self.close()
+        self.venv = self._open(make)
         return self.venv
 
     def close(self) -> None:
-        self.venv.close()
+        """Close the workers; when one of them died, stop the others (a pipe to a dead one refuses the goodbye)."""
+        venv, self.venv = self.venv, None
+        if venv is None:
+            return
+        try:
+            venv.close()
+        except _LOST:
+            for proc in getattr(venv, "processes", []):
+                proc.kill()
+                proc.join()
+
+    def lost(self) -> TrainDriverError:
+        """The one line for a worker process that died under the run, naming it and how when it can."""
+        procs = getattr(self.venv, "processes", []) if self.venv is not None else []
+        deadline = time.monotonic() + 2.0  # the pipe breaks a moment before the exit status is there
+        while procs and all(p.exitcode is None for p in procs) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        ends = [f"{i} {process_end(p.exitcode)}" for i, p in enumerate(procs) if p.exitcode is not None]
+        which = f" (worker {', '.join(ends)})" if ends else ""
+        return TrainDriverError(f"a worker process driving the training envs died{which}; the iterations saved in "
+                                f"checkpoints/ are kept: run the same command with --resume to continue")
+
+
+#: What the pipe to a worker process that died raises (EOFError on a read, BrokenPipeError ... on a write).
+_LOST = (EOFError, ConnectionError)
 
 
 def train_driver(garages, out_dir: str | Path, *, validation=None, config: DriverTrainConfig | dict | None = None,
@@ -379,6 +411,8 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
             state["selected_iteration"] = _selected(state["curve"])
             _write_manifest(out, manifest, state)
             _final_model(workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs, progress)
+        except _LOST:
+            raise workers.lost() from None
         finally:
             workers.close()
     return out / MODEL
