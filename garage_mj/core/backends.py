@@ -344,6 +344,8 @@ def _supervised(func: Callable[[Any], Any], jobs: list, size: int, limits: list[
                     ok, value = event[1]
                     if not ok:
                         raise value  # the job's own error, as it raised it
+                    if queue:  # its next job first: it works while the caller writes this result down
+                        w.give(queue[0], jobs[queue.popleft()])
                     yield value
                     continue
                 seconds = time.monotonic() - (w.since or since or time.monotonic())

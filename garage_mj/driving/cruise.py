@@ -6,6 +6,11 @@ worker count or order. A worker keeps one env (one compiled MuJoCo scene) per ga
 arrive grouped by garage, so a scene is built at most once per worker and garage
 (:mod:`garage_mj.driving.episode`).
 
+A test whose process dies on every try (a segfault in the driver, the OOM killer, ``kill -9``;
+a worker pool gives it once more to a fresh worker) is a ``driver_crash`` row, and one that runs
+past ``settings.test_timeout`` seconds of wall time a ``driver_timeout`` row (:func:`lost_row`);
+the run goes on.
+
 Outputs in ``out_dir`` (:mod:`garage_mj.driving.results`): ``tests.csv`` (one row per test,
 appended and flushed as each test ends, so a crash or Ctrl-C loses nothing and a re-run skips
 what is there), ``summary.csv`` (the paper's table columns per garage, and each garage's route difficulty beside the
