@@ -14,6 +14,8 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 - ``cruise_routes``: the ego car's forward routes on the road network matrix, filleted into turns it can steer.
 - ``clearance``: obstacles as rectangles, the car's footprint and its swept clearance along a path.
 - ``drivable``: the planned test to each stall (goal, route, checks) and a garage's drivability.
+- ``park_planning``: park tests: the stall pose, the success geometry, and the reference Reeds-Shepp planner
+  (OMPL) that decides a park test's feasibility and gives the path a reference driver tracks.
 - ``route_features``: what a test asks of a driver, from its planned route (turns, curvature, clearance, ...).
 - ``route_difficulty``: the route-aware difficulty, a monotone logistic model of failure on route features.
 - ``car``: the ego car's model file and geometry (outline, axles, steering limit, camera poses).
@@ -65,6 +67,11 @@ __getattr__, __all__ = lazy_exports(__name__, {
     "TestPlan": "drivable",
     "drive_planner": "drivable",
     "drivability": "drivable",
+    "ParkPlanner": "park_planning",
+    "ParkPlan": "park_planning",
+    "ParkConfig": "park_planning",
+    "park_pose": "park_planning",
+    "in_stall": "park_planning",
     "Semantic": "semantics",
     "geom_classes": "semantics",
 })

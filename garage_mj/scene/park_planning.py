@@ -1,0 +1,671 @@
+"""Park tests: the stall pose, the success geometry and the reference planner that certifies feasibility (SPEC 8).
+
+**Poses.** Every pose here is ``(x [m], y [m], yaw [rad])`` of the car's **centre** (the origin of the
+car frame, the chassis centre): what the drive env reports (``Car.pose``) and what the cruise plan's goal
+is (``TestPlan.goal``, the park test's start). Planning runs on the **rear-axle midpoint** (the point a
+Reeds-Shepp curve describes for a bicycle-model car, and the point ``clearance.footprint`` takes):
+:func:`centre_to_rear` and :func:`rear_to_centre` convert, ``ParkPlan.rear_poses`` holds both.
+
+**The stall pose** (:func:`park_pose`): the car centred between the stall's side lines, its axis along the
+stall, its rear (``reverse``: reverse-in) or nose (``forward``: nose-in) :data:`BACK_GAP` from the stall's
+back line. :func:`in_stall` is the success geometry and the parking metrics.
+
+**The reference planner** (:class:`ParkPlanner`) plans *from the stall outward* (leaving a stall is the
+narrow passage) in OMPL's ``ReedsSheppStateSpace`` with the car's turning radius (less a curvature
+margin), a pose being valid when the car's footprint grown by ``margin`` on every side overlaps no
+obstacle (walls, obstacle blocks, pillars and the outlines of the occupied stalls, parked cars lying
+wholly inside their outlines; the target stall is empty) and its rear axle lies in the planning area
+(the box around the start, the stall pose and the straight exit, grown by ``region``). First the
+analytic path, as Hybrid A* does: straight out of the stall along its axis by one of a few distances,
+then one Reeds-Shepp curve to the start pose, the whole curve checked; the shortest valid one wins.
+Else a seeded sampling planner (BIT* by default) over the Reeds-Shepp space from the straight exit
+(the car just out of the stall), with a budget of loop iterations (not wall time: the same seed gives
+the same plan on a loaded machine), then OMPL's path simplification. The path is then reversed (its
+gears flip) so it runs start -> stall. A plan not found within the budget makes the test **infeasible**.
+Every pose of a plan (``step`` apart, each cusp on a pose) is checked; OMPL checks its motions at the
+same poses. Sampled paths may hold a few more cusps than a driver would make: they certify
+feasibility, and a reference driver tracks them.
+
+OMPL's Python bindings (nanobind) print a "nanobind: leaked N instances" report to stderr at interpreter
+exit for every OMPL object still alive then. The planner keeps OMPL objects only inside one ``plan``
+call (none on the planner or the plan), and an ``atexit`` handler collects garbage cycles before that
+report runs, so a run prints nothing. OMPL's own log (a reseeding notice at each plan) is silenced
+around each call and its level restored. Planning sets OMPL's global seed: not thread-safe.
+"""
+
+from __future__ import annotations
+
+import atexit
+import gc
+import math
+import time
+from collections.abc import Iterable
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from garage_mj.scene.clearance import Obstacles, footprint, nearest_obstacle, scene_obstacles
+from garage_mj.scene.garage_scene import GarageScene
+
+if TYPE_CHECKING:
+    from garage_mj.scene.car import CarGeometry
+    from garage_mj.scene.stalls import Stall
+
+BACK_GAP = 0.15  # [m] the car's rear (reverse-in) or nose (nose-in) to the stall's back line
+FAR_END_OVER = 0.3  # [m] how far the car's far end may stand beyond the stall's aisle-side line
+HEADING_TOLERANCE = 10.0  # [deg] the car's axis to the stall's, in the maneuver's direction
+_EPS = 1e-9  # [m] geometric tolerance of the inside test
+
+
+@dataclass(frozen=True)
+class Maneuver:
+    """How the car stands in the stall at the end of a park test."""
+
+    name: str
+    turn: float  # [rad] car heading = stall yaw (towards the aisle) + this
+    at_back: str  # the car's end at the back line: "rear" or "front"
+    exit_gear: int  # +1: the car leaves the stall driving forward, -1 reversing
+
+    def heading(self, stall: Stall) -> float:
+        return _wrap(stall.yaw + self.turn)
+
+
+#: The park maneuvers (SPEC 8): reverse-in is the default.
+MANEUVERS: dict[str, Maneuver] = {
+    "reverse": Maneuver("reverse", 0.0, "rear", +1),
+    "forward": Maneuver("forward", math.pi, "front", -1),
+}
+
+
+def maneuver(name: str) -> Maneuver:
+    """The :class:`Maneuver` named ``name``; a ValueError naming the known ones otherwise."""
+    if name not in MANEUVERS:
+        raise ValueError(f"unknown park maneuver {name!r}; known: {', '.join(MANEUVERS)}")
+    return MANEUVERS[name]
+
+
+def _wrap(a):
+    """Angle(s) wrapped to [-pi, pi)."""
+    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi if isinstance(a, np.ndarray) \
+        else (a + math.pi) % (2 * math.pi) - math.pi
+
+
+# -- reference points --------------------------------------------------------------------------------
+def centre_to_rear(pose, car: CarGeometry) -> np.ndarray:
+    """Pose(s) ``(..., 3)`` of the car's centre as poses of its rear-axle midpoint (same heading)."""
+    p = np.array(pose, dtype=float)
+    b = car.rear_axle  # [m] rear axle x in the car frame (< 0)
+    p[..., 0] += b * np.cos(p[..., 2])
+    p[..., 1] += b * np.sin(p[..., 2])
+    return p
+
+
+def rear_to_centre(pose, car: CarGeometry) -> np.ndarray:
+    """Pose(s) ``(..., 3)`` of the car's rear-axle midpoint as poses of its centre (same heading)."""
+    p = np.array(pose, dtype=float)
+    b = car.rear_axle
+    p[..., 0] -= b * np.cos(p[..., 2])
+    p[..., 1] -= b * np.sin(p[..., 2])
+    return p
+
+
+# -- the stall pose and the success geometry -----------------------------------------------------------
+def park_pose(stall: Stall, car: CarGeometry, maneuver_name: str = "reverse") -> tuple[float, float, float]:
+    """The target pose (car centre, SPEC 8) of a park test into ``stall`` with maneuver ``maneuver_name``."""
+    m = maneuver(maneuver_name)
+    ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)  # from the back line towards the aisle
+    # the centre lies this far from the back line: the gap plus the centre-to-end length of the end there
+    d = BACK_GAP + (-car.rear if m.at_back == "rear" else car.front)
+    s = d - stall.length / 2  # along the stall axis from the stall's centre
+    return stall.x + s * ux, stall.y + s * uy, float(m.heading(stall))
+
+
+@dataclass(frozen=True)
+class ParkFit:
+    """How a car pose sits in a stall: the success geometry and the parking metrics of SPEC 8."""
+
+    inside: bool  # the footprint inside the stall's lines (the far end up to FAR_END_OVER beyond the aisle line)
+    aligned: bool  # heading within HEADING_TOLERANCE of the stall axis in the maneuver's direction
+    position_error: float  # [m] car centre to the target pose's centre
+    heading_error: float  # [deg] |car heading - target heading|
+    lateral_offset: float  # [m] car centre off the stall axis, > 0 left looking out of the stall
+    longitudinal_offset: float  # [m] car centre to the target along the stall axis, > 0 towards the aisle
+    overhang: float  # [m] how far the footprint crosses a line it may not (0 when inside)
+
+    @property
+    def parked(self) -> bool:
+        """Inside and aligned: the geometry of a success (the env adds: at rest, no contact)."""
+        return self.inside and self.aligned
+
+
+def in_stall(stall: Stall, car: CarGeometry, pose, maneuver_name: str = "reverse") -> ParkFit:
+    """The success geometry and parking metrics of the car at ``pose`` (car centre) in ``stall``."""
+    tx, ty, tyaw = park_pose(stall, car, maneuver_name)
+    x, y, yaw = (float(v) for v in pose)
+    ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)
+    rear = centre_to_rear((x, y, yaw), car)
+    corners = footprint(car, rear[None, :2], np.array([yaw]))[0]  # (4, 2)
+    rel = corners - (stall.x, stall.y)
+    s = rel @ (ux, uy)  # along the stall axis, towards the aisle
+    t = rel @ (-uy, ux)  # across it, to the left
+    over = max(float(np.abs(t).max()) - stall.width / 2, -float(s.min()) - stall.length / 2,
+               float(s.max()) - stall.length / 2 - FAR_END_OVER, 0.0)
+    heading = abs(math.degrees(_wrap(yaw - tyaw)))
+    cx, cy = x - stall.x, y - stall.y
+    return ParkFit(inside=over <= _EPS, aligned=heading <= HEADING_TOLERANCE,
+                   position_error=math.hypot(x - tx, y - ty), heading_error=heading,
+                   lateral_offset=-uy * cx + ux * cy,
+                   longitudinal_offset=(x - tx) * ux + (y - ty) * uy, overhang=over)
+
+
+# -- the obstacles of one park test --------------------------------------------------------------------
+def park_obstacles(obstacles: Obstacles, target: int, occupied: Iterable[int] | None = None) -> Obstacles:
+    """The obstacles of a park test into stall ``target``: every non-stall obstacle, and the outlines of the
+    ``occupied`` stalls (None: every stall, the worst case the cruise checks use) except ``target``."""
+    keep = obstacles.stall < 0
+    if occupied is None:
+        keep |= obstacles.stall != target
+    else:
+        occ = np.array(sorted({int(s) for s in occupied} - {int(target)}), dtype=int)
+        keep |= np.isin(obstacles.stall, occ)
+    idx = np.flatnonzero(keep)
+    return Obstacles(obstacles.boxes[idx], [obstacles.classes[i] for i in idx], obstacles.stall[idx])
+
+
+# -- configuration and result ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Sampler:
+    """A sampling planner of ``ompl.geometric``: its class name and whether it takes a range."""
+
+    cls: str
+    ranged: bool
+
+
+#: The sampling planners ParkConfig.planner may name.
+SAMPLERS: dict[str, _Sampler] = {
+    "bitstar": _Sampler("BITstar", False),
+    "rrtstar": _Sampler("RRTstar", True),
+    "rrtconnect": _Sampler("RRTConnect", True),
+}
+
+
+@dataclass(frozen=True)
+class ParkConfig:
+    """Settings of the reference park planner (units in the comments)."""
+
+    margin: float = 0.1  # [m] the footprint to every obstacle, on every side
+    curvature_margin: float = 0.1  # the path's curvature stays <= (1 - this) x the car's limit
+    iterations: int = 1500  # budget of the sampling planner: loop iterations (calls of its termination check)
+    step: float = 0.1  # [m] spacing of the plan's poses (rear-axle path length), each one checked
+    seed: int = 1  # OMPL's RNG seed: the same seed gives the same plan
+    region: float = 6.0  # [m] the planning area: the box around start, stall and exit poses grown by this
+    exit_step: float = 0.5  # [m] spacing of the straight exits the analytic path tries
+    planner: str = "bitstar"  # a key of SAMPLERS
+    planner_range: float = 4.0  # [m] longest motion of a ranged sampler (rrtstar, rrtconnect)
+
+    def __post_init__(self) -> None:
+        if self.planner not in SAMPLERS:
+            raise ValueError(f"unknown park planner {self.planner!r}; known: {', '.join(SAMPLERS)}")
+        for name in ("step", "exit_step", "planner_range"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"ParkConfig.{name} must be > 0, got {getattr(self, name)}")
+        if self.margin < 0 or not 0 <= self.curvature_margin < 1 or self.iterations < 0:
+            raise ValueError("ParkConfig: margin >= 0, 0 <= curvature_margin < 1 and iterations >= 0")
+
+
+DEFAULT_PARK = ParkConfig()
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class ParkPlan:
+    """The reference plan of one park test, start -> stall, or why none was found (then infeasible).
+
+    ``poses[i]`` is the car centre (the drive env's ``Car.pose``), ``rear_poses[i]`` the rear-axle
+    midpoint, both ``(x, y, yaw)``; ``directions[i]`` the gear (+1 forward, -1 reverse) driving from
+    pose ``i`` to ``i + 1`` (the last pose repeats the last gear). A cusp (gear change, at rest) lies
+    exactly on a pose; :meth:`segments` splits the path there.
+    """
+
+    stall: int
+    maneuver: str
+    found: bool
+    reason: str = ""  # why not found ("" when found)
+    start: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # car centre at the start
+    goal: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # car centre at the stall pose
+    poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (N, 3) car centre
+    rear_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (N, 3) rear-axle midpoint
+    directions: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int8))  # (N,) +1 / -1
+    length: float = 0.0  # [m] of the rear-axle path
+    cusps: int = 0  # gear changes
+    min_clearance: float = math.nan  # [m] the footprint to the nearest obstacle, over the poses
+    planning_time: float = 0.0  # [s] CPU time of the plan call
+    method: str = ""  # "analytic" (straight out + one Reeds-Shepp curve) or the sampling planner's name
+    iterations: int = 0  # sampling planner iterations used (0: analytic)
+
+    def segments(self) -> list[tuple[int, int, int]]:
+        """``(first, last, gear)`` pose index ranges (inclusive) of one gear; consecutive ones share the cusp pose."""
+        d = self.directions
+        if not len(d):
+            return []
+        cut = [0, *(np.flatnonzero(d[1:-1] != d[:-2]) + 1).tolist(), len(d) - 1]
+        return [(a, b, int(d[a])) for a, b in zip(cut[:-1], cut[1:], strict=True) if b > a]
+
+    def summary(self) -> dict[str, Any]:
+        """The plan's numbers as JSON-able values (no path)."""
+        def r(v):
+            return None if not math.isfinite(v) else round(float(v), 4)
+        return {"stall": self.stall, "maneuver": self.maneuver, "found": self.found, "reason": self.reason,
+                "length": r(self.length), "cusps": self.cusps, "min_clearance": r(self.min_clearance),
+                "planning_time": r(self.planning_time), "method": self.method, "iterations": self.iterations}
+
+
+# -- collision checks ------------------------------------------------------------------------------------
+class _Checker:
+    """Is the car's footprint, grown by a margin on every side, clear of a set of axis-aligned boxes?
+
+    Separating axes between the grown car rectangle and each box: vectorized for a path
+    (:meth:`clear`), and one pose at a time through a 1 m grid of nearby boxes for OMPL (``__call__``,
+    taking an OMPL state of the rear-axle midpoint). A pose whose rear axle lies outside ``region`` is
+    not valid: ``boxes`` need only hold the obstacles the car can reach from inside it. Holds no OMPL
+    object. The grown rectangle has square corners: the check is a little stricter than ``margin``
+    at the car's corners, never looser.
+    """
+
+    CELL = 1.0  # [m] grid cell of the per-pose look-up
+
+    def __init__(self, boxes: np.ndarray, car: CarGeometry, margin: float,
+                 region: tuple[float, float, float, float]) -> None:
+        self.region = region  # [m] xmin, ymin, xmax, ymax: a rear axle outside is not valid
+        self.hl = (car.front - car.rear) / 2 + margin  # [m] half length of the grown rectangle
+        self.hw = car.half_width + margin  # [m] half width
+        self.off = (car.front + car.rear) / 2 - car.rear_axle  # [m] rear axle to the rectangle's centre
+        self.centre = (boxes[:, :2] + boxes[:, 2:]) / 2  # (M, 2)
+        self.half = (boxes[:, 2:] - boxes[:, :2]) / 2
+        self.calls = 0
+        reach = math.hypot(self.hl, self.hw) + self.CELL * math.sqrt(0.5)
+        self.grid: dict[tuple[int, int], list[tuple[float, float, float, float]]] = {}
+        if len(boxes):
+            self.lo = boxes[:, :2].min(axis=0) - reach
+            hi = boxes[:, 2:].max(axis=0) + reach
+            nx, ny = (int(v) + 1 for v in np.ceil((hi - self.lo) / self.CELL))
+            ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+            cells = self.lo + (np.stack([ix.ravel(), iy.ravel()], axis=1) + 0.5) * self.CELL  # cell centres
+            gap = np.maximum(np.abs(cells[:, None, :] - self.centre[None]) - self.half[None], 0.0)
+            near = np.hypot(gap[..., 0], gap[..., 1]) <= reach  # (cells, M)
+            for k in np.flatnonzero(near.any(axis=1)):
+                self.grid[(int(ix.ravel()[k]), int(iy.ravel()[k]))] = [
+                    (*self.centre[j], *self.half[j]) for j in np.flatnonzero(near[k])]
+
+    def __call__(self, state) -> bool:
+        self.calls += 1
+        return self.pose_clear(state.getX(), state.getY(), state.getYaw())
+
+    def pose_clear(self, x: float, y: float, yaw: float) -> bool:
+        """One rear-axle pose: inside the region, the grown footprint clear of every box?"""
+        r = self.region
+        if not (r[0] <= x <= r[2] and r[1] <= y <= r[3]):
+            return False
+        if not self.grid:
+            return True
+        c, s = math.cos(yaw), math.sin(yaw)
+        cx, cy = x + self.off * c, y + self.off * s
+        boxes = self.grid.get((int((cx - self.lo[0]) // self.CELL), int((cy - self.lo[1]) // self.CELL)), ())
+        hl, hw, ac, as_ = self.hl, self.hw, abs(c), abs(s)
+        for bx, by, hx, hy in boxes:
+            dx, dy = cx - bx, cy - by
+            if abs(dx) > hx + hl * ac + hw * as_ or abs(dy) > hy + hl * as_ + hw * ac:
+                continue
+            if abs(dx * c + dy * s) > hl + hx * ac + hy * as_ or abs(-dx * s + dy * c) > hw + hx * as_ + hy * ac:
+                continue
+            return False
+        return True
+
+    def clear(self, rear: np.ndarray) -> np.ndarray:
+        """(N,) whether each rear-axle pose ``(N, 3)`` is inside the region and clear."""
+        r = self.region
+        inside = (rear[:, 0] >= r[0]) & (rear[:, 0] <= r[2]) & (rear[:, 1] >= r[1]) & (rear[:, 1] <= r[3])
+        if not len(self.centre):
+            return inside
+        c, s = np.cos(rear[:, 2])[:, None], np.sin(rear[:, 2])[:, None]
+        dx = rear[:, 0:1] + self.off * c - self.centre[None, :, 0]
+        dy = rear[:, 1:2] + self.off * s - self.centre[None, :, 1]
+        hx, hy = self.half[None, :, 0], self.half[None, :, 1]
+        ac, as_ = np.abs(c), np.abs(s)
+        sep = (np.abs(dx) > hx + self.hl * ac + self.hw * as_) | (np.abs(dy) > hy + self.hl * as_ + self.hw * ac)
+        sep |= np.abs(dx * c + dy * s) > self.hl + hx * ac + hy * as_
+        sep |= np.abs(-dx * s + dy * c) > self.hw + hx * as_ + hy * ac
+        return inside & sep.all(axis=1)
+
+
+# -- OMPL ---------------------------------------------------------------------------------------------------
+_OMPL: tuple[Any, Any, Any] | None = None
+
+
+def _ompl() -> tuple[Any, Any, Any]:
+    """OMPL's ``base``, ``geometric`` and ``util`` modules, imported on first use.
+
+    The first import also registers an ``atexit`` garbage collection: OMPL objects caught in a
+    reference cycle are freed before nanobind's leak report runs at interpreter exit.
+    """
+    global _OMPL
+    if _OMPL is None:
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
+
+        atexit.register(gc.collect)
+        _OMPL = (ob, og, ou)
+    return _OMPL
+
+
+@contextmanager
+def _ompl_seeded(seed: int):
+    """OMPL's modules with its RNG seeded and its log silenced (restored on the way out)."""
+    ob, og, ou = _ompl()
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_NONE)  # reseeding logs an error-level notice; a quiet planner prints nothing
+    try:
+        ou.RNG.setSeed(int(seed) + 1)  # OMPL reads a seed of 0 as "random": ours start at 0
+        yield ob, og
+    finally:
+        ou.setLogLevel(level)
+
+
+class _Curves:
+    """Reeds-Shepp curves of one turning radius through OMPL, sampled into rear-axle poses."""
+
+    def __init__(self, ob, radius: float, region: tuple[float, float, float, float], step: float) -> None:
+        self.space = ob.ReedsSheppStateSpace(radius)
+        bounds = ob.RealVectorBounds(2)
+        bounds.setLow(0, region[0])
+        bounds.setLow(1, region[1])
+        bounds.setHigh(0, region[2])
+        bounds.setHigh(1, region[3])
+        self.space.setBounds(bounds)
+        #: the fraction of the space's extent that makes OMPL check a motion every ``step`` metres
+        self.resolution = step / self.space.getMaximumExtent()
+        self.space.setLongestValidSegmentFraction(self.resolution)
+        self.space.setup()
+        self._a, self._b, self._at = (self.space.allocState() for _ in range(3))
+
+    def state(self, pose, st=None):
+        """``pose`` (x, y, yaw) as a state of the space (a new one unless ``st`` is given)."""
+        st = self.space.allocState() if st is None else st
+        st.setX(float(pose[0]))
+        st.setY(float(pose[1]))
+        yaw = float(pose[2])
+        # OMPL's yaw bounds are [-pi, pi) (a yaw of pi is out); a yaw inside keeps its bits: shortest curves can
+        # tie, and which one OMPL picks may change with the last bit of a pose
+        st.setYaw(yaw if -math.pi <= yaw < math.pi else float(_wrap(yaw)))
+        return st
+
+    def length(self, a, b) -> float:
+        """[m] of the shortest Reeds-Shepp curve from pose ``a`` to pose ``b``."""
+        return float(self.space.distance(self.state(a, self._a), self.state(b, self._b)))
+
+    def _pose(self, t: float) -> tuple[float, float, float]:
+        self.space.interpolate(self._a, self._b, t, self._at)
+        return self._at.getX(), self._at.getY(), self._at.getYaw()
+
+    def curve(self, a, b, keep=None) -> np.ndarray:
+        """(N, 3) poses along the curve from ``a`` to ``b`` (both exact): the poses OMPL's motion check of this
+        curve visits (at most ``step`` apart), and the pose of each cusp where ``keep(x, y, yaw)`` accepts it."""
+        n = max(1, int(self.space.validSegmentCount(self.state(a, self._a), self.state(b, self._b))))
+        ts = np.arange(n + 1) / n
+        pts = np.array([a, *(self._pose(t) for t in ts[1:-1]), b], dtype=float)
+        gear = _gears(pts)
+        cusps = []
+        for k in np.flatnonzero(gear[1:] != gear[:-1]) + 1:  # a cusp between ts[k-1] and ts[k+1]
+            t, cusp = self._cusp(ts[k - 1], ts[k + 1], pts[k - 1], gear[k - 1])
+            if min(np.linalg.norm(cusp[:2] - pts[j, :2]) for j in (k - 1, k, k + 1)) > 1e-6 and \
+                    (keep is None or keep(*cusp)):
+                cusps.append((t, cusp))
+        if not cusps:
+            return pts
+        at = np.concatenate([ts, [t for t, _ in cusps]])
+        return np.concatenate([pts, [c for _, c in cusps]])[np.argsort(at, kind="stable")]
+
+    def _cusp(self, lo: float, hi: float, p0: np.ndarray, gear: int) -> tuple[float, np.ndarray]:
+        """Where (curve parameter, pose) the car stops and changes gear: farthest along its heading in its gear
+        from ``p0`` (golden section search between ``lo`` and ``hi``)."""
+        u = np.array([math.cos(p0[2]), math.sin(p0[2])]) * gear
+
+        def reach(t: float) -> float:
+            return float(np.dot(np.array(self._pose(t)[:2]) - p0[:2], u))
+
+        g = (math.sqrt(5) - 1) / 2
+        a, b = lo, hi
+        for _ in range(40):
+            c, d = b - g * (b - a), a + g * (b - a)
+            if reach(c) >= reach(d):
+                b = d
+            else:
+                a = c
+        return (a + b) / 2, np.array(self._pose((a + b) / 2))
+
+
+def _gears(pts: np.ndarray) -> np.ndarray:
+    """(N - 1,) the gear (+1 / -1) of each step between consecutive poses: its motion along the heading."""
+    d = np.diff(pts[:, :2], axis=0)
+    along = d[:, 0] * np.cos(pts[:-1, 2]) + d[:, 1] * np.sin(pts[:-1, 2])
+    gear = np.where(along < 0, -1, 1).astype(np.int8)
+    still = np.abs(along) < 1e-12  # a repeated pose keeps the gear before it
+    for i in np.flatnonzero(still):
+        gear[i] = gear[i - 1] if i > 0 else gear[i]
+    return gear
+
+
+def _directions(pts: np.ndarray) -> np.ndarray:
+    """(N,) gear per pose: of the step leaving it (the last pose repeats the last step's)."""
+    if len(pts) < 2:
+        return np.ones(len(pts), dtype=np.int8)
+    g = _gears(pts)
+    return np.append(g, g[-1]).astype(np.int8)
+
+
+def _straight(p: np.ndarray, gear: int, dist: float, step: float) -> np.ndarray:
+    """(N, 3) poses from rear-axle pose ``p`` straight along its heading in ``gear`` for ``dist`` metres."""
+    n = max(1, math.ceil(dist / step - 1e-9))
+    s = np.linspace(0.0, dist, n + 1) * gear
+    return np.column_stack([p[0] + s * math.cos(p[2]), p[1] + s * math.sin(p[2]), np.full(n + 1, p[2])])
+
+
+def _join(*parts: np.ndarray) -> np.ndarray:
+    """Pose arrays end to end, each one's first pose (the previous one's last) dropped."""
+    return np.concatenate([parts[0], *(q[1:] for q in parts[1:])])
+
+
+# -- the planner -----------------------------------------------------------------------------------------------
+class _NoPlan(Exception):
+    """Why a park test has no plan (its message is the plan's reason)."""
+
+
+class ParkPlanner:
+    """The reference planner of the park tests of one :class:`GarageScene` for one car (module docstring)."""
+
+    def __init__(self, scene: GarageScene, car: CarGeometry | None = None, config: ParkConfig = DEFAULT_PARK) -> None:
+        if car is None:
+            from garage_mj.scene.car import car_geometry  # reads the car's MuJoCo model
+
+            car = car_geometry()
+        self.scene = scene
+        self.car = car
+        self.config = config
+        self._obstacles: Obstacles | None = None
+        rows, cols = scene.garage.shape
+        self.extent = (0.0, 0.0, cols * scene.world.block, rows * scene.world.block)  # [m] the garage's area
+        far = max(car.front - car.rear_axle, car.rear_axle - car.rear)
+        self.reach = math.hypot(far, car.half_width) + config.margin  # [m] rear axle to the grown footprint's corner
+
+    @property
+    def radius(self) -> float:
+        """[m] the turning radius of the plans (of the rear-axle midpoint): the car's, plus the curvature margin."""
+        return self.car.min_radius / (1.0 - self.config.curvature_margin)
+
+    def obstacles(self) -> Obstacles:
+        """Walls, obstacle blocks, pillars and every stall's outline of the scene (built once)."""
+        if self._obstacles is None:
+            self._obstacles = scene_obstacles(self.scene)
+        return self._obstacles
+
+    def plan(self, start, stall_id: int, maneuver_name: str = "reverse", occupied: Iterable[int] | None = None,
+             obstacles: Obstacles | None = None) -> ParkPlan:
+        """The reference plan from ``start`` (car centre, at rest) into stall ``stall_id`` with the maneuver.
+
+        The obstacles: ``obstacles`` as given (the caller's own set), else the scene's walls, obstacle
+        blocks and pillars with the outlines of the ``occupied`` stalls (None: every other stall).
+        """
+        t0 = time.process_time()
+        stall = self.scene.stalls.stalls[stall_id]
+        m = maneuver(maneuver_name)
+        goal = park_pose(stall, self.car, m.name)
+        start = tuple(float(v) for v in start)
+        obs = obstacles if obstacles is not None else park_obstacles(self.obstacles(), stall_id, occupied)
+        base = dict(stall=int(stall_id), maneuver=m.name, start=start, goal=goal)
+        try:
+            rear, method, iterations = self._search(stall, m, start, goal, obs)
+        except _NoPlan as why:
+            return ParkPlan(found=False, reason=str(why), planning_time=time.process_time() - t0, **base)
+        rear = rear[::-1].copy()  # planned from the stall outward: driven from the start inward
+        rear[:, 2] = _wrap(rear[:, 2])
+        directions = _directions(rear)
+        dist, _ = nearest_obstacle(obs, self.car, rear[:, :2], rear[:, 2])
+        return ParkPlan(found=True, poses=_frozen(rear_to_centre(rear, self.car)), rear_poses=_frozen(rear),
+                        directions=_frozen(directions),
+                        length=float(np.linalg.norm(np.diff(rear[:, :2], axis=0), axis=1).sum()),
+                        cusps=int((directions[1:-1] != directions[:-2]).sum()), min_clearance=float(dist.min()),
+                        planning_time=time.process_time() - t0, method=method, iterations=iterations, **base)
+
+    # -- steps of a plan ---------------------------------------------------------------------------------------
+    def _search(self, stall: Stall, m: Maneuver, start, goal, obs: Obstacles) -> tuple[np.ndarray, str, int]:
+        """Rear-axle poses from the stall pose out to the start, the method and the iterations used; or _NoPlan."""
+        cfg, car = self.config, self.car
+        g, s = centre_to_rear(goal, car), centre_to_rear(start, car)
+        d_out = stall.length - BACK_GAP + cfg.margin  # [m] straight out this far, the car has left the stall
+        out = _straight(g, m.exit_gear, d_out, cfg.step)
+        region = self._region(np.array([g, s, out[-1]]))
+        checker = _Checker(self._near(obs, region).boxes, car, cfg.margin, region)
+        for what, pose in (("stall pose", g), ("start pose", s)):
+            if not checker.pose_clear(*pose):
+                raise _NoPlan(self._blocked(obs, pose, f"the {what}"))
+        ok = checker.clear(out)
+        d_ok = d_out if ok.all() else float(np.hypot(*(out[int(np.argmin(ok)) - 1, :2] - g[:2]))) if ok[0] else 0.0
+        with _ompl_seeded(cfg.seed) as (ob, og):
+            curves = _Curves(ob, self.radius, region, cfg.step)
+            path = self._analytic(curves, checker, g, s, m, d_ok)
+            if path is not None:
+                return path, "analytic", 0
+            if cfg.iterations == 0:
+                raise _NoPlan("no straight exit and one Reeds-Shepp curve reach the start (sampling is off)")
+            return self._sample(ob, og, curves, checker, g, s, m, min(d_ok, d_out))
+
+    def _region(self, poses: np.ndarray) -> tuple[float, float, float, float]:
+        """[m] the planning area: the box around ``poses`` grown by ``region``, within the garage."""
+        r, (x0, y0, x1, y1) = self.config.region, self.extent
+        lo, hi = poses[:, :2].min(axis=0) - r, poses[:, :2].max(axis=0) + r
+        return max(lo[0], x0), max(lo[1], y0), min(hi[0], x1), min(hi[1], y1)
+
+    def _near(self, obs: Obstacles, region: tuple[float, float, float, float]) -> Obstacles:
+        """The obstacles the grown footprint can touch with its rear axle inside ``region``."""
+        b, r = obs.boxes, self.reach
+        keep = (b[:, 2] >= region[0] - r) & (b[:, 0] <= region[2] + r) & (b[:, 3] >= region[1] - r) & \
+            (b[:, 1] <= region[3] + r)
+        idx = np.flatnonzero(keep)
+        return Obstacles(b[idx], [obs.classes[i] for i in idx], obs.stall[idx])
+
+    def _blocked(self, obs: Obstacles, rear: np.ndarray, what: str) -> str:
+        """Why the pose ``rear`` (rear axle) is not valid: the nearest obstacle and the margin, or the area."""
+        dist, near = nearest_obstacle(obs, self.car, rear[None, :2], rear[None, 2])
+        if near[0] < 0 or dist[0] >= self.config.margin:
+            return f"{what} lies outside the planning area"
+        x, y = rear[:2]
+        return (f"{what} ({x:.1f}, {y:.1f}) is not clear: a {obs.classes[int(near[0])]} {dist[0]:.2f} m from the car "
+                f"(margin {self.config.margin:.2f} m)")
+
+    def _analytic(self, curves: _Curves, checker: _Checker, g: np.ndarray, s: np.ndarray, m: Maneuver,
+                  d_ok: float) -> np.ndarray | None:
+        """Straight out of the stall by one of the exit distances, then one Reeds-Shepp curve to the start:
+        the shortest such path that is clear, or None."""
+        cfg = self.config
+        exits = [k * cfg.exit_step for k in range(int(d_ok / cfg.exit_step + 1e-9) + 1)]
+
+        def exit_pose(d: float) -> np.ndarray:
+            return _straight(g, m.exit_gear, d, d)[-1] if d > 0 else g
+
+        for d in sorted(exits, key=lambda d: (d + curves.length(exit_pose(d), s), d)):
+            e = exit_pose(d)
+            curve = curves.curve(e, s, checker.pose_clear)
+            path = _join(_straight(g, m.exit_gear, d, cfg.step), curve) if d > 0 else curve
+            if checker.clear(path).all():
+                return path
+        return None
+
+    def _sample(self, ob, og, curves: _Curves, checker: _Checker, g: np.ndarray, s: np.ndarray, m: Maneuver,
+                d_exit: float) -> tuple[np.ndarray, str, int]:
+        """The seeded sampling planner from the straight exit (``d_exit`` out of the stall) to the start."""
+        cfg = self.config
+        si = ob.SpaceInformation(curves.space)
+        si.setStateValidityChecker(checker)
+        si.setStateValidityCheckingResolution(curves.resolution)
+        si.setup()
+        e = _straight(g, m.exit_gear, d_exit, d_exit)[-1] if d_exit > 0 else g
+        pdef = ob.ProblemDefinition(si)
+        pdef.setStartAndGoalStates(curves.state(e), curves.state(s), 1e-3)
+        objective = ob.PathLengthOptimizationObjective(si)
+        objective.setCostThreshold(ob.Cost(math.inf))  # any path satisfies it: stop at the first
+        pdef.setOptimizationObjective(objective)
+        spec = SAMPLERS[cfg.planner]
+        planner = getattr(og, spec.cls)(si)
+        if spec.ranged:
+            planner.setRange(cfg.planner_range)
+        planner.setProblemDefinition(pdef)
+        planner.setup()
+        used = [0]
+
+        def spent() -> bool:
+            used[0] += 1
+            return used[0] > cfg.iterations
+
+        planner.solve(ob.PlannerTerminationCondition(spent))
+        if not pdef.hasExactSolution():
+            raise _NoPlan(f"no path found: the straight exit and one Reeds-Shepp curve hit an obstacle, and "
+                          f"{cfg.planner} found none in {cfg.iterations} iterations")
+        path = pdef.getSolutionPath()
+        og.PathSimplifier(si).simplifyMax(path)
+        way = [e, *([st.getX(), st.getY(), st.getYaw()] for st in path.getStates()[1:])]
+        if np.linalg.norm(np.subtract(way[-1], s)) > 1e-9:
+            way.append(s)
+        parts = [_edge(curves, checker, np.asarray(a), np.asarray(b)) for a, b in zip(way[:-1], way[1:], strict=True)]
+        if d_exit > 0:
+            parts.insert(0, _straight(g, m.exit_gear, d_exit, cfg.step))
+        dense = _join(*parts)
+        if not checker.clear(dense).all():
+            raise _NoPlan(f"{cfg.planner}'s path grazes an obstacle between the poses it checked")
+        return dense, cfg.planner, min(used[0], cfg.iterations)
+
+
+def _edge(curves: _Curves, checker: _Checker, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The poses of one edge of a sampled path, ``a`` to ``b``: the curve from ``a`` to ``b``, or where that one is
+    not clear, the curve from ``b`` to ``a`` driven backwards (two shortest curves can tie, and OMPL may
+    have checked the edge either way)."""
+    forward = curves.curve(a, b, checker.pose_clear)
+    if checker.clear(forward).all():
+        return forward
+    return curves.curve(b, a, checker.pose_clear)[::-1]
+
+
+def park_planner(scene: GarageScene, car: CarGeometry | None = None, config: ParkConfig | None = None) -> ParkPlanner:
+    """The reference park planner of ``scene`` for ``car`` (default ``models/car``) and ``config``."""
+    return ParkPlanner(scene, car, config or DEFAULT_PARK)
+
+
+__all__ = ["BACK_GAP", "FAR_END_OVER", "HEADING_TOLERANCE", "MANEUVERS", "SAMPLERS", "DEFAULT_PARK", "Maneuver",
+           "ParkConfig", "ParkFit", "ParkPlan", "ParkPlanner", "centre_to_rear", "in_stall", "maneuver",
+           "park_obstacles", "park_planner", "park_pose", "rear_to_centre"]
