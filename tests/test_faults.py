@@ -814,3 +814,33 @@ def test_the_test_timeout_is_a_stored_setting_and_old_runs_resume(pack_dir, tmp_
     assert main([*args, "--test-timeout", "120"]) == 0 and "(0 new)" in capsys.readouterr().out
     assert "error: argument --test-timeout: 0 must be a number of seconds > 0" in one_line_error(
         capsys, [*args, "--test-timeout", "0"])
+
+
+def _children(pid: int) -> list[int]:
+    """The process ids whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(stat.parent.name))
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds the worker processes through /proc")
+def test_kill_9_of_a_cruise_worker_is_retried_and_the_run_completes(pack_dir, tmp_path):
+    """The run that used to wait for ever: a pool worker killed mid-test; its test runs again, same rows."""
+    out, ref = tmp_path / "killed", tmp_path / "whole"
+    args = ["cruise", "--packs", str(pack_dir), "--tests", "6", "--driver", "waypoint", "--quiet"]
+    proc = _spawn(*args, "--workers", "2", "--out", str(out))
+    start = time.monotonic()
+    _wait_for(lambda: len((out / "tests.csv").read_text().splitlines()) > 1 if (out / "tests.csv").exists()
+              else False, proc)  # a test ended: the workers are up and busy
+    workers = [p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text()]
+    assert workers, _children(proc.pid)
+    os.kill(workers[0], signal.SIGKILL)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and time.monotonic() - start < 30, err
+    assert main([*args, "--out", str(ref)]) == 0
+    assert _results(out / "tests.csv") == _results(ref / "tests.csv") and len(_results(ref / "tests.csv")) == 6

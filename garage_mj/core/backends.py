@@ -267,7 +267,8 @@ class _Worker:
 
     def give(self, index: int, job: Any) -> None:
         self.job, self.since = index, None
-        self.conn.send((index, job))
+        with contextlib.suppress(OSError):  # it died while idle: read() finds it gone, the job goes to another
+            self.conn.send((index, job))
 
     def read(self) -> tuple[str, Any] | None:
         """What became of its job: ("done", (ok, result or exception)), ("died", how), or None (still running)."""
