@@ -5,8 +5,10 @@ exports the library's garages that pass the filters, or those of ``--ids``. Pack
 complete packs are skipped, partial ones repaired. ``--carla-package DIR`` (with or without
 ``--out``) adds the same garages to a package for CARLA's ``make import``
 (:mod:`garage_mj.export.carla_package`), whose lock it holds for the whole export; maps
-already in the package stay, complete ones are not rebuilt. Without Assimp (no wheel for the platform) packs are
-written without ``garage.fbx`` and one line says so; a CARLA package is refused.
+already in the package stay, complete ones are not rebuilt. ``--park-problems DIR`` writes every park test
+of the garages as a planning problem, JSON and a TPCAP case each (:mod:`garage_mj.export.park_problems`).
+Without Assimp (no wheel for the platform) packs are written without ``garage.fbx`` and one line says so; a
+CARLA package is refused.
 """
 
 from __future__ import annotations
@@ -27,11 +29,12 @@ from garage_mj.grid.garage import Garage
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "export",
-        help=f"export garages as asset packs ({formats()}) and CARLA import packages",
+        help=f"export garages as asset packs ({formats()}), CARLA import packages and park planning problems",
         description=f"Write one asset pack folder per garage under --out, plus {INDEX}. Re-running skips\n"
         "complete packs and repairs partial ones. --carla-package DIR adds the garages to a package\n"
         "for CARLA's map import (maps already in it stay): copy DIR into CARLA's Import/ folder and\n"
-        "run `make import`.",
+        "run `make import`. --park-problems DIR writes every park test as a planning problem (start\n"
+        "pose, stall pose, obstacle polygons) in JSON and in the TPCAP benchmark's case layout.",
         epilog=f"Each asset pack holds:\n{contents()}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -52,6 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also (or only) add the garages to a CARLA import package here: DIR/DIR.json and one "
                    "<map>.fbx + <map>.xodr folder per garage (maps already in DIR stay); the folder's name is "
                    "the package name")
+    p.add_argument("--park-problems", type=Path, metavar="DIR",
+                   help="also (or only) write every park test (each stall with a feasible cruise test, reverse-in "
+                   "and nose-in) as a planning problem: start pose, stall pose and obstacle polygons, as JSON and "
+                   "as a TPCAP benchmark case (CSV), one folder per garage, index DIR/park_problems.json")
     p.add_argument("--force", action="store_true", help="rebuild packs and CARLA maps that are already complete")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -82,8 +89,9 @@ def _from_library(args: argparse.Namespace) -> list:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.out is None and args.carla_package is None:
-        raise UserError("give --out DIR (asset packs), --carla-package DIR (a CARLA import package), or both")
+    if args.out is None and args.carla_package is None and args.park_problems is None:
+        raise UserError("give --out DIR (asset packs), --carla-package DIR (a CARLA import package), or both"
+                        " (or --park-problems DIR)")
     if args.out is not None and args.carla_package is not None and \
             args.out.resolve() == args.carla_package.resolve():
         raise UserError(f"--out and --carla-package both name {args.out}; give the package a folder of its own")
@@ -130,3 +138,9 @@ def _export(args: argparse.Namespace, garages: list[Garage]) -> None:
         count = len(json.loads(description.read_text())["maps"])
         print(f"CARLA package {description.parent.name}: {count} map(s) in {args.carla_package}; copy the folder "
               "into CARLA's Import/ folder and run `make import`")
+    if args.park_problems is not None:
+        from garage_mj.export.park_problems import write_park_problems
+
+        index = write_park_problems(garages, args.park_problems)
+        count = len(json.loads(index.read_text())["problems"])
+        print(f"{count} park problem(s) of {len(garages)} garage(s) in {args.park_problems} (index: {index})")

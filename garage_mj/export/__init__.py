@@ -18,6 +18,8 @@ others' dependencies.
 - ``blender_probe``: the child process ``validate`` runs to read ``garage.fbx`` back with Blender's FBX importer.
 - ``xosc``: a cruise test written as an OpenSCENARIO 1.2 file (with ``scenariogeneration``).
 - ``xosc_read``: reads a cruise test's OpenSCENARIO file (written by ``xosc``) back.
+- ``park_problems``: every park test as a planning problem (start pose, stall pose, obstacle polygons), in
+  JSON and as a case of the TPCAP parking benchmark, and the reader of both.
 """
 
 from __future__ import annotations
@@ -37,4 +39,6 @@ __getattr__, __all__ = lazy_exports(__name__, {
     "write_fbx": "fbx",
     "write_carla_package": "carla_package",
     "write_preview": "preview",
+    "write_park_problems": "park_problems",
+    "read_park_problem": "park_problems",
 })

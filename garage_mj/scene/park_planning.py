@@ -551,7 +551,7 @@ class ParkPlanner:
         d_out = stall.length - BACK_GAP + cfg.margin  # [m] straight out this far, the car has left the stall
         out = _straight(g, m.exit_gear, d_out, cfg.step)
         region = self._region(np.array([g, s, out[-1]]))
-        checker = _Checker(self._near(obs, region).boxes, car, cfg.margin, region)
+        checker = _Checker(self.near(obs, region).boxes, car, cfg.margin, region)
         for what, pose in (("stall pose", g), ("start pose", s)):
             if not checker.pose_clear(*pose):
                 raise _NoPlan(self._blocked(obs, pose, f"the {what}"))
@@ -566,14 +566,21 @@ class ParkPlanner:
                 raise _NoPlan("no straight exit and one Reeds-Shepp curve reach the start (sampling is off)")
             return self._sample(ob, og, curves, checker, g, s, m, min(d_ok, d_out))
 
+    def area(self, start, stall_id: int, maneuver_name: str = "reverse") -> tuple[float, float, float, float]:
+        """[m] ``(xmin, ymin, xmax, ymax)``: the planning area of a park test (a plan's rear axle stays inside)."""
+        stall, m = self.scene.stalls.stalls[stall_id], maneuver(maneuver_name)
+        g = centre_to_rear(park_pose(stall, self.car, m.name), self.car)
+        out = _straight(g, m.exit_gear, stall.length - BACK_GAP + self.config.margin, 1.0)[-1]
+        return self._region(np.array([g, centre_to_rear(start, self.car), out]))
+
     def _region(self, poses: np.ndarray) -> tuple[float, float, float, float]:
         """[m] the planning area: the box around ``poses`` grown by ``region``, within the garage."""
         r, (x0, y0, x1, y1) = self.config.region, self.extent
         lo, hi = poses[:, :2].min(axis=0) - r, poses[:, :2].max(axis=0) + r
         return max(lo[0], x0), max(lo[1], y0), min(hi[0], x1), min(hi[1], y1)
 
-    def _near(self, obs: Obstacles, region: tuple[float, float, float, float]) -> Obstacles:
-        """The obstacles the grown footprint can touch with its rear axle inside ``region``."""
+    def near(self, obs: Obstacles, region: tuple[float, float, float, float]) -> Obstacles:
+        """The obstacles of ``obs`` the footprint (grown by the margin) can touch with its rear axle inside ``region``."""
         b, r = obs.boxes, self.reach
         keep = (b[:, 2] >= region[0] - r) & (b[:, 0] <= region[2] + r) & (b[:, 3] >= region[1] - r) & \
             (b[:, 1] <= region[3] + r)
