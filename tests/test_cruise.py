@@ -227,6 +227,7 @@ def test_cli_cruise_runs_and_bad_driver_is_one_line(library, tmp_path, capsys):
                  "waypoint", "--out", str(tmp_path / "c"), "--quiet"]) == 0
     out, err = capsys.readouterr()
     assert "Pearson r" in out and "feasible (continuous actions, the driver's own), Pearson" in out
+    assert "Pearson r(difficulty, success) = too few garages (2) for a correlation (paper -0.638)" in out
     assert "warning" not in err
     assert len(rows_of(tmp_path / "c" / "tests.csv")) == 2
     assert main(["cruise", "--library", str(library), "--tests", "1", "--driver", "nope:Nothing",

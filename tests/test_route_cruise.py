@@ -83,19 +83,33 @@ def test_summary_json_regresses_success_on_both_difficulties(garages, tmp_path):
     from garage_mj.driving.sources import CruiseSource
     from tests.test_cruise import fake_row
 
-    srcs = [CruiseSource.from_garage(g) for g in garages]
-    outcomes = (["success"] * 4, ["success", "success", "collision", "timeout"], ["collision"] * 3 + ["success"])
+    more = [*garages, *(paint_garage("tiny_7x11", seed=s) for s in (4, 5, 6, 7))]
+    srcs = [CruiseSource.from_garage(g) for g in more]
+    outcomes = (["success"] * 4, ["success", "success", "collision", "timeout"], ["collision"] * 3 + ["success"],
+                ["success"] * 3 + ["timeout"], ["collision"] * 4, ["success"] * 2 + ["collision"] * 2,
+                ["success"] * 4)
     rows = [fake_row(s, k, o) for s, os in zip(srcs, outcomes) for k, o in enumerate(os)]
-    route = {srcs[0].hash: 0.1, srcs[1].hash: 0.4, srcs[2].hash: math.nan}  # the last: no feasible stall
+    values = (0.1, 0.4, 0.7, 0.2, 0.9, 0.5)
+    route = {**{s.hash: v for s, v in zip(srcs, values)}, srcs[6].hash: math.nan}  # the last: no feasible stall
     summary, stats = write_outputs(tmp_path, rows, srcs, CruiseSettings("vision"), route=route, route_model="k")
-    assert [r["route_difficulty"] for r in summary] == [0.1, 0.4, None]
-    assert [r["route_difficulty"] for r in _summary(tmp_path)] == ["0.1", "0.4", ""]
-    paper = regression([round(s.difficulty, 4) for s in srcs], [100.0, 50.0, 25.0])  # as summary.csv rounds it
-    assert (stats["r"], stats["slope"], stats["n"]) == (pytest.approx(paper.r), pytest.approx(paper.slope), 3)
+    assert [r["route_difficulty"] for r in summary] == [*values, None]
+    assert [r["route_difficulty"] for r in _summary(tmp_path)] == [*map(str, values), ""]
+    success = [100.0, 50.0, 25.0, 75.0, 0.0, 50.0, 100.0]
+    paper = regression([round(s.difficulty, 4) for s in srcs], success)  # as summary.csv rounds it
+    assert (stats["r"], stats["slope"], stats["n"]) == (pytest.approx(paper.r), pytest.approx(paper.slope), 7)
+    on_route = regression(values, success[:6])
     assert (stats["route_r"], stats["route_slope"], stats["route_intercept"], stats["route_n"]) == (
-        pytest.approx(-1.0), pytest.approx(-50 / 0.3), pytest.approx(100 + 50 / 3), 2)
-    assert stats["route_model"] == "k"
-    assert json.loads((tmp_path / "summary.json").read_text())["route_r"] == pytest.approx(-1.0)
+        pytest.approx(on_route.r), pytest.approx(on_route.slope), pytest.approx(on_route.intercept), 6)
+    assert stats["route_model"] == "k" and stats["r_note"] is None and stats["route_r_note"] is None
+    assert json.loads((tmp_path / "summary.json").read_text())["route_r"] == pytest.approx(on_route.r)
+
+    # over fewer than 5 garages: no r and no line, and a note saying why
+    (tmp_path / "few").mkdir()
+    _, few = write_outputs(tmp_path / "few", rows[:12], srcs[:3], CruiseSettings("vision"), route=route,
+                           route_model="k")
+    assert (few["r"], few["slope"], few["intercept"], few["n"]) == (None, None, None, 3)
+    assert few["r_note"] == "too few garages (3) for a correlation"
+    assert (few["route_r"], few["route_n"], few["route_r_note"]) == (None, 3, "too few garages (3) for a correlation")
 
 
 def test_the_shipped_learned_driver_gets_its_own_route_model(garages, tmp_path):

@@ -27,6 +27,7 @@ from garage_mj.cli._common import (
 )
 from garage_mj.core.fsutil import atomic_write, ensure_dir
 from garage_mj.driving.actors.config import load_scenario_config
+from garage_mj.driving.difficulty.regression import r_text
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import TEST_COLUMNS
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
@@ -219,8 +220,7 @@ def run(args: argparse.Namespace) -> int:
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)
     s = res.stats
-    r = "n/a" if s["r"] is None else f"{s['r']:.3f}"
-    route_r = "n/a" if s["route_r"] is None else f"{s['route_r']:.3f}"
+    r, route_r = r_text(s["r"], s["n"]), r_text(s["route_r"], s["route_n"])
     print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "
           f"(excluded), success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
           f"Pearson r(difficulty, success) = {r} (paper {s['paper_r']}), r(route difficulty, success) = {route_r}; "

@@ -233,8 +233,8 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
     sims = [float(r["time"]) for r in timed]
     kinds = [r["outcome"] for r in rows]
     failures = failure_counts(rows)
-    stats = {**fit.as_dict(), "paper_r": PAPER_R,
-             **{f"route_{k}": v for k, v in route_fit.as_dict().items()}, "route_model": route_model if route else None,
+    stats = {**fit.as_reported(), "paper_r": PAPER_R,
+             **{f"route_{k}": v for k, v in route_fit.as_reported().items()}, "route_model": route_model if route else None,
              "garages": len(summary), "tests": len(rows),
              "infeasible": kinds.count("infeasible"), "feasible": len(driven),
              "driver": settings.driver, "seed": settings.seed,

@@ -16,6 +16,7 @@ from garage_mj.core.backends import Compute
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import write_json
+from garage_mj.driving.difficulty.regression import too_few
 from garage_mj.driving.results import COUNT_COLUMNS, HIT_CLASSES, failed_tests
 from garage_mj.driving.sim.outcomes import HIT_KINDS, OUTCOMES, PAPER_CLASS, PAPER_CLASSES, OutcomeConfig
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
@@ -264,7 +265,8 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
     else:
         regression_route_png = None
     text = "; ".join(
-        f"{d}: Pearson r = {_fmt_r(f.get('r'))} on the paper's difficulty, {_fmt_r(f.get('route_r'))} on the route "
+        f"{d}: Pearson r = {_fmt_r(f.get('r'), f['n'])} on the paper's difficulty, "
+        f"{_fmt_r(f.get('route_r'), f['route_n'])} on the route "
         f"difficulty, over {count_noun(f['garages'], 'garage')}, {count_noun(f['tests'], 'test')}"
         for d, f in fits.items()
     )
@@ -292,8 +294,9 @@ def _cruise_note() -> str:
             "stall) is never driven.")
 
 
-def _fmt_r(r) -> str:
-    return "n/a (success rate constant)" if r is None or r != r else f"{r:.3f}"
+def _fmt_r(r: float | None, n: int) -> str:
+    """r as the report says it: 3 decimals, or why there is none (too few garages, a constant success rate)."""
+    return too_few(n) or ("n/a (success rate constant)" if r is None or r != r else f"{r:.3f}")
 
 
 def demo_config(**overrides) -> DemoConfig:

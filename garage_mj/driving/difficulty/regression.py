@@ -22,6 +22,19 @@ PAPER_TABLE: tuple[tuple[float, float, float, float], ...] = (
     (2.4, 3.667, 0.655, 78), (2.167, 3.429, 0.733, 0), (2.2, 3.333, 0.744, 68), (2.222, 2.8, 0.829, 42),
 )
 PAPER_R = -0.638  # Pearson r(difficulty, success %) over PAPER_TABLE
+#: The fewest garages a correlation is reported over: over 2 garages r is always +-1, over 3-4 mostly noise.
+MIN_GARAGES = 5
+
+
+def too_few(n: int) -> str | None:
+    """What a report says instead of r over ``n`` garages when they are too few (:data:`MIN_GARAGES`); else None."""
+    return f"too few garages ({n}) for a correlation" if n < MIN_GARAGES else None
+
+
+def r_text(r: float | None, n: int) -> str:
+    """Pearson r over ``n`` garages as a report prints it: 3 decimals, ``n/a`` when undefined (a constant
+    success rate or difficulty), or "too few garages (N) for a correlation"."""
+    return too_few(n) or ("n/a" if r is None or math.isnan(r) else f"{r:.3f}")
 
 
 @dataclass(frozen=True)
@@ -35,6 +48,19 @@ class Regression:
 
     def as_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in asdict(self).items()}
+
+    @property
+    def reportable(self) -> bool:
+        """Whether r and the line are over enough garages to report (:data:`MIN_GARAGES`)."""
+        return self.n >= MIN_GARAGES
+
+    def as_reported(self) -> dict:
+        """:meth:`as_dict` as a summary reports it: r, slope and intercept None over too few garages, and
+        ``r_note`` saying so (None otherwise)."""
+        out = self.as_dict()
+        if not self.reportable:
+            out.update(r=None, slope=None, intercept=None)
+        return {**out, "r_note": too_few(self.n)}
 
 
 def pearson(x: Sequence[float], y: Sequence[float]) -> float:
