@@ -80,6 +80,11 @@ def test_a_listed_failure_reproduces_and_a_rerun_resumes(hunted):
     again = rerun(out, worst.source.hash[:12], int(row["test"]))
     assert (again["outcome"], again["time"], again["hit"]) == (row["outcome"], float(row["time"]), row["hit"])
     before = (out / "cruise" / "tests.csv").read_text()
+    state, run = json.loads((out / "hunt.json").read_text()), json.loads((out / "cruise" / "run.json").read_text())
+    assert state["settings"]["test_timeout"] == run["test_timeout"] == 120.0
+    del state["settings"]["test_timeout"], run["test_timeout"]  # as a hunt from before the setting wrote them
+    (out / "hunt.json").write_text(json.dumps(state))
+    (out / "cruise" / "run.json").write_text(json.dumps(run))
     with pytest.warns(ActionTypeWarning):
         res2 = hunt(CruiseSettings("waypoint", seed=3, action_type="discrete", env=FAST), out, map="tiny_7x11",
                     config=CFG, videos=False, compute=QUIET)
@@ -88,6 +93,9 @@ def test_a_listed_failure_reproduces_and_a_rerun_resumes(hunted):
     with pytest.warns(ActionTypeWarning), pytest.raises(HuntError, match=r"other settings \(seed\)"):
         hunt(CruiseSettings("waypoint", seed=4, action_type="discrete", env=FAST), out, map="tiny_7x11",
              config=CFG, compute=QUIET)
+    with pytest.warns(ActionTypeWarning), pytest.raises(HuntError, match=r"other settings \(test_timeout\)"):
+        hunt(CruiseSettings("waypoint", seed=3, action_type="discrete", env=FAST, test_timeout=5), out,
+             map="tiny_7x11", config=CFG, compute=QUIET)
     with pytest.raises(HuntError, match=r"other settings \(action_type\)"):  # waypoint's own: continuous
         hunt(CruiseSettings("waypoint", seed=3, env=FAST), out, map="tiny_7x11", config=CFG, compute=QUIET)
 

@@ -88,6 +88,20 @@ def test_workers_get_the_env_and_a_lost_worker_is_retried_then_named(ray2, tmp_p
         list(map_unordered(_raise, [7], compute=Compute(1, "ray")))
 
 
+def test_a_job_past_its_time_limit_or_lost_for_good_goes_to_on_lost(ray2):
+    """As on the local pool: the actor's interval timer stops a job that hangs; a job whose worker dies on every
+    try is the caller's on_lost to record; the other jobs run."""
+    from tests import _crashing
+
+    got = map_unordered(_crashing.square_or_hang, range(3), compute=Compute(2, "ray"), timeout=1.5,
+                        on_lost=lambda job, why: (job, why.kind, why.reason))
+    assert sorted(map(repr, got)) == sorted(map(repr, [0, 1, (2, "timeout", "ran past the time limit of 1.5 s of "
+                                                                             "wall time")]))
+    lost = list(map_unordered(_always_die, [5], compute=Compute(1, "ray"), max_retries=0,
+                              on_lost=lambda job, why: (job, why.kind, why.reason)))
+    assert lost == [(5, "crash", "its process or node died on its one try")]
+
+
 def test_bad_backend_fails_before_any_job():
     with pytest.raises(BackendError, match="unknown backend"):
         Compute(backend="dask")

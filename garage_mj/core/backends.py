@@ -220,6 +220,10 @@ def _limited(func: Callable[[Any], Any], job: Any, timeout: float | None) -> Any
         return LostJob("timeout", timeout_reason(timeout), time.perf_counter() - start)
 
 
+def _tries(n: int) -> str:
+    return "on its one try" if n == 1 else f"on each of {n} tries"
+
+
 def process_end(exitcode: int | None) -> str:
     """How a worker process ended, in words (``was killed by signal SIGSEGV``, ``exited with code 3``)."""
     if exitcode is not None and exitcode < 0:
@@ -365,7 +369,7 @@ def _supervised(func: Callable[[Any], Any], jobs: list, size: int, limits: list[
                     if losses[index] <= LOCAL_RETRIES:
                         queue.appendleft(index)
                     else:
-                        yield lost(jobs[index], LostJob("crash", f"its process {event[1]} on each of {losses[index]} tries",
+                        yield lost(jobs[index], LostJob("crash", f"its process {event[1]} {_tries(losses[index])}",
                                                                  seconds))
                 elif w.overdue(limits[index]):
                     w.stop(kill=True)
@@ -491,8 +495,7 @@ def _ray_actors(ray, func: Callable[[Any], Any], jobs: list, workers: int, max_r
                     raise BackendError(f"ray: job {index} lost its worker {max_retries + 1} times (node or process "
                                        f"died: {_first_line(exc)}); finished jobs are saved, run again to resume"
                                        ) from None
-                result = LostJob("crash", f"its process or node died ({max_retries + 1} tries): {_first_line(exc)}",
-                                 0.0)
+                result = LostJob("crash", f"its process or node died {_tries(max_retries + 1)}", 0.0)
             submit(a)
             if isinstance(result, LostJob):
                 result = (on_lost or _stop_batch)(jobs[index], result)
