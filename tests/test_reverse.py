@@ -129,6 +129,11 @@ def test_park_actions_map_to_commands_and_spaces():
         park_command_from_action(6)
     with pytest.raises(ValueError, match="pedal, steer, gear"):
         park_command_from_action([1.0, 0.0])
+    for bad in (float("nan"), np.float32("inf"), [math.nan, 0.0, 0.0], [0.0, 0.0, -math.inf]):
+        with pytest.raises(ValueError, match="not finite"):  # refused, as a cruise action is: never a command
+            park_command_from_action(bad)
+    with pytest.raises(ValueError, match="three numbers"):
+        park_command_from_action(np.array(["a", "b", "c"]))
     assert park_action_space("discrete").n == 6
     box = park_action_space("continuous")
     assert box.shape == (3,) and box.dtype == np.float32 and box.low.min() == -1.0 and box.high.max() == 1.0

@@ -127,17 +127,28 @@ def park_command_from_action(action) -> tuple[float, float, Gear | None]:
     """``(throttle, steer, gear request)`` from a :class:`ParkAction` or a continuous ``[pedal, steer, gear]``.
 
     The request is ``None`` (keep the gear) for the discrete driving actions; a continuous action
-    always requests one: R when ``gear < 0``, D otherwise.
+    always requests one: R when ``gear < 0``, D otherwise. A driver's action that is neither (NaN or
+    infinite included) is a ``ValueError`` naming it, as in :func:`command_from_action`.
     """
     arr = np.asarray(action)
     if arr.ndim == 0:
+        if arr.dtype.kind == "f" and not math.isfinite(arr):
+            raise ValueError(f"the driver's action {action!r} is not finite (NaN or infinity); a discrete park "
+                             f"action is one of 0..{len(ParkAction) - 1}")
         try:
             return PARK_DISCRETE_COMMANDS[ParkAction(int(arr))]
-        except ValueError:
+        except (ValueError, TypeError):
             raise ValueError(f"park action {action!r} is not one of 0..{len(ParkAction) - 1}") from None
     if arr.shape != (PARK_CONTINUOUS_SIZE,):
         raise ValueError(f"continuous park action must be [pedal, steer, gear], got shape {arr.shape}")
-    return clip(arr[0], -1.0, 1.0), clip(arr[1], -1.0, 1.0), Gear.R if arr[2] < 0 else Gear.D
+    try:
+        pedal, steer, gear = float(arr[0]), float(arr[1]), float(arr[2])
+    except (ValueError, TypeError):
+        raise ValueError(f"continuous park action {action!r} must be three numbers [pedal, steer, gear]") from None
+    if not (math.isfinite(pedal) and math.isfinite(steer) and math.isfinite(gear)):
+        raise ValueError(f"the driver's action {[pedal, steer, gear]} is not finite (NaN or infinity); a continuous "
+                         "park action is [pedal, steer, gear], each in [-1, 1]")
+    return clip(pedal, -1.0, 1.0), clip(steer, -1.0, 1.0), Gear.R if gear < 0 else Gear.D
 
 
 def park_action_space(action_type: str):
