@@ -102,7 +102,8 @@ def test_in_stall_reports_the_success_geometry_and_the_metrics(tiny):
 def _check_plan(scene, plan, start, stall_id, maneuver, occupied, margin):
     stall = scene.stalls.stalls[stall_id]
     assert plan.found, plan.reason
-    assert plan.poses[0] == pytest.approx(np.array(start), abs=1e-9)  # from the start pose ...
+    assert np.array_equal(plan.poses[0][2:], start[2:])  # from the start pose (its heading exactly) ...
+    assert plan.poses[0] == pytest.approx(np.array(start), abs=1e-9)
     assert plan.poses[-1] == pytest.approx(np.array(park_pose(stall, CAR, maneuver)), abs=1e-9)  # ... to the stall pose
     assert in_stall(stall, CAR, plan.poses[-1], maneuver).parked
     assert plan.rear_poses == pytest.approx(centre_to_rear(plan.poses, CAR))

@@ -534,7 +534,8 @@ class ParkPlanner:
         except _NoPlan as why:
             return ParkPlan(found=False, reason=str(why), planning_time=time.process_time() - t0, **base)
         rear = rear[::-1].copy()  # planned from the stall outward: driven from the start inward
-        rear[:, 2] = _wrap(rear[:, 2])
+        yaw = rear[:, 2]
+        rear[:, 2] = np.where((yaw >= -math.pi) & (yaw < math.pi), yaw, _wrap(yaw))  # in range: kept to the bit
         directions = _directions(rear)
         dist, _ = nearest_obstacle(obs, self.car, rear[:, :2], rear[:, 2])
         return ParkPlan(found=True, poses=_frozen(rear_to_centre(rear, self.car)), rear_poses=_frozen(rear),
