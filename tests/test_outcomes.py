@@ -141,7 +141,8 @@ def test_missed_goal_radius_separates_a_missed_goal_from_a_deadlock():
 def test_missed_goal_is_a_failure_and_a_deadlock_in_the_papers_classes():
     assert OutcomeKind.MISSED_GOAL in FAILURES and OutcomeKind.MISSED_GOAL.value == "missed_goal"
     assert PAPER_CLASS == {"collision": "collision", "timeout": "timeout", "deadlock": "deadlock",
-                           "missed_goal": "deadlock", "driver_crash": "deadlock", "driver_timeout": "timeout"}
+                           "missed_goal": "deadlock", "outside_stall": "deadlock", "driver_crash": "deadlock",
+                           "driver_timeout": "timeout"}
     assert set(PAPER_CLASS) == {k.value for k in FAILURES}
 
 

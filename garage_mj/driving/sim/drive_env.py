@@ -62,8 +62,27 @@ from garage_mj.driving.sim.outcomes import (
     OutcomeMonitor,
     ego_contacts,
 )
+from garage_mj.driving.sim.park_outcomes import ParkMonitor, ParkOutcomeConfig
+from garage_mj.driving.sim.park_task import (
+    MANEUVER_CHOICES,
+    TASKS,
+    ParkTest,
+    draw_park_test,
+    end_info,
+    park_info,
+    park_monitor,
+)
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
-from garage_mj.driving.sim.vehicle import Car, DiscreteAction, attach_car, command_from_action, compile_mjcf
+from garage_mj.driving.sim.vehicle import (
+    Car,
+    DiscreteAction,
+    Gear,
+    attach_car,
+    command_from_action,
+    compile_mjcf,
+    park_action_space,
+    park_command_from_action,
+)
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies
 from garage_mj.scene.actor_spec import ActorSpec
@@ -71,6 +90,7 @@ from garage_mj.scene.car import CarConfig, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
+from garage_mj.scene.park_planning import ParkConfig, ParkPlanner
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, geom_classes
 
@@ -184,6 +204,18 @@ class GarageDriveEnv(gym.Env):
             or without actors). A test whose events no driver could avoid is ``infeasible``.
             With actors the observation gains ``actors`` (privileged, like ``pose``): per actor
             (x, y, yaw, seconds since its trigger or -1), in the order of ``driver_info()["actors"]``.
+        task: ``"cruise"`` (the default: everything above, exactly), ``"park"`` (start at rest on the cruise
+            goal beside the target stall, park in it) or ``"avp"`` (cruise from the entrance, then park;
+            one test); docs/spec.md section 8 and :mod:`~garage_mj.driving.sim.park_task`. Park and AVP
+            tests act through :func:`~garage_mj.driving.sim.vehicle.park_action_space` (a cruise driver's
+            action is taken too, and keeps the gear: it cannot reverse), end by
+            :class:`~garage_mj.driving.sim.park_outcomes.ParkMonitor` (``park_outcome``: its
+            :class:`~garage_mj.driving.sim.park_outcomes.ParkOutcomeConfig`), observe also ``stall`` and
+            ``gear``, and give the reference plan in the reset info as ``park_plan`` (``poses`` (N, 3) car
+            centre, ``directions`` (N,) +1/-1, ``stall_pose``), as :meth:`driver_info` does. No actors.
+        maneuver: ``"reverse"`` (reverse-in, the default), ``"forward"`` (nose-in) or ``"any"`` (drawn per test).
+        stall: a stall id every reset tests (park and AVP; default: drawn per test).
+        park_config: :class:`~garage_mj.scene.park_planning.ParkConfig` of the reference park planner.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -204,6 +236,11 @@ class GarageDriveEnv(gym.Env):
         drive: DriveConfig | dict[str, Any] | None = None,
         image_obs: bool = False,
         scenario: ScenarioConfig | dict[str, Any] | str | None = None,
+        task: str = "cruise",
+        maneuver: str = "reverse",
+        stall: int | None = None,
+        park_config: ParkConfig | dict[str, Any] | None = None,
+        park_outcome: ParkOutcomeConfig | dict[str, Any] | None = None,
     ) -> None:
         if not isinstance(garage, Garage):
             raise ValueError("GarageDriveEnv needs garage= (a garage_mj.Garage; for a pack: load_pack(folder).garage)")
@@ -215,6 +252,13 @@ class GarageDriveEnv(gym.Env):
             raise ValueError(f"occupancy must be in [0, 1], got {occupancy}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if task not in TASKS:
+            raise ValueError(f"task must be one of {TASKS}, got {task!r}")
+        if maneuver not in MANEUVER_CHOICES:
+            raise ValueError(f"maneuver must be one of {MANEUVER_CHOICES}, got {maneuver!r}")
+        self.task = task
+        self.maneuver = maneuver
+        self.stall = None if stall is None else int(stall)
         self.garage = garage
         self.infeasible = infeasible
         self.image_obs = bool(image_obs)
@@ -230,11 +274,18 @@ class GarageDriveEnv(gym.Env):
         self.drive_config = _as(DriveConfig, drive)
         self.outcome_config = _as(OutcomeConfig, outcome)
         self.scenario_config = scenario if isinstance(scenario, ScenarioConfig) else load_scenario_config(scenario)
+        if task != "cruise" and self.scenario_config.count:
+            raise ValueError(f"task {task!r} has no actors: a scenario with actors is for cruise tests")
+        self.park_config = _as(ParkConfig, park_config)
+        self.park_outcome_config = _as(ParkOutcomeConfig, park_outcome)
         self.render_mode = render_mode
         self.render_size = render_size
         self.dt = cam.period  # [s] control period
 
         self._build()
+        if self.stall is not None and not 0 <= self.stall < len(self.stalls):
+            raise ValueError(f"stall {self.stall} does not exist; garage {garage.name!r} has stalls "
+                             f"0..{len(self.stalls) - 1}")
         if infeasible == "skip":
             self.targets = [s.id for s in self.stalls if self.planner.plan(s.id).feasible]
         else:
@@ -242,15 +293,18 @@ class GarageDriveEnv(gym.Env):
         if not self.targets:
             raise ValueError(f"garage {garage.name!r}: no stall can be reached by a feasible route from the entrance")
 
-        setup = ObservationSetup(cam, self.image_obs, self.scenario_config.count)
+        setup = ObservationSetup(cam, self.image_obs, self.scenario_config.count, task)
         self.observation_space = spaces.Dict(observation_spaces(setup))
         self._observed = observed_entries(setup)  # the observation table's entries this env has
-        if action_type == "discrete":
-            self.action_space: spaces.Space = spaces.Discrete(len(DiscreteAction))
+        if task != "cruise":
+            self.action_space: spaces.Space = park_action_space(action_type)
+        elif action_type == "discrete":
+            self.action_space = spaces.Discrete(len(DiscreteAction))
         else:
             self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.route: Route | None = None
-        self.monitor: OutcomeMonitor | None = None
+        self.monitor: OutcomeMonitor | ParkMonitor | None = None
+        self._park: ParkTest | None = None  # the park or AVP test of this reset (None: a cruise test)
         self._info_test: dict[str, Any] | None = None  # _info's entries fixed per test
 
     # -- scene -------------------------------------------------------------------------------------
@@ -274,6 +328,7 @@ class GarageDriveEnv(gym.Env):
         self._top: Camera | None = None
         self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
         self.planner = drive_planner(self.scene, self.car_geometry, self.drive_config)
+        self.park_planner = ParkPlanner(self.scene, self.car_geometry, self.park_config)
         self.stalls = self.scene.stalls.stalls
         self._parked_cars = ParkedCars(self.model)  # the parked cars' geoms, looked up once per scene
         self.parkable = sorted(self._parked_cars.geoms)
@@ -293,6 +348,8 @@ class GarageDriveEnv(gym.Env):
         super().reset(seed=seed)
         rng = self.np_random
         options = options or {}
+        if self.task != "cruise":
+            return self._reset_park(rng, options)
         target = int(options["target"]) if "target" in options else int(rng.choice(self.targets))
         if target not in self.targets:
             raise ValueError(f"stall {target} cannot be reached; reachable stalls: {self.targets}")
@@ -340,6 +397,31 @@ class GarageDriveEnv(gym.Env):
             self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, self.scenario.reason)
         return self._observe(), self._info()
 
+    def _reset_park(self, rng, options: dict[str, Any]):
+        """:meth:`reset` of a park or AVP test (:mod:`~garage_mj.driving.sim.park_task`)."""
+        self._park = test = draw_park_test(self, rng, options)
+        self.target, self.occupied, self.test_plan = test.stall, test.occupied, test.cruise
+        self.scenario = Scenario()
+        self.route = test.reference
+        self.monitor = park_monitor(self, test)
+        self.start_pose = x, y, yaw = test.start
+        mujoco.mj_resetData(self.model, self.data)
+        self._parked_cars.apply(self.model, None, test.occupied)
+        self._place_actors()
+        self.car.reset(self.data, x, y, yaw)  # runs mj_forward; in D, at rest
+        self.path_length = 0.0  # [m] driven
+        self._last_xy = (x, y)
+        self.outcome = None if test.feasible else Outcome(OutcomeKind.INFEASIBLE, 0.0, test.reason)
+        self._info_test = None
+        self._end_info: dict[str, Any] | None = None
+        return self._observe(), {**self._info(), "park_plan": test.plan_info()}
+
+    def _park_command(self, action) -> tuple[float, float, Gear | None]:
+        """A park action as (pedal, steer, gear request); a cruise driver's ``[throttle, steer]`` keeps the gear."""
+        if np.shape(action) == (2,):
+            return (*command_from_action(action), None)
+        return park_command_from_action(action)
+
     def _scenario(self, plan: TestPlan, rng, given) -> Scenario:
         """The test's actors: drawn from ``rng`` per the scenario config, or ``given`` (a replay)."""
         cfg = self.scenario_config
@@ -385,13 +467,18 @@ class GarageDriveEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         if self.outcome is not None:
             raise RuntimeError("the episode is over; call reset()")
-        command = command_from_action(action)  # a bad or non-finite action is refused before anything moves
+        park = self._park is not None
+        # a bad or non-finite action is refused before anything moves
+        command = command_from_action(action) if not park else self._park_command(action)
         before = self.monitor.progress
         moving = False
         if self.scenario.actors:
             x0, y0, _ = self.car.pose(self.data)
             moving = self._move_actors(x0, y0)
-        self.car.control(self.data, *command, self.dt)
+        if park:
+            self.car.park_control(self.data, *command, self.dt)
+        else:
+            self.car.control(self.data, *command, self.dt)
         contacts = []
         model, data, hittable = self.model, self.data, self._hittable
         if self._hit_counts is not None:  # the wheels touch the floor at every step: count the rest
@@ -446,6 +533,8 @@ class GarageDriveEnv(gym.Env):
             }
             if self.scenario.missing:
                 self._info_test["actors_missing"] = dict(self.scenario.missing)
+            if self._park is not None:
+                self._info_test.update(park_info(self._park), feasible=self._park.feasible)
         info: dict[str, Any] = {"time": float(self.data.time), "path_length": self.path_length,
                                 "progress": self.monitor.progress, "pose": (x, y, yaw), **self._info_test}
         info["actors"] = dict(info["actors"])  # fresh dicts: a caller may keep or change an info
@@ -454,6 +543,10 @@ class GarageDriveEnv(gym.Env):
         if self.outcome is not None:
             info.update(outcome=self.outcome.kind.value, reason=self.outcome.reason,
                         hit=self.outcome.hit_class, hit_geom=self.outcome.hit_geom)
+            if self._park is not None and self._park.feasible:  # the parking metrics, once the test is over
+                if self._end_info is None:
+                    self._end_info = end_info(self, self._park, self.monitor)
+                info.update(self._end_info)
         return info
 
     def driver_info(self, seed: int = 0) -> dict[str, Any]:
@@ -462,14 +555,21 @@ class GarageDriveEnv(gym.Env):
         Seed, action type, control period, the car's geometry, and the test's plan: ``route``
         (the centre path, (N, 2) m), ``rear_path`` and ``rear_heading`` (the rear-axle path the
         route was built from) and ``goal`` (x, y, yaw). Privileged drivers (``oracle``) use the
-        plan; camera drivers should not.
+        plan; camera drivers should not. A park or AVP test adds ``task``, ``maneuver`` and ``park_plan``
+        (as in the reset info); its ``route`` is the reference path (park: the park plan's centre
+        path; AVP: the cruise route then the park plan), ``goal`` the stall pose, and ``rear_path``,
+        ``rear_heading``, ``rear_curvature`` stay the cruise plan's to the stall (for a park test, the
+        drive that ended at its start).
         """
         plan = self.test_plan
-        return {"seed": int(seed), "action_type": self.action_type, "dt": self.dt,
+        info = {"seed": int(seed), "action_type": self.action_type, "dt": self.dt,
                 "target_stall": self.target, "route_length": self.route.length, "car": self.car_geometry,
                 "route": self.route.points, "goal": self.monitor.goal_pose,
                 "rear_path": plan.rear, "rear_heading": plan.heading, "rear_curvature": plan.curvature,
                 "actors": [a.as_dict() for a in self.scenario.actors]}
+        if self._park is not None:
+            info.update(task=self.task, maneuver=self._park.maneuver, park_plan=self._park.plan_info())
+        return info
 
     def render(self) -> np.ndarray | None:
         """The ``ego/top`` camera in colour (``render_mode="rgb_array"``)."""

@@ -42,6 +42,7 @@ class ObservationSetup:
     camera: CameraConfig = CameraConfig()
     image_obs: bool = False  # depth and segmentation as (H, W, 1) uint8 images (GarageDriveEnv(image_obs=True))
     actors: int = 0  # actor slots: the scenario's actor count
+    task: str = "cruise"  # the drive env's task: "park" and "avp" tests observe the stall and the gear too
 
 
 @dataclass(slots=True)  # not frozen: one is made per step, and a frozen init costs more
@@ -134,6 +135,23 @@ def _pose(s: Snapshot) -> np.ndarray:
     return np.array([s.x, s.y, math.remainder(s.yaw, math.tau)], dtype=np.float32)
 
 
+# -- park and AVP tests -------------------------------------------------------------------------------
+def _parking(space: spaces.Box) -> Callable[[ObservationSetup], spaces.Box | None]:
+    """``space`` for park and AVP tests; a cruise test has no such entry."""
+    return lambda setup: None if setup.task == "cruise" else space
+
+
+def _stall(s: Snapshot) -> np.ndarray:
+    gx, gy, gyaw = s.env.monitor.goal_pose
+    x, y = to_car_frame((gx, gy), s.x, s.y, s.yaw)
+    rel = gyaw - s.yaw
+    return np.array([x, y, math.cos(rel), math.sin(rel)], dtype=np.float32)
+
+
+def _gear(s: Snapshot) -> np.ndarray:
+    return np.array([s.env.car.gear.value], dtype=np.float32)
+
+
 # -- the other road users ----------------------------------------------------------------------------
 def _actors_space(setup: ObservationSetup) -> spaces.Box | None:
     n = setup.actors
@@ -175,6 +193,13 @@ OBSERVATIONS: tuple[ObservationEntry, ...] = (
                      "route left to the goal [m] (0 past it)", _remaining),
     ObservationEntry("steer", _vector(1, -1.0, 1.0), False,
                      "road-wheel angle over full lock, in [-1, 1] (positive: left)", _steer),
+    ObservationEntry("stall", _parking(spaces.Box(np.array([-MAX_EXTENT, -MAX_EXTENT, -1.0, -1.0], np.float32),
+                                                  np.array([MAX_EXTENT, MAX_EXTENT, 1.0, 1.0], np.float32),
+                                                  dtype=np.float32)), False,
+                     "the stall pose to park in (car centre), car frame: x forward, y left [m], cos and sin of its "
+                     "yaw relative to the car's; park and AVP tests only", _stall),
+    ObservationEntry("gear", _parking(spaces.Box(-1.0, 1.0, (1,), np.float32)), False,
+                     "the gear: +1 drive, -1 reverse; park and AVP tests only", _gear),
     ObservationEntry("pose", _pose_space, True, "the car's pose, world frame: x, y [m], yaw [rad] in [-pi, pi]",
                      _pose),
     ObservationEntry("actors", _actors_space, True,
@@ -205,7 +230,7 @@ def observe(entries: Iterable[ObservationEntry], snapshot: Snapshot) -> dict[str
 
 
 # -- the docs table ----------------------------------------------------------------------------------
-DOC_SETUP = ObservationSetup(CameraConfig(rgb=True), image_obs=False, actors=2)  # what docs/observations.md shows
+DOC_SETUP = ObservationSetup(CameraConfig(rgb=True), image_obs=False, actors=2, task="park")  # docs/observations.md
 
 
 def _number(v: float) -> str:
@@ -242,6 +267,7 @@ def observations_markdown(setup: ObservationSetup = DOC_SETUP) -> str:
         f"Spaces as built for a {cam.width} x {cam.height} camera with a {cam.far:g} m far plane, colour "
         f"{'on' if cam.rgb else 'off'},",
         f"and {setup.actors} actor slots; where `image_obs=True` changes a space, it is given after the default.",
+        "A cruise test (`task=\"cruise\"`, the default) has no `stall` and no `gear`: they are a park or AVP test's.",
         "Privileged entries are for reference drivers (the `oracle`); a learned driver never reads them",
         "(`garage_mj/driving/learning/observation.py`).",
         "",

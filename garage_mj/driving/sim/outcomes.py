@@ -28,6 +28,10 @@ the test runs past its wall-clock limit (``CruiseSettings.test_timeout``). They 
 driver, not of the garage; in the paper's classes a crash counts as a deadlock (the car stops where
 it is) and a wall-clock overrun as a timeout.
 
+``outside_stall`` is the parking twin of ``missed_goal``, decided by
+:class:`~garage_mj.driving.sim.park_outcomes.ParkMonitor` for park and AVP tests (docs/spec.md section 8);
+a cruise test never ends so.
+
 ``infeasible`` is not decided here: the drive env gives it before the drive, from the scene alone
 (:mod:`garage_mj.scene.drivable`), and such a test is never driven.
 """
@@ -75,6 +79,8 @@ OUTCOMES = (
                 failure=True, paper_class="deadlock",
                 note="it stopped within {missed_goal_radius:g} m of the goal but outside the parking tolerance "
                      "({goal_tolerance:g} m, {goal_heading_tolerance:g} rad)"),
+    OutcomeSpec("outside_stall", "outside_stalls", "stopped near the target stall, not parked inside it "
+                "(park and AVP tests)", failure=True, paper_class="deadlock"),
     OutcomeSpec("driver_crash", "driver_crashes", "the driver's process died (a signal or an exit) on every try",
                 failure=True, paper_class="deadlock", runner=True,
                 note="the process running the driver died (a segfault, the OOM killer, kill -9) on each try: "

@@ -1,0 +1,166 @@
+"""Outcome of one park or AVP test (docs/spec.md section 8), decided by the environment, never by the driver.
+
+:class:`ParkMonitor` is the park tests' twin of :class:`~garage_mj.driving.sim.outcomes.OutcomeMonitor`
+(which cruise tests keep, untouched), with the same interface (``update``, ``progress``, ``time_limit``,
+``goal_pose``). It watches the car along a reference path: the park plan's poses (park test) or the
+cruise route followed by the park plan (AVP test, scored as one test). Checks, in this order:
+
+- collision: ego touches a wall, pillar, obstacle, parked car or actor (as in cruise);
+- success: at rest (``|speed| < rest_speed``) with the footprint inside the target stall and the heading
+  within 10 degrees of its axis in the maneuver's direction
+  (:func:`~garage_mj.scene.park_planning.in_stall` ``.parked``); a contact ends the test first, so a
+  success had none at any time;
+- no progress for ``stuck_time``: neither along the reference path nor towards the stall pose by
+  ``stuck_progress``: ``outside_stall`` within ``outside_radius`` of the stall pose (stopped, but not
+  parked: the reason gives the errors), ``deadlock`` farther away;
+- timeout: ``time_limit`` from the reference length (``park_time_limit``), set by the env.
+
+It also records what ``tests.csv`` reports of the drive: the driven poses (one per control step, for the
+minimum clearance along the driven path), the direction changes (the sign of the speed flipping between
+two stretches of motion faster than :data:`MOVING_SPEED`: cusps driven) and when the parking began
+(``park_from`` metres along the reference: 0 for a park test, the cruise route for an AVP test).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from garage_mj.driving.sim.outcomes import Contact, Outcome, OutcomeKind
+from garage_mj.scene.car import CarGeometry
+from garage_mj.scene.clearance import Obstacles, nearest_obstacle
+from garage_mj.scene.park_planning import ParkFit, centre_to_rear, in_stall, park_pose
+from garage_mj.scene.route_line import Route
+from garage_mj.scene.semantics import COLLIDABLE
+from garage_mj.scene.stalls import Stall
+
+MOVING_SPEED = 0.1  # [m/s] faster than this the car is moving (a direction change counts between two such stretches)
+
+
+@dataclass(frozen=True)
+class ParkOutcomeConfig:
+    """Thresholds of the park and AVP outcomes (units in the comments)."""
+
+    rest_speed: float = 0.1  # [m/s] slower than this the car is at rest (SPEC 8's gear-change speed)
+    min_mean_speed: float = 0.3  # [m/s] slowest mean speed along the park plan still in time
+    time_slack: float = 15.0  # [s] added to the time limit (starting, aligning)
+    cusp_time: float = 5.0  # [s] added per cusp of the plan (stop, change gear, start again)
+    stuck_time: float = 8.0  # [s] window in which the car must make progress
+    stuck_progress: float = 0.3  # [m] progress along the reference, or towards the stall pose, needed in it
+    outside_radius: float = 6.0  # [m] no progress this close to the stall pose: outside_stall, not deadlock
+
+    def __post_init__(self) -> None:
+        for name in ("rest_speed", "min_mean_speed", "stuck_time", "stuck_progress"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"ParkOutcomeConfig.{name} must be > 0, got {getattr(self, name)}")
+
+
+def park_time_limit(config: ParkOutcomeConfig, length: float, cusps: int) -> float:
+    """[s] the time limit of parking along a plan of ``length`` [m] with ``cusps`` gear changes."""
+    return length / config.min_mean_speed + config.time_slack + cusps * config.cusp_time
+
+
+class ParkMonitor:
+    """Watches one park (or AVP) test along ``reference`` and says when and how it ended (module docstring).
+
+    ``reference``: the reference path of the car's centre; ``stall`` and ``maneuver``: the target;
+    ``time_limit`` [s]; ``park_from`` [m]: where along ``reference`` the parking begins.
+    """
+
+    def __init__(self, reference: Route, stall: Stall, car: CarGeometry, maneuver: str, time_limit: float,
+                 config: ParkOutcomeConfig | None = None, park_from: float = 0.0) -> None:
+        self.route = reference
+        self.stall = stall
+        self.car = car
+        self.maneuver = maneuver
+        self.config = config or ParkOutcomeConfig()
+        self.time_limit = float(time_limit)
+        self.park_from = float(park_from)
+        self.target = park_pose(stall, car, maneuver)
+        self.goal = np.array(self.target[:2])
+        self.reset()
+
+    @property
+    def goal_pose(self) -> tuple[float, float, float]:
+        """(x [m], y [m], yaw [rad]) of the stall pose (car centre)."""
+        return self.target
+
+    def reset(self) -> None:
+        self.progress = 0.0  # [m] furthest arc length reached along the reference
+        self.outcome: Outcome | None = None
+        self.fit: ParkFit | None = None  # the car in the stall at the last update
+        self.poses: list[tuple[float, float, float]] = []  # driven poses, one per update
+        self.direction_changes = 0
+        self.park_start: float | None = None  # [s] when the parking began
+        self._sign = 0  # direction of the last stretch of motion
+        self._mark_time = 0.0
+        self._mark_progress = 0.0
+        self._mark_dist = math.inf
+
+    def start(self, pose, progress: float = 0.0) -> None:
+        """The car at rest at ``pose`` (car centre), ``progress`` metres along the reference: before the first step."""
+        self.progress = self._mark_progress = float(progress)
+        self.poses.append(tuple(float(v) for v in pose))
+        self._mark_dist = math.dist(pose[:2], self.target[:2])
+        if self.progress >= self.park_from:
+            self.park_start = 0.0
+
+    def update(self, time: float, position, speed: float, contacts: Iterable[Contact] = (),
+               yaw: float | None = None, hold: bool = False) -> Outcome | None:
+        """Feed one step; returns the outcome when the test ends (and keeps returning it).
+
+        ``hold``: an actor is moving, so the car may wait: the no-progress clock restarts.
+        """
+        if self.outcome is not None:
+            return self.outcome
+        cfg = self.config
+        x, y = float(position[0]), float(position[1])
+        yaw = self.target[2] if yaw is None else float(yaw)
+        self.poses.append((x, y, yaw))
+        if abs(speed) > MOVING_SPEED:
+            sign = 1 if speed > 0 else -1
+            self.direction_changes += self._sign != 0 and sign != self._sign
+            self._sign = sign
+        for c in contacts:
+            if c.semantic in COLLIDABLE:
+                return self._end(OutcomeKind.COLLISION, time,
+                                 f"hit {c.semantic.name.lower()} {c.geom} at {abs(speed):.1f} m/s",
+                                 c.semantic.name.lower(), c.geom)
+        fit = self.fit = in_stall(self.stall, self.car, (x, y, yaw), self.maneuver)
+        if abs(speed) < cfg.rest_speed and fit.parked:
+            return self._end(OutcomeKind.SUCCESS, time, f"parked ({fit.position_error:.2f} m, "
+                             f"{fit.heading_error:.1f} deg from the stall pose)")
+        s, _ = self.route.project((x, y), self.progress - 1.0, self.progress + 2.0 + abs(speed))
+        self.progress = max(self.progress, s)
+        if self.park_start is None and self.progress >= self.park_from:
+            self.park_start = float(time)
+        dist = math.dist((x, y), self.target[:2])
+        if hold or self.progress - self._mark_progress >= cfg.stuck_progress or \
+                self._mark_dist - dist >= cfg.stuck_progress:
+            self._mark_time, self._mark_progress, self._mark_dist = time, self.progress, min(dist, self._mark_dist)
+        elif time - self._mark_time >= cfg.stuck_time:
+            why = f"no progress for {time - self._mark_time:.1f} s"
+            if dist <= cfg.outside_radius:
+                where = "inside the lines" if fit.inside else f"{fit.overhang:.2f} m over a line"
+                return self._end(OutcomeKind.OUTSIDE_STALL, time,
+                                 f"not parked: {fit.position_error:.2f} m and {fit.heading_error:.1f} deg from the "
+                                 f"stall pose, lateral offset {fit.lateral_offset:+.2f} m, {where}, {why}")
+            return self._end(OutcomeKind.DEADLOCK, time, f"{why}, {dist:.1f} m from the stall pose")
+        if time >= self.time_limit:
+            return self._end(OutcomeKind.TIMEOUT, time, f"time limit {self.time_limit:.1f} s reached")
+        return None
+
+    def min_clearance(self, obstacles: Obstacles) -> float:
+        """[m] the footprint's smallest distance to ``obstacles`` over the driven poses (as the planner measures)."""
+        if not self.poses or not len(obstacles.boxes):
+            return math.nan
+        rear = centre_to_rear(np.array(self.poses), self.car)
+        dist, _ = nearest_obstacle(obstacles, self.car, rear[:, :2], rear[:, 2])
+        return float(dist.min())
+
+    def _end(self, kind: OutcomeKind, time: float, reason: str, hit_class=None, hit_geom=None) -> Outcome:
+        self.outcome = Outcome(kind, float(time), reason, hit_class, hit_geom)
+        return self.outcome
