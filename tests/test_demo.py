@@ -44,11 +44,13 @@ def test_demo_end_to_end_report_in_chromium(tmp_path):
     facts = page_facts(report)
     text = facts["text"]
     assert facts["imgs"] and all(i["loaded"] for i in facts["imgs"]), facts["imgs"]
-    # convergence + heatmap + (preview + MuJoCo render) per garage + regression on the paper's and the route difficulty
+    # convergence + heatmap + (preview + MuJoCo render) per garage + regression on the paper's difficulty (no
+    # route difficulty: no shipped route model was fitted on these drivers with their continuous actions)
     packs = [link for link in facts["links"] if link.startswith("packs/")]
     garages = len(packs)
     assert garages >= 1
-    assert len(facts["imgs"]) == 2 + 2 * garages + 2
+    assert len(facts["imgs"]) == 2 + 2 * garages + 1
+    assert "no route difficulty (no shipped model was fitted on this driver with these actions)" in facts["text"]
     for link in packs:
         assert (out / link / "manifest.json").is_file()
     (table,) = [t for t in facts["tables"] if t["id"] == "cruise-table"]

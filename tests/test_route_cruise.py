@@ -39,7 +39,7 @@ def _summary(out):
 
 def test_summary_has_route_difficulty_beside_the_papers_and_route_r(garages, shipped, tmp_path, monkeypatch):
     out = tmp_path / "run"
-    res = run_cruise(garages, 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
+    res = run_cruise(garages, 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET, route_model="route")
     rows = _summary(out)
     header = list(rows[0])
     assert header[header.index("difficulty") + 1] == "route_difficulty"
@@ -48,7 +48,7 @@ def test_summary_has_route_difficulty_beside_the_papers_and_route_r(garages, shi
         row = next(r for n, r in by_name.items() if n.endswith(g.canonical_hash()[:8]))
         assert float(row["route_difficulty"]) == pytest.approx(route_difficulty(g, shipped), abs=1e-4)
     stats = json.loads((out / "summary.json").read_text())
-    assert stats == res.stats and stats["route_model"] == shipped.key
+    assert stats == res.stats and stats["route_model"] == shipped.key and stats["route_model_name"] == "route"
     rated = [r for r in rows if r["success_pct"] != ""]
     success = [float(r["success_pct"]) for r in rated]
     assert stats["r"] == res.stats["r"]  # the paper's r stays where it was
@@ -61,7 +61,7 @@ def test_summary_has_route_difficulty_beside_the_papers_and_route_r(garages, shi
     # a re-run (here: a new process, nothing in memory) reads the values back instead of planning again
     monkeypatch.setattr(route_rating, "_MEMO", {})
     monkeypatch.setattr(route_rating, "route_difficulty", lambda *a: pytest.fail("route difficulty recomputed"))
-    again = run_cruise(garages, 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
+    again = run_cruise(garages, 2, CruiseSettings("waypoint", env=FAST), out, compute=QUIET, route_model="route")
     assert again.tests_run == 0 and _summary(out) == rows and again.stats == stats
 
     # a value edited by hand in the cache does not match its checksum: computed again, not read
@@ -112,17 +112,35 @@ def test_summary_json_regresses_success_on_both_difficulties(garages, tmp_path):
     assert (few["route_r"], few["route_n"], few["route_r_note"]) == (None, 3, "too few garages (3) for a correlation")
 
 
-def test_the_shipped_learned_driver_gets_its_own_route_model(garages, tmp_path):
-    from garage_mj.driving.difficulty.rating import driver_route_model
+def test_the_default_route_model_is_one_fitted_on_the_driver_and_its_action_type(garages, tmp_path):
+    from garage_mj.driving.difficulty.rating import choose_route_model
 
-    assert driver_route_model("learned") == "learned"
-    assert driver_route_model("learned", {"model": "other.zip"}) is None  # another learned model: the default
-    assert driver_route_model("vision") is None and driver_route_model("learned:other.zip") is None
+    assert choose_route_model(True, "learned", "discrete").name == "learned"
+    assert choose_route_model(None, "vision", "discrete").name == "route"
+    assert choose_route_model(True, "waypoint", "discrete").name == "route"
+    for driver, action_type, kwargs in (("vision", "continuous", None), ("learned", "continuous", None),
+                                        ("learned", "discrete", {"model": "other.zip"}),  # another learned model
+                                        ("learned:other.zip", "discrete", None), ("oracle", "continuous", None)):
+        none = choose_route_model(True, driver, action_type, kwargs)
+        assert none.model is None and f"no shipped route model was fitted on driver {driver!r} with " \
+            f"{action_type} actions" in none.note
+    assert choose_route_model("route", "vision", "continuous").name == "route"  # asked for: used as it is
+
     res = run_cruise(garages[:1], 1, CruiseSettings("learned", env=FAST), tmp_path / "l", compute=QUIET)
     own = load_route_model("learned")
-    assert res.stats["route_model"] == own.key
+    assert res.stats["route_model"] == own.key and res.stats["route_model_name"] == "learned"
+    assert res.stats["route_model_fitted_for"] == {"drivers": ["learned"], "action_types": ["discrete"]}
     assert float(_summary(tmp_path / "l")[0]["route_difficulty"]) == pytest.approx(
         route_difficulty(garages[0], own), abs=1e-4)
+
+    # vision with its own continuous actions: the shipped models were fitted on discrete ones, so none applies
+    res = run_cruise(garages[:1], 1, CruiseSettings("vision", env=FAST), tmp_path / "v", compute=QUIET)
+    assert _summary(tmp_path / "v")[0]["route_difficulty"] == ""
+    stats = json.loads((tmp_path / "v" / "summary.json").read_text())
+    assert stats["route_model"] is None and stats["route_model_fitted_for"] is None
+    assert stats["route_note"].startswith("no route difficulty: no shipped route model was fitted on driver 'vision' "
+                                          "with continuous actions (route: vision, waypoint with discrete actions")
+    assert not (tmp_path / "v" / "regression_route.png").exists()
 
 
 def test_another_model_or_none(garages, shipped, tmp_path):
@@ -143,7 +161,7 @@ def test_another_model_or_none(garages, shipped, tmp_path):
 
 def test_an_old_run_folder_still_draws(garages, tmp_path):
     out = tmp_path / "old"
-    run_cruise(garages[:2], 1, CruiseSettings("waypoint", env=FAST), out, compute=QUIET)
+    run_cruise(garages[:2], 1, CruiseSettings("waypoint", env=FAST), out, compute=QUIET, route_model="route")
     rows = _summary(out)
     with open(out / "summary.csv", "w", newline="") as f:  # summary.csv as an older garage-mj wrote it
         w = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "route_difficulty"], extrasaction="ignore")
@@ -169,9 +187,15 @@ def test_cli_cruise_prints_both_r(tmp_path, garages, capsys):
     assert "garage-mj library rate" in capsys.readouterr().err
     assert main(["library", "rate", str(lib), "--quiet"]) == 0
     assert main(["cruise", "--library", str(lib), "--tests", "1", "--driver", "waypoint", "--out",
-                 str(tmp_path / "c"), "--quiet", "--route-difficulty", "0", "1"]) == 0
+                 str(tmp_path / "c"), "--quiet", "--route-difficulty", "0", "1", "--route-model", "route"]) == 0
     out = capsys.readouterr().out
-    assert "Pearson r(difficulty, success) = " in out and "r(route difficulty, success) = " in out
+    assert "Pearson r(difficulty, success) = too few garages (2) for a correlation" in out
+    assert ("r(route difficulty, success) = too few garages (2) for a correlation (model route, fitted on vision, "
+            "waypoint with discrete actions)") in out
+    assert main(["cruise", "--library", str(lib), "--tests", "1", "--driver", "waypoint", "--out",
+                 str(tmp_path / "d"), "--quiet"]) == 0
+    assert ("no route difficulty (no shipped model was fitted on this driver with these actions; --route-model FILE "
+            "gives one)") in capsys.readouterr().out
 
 
 def test_heatmap_of_either_metric(tmp_path, garages, shipped, capsys):

@@ -159,6 +159,7 @@ def test_shipped_models_load_by_name(tmp_path, monkeypatch, painted_tiny):
     default, learned = load_route_model(), load_route_model("learned")
     assert load_route_model("route") == default and learned.key != default.key
     assert learned.fit["drivers"] == ["learned"] and {"short_roads", "few_way"} <= set(learned.features)
+    assert default.fit["action_types"] == learned.fit["action_types"] == ["discrete"]
     assert 0.0 < route_difficulty(painted_tiny, learned) < 1.0
     monkeypatch.chdir(tmp_path)  # a file of that name wins over the shipped model
     learned.save(tmp_path / "route")
@@ -183,6 +184,7 @@ def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage
     assert "route difficulty = P(fail)" in text and "per-garage r" in text
     model = load_route_model(out)
     assert model.fit["drivers"] == ["waypoint"] and model.fit["garages"] == 2
+    assert model.fit["action_types"] == ["discrete"]  # what a cruise run's default route model is matched on
     assert (tmp_path / "mine.fit.csv").read_text().startswith("run,driver,garage")
     assert main(["difficulty", "score", str(run), "--model", str(out), "--json", str(tmp_path / "s.json")]) == 0
     score = json.loads((tmp_path / "s.json").read_text())

@@ -171,6 +171,19 @@ def scenario(args: argparse.Namespace) -> dict | None:
     return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 
 
+def route_text(stats: dict) -> str:
+    """The closing line's route difficulty part: r under the model, named with what it was fitted for, or why
+    there is none (no shipped model was fitted on this driver and action type)."""
+    fitted = stats.get("route_model_fitted_for")
+    if not stats.get("route_model") or not fitted:
+        return ("no route difficulty (no shipped model was fitted on this driver with these actions; "
+                "--route-model FILE gives one)")
+    on = ", ".join(fitted["drivers"]) or "unknown drivers"
+    actions = " or ".join(fitted["action_types"]) or "unknown"
+    return (f"r(route difficulty, success) = {r_text(stats['route_r'], stats['route_n'])} (model "
+            f"{stats['route_model_name']}, fitted on {on} with {actions} actions)")
+
+
 def replay(args: argparse.Namespace) -> int:
     if args.videos:
         raise UserError("--videos records tests of a batch (--packs or --library), not --scenario-file replays")
@@ -220,10 +233,9 @@ def run(args: argparse.Namespace) -> int:
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)
     s = res.stats
-    r, route_r = r_text(s["r"], s["n"]), r_text(s["route_r"], s["route_n"])
     print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "
           f"(excluded), success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
-          f"Pearson r(difficulty, success) = {r} (paper {s['paper_r']}), r(route difficulty, success) = {route_r}; "
+          f"Pearson r(difficulty, success) = {r_text(s['r'], s['n'])} (paper {s['paper_r']}), {route_text(s)}; "
           f"results in {res.out_dir}")
     lost = runner_failures(s["failures"])
     if lost:

@@ -36,11 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, LostJob, check_backend, map_unordered
 from garage_mj.core.fsutil import FolderLock, clean_temp, ensure_dir
-from garage_mj.driving.difficulty.rating import (
-    cruise_route_difficulty,
-    driver_route_model,
-    resolve_route_model,
-)
+from garage_mj.driving.difficulty.rating import RouteModelChoice, choose_route_model, cruise_route_difficulty
 from garage_mj.driving.episode import cached_env, check_driver, close_cached_env, drive_test, forget_cached
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.replay import write_test_xosc
@@ -169,9 +165,10 @@ def run_cruise(
     tqdm bar when ``compute.progress``; tests.csv gets the same rows either way. ``route_model``: the route
     difficulty model of
     ``summary.csv``'s ``route_difficulty`` column and ``summary.json``'s ``route_r`` (True: the shipped
-    one of the driver, :func:`~garage_mj.driving.difficulty.rating.driver_route_model`: the learned driver's own
-    for the shipped learned driver, else the default; a ``RouteDifficulty``, a model file or a shipped
-    model's name; False: none, the column stays empty), planned for the
+    one fitted on the driver with the run's action type,
+    :func:`~garage_mj.driving.difficulty.rating.choose_route_model`, or none where no shipped model was:
+    the column stays empty and ``summary.json``'s ``route_note`` says why; a ``RouteDifficulty``, a model
+    file or a shipped model's name; False: none), planned for the
     default car and world as the model was fitted, whatever ``settings.env`` changes. Raises
     :class:`CruiseError`, ``DriverError`` (bad driver), ``BackendError`` (Ray missing),
     ``RouteModelError`` (a bad model file) before any test.
@@ -184,9 +181,7 @@ def run_cruise(
     # fails fast, in this process, with the loader's one-line message on a bad driver
     choice = choice if choice is not None else choose_action_type(settings.driver, settings.action_type)
     check_backend(compute)
-    if route_model is True:
-        route_model = driver_route_model(settings.driver, settings.driver_kwargs)
-    model = None if route_model is False else resolve_route_model(route_model)
+    route = choose_route_model(route_model, settings.driver, choice.action_type, settings.driver_kwargs)
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     hashes = [s.hash for s in srcs]
     if len(set(hashes)) != len(hashes):
@@ -195,7 +190,7 @@ def run_cruise(
     check_driver(settings)  # a driver that cannot be built stops the run before anything is written
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise", remove=True):  # a second run into `out` is refused, naming this one
-        return _run_locked(srcs, tests, out, settings, choice, compute, max_tests, xosc, model)
+        return _run_locked(srcs, tests, out, settings, choice, compute, max_tests, xosc, route)
 
 
 def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
@@ -224,7 +219,7 @@ def _write_garages(out: Path, srcs: Sequence[CruiseSource]) -> None:
 
 def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: CruiseSettings, choice: ActionChoice,
                 compute: Compute, max_tests: int | None, xosc: bool = False,
-                model: RouteDifficulty | None = None) -> CruiseResult:
+                route_choice: RouteModelChoice | None = None) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
     clean_temp(out)  # temp files of a killed run's atomic writes
     check_settings(out, settings, choice.source)
@@ -263,6 +258,8 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: C
     wanted = {(s.hash, i) for s in srcs for i in range(tests)}
     mine = [r for r in rows if (r["garage_hash"], int(r["test"])) in wanted]
     tested = {r["garage_hash"] for r in mine}
+    model = route_choice.model if route_choice else None
     route = None if model is None else cruise_route_difficulty(out, [s for s in srcs if s.hash in tested], model)
-    summary, stats = write_outputs(out, mine, srcs, settings, choice.source, route, model.key if model else None)
+    summary, stats = write_outputs(out, mine, srcs, settings, choice.source, route, model.key if model else None,
+                                   route_choice.record(bool(route)) if route_choice else None)
     return CruiseResult(out, new, mine, summary, stats, choice.label)

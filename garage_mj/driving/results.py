@@ -217,10 +217,12 @@ def paper_failures(failures: dict[str, int]) -> dict[str, int]:
 def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
                   settings: CruiseSettings, action_from: str = "--action-type",
                   route: dict[str, float] | None = None, route_model: str | None = None,
-                  ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+                  route_info: dict[str, Any] | None = None) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``summary.csv`` and ``summary.json`` from the test rows (``regression.png`` is drawn from them by
     :func:`garage_mj.reporting.cruise.cruise_figure`); ``action_from``: where the action type came from;
-    ``route``: garage hash -> route difficulty under the model with key ``route_model``."""
+    ``route``: garage hash -> route difficulty under the model with key ``route_model``; ``route_info``: what
+    summary.json says of that model (:meth:`~garage_mj.driving.difficulty.rating.RouteModelChoice.record`:
+    its name, the drivers and action types it was fitted for, or why there is none)."""
     summary = summarize(rows, sources, route)
     write_csv(out / "summary.csv", SUMMARY_COLUMNS, summary)
     rated = [r for r in summary if r["success_pct"] is not None]  # garages with a feasible test
@@ -235,6 +237,7 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
     failures = failure_counts(rows)
     stats = {**fit.as_reported(), "paper_r": PAPER_R,
              **{f"route_{k}": v for k, v in route_fit.as_reported().items()}, "route_model": route_model if route else None,
+             **(route_info or {}),
              "garages": len(summary), "tests": len(rows),
              "infeasible": kinds.count("infeasible"), "feasible": len(driven),
              "driver": settings.driver, "seed": settings.seed,

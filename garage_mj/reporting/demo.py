@@ -167,7 +167,8 @@ def run_demo(cfg: DemoConfig) -> Path:
             "as OpenSCENARIO, videos/ with the failures shown above)",
             "paper (SPEC section 5): r(difficulty, success) = -0.638 over 16 garages of the 13x13 aligned map",
             "route difficulty: the expected failure rate of a cruise test predicted from the planned routes "
-            "(garage-mj difficulty; the shipped model), beside the paper's difficulty",
+            "(garage-mj difficulty), beside the paper's difficulty, under the shipped model fitted on the driver "
+            "and its action type; n/a where none was (summary.json's route_note)",
         ],
     )
     report = write_report(data, out)
@@ -259,18 +260,19 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
     regression_png = figs / "regression.png"
     shutil.copyfile(out / "cruise" / run_folder(main) / "regression.png", regression_png)
     regression_route_png: Path | None = figs / "regression_route.png"
-    route_figure = out / "cruise" / run_folder(main) / "regression_route.png"
-    if route_figure.is_file():  # drawn when a garage with a feasible test has a route difficulty
-        shutil.copyfile(route_figure, regression_route_png)
+    # drawn for a run with a route difficulty: a shipped model fitted on its driver and action type
+    drawn = [d for d in (main, *cfg.drivers) if (out / "cruise" / run_folder(d) / "regression_route.png").is_file()]
+    if drawn:
+        shutil.copyfile(out / "cruise" / run_folder(drawn[0]) / "regression_route.png", regression_route_png)
     else:
         regression_route_png = None
     text = "; ".join(
-        f"{d}: Pearson r = {_fmt_r(f.get('r'), f['n'])} on the paper's difficulty, "
-        f"{_fmt_r(f.get('route_r'), f['route_n'])} on the route "
-        f"difficulty, over {count_noun(f['garages'], 'garage')}, {count_noun(f['tests'], 'test')}"
+        f"{d}: Pearson r = {_fmt_r(f.get('r'), f['n'])} on the paper's difficulty, {_route_r(f)}, "
+        f"over {count_noun(f['garages'], 'garage')}, {count_noun(f['tests'], 'test')}"
         for d, f in fits.items()
     )
-    text += f". Figures: the {main} driver. Paper: r = -0.638."
+    route_fig = f"; route difficulty: the {drawn[0]} driver" if drawn and drawn[0] != main else ""
+    text += f". Figures: the {main} driver{route_fig}. Paper: r = -0.638."
     return _CruisePart(columns, rows, _cruise_note(), failures, regression_png, regression_route_png, text, kpis)
 
 
@@ -292,6 +294,13 @@ def _cruise_note() -> str:
     return (f"{notes[:1].upper()}{notes[1:]}. In the paper's three failure classes ({', '.join(PAPER_CLASSES)}) "
             f"{mapped}. Success is over feasible tests; an infeasible test (no driver of this car can reach the "
             "stall) is never driven.")
+
+
+def _route_r(stats: dict) -> str:
+    """A run's r on the route difficulty, naming the model, or why it has none."""
+    if not stats.get("route_model"):
+        return "no route difficulty (no shipped model was fitted on this driver with these actions)"
+    return f"{_fmt_r(stats.get('route_r'), stats['route_n'])} on the route difficulty ({stats['route_model_name']} model)"
 
 
 def _fmt_r(r: float | None, n: int) -> str:

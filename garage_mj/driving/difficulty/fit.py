@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -161,6 +162,18 @@ def _check_out(out: Path, data: Path) -> None:
         raise DifficultyFitError(f"--out {out}: {above} is a file, not a folder; give a path in a folder")
 
 
+def _action_types(runs: Sequence[str | Path]) -> list[str]:
+    """The action types the cruise runs used (their ``run.json``), what a cruise run's default route model is
+    matched on (:func:`garage_mj.driving.difficulty.rating.choose_route_model`)."""
+    types = set()
+    for run in runs:
+        try:
+            types.add(json.loads((Path(run) / "run.json").read_text())["action_type"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # a run of an older garage-mj: its type is not known
+    return sorted(t for t in types if isinstance(t, str))
+
+
 def fit_runs(runs: Sequence[str | Path], out: str | Path, library: str | Path | None = None,
              features: Sequence[str] = FEATURES, progress: bool = True) -> tuple[RouteDifficulty, list[dict[str, Any]]]:
     """Fit a route difficulty on the feasible tests of ``runs``; writes ``out`` and ``<out stem>.fit.csv``.
@@ -173,7 +186,7 @@ def fit_runs(runs: Sequence[str | Path], out: str | Path, library: str | Path | 
     drivers = sorted({r["driver"] for r in records})
     try:
         model = fit(records, [r["failed"] for r in records], features,
-                    info={"runs": [str(r) for r in runs], "drivers": drivers,
+                    info={"runs": [str(r) for r in runs], "drivers": drivers, "action_types": _action_types(runs),
                           "garages": len({r["garage_hash"] for r in records}), "fit_data": data.name})
     except ValueError as exc:
         raise DifficultyFitError(f"cannot fit on {len(records)} tests of {len(runs)} run(s): {exc}") from None

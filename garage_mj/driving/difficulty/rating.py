@@ -27,7 +27,12 @@ from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, map_unordered
 from garage_mj.core.fsutil import write_json
 from garage_mj.generation.library import Library
 from garage_mj.generation.library_format import route_checksum
-from garage_mj.scene.route_difficulty import RouteDifficulty, load_route_model, route_difficulty
+from garage_mj.scene.route_difficulty import (
+    SHIPPED_MODELS,
+    RouteDifficulty,
+    load_route_model,
+    route_difficulty,
+)
 
 if TYPE_CHECKING:
     from garage_mj.driving.sources import CruiseSource
@@ -46,16 +51,58 @@ def resolve_route_model(model: RouteDifficulty | str | Path | None = None) -> Ro
     return model if isinstance(model, RouteDifficulty) else load_route_model(model)
 
 
-def driver_route_model(driver: Any, driver_kwargs: dict[str, Any] | None = None) -> str | None:
-    """The shipped route model that predicts ``driver`` best: the driver's own where one ships (``"learned"``
-    for the shipped learned driver), else None (the default model, fitted on the rule-based drivers).
+@dataclass(frozen=True)
+class RouteModelChoice:
+    """The route difficulty model of a cruise run, the name it goes by and what it was fitted for; or, with
+    ``model`` None, why the run has no route difficulty (``note``)."""
 
-    Drivers fail for different reasons: on fresh garages the learned driver's success and ``vision``'s
-    are uncorrelated (r -0.05), so no one difficulty predicts both (``docs/route_difficulty/fresh.json``).
+    model: RouteDifficulty | None
+    name: str | None = None  # a shipped model's name ("route", "learned"), a model file, or "given"
+    note: str | None = None
+
+    def record(self, rated: bool) -> dict[str, Any]:
+        """What ``summary.json`` says of the route difficulty (``rated``: whether any garage got one)."""
+        if self.model is None or not rated:
+            return {"route_model": None, "route_model_name": None, "route_model_fitted_for": None,
+                    "route_note": self.note}
+        return {"route_model": self.model.key, "route_model_name": self.name,
+                "route_model_fitted_for": fitted_for(self.model), "route_note": self.note}
+
+
+def fitted_for(model: RouteDifficulty) -> dict[str, list[str]]:
+    """The drivers and action types ``model`` was fitted on (its ``fit`` metadata; empty lists when it does
+    not say, as a model fitted by an older garage-mj)."""
+    return {"drivers": list(model.fit.get("drivers", [])), "action_types": list(model.fit.get("action_types", []))}
+
+
+def choose_route_model(route_model: RouteDifficulty | str | Path | bool | None, driver: Any, action_type: str,
+                       driver_kwargs: dict[str, Any] | None = None) -> RouteModelChoice:
+    """The route difficulty model of a cruise run of ``driver`` with ``action_type`` actions.
+
+    ``route_model`` True or None: the shipped model fitted on that driver with that action type (``"learned"``
+    for the shipped learned driver with its discrete actions, ``"route"`` for ``vision`` and ``waypoint`` with
+    discrete ones), or none when no shipped model was fitted for them: its failure rate would not be this
+    driver's (``vision`` with its own continuous actions succeeds where the default model reads 0.8). Drivers
+    fail for different reasons: on fresh garages the learned driver's success and ``vision``'s are
+    uncorrelated (r -0.05), so no one difficulty predicts both (``docs/route_difficulty/fresh.json``).
+    A model, a model file or a shipped model's name: that one, whatever it was fitted on. False: none.
     """
-    if driver == "learned" and not (driver_kwargs or {}).get("model"):
-        return "learned"
-    return None
+    if route_model is False:
+        return RouteModelChoice(None, note="no route difficulty asked for")
+    if route_model is not True and route_model is not None:
+        name = "given" if isinstance(route_model, RouteDifficulty) else str(route_model)
+        return RouteModelChoice(resolve_route_model(route_model), name)
+    own = None if (driver_kwargs or {}).get("model") else driver  # another learned model is not the shipped one
+    for name in SHIPPED_MODELS:
+        model = load_route_model(name)
+        fit = fitted_for(model)
+        if own in fit["drivers"] and action_type in fit["action_types"]:
+            return RouteModelChoice(model, name)
+    shipped = "; ".join(f"{n}: {', '.join(f['drivers'])} with {' or '.join(f['action_types'])} actions"
+                        for n, f in ((n, fitted_for(load_route_model(n))) for n in SHIPPED_MODELS))
+    return RouteModelChoice(None, note=f"no route difficulty: no shipped route model was fitted on driver {driver!r} "
+                                       f"with {action_type} actions ({shipped}); give --route-model FILE "
+                                       "(garage-mj difficulty fit) to use one")
 
 
 def _rate(job: tuple[int, Garage, RouteDifficulty]) -> tuple[int, float]:
