@@ -62,3 +62,23 @@ def page_facts(path: Path) -> dict:
                     headings: Array.from(document.querySelectorAll('h2')).map(h => h.textContent)};
             """
         )
+
+
+def table_fit(path: Path, width: int, height: int = 900) -> list[dict]:
+    """Load ``path`` in a ``width`` x ``height`` window; per table: its id, the window's inner width, the right edge
+    of its last header cell, and how far its scroll container (if any) must scroll sideways to show it all."""
+    with chromium() as driver:
+        driver.set_window_size(width, height)
+        driver.get(Path(path).resolve().as_uri())
+        return driver.execute_script(
+            """
+            return Array.from(document.querySelectorAll('table')).map(t => {
+                const ths = t.querySelectorAll('th');
+                const last = ths[ths.length - 1].getBoundingClientRect();
+                const box = t.parentElement;
+                return {id: t.id, inner: window.innerWidth, last_right: last.right,
+                        page_scroll: document.documentElement.scrollWidth - document.documentElement.clientWidth,
+                        box_scroll: box.scrollWidth - box.clientWidth};
+            });
+            """
+        )

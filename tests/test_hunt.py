@@ -138,3 +138,23 @@ def test_cli_hunt_runs_the_drivers_own_action_type(tmp_path, capsys):
     assert "garages in 0 generations (continuous actions, the driver's own); " in printed.splitlines()[0]
     state = json.loads((out / "hunt.json").read_text())
     assert (state["settings"]["action_type"], state["action_type_from"]) == ("continuous", "driver")
+
+
+def test_the_report_has_the_demo_reports_style_and_names_videos_by_garage(hunted):
+    from garage_mj.reporting.cruise import video_name
+    from garage_mj.reporting.hunt import record_videos, write_hunt_report
+    from garage_mj.reporting.report import CSS
+    from tests.browser import page_facts
+
+    out, res = hunted
+    mp4s = record_videos(res)
+    first = next(r for r in res.worst[0].failures if r["outcome"] not in ("driver_crash", "driver_timeout"))
+    assert [p.name for p in mp4s] == [video_name(first)]  # <garage>_<test>_<outcome>.mp4, as cruise names them
+    assert mp4s[0].name.startswith(video_name(first).split("_0")[0]) and mp4s[0].is_file()
+    report = write_hunt_report(out, res.table, res.worst, res.files["packs"], res.files["xosc"], mp4s, "waypoint")
+    assert CSS in report.read_text()
+    facts = page_facts(report)
+    assert facts["imgs"] and all(i["loaded"] for i in facts["imgs"]), facts["imgs"]
+    assert f"videos/{mp4s[0].name}" in facts["links"]
+    (table,) = facts["tables"]
+    assert table["id"] == "hunt-table" and table["rows"] == min(50, len(res.table))

@@ -25,7 +25,7 @@ from garage_mj.reporting.report import (  # noqa: E402
     render_html,
     write_report,
 )
-from tests.browser import page_facts  # noqa: E402
+from tests.browser import page_facts, table_fit  # noqa: E402
 
 
 def png(path, label):
@@ -157,3 +157,22 @@ def test_numbers_are_written_one_way():
     assert fmt_percent(100.0) == "100.0%" and fmt_percent(33.333) == "33.3%" and fmt_percent(None) == "n/a"
     assert count_noun(1, "pedestrian") == "1 pedestrian" and count_noun(2, "moving car") == "2 moving cars"
     assert count_noun(0, "clutter object") == "0 clutter objects"
+
+
+@pytest.mark.parametrize("width", [1400, 1920])
+def test_the_cruise_table_fits_the_window(tmp_path, width):
+    """The demo's cruise table, long names and all: its last column (success of feasible) is in view, no
+    sideways scrolling (it was cut off at 1400 and 1920 px)."""
+    from garage_mj.driving.results import COUNT_COLUMNS
+    from garage_mj.reporting.demo import _failure_cells
+
+    columns = ["garage", "driver", "actions", "difficulty", "route difficulty", "E[X]", "E[Y]", "tests", "infeasible",
+               *_failure_cells({k: c.replace("_", " ") for k, c in COUNT_COLUMNS.items()}, "what was hit"),
+               "success of feasible"]
+    row = ["tiny_7x11-3_b9bef0599e78", "my_driver:MyCarefulDriver + actors", "continuous", "0.553", "n/a", 4.667,
+           2.0, 50, 3, *_failure_cells({k: 12 for k in COUNT_COLUMNS}, "parked_car 3, wall 2, pillar 1, pedestrian 1"),
+           "88.0%"]
+    path = write_report(ReportData(title="t", cruise_columns=columns, cruise_rows=[row] * 3), tmp_path)
+    (fit,) = table_fit(path, width)
+    assert fit["id"] == "cruise-table" and fit["last_right"] <= fit["inner"], fit
+    assert fit["box_scroll"] <= 1 and fit["page_scroll"] == 0, fit

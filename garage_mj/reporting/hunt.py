@@ -4,8 +4,8 @@ watches and reads of it.
 The driving stage writes the hunt's results (``hunt.sqlite``, ``failures.csv``, packs, ``.xosc``
 files); :func:`hunt` then draws ``OUT/cruise/regression.png``
 (:func:`garage_mj.reporting.cruise.cruise_figure`), records an MP4 of the first failing test of each
-of the worst garages into ``OUT/videos/`` (:func:`record_videos`, the same seed as the hunt's test, the
-outcome in the file name)
+of the worst garages into ``OUT/videos/`` (:func:`record_videos`, the same seed as the hunt's test, named
+by garage, test and outcome as cruise names its videos)
 and writes ``OUT/report.html`` (:func:`write_hunt_report`): the ranking, then per worst garage its
 preview, failures, files and video.
 """
@@ -15,6 +15,7 @@ from __future__ import annotations
 import html
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 from garage_mj.core.fsutil import FolderLock, atomic_write
 from garage_mj.driving import hunt as driving_hunt
@@ -22,7 +23,8 @@ from garage_mj.driving.hunt import HuntResult, Scored, add_file, read_settings
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
 from garage_mj.driving.sources import CruiseSettings
 from garage_mj.export.artefacts import PREVIEW
-from garage_mj.reporting.cruise import cruise_figure
+from garage_mj.reporting.cruise import cruise_figure, video_name
+from garage_mj.reporting.report import CSS
 from garage_mj.reporting.video import record_video
 
 
@@ -42,51 +44,69 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, videos: bool = True, 
 
 
 def record_videos(result: HuntResult) -> list[Path]:
-    """``OUT/videos/<hash 12>_<test>_<outcome>.mp4``: the first failing test of each of the worst garages (kept
-    if there); not a test whose driver crashed or hung (driven again, it would again)."""
+    """``OUT/videos/<garage>_<test>_<outcome>.mp4`` (:func:`~garage_mj.reporting.cruise.video_name`, as cruise
+    names its videos): the first failing test of each of the worst garages (kept if there); not a test whose
+    driver crashed or hung (driven again, it would again)."""
     settings = CruiseSettings.from_stored(read_settings(result.out_dir))
-    unwatchable = {k.value for k in RUNNER_KINDS}
     mp4s = []
     for s in result.worst:
-        first = next((r for r in s.failures if r["outcome"] not in unwatchable), None)
+        first = _watchable(s)
         if first is None:
             continue
-        i = int(first["test"])
-        mp4 = result.out_dir / "videos" / f"{s.source.hash[:12]}_{i:05d}_{first['outcome']}.mp4"
+        mp4 = result.out_dir / "videos" / video_name(first)
         if not mp4.is_file():
-            record_video(s.source, mp4, settings, test=i)
+            record_video(s.source, mp4, settings, test=int(first["test"]))
         mp4s.append(mp4)
     return mp4s
 
 
+def _watchable(s: Scored) -> dict[str, str] | None:
+    """The first failing test of ``s`` worth a video: not one whose driver crashed or hung."""
+    unwatchable = {k.value for k in RUNNER_KINDS}
+    return next((r for r in s.failures if r["outcome"] not in unwatchable), None)
+
+
+#: The ranking's columns in the report (failures.csv has them all).
+REPORT_COLUMNS = ("rank", "garage", "difficulty", "tests", "feasible", "failures", "failure_pct", "hit",
+                  "failure_progress")
+
+
+def _href(path: Path, out: Path) -> str:
+    """``path`` as a link relative to ``out`` (URL-quoted: a ``#`` in a garage's name stays part of the path)."""
+    return html.escape(quote(path.relative_to(out).as_posix()))
+
+
+def _card(s: Scored, pack: Path, xoscs: list[Path], mp4s: list[Path], out: Path) -> str:
+    """One of the worst garages: preview, failures, its asset pack, OpenSCENARIO files and video."""
+    e = html.escape
+    mine = [p for p in xoscs if p.name.startswith(s.source.hash[:12])]
+    names = {video_name(r) for r in s.failures}
+    videos = "".join(f'<p><video src="{_href(p, out)}" controls width="480"></video><br>'
+                     f'<a href="{_href(p, out)}">{e(p.name)}</a></p>' for p in mp4s if p.name in names)
+    fails = "".join(f"<li>test {e(r['test'])} (seed {e(r['seed'])}): {e(r['outcome'].replace('_', ' '))}"
+                    f"{' (' + e(r['hit']) + ')' if r['hit'] else ''}: {e(r['reason'])}</li>" for r in s.failures)
+    files = " ".join(f'<a href="{_href(p, out)}">{e(p.name)}</a>' for p in mine) or "-"
+    return (f"<h3>{e(s.source.name)}: {len(s.failures)} of {len(s.feasible)} feasible tests failed</h3>"
+            f'<div class=card><img src="{_href(pack / PREVIEW, out)}" alt="preview of {e(s.source.name)}" '
+            f'style="max-width:360px"><p><a href="{_href(pack, out)}/">asset pack</a></p>'
+            f"<ul class=reasons>{fails}</ul><p>OpenSCENARIO: {files}</p>{videos}</div>")
+
+
 def write_hunt_report(out: Path, rows: list[dict], worst: list[Scored], packs: list[Path], xoscs: list[Path],
                       mp4s: list[Path], driver: str) -> Path:
-    """``report.html``: the ranking, then per worst garage its preview, failures, files and videos (``mp4s``)."""
+    """``report.html`` in the demo report's style (:data:`~garage_mj.reporting.report.CSS`): the ranking, then
+    per worst garage its preview, failures, files and video (``mp4s``, named as cruise names them)."""
     e = html.escape
-    head = ["rank", "garage", "difficulty", "tests", "feasible", "failures", "failure_pct", "hit",
-            "failure_progress"]
-    table = "".join("<tr>" + "".join(f"<td>{e(str(r[c]))}</td>" for c in head) + "</tr>" for r in rows[:50])
-    cards = []
-    for s, pack in zip(worst, packs, strict=True):
-        rel = pack.relative_to(out)
-        mine = [p for p in xoscs if p.name.startswith(s.source.hash[:12])]
-        vid = [p for p in mp4s if p.name.startswith(s.source.hash[:12])]
-        fails = "".join(f"<li>test {e(r['test'])} (seed {e(r['seed'])}): {e(r['outcome'])}"
-                        f"{' (' + e(r['hit']) + ')' if r['hit'] else ''}: {e(r['reason'])}</li>" for r in s.failures)
-        files = " ".join(f'<a href="{e(str(p.relative_to(out)))}">{e(p.name)}</a>' for p in mine)
-        video = "".join(f'<p><video src="{e(str(p.relative_to(out)))}" controls width="480"></video></p>' for p in vid)
-        preview = rel / PREVIEW
-        cards.append(f'<section><h3>{e(s.source.name)}: {len(s.failures)} of {len(s.feasible)} feasible tests '
-                     f'failed</h3><p><a href="{e(str(rel))}">asset pack</a></p>'
-                     f'<img src="{e(str(preview))}" alt="preview of {e(s.source.name)}" width="360">'
-                     f'<ul>{fails}</ul><p>OpenSCENARIO: {files}</p>{video}</section>')
-    page = (f"<!doctype html><html><head><meta charset='utf-8'><title>hunt: {e(driver)}</title>"
-            "<style>body{font-family:sans-serif;margin:2em}td,th{border:1px solid #ccc;padding:2px 6px}"
-            "table{border-collapse:collapse}</style></head><body>"
-            f"<h1>Hunt: where {e(driver)} fails</h1><p>{len(rows)} garages tested; ranked by failure rate on "
-            "feasible tests (failures.csv has them all).</p><table><tr>"
-            + "".join(f"<th>{e(c)}</th>" for c in head) + f"</tr>{table}</table><h2>The worst garages</h2>"
-            + "".join(cards) + "</body></html>")
+    table = "".join("<tr>" + "".join(f"<td>{e(str(r[c]))}</td>" for c in REPORT_COLUMNS) + "</tr>" for r in rows[:50])
+    cards = "".join(_card(s, pack, xoscs, mp4s, out) for s, pack in zip(worst, packs, strict=True))
+    page = (f"<!doctype html><html lang=en><head><meta charset=utf-8>"
+            "<meta name=viewport content='width=device-width,initial-scale=1'>"
+            f"<title>hunt: {e(driver)}</title><style>{CSS}</style></head><body>"
+            f"<h1>Hunt: where {e(driver)} fails</h1><p class=muted>{len(rows)} garages tested; ranked by failure rate "
+            "on feasible tests (failures.csv has them all).</p><h2 id=ranking>Ranking</h2>"
+            "<div class=wide><table id=hunt-table><thead><tr>" + "".join(f"<th>{e(c)}</th>" for c in REPORT_COLUMNS)
+            + f"</tr></thead><tbody>{table}</tbody></table></div><h2 id=worst>The worst garages</h2>"
+            + cards + "</body></html>")
     path = out / "report.html"
     atomic_write(path, page)
     return path

@@ -25,7 +25,9 @@ h1{font-size:1.7rem;margin-bottom:.2rem}h2{border-bottom:2px solid #e3e7ec;paddi
 .muted{color:#5d6875}.figs{display:flex;flex-wrap:wrap;gap:1rem}.figs figure{margin:0;flex:1 1 420px}
 img{max-width:100%;border:1px solid #d5dbe1;border-radius:4px;background:#fff}
 table{border-collapse:collapse;width:100%;font-size:.92rem;margin:.6rem 0}#cruise-table{font-size:.8rem}
-#cruise-table th,#cruise-table td{padding:.25rem .35rem}
+#cruise-table th,#cruise-table td{padding:.25rem .35rem}#cruise-table th{vertical-align:bottom;hyphens:auto}
+#cruise-table td:nth-child(-n+2){overflow-wrap:anywhere;min-width:6em}
+.bleed{width:min(calc(100vw - 3rem),1700px);margin-left:50%;transform:translateX(-50%)}
 th,td{border:1px solid #d5dbe1;padding:.3rem .5rem;text-align:right}th{background:#f1f4f7}
 td:first-child,th:first-child{text-align:left}
 .gallery{display:grid;grid-template-columns:repeat(auto-fill,minmax(250px,1fr));gap:1rem}
@@ -204,7 +206,8 @@ def render_html(data: ReportData, out_dir: Path) -> str:
             )
         parts.append("</div>")
     if data.cruise_rows:
-        parts.append("<h2 id=cruise>Cruise tests</h2><div class=wide><table id=cruise-table><thead><tr>")
+        # wider than the text when the window is (.bleed), names wrapping anywhere: the last column stays in view
+        parts.append("<h2 id=cruise>Cruise tests</h2><div class='wide bleed'><table id=cruise-table><thead><tr>")
         parts += [f"<th>{e(c)}</th>" for c in data.cruise_columns]
         parts.append("</tr></thead><tbody>")
         for row in data.cruise_rows:
