@@ -155,8 +155,8 @@ def test_missed_goals_are_counted_and_old_deadlock_rows_load(garages, tmp_path):
     header = (tmp_path / "summary.csv").read_text().splitlines()[0].split(",")
     assert header == list(SUMMARY_COLUMNS) and header.index("missed_goals") == header.index("deadlocks") + 1
     assert (summary[0]["deadlocks"], summary[0]["missed_goals"], summary[0]["success_pct"]) == (1, 2, 20.0)
-    assert stats["failures"] == {"collision": 1, "timeout": 0, "deadlock": 1, "missed_goal": 2, "driver_crash": 0,
-                                 "driver_timeout": 0}
+    assert stats["failures"] == {"collision": 1, "timeout": 0, "deadlock": 1, "missed_goal": 2, "outside_stall": 0,
+                                 "driver_crash": 0, "driver_timeout": 0}
     assert stats["paper_failures"] == {"collision": 1, "timeout": 0, "deadlock": 3}  # missed goals are deadlocks
 
 

@@ -1,4 +1,5 @@
-"""``garage-mj cruise``: batch cruise tests of a driver over packs or library garages (docs/spec.md section 7)."""
+"""``garage-mj cruise``: batch cruise tests of a driver over packs or library garages (docs/spec.md section 7);
+with ``--task park`` or ``--task avp`` the park and AVP tests of section 8."""
 
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ from garage_mj.driving.difficulty.regression import r_text
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import TEST_COLUMNS
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
+from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings, CruiseSource
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
@@ -94,8 +96,36 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--xosc", action="store_true",
                    help="also write every test as OpenSCENARIO 1.2 into OUT/xosc/ (garages without an asset "
                         "pack get one in OUT/packs/); replay one with --scenario-file")
+    add_task_args(p, stall=True)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=user_errors(run))
+
+
+def add_task_args(p: argparse.ArgumentParser, stall: bool = False) -> None:
+    """``--task`` and ``--maneuver`` (and ``--stall``): what each test asks of the driver (docs/spec.md 7 and 8)."""
+    p.add_argument("--task", choices=TASKS, default="cruise",
+                   help="cruise: entrance to the lane beside the stall (default); park: from there into the stall, "
+                        "forward and reverse; avp: both, scored as one test. Stored in run.json like the seed")
+    p.add_argument("--maneuver", choices=MANEUVER_CHOICES, default="reverse",
+                   help="park and avp: reverse-in (default), forward (nose-in), or any (drawn per test)")
+    if stall:
+        p.add_argument("--stall", type=non_negative_int, metavar="ID",
+                       help="test this stall every time (default: drawn per test); an id the garage lacks is "
+                            "refused naming its range")
+
+
+def task_warning(command: str, driver: str, task: str) -> None:
+    """One line on stderr when a park or AVP run's driver cannot reverse: its class does not name the task in a
+    ``tasks`` attribute (a cruise driver: its actions keep the car in D). The tests still run."""
+    from garage_mj.driving.drivers import resolve_driver
+
+    if task == "cruise":
+        return
+    tasks = getattr(resolve_driver(driver), "tasks", ("cruise",))
+    if task not in tasks:
+        print(f"garage-mj {command}: warning: driver {driver!r} is a cruise driver (its class declares no "
+              f"tasks = (..., {task!r})): it cannot select reverse, so it drives the {task} tests forward only",
+              file=sys.stderr)
 
 
 def video_count(text: str) -> int:
@@ -229,7 +259,9 @@ def run(args: argparse.Namespace) -> int:
         env["scenario"] = scen
     with action_warnings("cruise"):
         settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
-                                  test_timeout=args.test_timeout)
+                                  test_timeout=args.test_timeout, task=args.task, maneuver=args.maneuver,
+                                  stall=args.stall)
+        task_warning("cruise", args.driver, args.task)
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)
     s = res.stats

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import compute, positive_int, positive_seconds, seed, unit_range
-from garage_mj.cli.cruise import action_warnings, runner_failures, scenario
+from garage_mj.cli.cruise import action_warnings, add_task_args, runner_failures, scenario, task_warning
 from garage_mj.driving.hunt import HuntConfig, HuntResult
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings
 
@@ -54,6 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "cluster at --address); results are the same")
     p.add_argument("--address", metavar="HOST:PORT", help="with --backend ray: a running Ray cluster")
     p.add_argument("--out", type=Path, default=Path("hunt"), help="output folder (default ./hunt)")
+    add_task_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -72,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
                      worst=args.worst)
     with action_warnings("hunt"):
         settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
-                                  test_timeout=args.test_timeout)
+                                  test_timeout=args.test_timeout, task=args.task, maneuver=args.maneuver)
+        task_warning("hunt", args.driver, args.task)
         res = hunt(settings, args.out, map=args.map if args.library is None else args.library_map,
                    library=args.library, config=cfg, compute=compute(args), videos=not args.no_videos)
     print(failure_summary(res))

@@ -103,7 +103,8 @@ def lost_row(job: tuple[CruiseSource, int, CruiseSettings, str | None, bool], wh
             "seed": cruise_seed(settings.seed, source.hash, index), "driver": settings.driver,
             "outcome": kind.value, "reason": f"driver {settings.driver}: {why.reason}", "difficulty": source.difficulty,
             "mean_road_length": source.mean_road_length, "mean_intersection_degree": source.mean_intersection_degree,
-            "wall_s": round(why.seconds, 3)}
+            "wall_s": round(why.seconds, 3), "task": settings.task,
+            "maneuver": settings.maneuver if settings.task != "cruise" and settings.maneuver != "any" else ""}
 
 
 # -- OpenSCENARIO export --------------------------------------------------------------------------------
@@ -187,6 +188,9 @@ def run_cruise(
     if len(set(hashes)) != len(hashes):
         raise CruiseError("the same garage is listed twice; give each garage once")
     settings = settings.resolved(choice.action_type)
+    if xosc and settings.task != "cruise":
+        raise CruiseError(f"--xosc writes cruise tests as OpenSCENARIO; {settings.task} tests are not exported: "
+                          "leave it out")
     check_driver(settings)  # a driver that cannot be built stops the run before anything is written
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise", remove=True):  # a second run into `out` is refused, naming this one

@@ -11,11 +11,13 @@ both use it.
 from __future__ import annotations
 
 import json
+import math
 import time
 import traceback
 from typing import Any
 
 from garage_mj.core.errors import GarageMJError
+from garage_mj.driving.results import PARK_COLUMNS
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
 _CACHE: dict[str, Any] = {}
@@ -25,12 +27,15 @@ def cached_env(source: CruiseSource, settings: CruiseSettings):
     """This process's env for ``source`` (built once; the previous garage's env is closed)."""
     from garage_mj.driving.sim.drive_env import GarageDriveEnv
 
-    key = (source.hash, json.dumps(settings.env, sort_keys=True))
+    key = (source.hash, json.dumps(settings.env, sort_keys=True), settings.task, settings.maneuver, settings.stall)
     if _CACHE.get("hash") != key:
         if "env" in _CACHE:
             _CACHE.pop("env").close()
+        task = {} if settings.task == "cruise" else {"task": settings.task, "maneuver": settings.maneuver}
+        if settings.stall is not None:
+            task["stall"] = settings.stall
         _CACHE["env"] = GarageDriveEnv(garage=source.garage, action_type=settings.action_type,
-                                       occupancy=settings.occupancy, infeasible="report", **settings.env)
+                                       occupancy=settings.occupancy, infeasible="report", **task, **settings.env)
         _CACHE["hash"] = key
     return _CACHE["env"]
 
@@ -105,4 +110,30 @@ def drive_test(env, obs, info, seed: int, settings: CruiseSettings, source: Crui
         "pedestrians": info["actors"]["pedestrian"], "moving_cars": info["actors"]["moving_car"],
         "clutter": info["actors"]["clutter"],
         "wall_s": round(time.perf_counter() - start, 3),
+        **park_cells(info),
     }
+
+
+def _cell(value: Any, digits: int = 3) -> Any:
+    """A number for a CSV cell, rounded; "" for None, NaN or an infinity."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return ""
+    return round(value, digits) if isinstance(value, float) else value
+
+
+def park_cells(info: dict[str, Any]) -> dict[str, Any]:
+    """The park columns of a test's row (:data:`~garage_mj.driving.results.PARK_COLUMNS`) from the env's last info:
+    for a cruise test its task only; the parking metrics where the test was driven, the plan's where one was found."""
+    cells: dict[str, Any] = dict.fromkeys(PARK_COLUMNS, "")
+    if "task" not in info:
+        return {**cells, "task": "cruise"}
+    found = info["plan_cusps"] >= 0
+    cells |= {"task": info["task"], "maneuver": info["maneuver"],
+             "plan_length_m": _cell(info["plan_length"]) if found else "",
+             "plan_cusps": info["plan_cusps"] if found else "",
+             "plan_clearance_m": _cell(info["plan_clearance"]) if found else ""}
+    if "position_error" in info:  # driven: the metrics at its end
+        cells.update(position_error_m=_cell(info["position_error"]), heading_error_deg=_cell(info["heading_error"], 2),
+                     lateral_offset_m=_cell(info["lateral_offset"]), direction_changes=info["direction_changes"],
+                     park_time_s=_cell(info["park_time"]), min_clearance_m=_cell(info["min_clearance"]))
+    return cells

@@ -197,6 +197,8 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
     stored = {"driver": settings.driver, "map": map, "library": str(Path(library).resolve()) if library else None,
               "seed": settings.seed, "action_type": settings.action_type, "occupancy": settings.occupancy,
               "env": settings.env, "test_timeout": settings.test_timeout, "config": asdict(cfg)}
+    if settings.task != "cruise":  # a cruise hunt's hunt.json stays as it was
+        stored.update(task=settings.task, maneuver=settings.maneuver)
     session = ray_session(compute) if compute.backend == "ray" else contextlib.nullcontext()
     with FolderLock(out, "garage-mj hunt", remove=True), session:
         state_path = _state_file(out)

@@ -11,6 +11,10 @@ difficulty (``route_r``, ``route_slope``, ``route_intercept``, ``route_n``, unde
 :mod:`garage_mj.driving.difficulty.regression`). A garage's route difficulty is empty in ``summary.csv`` when it
 has no feasible stall or was not computed (a run without a route model, a run of an older garage-mj).
 
+A park or AVP run (``CruiseSettings.task``) writes the same files; its ``tests.csv`` rows fill the park
+columns (:data:`PARK_COLUMNS`, empty but ``task`` in a cruise row), and its ``summary.csv`` and
+``summary.json`` add :data:`PARK_SUMMARY_COLUMNS` (a cruise run's keep their columns).
+
 Failures are counted per failure kind of :data:`garage_mj.driving.sim.outcomes.OUTCOMES`
 (:data:`FAILURE_KINDS`, each with its column of :data:`COUNT_COLUMNS`), and folded into the paper's three
 classes (:data:`garage_mj.driving.sim.outcomes.PAPER_CLASS`): ``summary.json`` gives both.
@@ -38,9 +42,18 @@ from garage_mj.driving.difficulty.regression import PAPER_R, regression
 from garage_mj.driving.sim.outcomes import FAILURES, HIT_KINDS, OUTCOMES, PAPER_CLASS, OutcomeKind
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseError, CruiseSettings, CruiseSource
 
-TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome", "hit",
-                "hit_geom", "reason", "time", "path_length", "route_length", "difficulty", "mean_road_length",
-                "mean_intersection_degree", "pedestrians", "moving_cars", "clutter", "wall_s")
+#: The columns of ``tests.csv`` before park tests (a file with these alone is repaired to :data:`TEST_COLUMNS`).
+LEGACY_TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome",
+                       "hit", "hit_geom", "reason", "time", "path_length", "route_length", "difficulty",
+                       "mean_road_length", "mean_intersection_degree", "pedestrians", "moving_cars", "clutter",
+                       "wall_s")
+#: A test's task and the parking metrics of docs/spec.md section 8 (empty in a cruise test's row, but ``task``):
+#: the car's final pose against the stall pose, the cusps driven, the parking time [s] (an AVP test's from the
+#: end of its cruise route), the footprint's least clearance along the driven path, and the reference plan's
+#: length, cusps and clearance.
+PARK_COLUMNS = ("task", "maneuver", "position_error_m", "heading_error_deg", "lateral_offset_m", "direction_changes",
+                "park_time_s", "min_clearance_m", "plan_length_m", "plan_cusps", "plan_clearance_m")
+TEST_COLUMNS = (*LEGACY_TEST_COLUMNS, *PARK_COLUMNS)
 #: What a collision can hit (``hit`` column): the summary counts collisions per class.
 HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
 #: The failure outcomes, as ``tests.csv`` writes them, in display order.
@@ -50,6 +63,13 @@ COUNT_COLUMNS = {s.kind: s.column for s in OUTCOMES if s.failure}
 #: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
 SUMMARY_COLUMNS = ("garage", "difficulty", "route_difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
                    *COUNT_COLUMNS.values(), "success_pct", *(f"hit_{c}" for c in HIT_CLASSES))
+#: ``summary.csv``'s columns added for a park or AVP run (a cruise run's keep :data:`SUMMARY_COLUMNS` alone):
+#: collision and timeout rates over feasible tests, mean final position and heading errors over the driven
+#: tests, mean parking time and direction changes over the successes.
+PARK_SUMMARY_COLUMNS = ("collision_pct", "timeout_pct", "mean_position_error_m", "mean_heading_error_deg",
+                        "mean_park_time_s", "mean_direction_changes")
+#: The task settings ``run.json`` holds only where they differ from these (a cruise run's is as before park tests).
+TASK_DEFAULTS = {"task": "cruise", "maneuver": "reverse", "stall": None}
 #: Settings beside the compared ones in ``run.json``: how they were chosen, not what the tests are.
 PROVENANCE_KEYS = ("action_type_from",)
 
@@ -71,7 +91,9 @@ def read_tests(path: Path) -> list[dict[str, str]]:
     Repairs what a crash, a second run or a careless edit can leave, never dropping a complete
     row: an empty file or a missing header (the header is written back), a torn last line (a
     ``kill -9`` mid-write: dropped), a header of other columns (rewritten with
-    :data:`TEST_COLUMNS`), and duplicate (garage_hash, test) rows (the first one is kept).
+    :data:`TEST_COLUMNS`), and duplicate (garage_hash, test) rows (the first one is kept). A file from
+    before park tests (:data:`LEGACY_TEST_COLUMNS`, with or without its header) is a cruise run's: its
+    rows get task ``cruise`` and empty park columns.
     """
     if not path.is_file():
         return []
@@ -90,6 +112,10 @@ def read_tests(path: Path) -> list[dict[str, str]]:
     dropped = 0
     for fields in csv.reader(body):
         row = dict(zip(columns, fields)) if len(fields) == len(columns) else None
+        if row is None and not has_header and len(fields) == len(LEGACY_TEST_COLUMNS):
+            row = dict(zip(LEGACY_TEST_COLUMNS, fields))
+        if row is not None and "task" not in row:  # a row from before park tests: a cruise test
+            row = {**row, **dict.fromkeys(PARK_COLUMNS, ""), "task": "cruise"}
         if row is None or not _complete(row) or (row["garage_hash"], row["test"]) in seen:
             dropped += 1
             continue
@@ -125,7 +151,9 @@ def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--ac
     """
     path = out / "run.json"
     mine = json.loads(json.dumps(asdict(settings)))
-    record = {**mine, "action_type_from": action_from}
+    # a cruise run's run.json stays as it was before park tests: the task settings only where not the defaults
+    record = {**{k: v for k, v in mine.items() if k not in TASK_DEFAULTS or v != TASK_DEFAULTS[k]},
+              "action_type_from": action_from}
     if path.is_file():
         try:
             theirs = json.loads(path.read_bytes().decode("utf-8"))
@@ -139,6 +167,8 @@ def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--ac
             write_json(path, record)
         theirs = {k: v for k, v in theirs.items() if k not in PROVENANCE_KEYS}
         theirs.setdefault("test_timeout", DEFAULT_TEST_TIMEOUT)  # a run.json from before the setting: the default
+        for key, default in TASK_DEFAULTS.items():  # left out (a cruise run's), or from before park tests
+            theirs.setdefault(key, default)
 
         def refuse(diff: list[str]) -> CruiseError:
             shown = ", ".join(f"{k} {_shown(theirs.get(k))} there, {_shown(mine.get(k))} now" for k in diff)
@@ -174,6 +204,33 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
             **{f"hit_{c}": hits.get(c, 0) for c in HIT_CLASSES},
         })
     return out
+
+
+def _tested(sources: Sequence[CruiseSource], rows: Sequence[dict[str, Any]]) -> list[CruiseSource]:
+    """The sources with a row, in order (the garages :func:`summarize` gives a row)."""
+    hashes = {r["garage_hash"] for r in rows}
+    return [s for s in sources if s.hash in hashes]
+
+
+def _mean(rows: Sequence[dict[str, Any]], column: str) -> float | None:
+    values = [float(r[column]) for r in rows if r.get(column, "") not in ("", None)]
+    return rounded(float(np.mean(values))) if values else None
+
+
+def park_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """:data:`PARK_SUMMARY_COLUMNS` over the rows of park or AVP tests (docs/cruise.md, "Park and AVP tests")."""
+    driven = driven_tests(rows)
+    kinds = [r["outcome"] for r in driven]
+    successes = [r for r in driven if r["outcome"] == OutcomeKind.SUCCESS.value]
+
+    def pct(kind: str) -> float | None:
+        return round(100.0 * kinds.count(kind) / len(driven), 2) if driven else None
+
+    return {"collision_pct": pct(OutcomeKind.COLLISION.value), "timeout_pct": pct(OutcomeKind.TIMEOUT.value),
+            "mean_position_error_m": _mean(driven, "position_error_m"),
+            "mean_heading_error_deg": _mean(driven, "heading_error_deg"),
+            "mean_park_time_s": _mean(successes, "park_time_s"),
+            "mean_direction_changes": _mean(successes, "direction_changes")}
 
 
 def rounded(value: float | None, digits: int = 4) -> float | None:
@@ -224,7 +281,11 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
     summary.json says of that model (:meth:`~garage_mj.driving.difficulty.rating.RouteModelChoice.record`:
     its name, the drivers and action types it was fitted for, or why there is none)."""
     summary = summarize(rows, sources, route)
-    write_csv(out / "summary.csv", SUMMARY_COLUMNS, summary)
+    parking = settings.task != "cruise"
+    if parking:
+        for s, row in zip(_tested(sources, rows), summary, strict=True):
+            row.update(park_summary([r for r in rows if r["garage_hash"] == s.hash]))
+    write_csv(out / "summary.csv", (*SUMMARY_COLUMNS, *PARK_SUMMARY_COLUMNS) if parking else SUMMARY_COLUMNS, summary)
     rated = [r for r in summary if r["success_pct"] is not None]  # garages with a feasible test
     fit = regression([r["difficulty"] for r in rated], [r["success_pct"] for r in rated])
     on_route = [r for r in rated if r["route_difficulty"] is not None]
@@ -248,5 +309,7 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
              "hits": _hits(driven),
              "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
              "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}
+    if parking:
+        stats.update(task=settings.task, maneuver=settings.maneuver, **park_summary(rows))
     write_json(out / "summary.json", stats)
     return summary, stats

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from garage_mj.core.errors import GarageMJError, control_character
+from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.metrics import evaluate
 
@@ -79,7 +80,8 @@ class CruiseSettings:
 
     ``occupancy`` is a setting of its own, never a key of ``env``. ``test_timeout`` can change a test's
     outcome (``driver_timeout``), so it is stored and compared too; a ``run.json`` written before it
-    existed holds the default.
+    existed holds the default. So do ``task``, ``maneuver`` and ``stall`` (docs/spec.md section 8): a
+    ``run.json`` from before them is a cruise run's, with every stall drawn.
     """
 
     driver: str = "vision"  # built-in name or module:Class
@@ -89,8 +91,22 @@ class CruiseSettings:
     env: dict[str, Any] = field(default_factory=dict)  # more GarageDriveEnv keyword arguments
     driver_kwargs: dict[str, Any] = field(default_factory=dict)
     test_timeout: float = DEFAULT_TEST_TIMEOUT  # [s] wall time per test; past it the test is a driver_timeout
+    task: str = "cruise"  # "cruise", "park" or "avp" (GarageDriveEnv(task=))
+    maneuver: str = "reverse"  # park and AVP tests: "reverse", "forward" or "any" (drawn per test)
+    stall: int | None = None  # the stall every test targets (None: drawn per test)
 
     def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise CruiseError(f"task {self.task!r}: use one of {', '.join(TASKS)}")
+        if self.maneuver not in MANEUVER_CHOICES:
+            raise CruiseError(f"maneuver {self.maneuver!r}: use one of {', '.join(MANEUVER_CHOICES)}")
+        scen = (self.env or {}).get("scenario") or {}
+        if self.task != "cruise" and any(scen.get(k) for k in ("pedestrians", "moving_cars", "clutter")):
+            raise CruiseError(f"task {self.task!r} has no actors: pedestrians, moving cars and clutter are for "
+                              "cruise tests; leave them out")
+        if self.stall is not None and (isinstance(self.stall, bool) or not isinstance(self.stall, int)
+                                       or self.stall < 0):
+            raise CruiseError(f"stall {self.stall!r}: give a stall id, an integer >= 0")
         if "occupancy" in (self.env or {}):
             raise CruiseError("env: occupancy is a cruise setting of its own (CruiseSettings.occupancy), not an "
                               "env keyword; give it as occupancy=")
@@ -110,12 +126,14 @@ class CruiseSettings:
     def from_stored(cls, data: dict[str, Any]) -> CruiseSettings:
         """The settings a run stored: ``run.json``, or the settings of a hunt's ``hunt.json`` (no driver kwargs)."""
         return cls(data["driver"], data["seed"], data["action_type"], data["occupancy"], data.get("env") or {},
-                   data.get("driver_kwargs") or {}, data.get("test_timeout", DEFAULT_TEST_TIMEOUT))
+                   data.get("driver_kwargs") or {}, data.get("test_timeout", DEFAULT_TEST_TIMEOUT),
+                   data.get("task", "cruise"), data.get("maneuver", "reverse"), data.get("stall"))
 
     def resolved(self, action_type: str) -> CruiseSettings:
         """These settings as a run uses and stores them: ``action_type`` the one chosen, plain numbers and dicts."""
         return CruiseSettings(self.driver, int(self.seed), action_type, float(self.occupancy), dict(self.env or {}),
-                              dict(self.driver_kwargs or {}), float(self.test_timeout))
+                              dict(self.driver_kwargs or {}), float(self.test_timeout), self.task, self.maneuver,
+                              None if self.stall is None else int(self.stall))
 
 
 def painted_sources(map: str, n: int, seed: int = 0, oversample: int = 4) -> list[CruiseSource]:

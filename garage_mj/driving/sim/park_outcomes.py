@@ -120,15 +120,15 @@ class ParkMonitor:
         x, y = float(position[0]), float(position[1])
         yaw = self.target[2] if yaw is None else float(yaw)
         self.poses.append((x, y, yaw))
+        for c in contacts:
+            if c.semantic in COLLIDABLE:  # (the bounce of a hit is no direction change)
+                return self._end(OutcomeKind.COLLISION, time,
+                                 f"hit {c.semantic.name.lower()} {c.geom} at {abs(speed):.1f} m/s",
+                                 c.semantic.name.lower(), c.geom)
         if abs(speed) > MOVING_SPEED:
             sign = 1 if speed > 0 else -1
             self.direction_changes += self._sign != 0 and sign != self._sign
             self._sign = sign
-        for c in contacts:
-            if c.semantic in COLLIDABLE:
-                return self._end(OutcomeKind.COLLISION, time,
-                                 f"hit {c.semantic.name.lower()} {c.geom} at {abs(speed):.1f} m/s",
-                                 c.semantic.name.lower(), c.geom)
         fit = self.fit = in_stall(self.stall, self.car, (x, y, yaw), self.maneuver)
         if abs(speed) < cfg.rest_speed and fit.parked:
             return self._end(OutcomeKind.SUCCESS, time, f"parked ({fit.position_error:.2f} m, "
