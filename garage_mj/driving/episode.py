@@ -31,11 +31,9 @@ def cached_env(source: CruiseSource, settings: CruiseSettings):
     if _CACHE.get("hash") != key:
         if "env" in _CACHE:
             _CACHE.pop("env").close()
-        task = {} if settings.task == "cruise" else {"task": settings.task, "maneuver": settings.maneuver}
-        if settings.stall is not None:
-            task["stall"] = settings.stall
         _CACHE["env"] = GarageDriveEnv(garage=source.garage, action_type=settings.action_type,
-                                       occupancy=settings.occupancy, infeasible="report", **task, **settings.env)
+                                       occupancy=settings.occupancy, infeasible="report", **settings.task_kwargs(),
+                                       **settings.env)
         _CACHE["hash"] = key
     return _CACHE["env"]
 

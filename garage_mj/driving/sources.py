@@ -129,6 +129,13 @@ class CruiseSettings:
                    data.get("driver_kwargs") or {}, data.get("test_timeout", DEFAULT_TEST_TIMEOUT),
                    data.get("task", "cruise"), data.get("maneuver", "reverse"), data.get("stall"))
 
+    def task_kwargs(self) -> dict[str, Any]:
+        """The ``GarageDriveEnv`` keyword arguments of the task settings (none for a cruise run with every stall drawn)."""
+        kwargs: dict[str, Any] = {} if self.task == "cruise" else {"task": self.task, "maneuver": self.maneuver}
+        if self.stall is not None:
+            kwargs["stall"] = self.stall
+        return kwargs
+
     def resolved(self, action_type: str) -> CruiseSettings:
         """These settings as a run uses and stores them: ``action_type`` the one chosen, plain numbers and dicts."""
         return CruiseSettings(self.driver, int(self.seed), action_type, float(self.occupancy), dict(self.env or {}),

@@ -83,7 +83,8 @@ def record_video(
     choice = choose_action_type(settings.driver, settings.action_type, warn=False)
     drv = load_driver(settings.driver, **(settings.driver_kwargs or {}))
     env = GarageDriveEnv(garage=src.garage, action_type=choice.action_type, occupancy=settings.occupancy,
-                         infeasible="report", **(settings.env or {}))  # as the cruise runner: same seed, same test
+                         infeasible="report", **settings.task_kwargs(),
+                         **(settings.env or {}))  # as the cruise runner: same seed, same test
     width, height = size
     cam = Camera(env.model, CameraConfig(camera=camera, width=width, height=height, rgb=True, depth=False,
                                          segmentation=False))
