@@ -18,6 +18,13 @@ still reaches the path ahead, it brakes to stop ``actor_gap`` before the first s
 drives on when the actor has passed. A stop that would fall inside a turn moves back to the
 straight before it (the tracker holds a curve worse from a standstill).
 
+Park and AVP tests (docs/spec.md section 8): when the reset info has ``park_plan`` (the reference park
+plan: car-centre ``poses`` and gear ``directions``), the oracle tracks it forward and in reverse with
+:class:`~garage_mj.driving.drivers.park_tracking.ParkTracker` and answers the continuous park action
+``[pedal, steer, gear]``. A park test (``task`` "park") is the plan alone; an AVP test (``task`` "avp")
+first drives the cruise route exactly as a cruise test does (in D), and once at rest on its goal tracks
+the plan from there. Without ``park_plan`` nothing of this runs: a cruise test's commands are the same.
+
 If the oracle fails a feasible test, the test or the testbed is wrong, not the driver under test.
 """
 
@@ -31,6 +38,8 @@ import numpy as np
 
 from garage_mj.driving.actors.scenario import Corridor, actor_poses, sample_times
 from garage_mj.driving.drivers.base import BaseDriver
+from garage_mj.driving.drivers.park_tracking import ParkTrackConfig, ParkTracker
+from garage_mj.driving.sim.vehicle import Gear, ParkAction, clip
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import TestPlan
 
@@ -58,8 +67,19 @@ class OracleDriver(BaseDriver):
     config_class = OracleConfig
     action_type = "continuous"  # made for [throttle, steer]; discrete actions round its commands
 
+    #: Gains and speeds of the park plan tracker (park and AVP tests).
+    park_config = ParkTrackConfig()
+
     def reset(self, info: dict[str, Any]) -> None:
         super().reset(info)
+        self.tracker: ParkTracker | None = None
+        self.phase = "cruise"  # "cruise" (no park plan, or an AVP test's route) or "park"
+        plan = info.get("park_plan")
+        if plan is not None and len(plan["poses"]) >= 2:
+            self.tracker = ParkTracker(plan["poses"], plan["directions"], self.car, self.park_config, self.dt)
+            if info.get("task", "park") != "avp":
+                self.phase = "park"
+                return
         rear = info.get("rear_path")
         if rear is None or info.get("rear_heading") is None:
             raise ValueError("the oracle driver needs the test's plan (rear_path, rear_heading, rear_curvature) "
@@ -165,7 +185,7 @@ class OracleDriver(BaseDriver):
         j = min(int(np.searchsorted(self.s, ahead)), len(self.s) - 1)
         heading_err = math.remainder(yaw - h, math.tau)
         kappa = float(self.kappa[j]) - cfg.k_lateral * lateral - cfg.k_heading * math.sin(heading_err)
-        remaining = self.s[-1] - s_now
+        remaining = self.remaining = self.s[-1] - s_now
         if remaining <= cfg.stop_within:
             return -1.0, self.steer_for(kappa)
         v = float(np.interp(s_now, self.s, self.v_limit))
@@ -177,3 +197,41 @@ class OracleDriver(BaseDriver):
                 return -1.0, self.steer_for(kappa)
             v = min(v, math.sqrt(2.0 * cfg.actor_decel * room))
         return self.throttle_for(v, speed), self.steer_for(kappa)
+
+    # -- park and AVP tests ------------------------------------------------------------------------
+    def act(self, obs: dict[str, Any]):
+        """The cruise action (no park plan: :meth:`BaseDriver.act`, unchanged), else the park action."""
+        if self.tracker is None:
+            return super().act(obs)
+        speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
+        gear = Gear.D
+        if self.phase == "cruise":  # an AVP test's route, driven as in a cruise test
+            throttle, steer = self.command(obs)
+            if self.remaining <= self.config.stop_within and abs(speed) < self.tracker.config.at_rest:
+                self.phase = "park"
+        if self.phase == "park":
+            seen = obs.get("gear")
+            wheel = obs.get("steer")
+            throttle, steer, gear = self.tracker.command(
+                np.asarray(obs["pose"]).reshape(-1)[:3], speed,
+                None if seen is None else (Gear.R if float(np.asarray(seen).reshape(-1)[0]) < 0 else Gear.D),
+                None if wheel is None else float(np.asarray(wheel).reshape(-1)[0]))
+        if self.noise.throttle_std > 0:
+            throttle += float(self._rng.normal(0.0, self.noise.throttle_std))
+        if self.noise.steer_std > 0:
+            steer += float(self._rng.normal(0.0, self.noise.steer_std))
+        self._queue.append((clip(throttle, -1.0, 1.0), clip(steer, -1.0, 1.0)))
+        throttle, steer = self._queue.popleft()
+        if self.discrete:
+            return self._park_discrete(throttle, steer, gear, obs)
+        return np.array([throttle, steer, gear.sign], dtype=np.float32)
+
+    def _park_discrete(self, throttle: float, steer: float, gear: Gear, obs: dict[str, Any]) -> int:
+        """The :class:`ParkAction` for a park command: a gear selection while the wanted gear is not in, else
+        the cruise action closest to ``(throttle, steer)`` (:meth:`track_discrete`)."""
+        seen = obs.get("gear")
+        current = self.tracker.gear if seen is None else (Gear.R if float(np.asarray(seen).reshape(-1)[0]) < 0
+                                                          else Gear.D)
+        if gear is not current:
+            return int(ParkAction.SELECT_REVERSE if gear is Gear.R else ParkAction.SELECT_DRIVE)
+        return self.track_discrete(throttle, steer, obs)
