@@ -4,7 +4,8 @@
 Usage: ``driver = load_driver("waypoint", noise={"steer_std": 0.05})``, then per test
 ``driver.reset({"seed": 0, "action_type": "continuous"})`` and per step ``driver.act(obs)``.
 
-The hand-written built-ins are in :data:`DRIVERS` (``oracle``, ``waypoint``, ``vision``); the learned
+The hand-written built-ins are in :data:`DRIVERS` (``oracle``, ``waypoint``, ``vision``, and
+``park_assist``, a parking baseline for park and AVP tests only); the learned
 one is ``learned`` (the shipped deep-RL model, :mod:`garage_mj.driving.drivers.learned`) or
 ``learned:PATH`` (a model zip of ``garage-mj train-driver``). The ``learned:`` prefix wins over
 ``module:Class``, so a spec string (what cruise settings store) names model and driver alike.
@@ -44,6 +45,7 @@ DRIVERS: dict[str, str] = {
     "oracle": "garage_mj.driving.drivers.oracle:OracleDriver",
     "waypoint": "garage_mj.driving.drivers.waypoint:WaypointDriver",
     "vision": "garage_mj.driving.drivers.vision:VisionDriver",
+    "park_assist": "garage_mj.driving.drivers.park_assist:ParkAssistDriver",
 }
 #: The name prefix of a module imported from a ``path/to/file.py:Class`` spec (its ``__file__`` is the path).
 USER_FILE_MODULE = "garage_mj_user_driver_"
