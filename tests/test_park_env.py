@@ -158,3 +158,15 @@ def test_the_park_monitor_counts_direction_changes_and_deadlocks_far_away(painte
     out = monitor.update(9.0, far[:2], 0.0, yaw=far[2])
     assert out.kind is OutcomeKind.DEADLOCK and "from the stall pose" in out.reason
     assert not in_stall(stall, car, far, "reverse").parked
+
+
+@pytest.mark.parametrize("task", ["park", "avp"])
+def test_check_env_and_seeded_resets_of_the_registered_id(painted_tiny, task):
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make("garage_mj/GarageDrive-v0", garage=painted_tiny, task=task, maneuver="any").unwrapped
+    check_env(env, skip_render_check=True)
+    a, b = (env.reset(seed=5)[1] for _ in range(2))
+    assert (a["target_stall"], a["maneuver"], a["pose"]) == (b["target_stall"], b["maneuver"], b["pose"])
+    assert np.array_equal(a["park_plan"]["poses"], b["park_plan"]["poses"])
+    env.close()
