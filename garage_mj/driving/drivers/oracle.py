@@ -66,6 +66,7 @@ class OracleDriver(BaseDriver):
 
     config_class = OracleConfig
     action_type = "continuous"  # made for [throttle, steer]; discrete actions round its commands
+    tasks = ("cruise", "park", "avp")  # it reverses where a park plan asks (garage_mj.cli.cruise.task_warning)
 
     #: Gains and speeds of the park plan tracker (park and AVP tests).
     park_config = ParkTrackConfig()

@@ -65,6 +65,7 @@ class ParkAssistDriver(BaseDriver):
 
     config_class = ParkAssistConfig
     action_type = "continuous"  # made for [pedal, steer, gear]
+    tasks = ("park", "avp")  # it parks; a cruise test is an error (no stall observation)
 
     def reset(self, info: dict[str, Any]) -> None:
         super().reset(info)
