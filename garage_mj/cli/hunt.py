@@ -27,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--library-map", metavar="NAME", help="with --library: only garages of this map")
     p.add_argument("--driver", default="vision",
                    help="built-in driver (oracle, waypoint, vision; learned: the shipped deep-RL model), "
-                        "learned:PATH (a model zip of garage-mj train-driver) or module:Class (default vision)")
+                        "learned:PATH (a model zip of garage-mj train-driver), module:Class (a module on the Python path or "
+                        "in the current folder) or path/to/file.py:Class (default vision)")
     p.add_argument("--budget", type=positive_int, default=1000, help="cruise tests to spend in all (default 1000)")
     p.add_argument("--tests", type=positive_int, default=5, help="tests per garage per evaluation (default 5)")
     p.add_argument("--population", type=positive_int, default=20, help="garages per generation (default 20)")
