@@ -182,6 +182,7 @@ def test_fit_and_score_from_a_cruise_run(tmp_path, painted_tiny, junction_garage
     assert main(["difficulty", "fit", str(run), "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "route difficulty = P(fail)" in text and "per-garage r" in text
+    assert "per-garage r = too few garages (2) for a correlation" in text  # no r over 2 garages
     model = load_route_model(out)
     assert model.fit["drivers"] == ["waypoint"] and model.fit["garages"] == 2
     assert model.fit["action_types"] == ["discrete"]  # what a cruise run's default route model is matched on

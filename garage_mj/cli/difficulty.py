@@ -9,6 +9,7 @@ from garage_mj.cli import UserError
 from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, positive_int, seed, user_errors
 from garage_mj.core.fsutil import write_json
 from garage_mj.driving.difficulty.fit import driver_agreement, fit_runs, load_runs, score
+from garage_mj.driving.difficulty.regression import r_text, too_few
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.scene.route_difficulty import load_route_model
 from garage_mj.scene.route_features import FEATURES, garage_features, mean_features
@@ -87,8 +88,8 @@ def _print_score(score: dict) -> None:
         for name, key in (("route difficulty", "route"), ("paper's difficulty", "paper")):
             m = d[key]
             lo, hi = m["r_ci95"]
-            ci = f" [{lo:.3f}, {hi:.3f}]" if lo is not None else ""
-            r = "n/a" if m["r"] is None else f"{m['r']:.3f}"
+            r = r_text(m["r"], d["garages"])  # over too few garages: says so, no number
+            ci = f" [{lo:.3f}, {hi:.3f}]" if lo is not None and not too_few(d["garages"]) else ""
             a = "n/a" if m["auc"] is None else f"{m['auc']:.3f}"
             print(f"  {name:<19} per-garage r = {r}{ci}   per-test AUC = {a}")
         if d.get("attainable_r") is not None:  # the ceiling that the garages' test counts put on any r
