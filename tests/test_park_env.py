@@ -170,3 +170,10 @@ def test_check_env_and_seeded_resets_of_the_registered_id(painted_tiny, task):
     assert (a["target_stall"], a["maneuver"], a["pose"]) == (b["target_stall"], b["maneuver"], b["pose"])
     assert np.array_equal(a["park_plan"]["poses"], b["park_plan"]["poses"])
     env.close()
+
+
+def test_stall_fixes_a_cruise_tests_target_too(painted_tiny):
+    env = GarageDriveEnv(painted_tiny, stall=3, infeasible="report")
+    assert {env.reset(seed=s)[1]["target_stall"] for s in range(3)} == {3}
+    assert env.action_space.n == 4  # still a cruise test
+    env.close()

@@ -214,7 +214,7 @@ class GarageDriveEnv(gym.Env):
             ``gear``, and give the reference plan in the reset info as ``park_plan`` (``poses`` (N, 3) car
             centre, ``directions`` (N,) +1/-1, ``stall_pose``), as :meth:`driver_info` does. No actors.
         maneuver: ``"reverse"`` (reverse-in, the default), ``"forward"`` (nose-in) or ``"any"`` (drawn per test).
-        stall: a stall id every reset tests (park and AVP; default: drawn per test).
+        stall: a stall id every reset tests (default: drawn per test).
         park_config: :class:`~garage_mj.scene.park_planning.ParkConfig` of the reference park planner.
     """
 
@@ -350,7 +350,12 @@ class GarageDriveEnv(gym.Env):
         options = options or {}
         if self.task != "cruise":
             return self._reset_park(rng, options)
-        target = int(options["target"]) if "target" in options else int(rng.choice(self.targets))
+        if "target" in options:
+            target = int(options["target"])
+        elif self.stall is not None:  # one stall for every test (no draw: the other draws as with none)
+            target = self.stall
+        else:
+            target = int(rng.choice(self.targets))
         if target not in self.targets:
             raise ValueError(f"stall {target} cannot be reached; reachable stalls: {self.targets}")
         occupied_draw = rng.random(len(self.parkable)) < self.occupancy
