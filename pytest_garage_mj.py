@@ -14,12 +14,14 @@ Fixtures:
 - ``garage_library``: the path of an SQLite scenario library in the test's ``tmp_path`` holding 3 painted
   ``tiny_7x11`` garages.
 - ``garage_packs`` (session): a folder of the asset packs of those 3 garages (shared: copy it to change it).
-- ``garage_cruise``: ``garage_cruise(MyDriver)`` runs cruise tests of a driver class and returns
+- ``garage_cruise``: ``garage_cruise(MyDriver)`` runs cruise tests (``task="park"`` or ``"avp"``: park or
+  AVP tests, with ``maneuver`` and ``stall``) of a driver class and returns
   :class:`garage_mj.testing.DriverTests` (the results table; ``.assert_success()`` fails listing each
   failed test with how it failed, its MP4 and its ``.xosc``). Output in the test's ``tmp_path``.
 
 What ``garage_cruise`` tests, from the command line (``pytest --garage-tests 20``), else the marker
-``@pytest.mark.garage_mj(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS)``, else the
+``@pytest.mark.garage_mj(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS, task=..., maneuver=...,
+stall=ID)``, else the
 defaults; an argument given to ``garage_cruise(...)`` in the test itself wins over both. A test that runs
 past ``test_timeout`` (default 120 s) fails as ``driver_timeout`` and the others still run.
 """
@@ -35,11 +37,16 @@ import pytest
 
 MARKER = "garage_mj"
 #: What the options and the marker choose, with the defaults: maps to paint garages of, garages per map,
-#: cruise tests per garage, worker processes, wall time a test may take [s] (garage_mj's DEFAULT_TEST_TIMEOUT).
-DEFAULTS: dict[str, Any] = {"maps": ["tiny_7x11"], "per_map": 1, "tests": 3, "workers": 1, "test_timeout": 120.0}
+#: cruise tests per garage, worker processes, wall time a test may take [s] (garage_mj's DEFAULT_TEST_TIMEOUT),
+#: the task (cruise, park, avp), the park maneuver (reverse, forward, any) and the target stall (None: drawn).
+DEFAULTS: dict[str, Any] = {"maps": ["tiny_7x11"], "per_map": 1, "tests": 3, "workers": 1, "test_timeout": 120.0,
+                            "task": "cruise", "maneuver": "reverse", "stall": None}
+TASKS = ("cruise", "park", "avp")  # garage_mj's TASKS and MANEUVER_CHOICES (not imported: see above)
+MANEUVERS = ("reverse", "forward", "any")
 _CLI_HINT = " (put --debug before the command for its traceback)"  # the command line's advice; the traceback follows here
 _OPTIONS = {"maps": "garage_maps", "per_map": "garage_per_map", "tests": "garage_tests", "workers": "garage_workers",
-            "test_timeout": "garage_test_timeout"}
+            "test_timeout": "garage_test_timeout", "task": "garage_task", "maneuver": "garage_maneuver",
+            "stall": "garage_stall"}
 
 
 def _positive(text: str) -> int:
@@ -62,6 +69,16 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _stall(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a stall id, a whole number >= 0")
+    return value
+
+
 def _maps(text: str) -> list[str]:
     maps = [m.strip() for m in text.split(",") if m.strip()]
     if not maps:
@@ -79,10 +96,16 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--garage-workers", type=_positive, metavar="N", help="worker processes (default 1)")
     group.addoption("--garage-test-timeout", type=_seconds, metavar="SECONDS",
                     help="wall time a cruise test may take before it fails as driver_timeout (default 120)")
+    group.addoption("--garage-task", choices=TASKS, help="cruise, park or avp tests (default cruise)")
+    group.addoption("--garage-maneuver", choices=MANEUVERS,
+                    help="park and AVP tests: reverse-in, nose-in (forward) or drawn per test (any; default reverse)")
+    group.addoption("--garage-stall", type=_stall, metavar="ID",
+                    help="the stall every test targets (default: drawn per test)")
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", f"{MARKER}(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS): what the "
+    config.addinivalue_line("markers", f"{MARKER}(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS, task=..., "
+                                       "maneuver=..., stall=ID): what the "
                                        "garage_cruise fixture tests by default (--garage-* options override it)")
 
 
@@ -148,8 +171,8 @@ def garage_packs(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture
 def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
-    """``garage_cruise(driver, garages=None, *, tests=None, ...)``: cruise tests of ``driver`` (a class with
-    ``reset(info)`` and ``act(obs)``, or a spec); returns ``garage_mj.testing.DriverTests``."""
+    """``garage_cruise(driver, garages=None, *, tests=None, task=None, ...)``: cruise (park, AVP) tests of
+    ``driver`` (a class with ``reset(info)`` and ``act(obs)``, or a spec); returns ``garage_mj.testing.DriverTests``."""
     chosen = _chosen(request)
     runs = itertools.count()
 
@@ -157,7 +180,8 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
                       test_timeout: float | None = None,
                       per_map: int | None = None, seed: int = 0, action_type: str | None = None,
                       occupancy: float = 0.5, driver_kwargs: dict[str, Any] | None = None,
-                      env: dict[str, Any] | None = None):
+                      env: dict[str, Any] | None = None, task: str | None = None, maneuver: str | None = None,
+                      stall: int | None = None):
         from garage_mj.core.backends import Compute
         from garage_mj.core.errors import GarageMJError
         from garage_mj.driving.sources import CruiseSettings
@@ -167,7 +191,10 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
         k = next(runs)
         try:
             settings = CruiseSettings(seed=seed, action_type=action_type, occupancy=occupancy, env=dict(env or {}),
-                                      driver_kwargs=dict(driver_kwargs or {}))  # the driver: run_driver_tests sets it
+                                      driver_kwargs=dict(driver_kwargs or {}),  # the driver: run_driver_tests sets it
+                                      task=chosen["task"] if task is None else task,
+                                      maneuver=chosen["maneuver"] if maneuver is None else maneuver,
+                                      stall=chosen["stall"] if stall is None else stall)
             compute = Compute(workers=chosen["workers"] if workers is None else workers, progress=False)
             return run_driver_tests(
                 driver, chosen["maps"] if garages is None else garages, chosen["tests"] if tests is None else tests,

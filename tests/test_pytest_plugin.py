@@ -146,3 +146,44 @@ def test_run_driver_tests_takes_a_time_limit(tmp_path):
     res = run_driver_tests("tests._crashing:SleepDriver", tests=1, out_dir=tmp_path, test_timeout=0.5)
     assert [r["outcome"] for r in res.rows] == ["driver_timeout"] and res.success_rate == 0.0
     assert "driver_timeout 1" in res.failure_report(videos=0)
+
+
+PARKING = """
+import numpy as np
+import pytest
+
+
+class StandStill:
+    action_type = "continuous"
+
+    def reset(self, info):
+        pass
+
+    def act(self, obs):
+        return np.zeros(2, dtype=np.float32)  # no pedal, no steer: it never leaves the lane
+
+
+@pytest.mark.garage_mj(tests=1, task="park")
+def test_the_oracle_parks(garage_cruise):
+    res = garage_cruise("oracle").assert_success()
+    assert res.task == "park" and [r["task"] for r in res.rows] == ["park"]
+
+
+def test_standing_still_does_not_park(garage_cruise):
+    garage_cruise(StandStill, tests=1).assert_success()
+"""
+
+
+def test_park_tests_of_a_driver_pass_with_the_oracle_and_fail_readably_standing_still(pytester):
+    """task="park" (marker) and --garage-task park: the oracle parks; a car that stands still fails (no
+    progress), the message giving its position and heading error."""
+    pytester.makepyfile(test_parking=PARKING)
+    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--garage-maneuver", "reverse", "-k", "oracle")
+    result.assert_outcomes(passed=1)
+    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--garage-task", "park", "-k", "standing")
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    assert "park tests of test_parking:StandStill on 1 garage(s), 1 test(s): 1 of 1 feasible" in text, text
+    assert re.search(r"tiny_7x11-\S+ test 0: (outside_stall|deadlock): .*\(position error \d+\.\d\d m, heading error "
+                     r"\d+\.\d deg\)", text), text
+    assert re.search(r"video: \S+\.mp4", text), text

@@ -1,11 +1,13 @@
-"""Cruise tests of a driver class from a user's own test suite: run them, read the table, assert on it.
+"""Cruise, park and AVP tests of a driver class from a user's own test suite: run them, read the table,
+assert on it.
 
-:func:`run_driver_tests` runs ``tests`` cruise tests of a driver on each garage through the cruise
-runner (:func:`garage_mj.driving.cruise.run_cruise`: the same seeds, outcomes and ``tests.csv`` as
+:func:`run_driver_tests` runs ``tests`` cruise tests (or park or AVP tests: ``task``) of a driver on
+each garage through the cruise runner (:func:`garage_mj.driving.cruise.run_cruise`: the same seeds, outcomes and ``tests.csv`` as
 ``garage-mj cruise``) and returns :class:`DriverTests`, the results table.
 :meth:`DriverTests.assert_success` fails with a message a person can act on: how many feasible tests
 failed and how (reasons grouped per class, :mod:`garage_mj.reporting.failures`), then each failed test
-with its outcome and reason, the MP4 of the first few (:func:`garage_mj.reporting.cruise.record_cruise_videos`,
+with its outcome and reason (a park or AVP test's also with its position and heading error at the
+end), the MP4 of the first few (:func:`garage_mj.reporting.cruise.record_cruise_videos`,
 as ``garage-mj cruise --videos``) and its ``.xosc`` (the runner's ``xosc=True``, as ``garage-mj cruise
 --xosc``). Both are made only once a test has failed, so a passing suite pays for neither.
 """
@@ -73,6 +75,9 @@ def run_driver_tests(
     compute: Compute = QUIET,
     per_map: int = 1,
     test_timeout: float | None = None,
+    task: str | None = None,
+    maneuver: str | None = None,
+    stall: int | None = None,
 ) -> DriverTests:
     """Run ``tests`` cruise tests of ``driver`` on every garage of ``garages``; the results table.
 
@@ -86,11 +91,14 @@ def run_driver_tests(
     ``compute``: the workers (default one, no progress bar). Test seeds derive from (seed, garage, test
     index), so results do not depend on the workers. ``test_timeout`` [s]: the wall time a test may take
     (default ``settings.test_timeout``, :data:`~garage_mj.driving.sources.DEFAULT_TEST_TIMEOUT`); a test past it
-    is a ``driver_timeout`` failure and the others still run.
+    is a ``driver_timeout`` failure and the others still run. ``task`` (``cruise``, ``park``, ``avp``),
+    ``maneuver`` (``reverse``, ``forward``, ``any``) and ``stall`` (a stall id every test targets), when
+    given, replace the ones of ``settings`` (docs/spec.md section 8; ``garage-mj cruise --task``).
     """
     settings = settings if settings is not None else CruiseSettings()
     timeout = settings.test_timeout if test_timeout is None else test_timeout
-    settings = dataclasses.replace(settings, driver=driver_spec(driver), test_timeout=timeout)
+    chosen = {k: v for k, v in (("task", task), ("maneuver", maneuver), ("stall", stall)) if v is not None}
+    settings = dataclasses.replace(settings, driver=driver_spec(driver), test_timeout=timeout, **chosen)
     sources = cruise_sources(garages, per_map, settings.seed)
     call = {"sources": sources, "tests": tests, "settings": settings, "out_dir": out_dir, "compute": compute}
     return DriverTests(run_cruise(**call), tuple(sources), call)
@@ -104,6 +112,15 @@ def _replay_command(spec: str) -> str:
         return "garage-mj cruise --scenario-file FILE.xosc --out DIR"
     root = Path(where).resolve().parents[spec.partition(":")[0].count(".")]  # where the module is importable from
     return f"PYTHONPATH={root} garage-mj cruise --scenario-file FILE.xosc --out DIR"
+
+
+def _park_errors(row: dict[str, str]) -> str:
+    """A park or AVP test's errors at the end (`` (position error 1.2 m, heading error 14.0 deg)``); empty for a
+    cruise test's row, whose park columns are empty."""
+    pos, head = row.get("position_error_m", ""), row.get("heading_error_deg", "")
+    if not pos or not head:
+        return ""
+    return f" (position error {float(pos):.2f} m, heading error {float(head):.1f} deg)"
 
 
 def _pct(x: float | None) -> str:
@@ -126,6 +143,11 @@ class DriverTests:
     @property
     def driver(self) -> str:
         return self._call["settings"].driver
+
+    @property
+    def task(self) -> str:
+        """What the tests were: ``cruise``, ``park`` or ``avp`` (:attr:`CruiseSettings.task`)."""
+        return self._call["settings"].task
 
     @property
     def rows(self) -> list[dict[str, str]]:
@@ -165,7 +187,7 @@ class DriverTests:
                          for row in lines)
 
     def __str__(self) -> str:
-        return f"cruise tests of {self.driver} ({self.out_dir / 'tests.csv'}):\n{self.table()}"
+        return f"{self.task} tests of {self.driver} ({self.out_dir / 'tests.csv'}):\n{self.table()}"
 
     def _record_failures(self, videos: int) -> None:
         """The ``.xosc`` of every test and the MP4 of the first ``videos`` failures, into ``out_dir``."""
@@ -174,7 +196,8 @@ class DriverTests:
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ActionTypeWarning)  # the first run warned already
-            run_cruise(**{**self._call, "xosc": True})  # the tests are done: this only writes their .xosc
+            if self.task == "cruise":  # .xosc files hold cruise tests only
+                run_cruise(**{**self._call, "xosc": True})  # the tests are done: this only writes their .xosc
         if videos > 0:
             record_cruise_videos(self.result, self.sources, min(videos, len(self.failures)))
 
@@ -189,10 +212,11 @@ class DriverTests:
         rate, n, failed = self.success_rate, len(self.feasible), self.failures
         infeasible = len(self.rows) - n
         garages = len({r["garage_hash"] for r in self.rows})
-        head = f"cruise tests of {self.driver} on {garages} garage(s), {len(self.rows)} test(s)"
+        head = f"{self.task} tests of {self.driver} on {garages} garage(s), {len(self.rows)} test(s)"
         if rate is None:
-            return (f"{head}: none was feasible ({infeasible} infeasible: no forward route to the target stall "
-                    f"clears the car), so nothing was driven; test more garages or more tests per garage "
+            why = "no forward route to the target stall clears the car" if self.task == "cruise" else \
+                "no park plan into the target stall clears the car"
+            return (f"{head}: none was feasible ({infeasible} infeasible: {why}), so nothing was driven; test more garages or more tests per garage "
                     f"(rows in {self.out_dir / 'tests.csv'})")
         if rate >= min_success - 1e-12:
             return None
@@ -203,12 +227,13 @@ class DriverTests:
         for kind, count in report.counts.items():
             lines.append(f"  {kind} {count}: " + "; ".join(f"{g.text} (x{g.count})" for g in report.reasons[kind]))
         hits = {(r["garage"], int(r["test"])): r["hit"] for r in failed}
+        errors = {(r["garage"], int(r["test"])): _park_errors(r) for r in failed}
         lines.append(f"failed tests (the first {min(videos, len(failed))} with an MP4; replay one with "
                      f"{_replay_command(self.driver)}):")
         for item in report.shown:
             hit = hits.get((item.garage, item.test))
             lines.append(f"  {item.garage} test {item.test}: {item.outcome}{f' ({hit})' if hit else ''}: "
-                         f"{item.reason}")
+                         f"{item.reason}{errors.get((item.garage, item.test), '')}")
             if item.video is not None:
                 lines.append(f"    video: {item.video}")
             if item.xosc is not None:
