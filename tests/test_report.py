@@ -176,3 +176,74 @@ def test_the_cruise_table_fits_the_window(tmp_path, width):
     (fit,) = table_fit(path, width)
     assert fit["id"] == "cruise-table" and fit["last_right"] <= fit["inner"], fit
     assert fit["box_scroll"] <= 1 and fit["page_scroll"] == 0, fit
+
+
+# -- a cruise run's own report (garage-mj cruise --report): the park table and the failures' pictures ----------------
+STAND_STILL = "tests._crashing:_Stop"  # a driver that never moves: every park test fails
+
+
+@pytest.fixture(scope="module")
+def tiny_garage():
+    from garage_mj.grid.painters import paint_garage
+
+    return paint_garage("tiny_7x11", seed=1)
+
+
+def test_a_park_run_report_has_the_park_table_and_a_picture_per_failure_shown(tiny_garage, tmp_path):
+    from garage_mj.cli import main
+    from garage_mj.driving.results import PARK_SUMMARY_COLUMNS
+    from garage_mj.export.pack import export_pack
+    from garage_mj.reporting.cruise import REPORT_FAILURES
+    from garage_mj.reporting.park import PICTURES, SUCCESS_NOTE, column_label
+
+    export_pack(tiny_garage, tmp_path / "packs")
+    out = tmp_path / "park"
+    assert main(["cruise", "--packs", str(tmp_path / "packs"), "--tests", str(REPORT_FAILURES + 1), "--driver",
+                 STAND_STILL, "--task", "park", "--out", str(out), "--quiet", "--report"]) == 0
+    pictures = sorted((out / PICTURES).glob("*.png"))
+    assert len(pictures) == REPORT_FAILURES  # one per failure shown, not one per failure
+    facts = page_facts(out / "report.html")
+    assert "Park tests" in facts["headings"]
+    park = next(t for t in facts["tables"] if t["id"] == "park-table-1")
+    labels = [column_label(c) for c in PARK_SUMMARY_COLUMNS]
+    assert park["head"] == ["garage", "tests", "infeasible", "success of feasible", *labels]
+    assert "mean position error [m]" in labels and "collision %" in labels
+    assert park["rows"] == 2 and park["cells"][-1][0] == "all garages" and park["cells"][0][3] == "0.0%"
+    assert SUCCESS_NOTE in facts["text"] and "0.6 m lateral" in SUCCESS_NOTE
+    failures = next(t for t in facts["tables"] if t["head"][:2] == ["garage", "test"])
+    assert failures["head"][-1] == "top-down" and failures["rows"] == REPORT_FAILURES
+    shown = [i for i in facts["imgs"] if PICTURES in i["src"]]
+    assert sorted(i["src"].rsplit("/", 1)[1] for i in shown) == [p.name for p in pictures]
+    assert facts["imgs"] and all(i["loaded"] for i in facts["imgs"]), facts["imgs"]
+    assert all(f"{PICTURES}/{p.name}" in facts["links"] for p in pictures)
+
+
+def test_an_oracle_park_run_report_shows_its_success_and_no_picture(tiny_garage, tmp_path):
+    from garage_mj.core.backends import Compute
+    from garage_mj.driving.sources import CruiseSettings
+    from garage_mj.reporting.cruise import cruise_report, run_cruise
+    from garage_mj.reporting.park import PICTURES
+
+    out = tmp_path / "oracle"
+    run_cruise([tiny_garage], 2, CruiseSettings("oracle", 0, task="park"), out, compute=Compute(progress=False))
+    facts = page_facts(cruise_report(out, [tiny_garage]))
+    park = next(t for t in facts["tables"] if t["id"] == "park-table-1")
+    assert [row[3] for row in park["cells"]] == ["100.0%", "100.0%"]
+    assert not (out / PICTURES).exists() and all(i["loaded"] for i in facts["imgs"])
+
+
+def test_a_cruise_run_report_has_no_park_table(tiny_garage, tmp_path):
+    from garage_mj.core.backends import Compute
+    from garage_mj.driving.sources import CruiseSettings
+    from garage_mj.reporting.cruise import cruise_report, run_cruise
+    from garage_mj.reporting.park import PICTURES, park_table
+
+    out = tmp_path / "cruise"
+    env = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits: a quick failure
+    run_cruise([tiny_garage], 1, CruiseSettings(STAND_STILL, 0, env=env), out, compute=Compute(progress=False))
+    assert park_table(out) is None
+    path = cruise_report(out, [tiny_garage])
+    facts = page_facts(path)
+    assert "Park tests" not in facts["headings"] and not any(t["id"].startswith("park") for t in facts["tables"])
+    assert not any("top-down" in t["head"] for t in facts["tables"]) and not (out / PICTURES).exists()
+    assert "park-table" not in path.read_text()

@@ -46,7 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "the paper's difficulty and the route difficulty under --route-model beside the outcomes; without it the "
                     "driver's shipped model: 'learned' for the shipped learned driver, else the default), "
                     "summary.json (Pearson r and regression on each), regression.png and regression_route.png "
-                    "into --out, and with --videos N MP4s of N tests into OUT/videos/.")
+                    "into --out, with --videos N MP4s of N tests into OUT/videos/, and with --report "
+                    "OUT/report.html.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--packs", type=Path, metavar="DIR", help="a folder of asset packs (garage-mj export)")
     src.add_argument("--library", type=Path, metavar="FILE", help="a garage library (garage-mj train)")
@@ -83,6 +84,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="after the tests, MP4s of N of them (failures first, then successes, in garage and test "
                         "order) into OUT/videos/<garage>_<test>_<outcome>.mp4; re-run on a finished --out to only "
                         "make videos")
+    p.add_argument("--report", action="store_true",
+                   help="after the tests (and videos), OUT/report.html: the success and regression figures, the "
+                        "failures' reasons per class and the first failures with their files (MP4 from --videos, "
+                        ".xosc from --xosc); a park or AVP run adds the park table and a top-down picture of each "
+                        "failure shown (OUT/pictures/)")
     act = p.add_argument_group("adverse events (garage_mj.driving.actors.scenario; drawn per test from its seed)")
     act.add_argument("--pedestrians", type=non_negative_int, metavar="N",
                      help="pedestrians per test: crossing, stepping out between parked cars, walking along")
@@ -217,6 +223,8 @@ def route_text(stats: dict) -> str:
 def replay(args: argparse.Namespace) -> int:
     if args.videos:
         raise UserError("--videos records tests of a batch (--packs or --library), not --scenario-file replays")
+    if args.report:
+        raise UserError("--report reports a batch (--packs or --library), not --scenario-file replays")
     if args.ids is not None:
         raise UserError("--ids picks garages of a --library, not --scenario-file replays")
     if args.action_type is not None:
@@ -280,4 +288,8 @@ def run(args: argparse.Namespace) -> int:
                                                                       " (no driven test to record)"))
         for path, row in made:
             print(f"  {path.name}: {row['outcome']}{' (' + row['hit'] + ')' if row['hit'] else ''}: {row['reason']}")
+    if args.report:
+        from garage_mj.reporting.cruise import REPORT_FAILURES, cruise_report
+
+        print(f"report: {cruise_report(res.out_dir, srcs, max(REPORT_FAILURES, args.videos or 0))}")
     return 0

@@ -1,5 +1,5 @@
 """The failures of a cruise run as a report shows them: the reasons grouped per failure class, and the
-first few failing tests with their MP4 and OpenSCENARIO file.
+first few failing tests with their MP4, OpenSCENARIO file and (park or AVP) top-down picture.
 
 A class's reasons are grouped by their wording with the numbers taken out, so eight "stopped 1.01 m
 ..." to "stopped 1.59 m ..." lines read as one line with the range, "stopped 1.01–1.59 m ...", and
@@ -70,8 +70,11 @@ def run_failures(label: str, run_dir: Path, rows: Sequence[dict[str, str]], sour
                  shown: int = 3) -> RunFailures:
     """What the report shows of the cruise run in ``run_dir``: counts and reasons per class, and the first
     ``shown`` failures with their ``.xosc`` (``run_cruise(..., xosc=True)`` wrote them) and their MP4
-    (:func:`garage_mj.reporting.cruise.record_cruise_videos` wrote them into ``videos/``), each when there."""
+    (:func:`garage_mj.reporting.cruise.record_cruise_videos` wrote them into ``videos/``) and, for a park or AVP
+    run, their top-down picture (:func:`garage_mj.reporting.park.record_park_pictures`, ``pictures/``), each when
+    there."""
     from garage_mj.reporting.cruise import video_name  # matplotlib: deferred, so garage-mj --help stays light
+    from garage_mj.reporting.park import PICTURES, picture_name
 
     run_dir = Path(run_dir)
     settings = json.loads((run_dir / "run.json").read_text())
@@ -81,8 +84,9 @@ def run_failures(label: str, run_dir: Path, rows: Sequence[dict[str, str]], sour
         test = int(r["test"])
         xosc = run_dir / "xosc" / xosc_name(by_hash[r["garage_hash"]], test)
         mp4 = run_dir / "videos" / video_name(r)
-        items.append(FailureItem(r["garage"], test, r["outcome"], r["reason"],
-                                 mp4 if mp4.is_file() else None, xosc if xosc.is_file() else None))
+        png = run_dir / PICTURES / picture_name(r)
+        items.append(FailureItem(r["garage"], test, r["outcome"], r["reason"], mp4 if mp4.is_file() else None,
+                                 xosc if xosc.is_file() else None, png if png.is_file() else None))
     feasible = driven_tests(rows)
     counts = failure_counts(feasible)
     return RunFailures(label=label, action_type=settings["action_type"], tests_csv=run_dir / "tests.csv",

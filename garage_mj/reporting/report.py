@@ -35,7 +35,7 @@ td:first-child,th:first-child{text-align:left}
 .card p{margin:.3rem 0;font-size:.88rem}.kpi{display:flex;gap:1.5rem;flex-wrap:wrap}
 .kpi div{background:#f1f4f7;border-radius:6px;padding:.5rem .9rem}.kpi b{font-size:1.25rem;display:block}
 h3{margin:1.4rem 0 .3rem}table.failures td,table.failures th{text-align:left}caption{text-align:left;color:#5d6875;padding:.2rem 0}
-ul.reasons>li{margin:.2rem 0}.wide{overflow-x:auto}
+ul.reasons>li{margin:.2rem 0}.wide{overflow-x:auto}img.thumb{width:160px}
 """
 
 
@@ -83,6 +83,17 @@ class FailureItem:
     reason: str
     video: Path | None = None
     xosc: Path | None = None
+    picture: Path | None = None  # a park or AVP test's top-down PNG (stalls, plan, driven path)
+
+
+@dataclass
+class ParkTable:
+    """A park or AVP run's table: per garage its tests, success and parking metrics, and what success means."""
+
+    label: str  # the run, e.g. "oracle, park tests"
+    columns: list[str]
+    rows: list[list[object]]
+    note: str = ""
 
 
 @dataclass
@@ -109,6 +120,7 @@ class ReportData:
     cruise_columns: list[str] = field(default_factory=list)
     cruise_rows: list[list[object]] = field(default_factory=list)
     cruise_note: str = ""  # under the table: what the columns mean
+    park_tables: list[ParkTable] = field(default_factory=list)  # park and AVP runs only
     failures: list[RunFailures] = field(default_factory=list)
     regression_png: Path | None = None  # success rate vs the paper's difficulty
     regression_route_png: Path | None = None  # success rate vs the route difficulty
@@ -140,6 +152,27 @@ def _link(path: Path | None, text: str, out_dir: Path) -> str:
     return "-" if path is None else f'<a href="{_rel(path, out_dir)}">{html.escape(text)}</a>'
 
 
+def _thumb(path: Path | None, alt: str, out_dir: Path) -> str:
+    """A small picture linking to itself full size; ``-`` when there is none."""
+    if path is None:
+        return "-"
+    src = _rel(path, out_dir)
+    return f'<a href="{src}"><img class=thumb src="{src}" alt="{html.escape(alt)}"></a>'
+
+
+def _park_table(table: ParkTable, index: int) -> str:
+    """One park or AVP run's table (``id=park-table-<index>``, from 1) and its note."""
+    e = html.escape
+    parts = [f"<h3>{e(table.label)}</h3><div class=wide><table id=park-table-{index}><thead><tr>"]
+    parts += [f"<th>{e(c)}</th>" for c in table.columns]
+    parts.append("</tr></thead><tbody>")
+    parts += ["<tr>" + "".join(f"<td>{_fmt(v)}</td>" for v in row) + "</tr>" for row in table.rows]
+    parts.append("</tbody></table></div>")
+    if table.note:
+        parts.append(f"<p class=muted>{e(table.note)}</p>")
+    return "".join(parts)
+
+
 def _run_failures(run: RunFailures, out_dir: Path) -> str:
     """One driver run: failures per class with their grouped reasons, the shown tests with their files."""
     e = html.escape
@@ -156,16 +189,20 @@ def _run_failures(run: RunFailures, out_dir: Path) -> str:
             parts.append(f"<li><b>{e(kind.replace('_', ' '))}</b> ({run.counts.get(kind, 0)})<ul>{lines}</ul></li>")
         parts.append("</ul>")
     if run.shown:
+        pictures = any(f.picture is not None for f in run.shown)  # a park or AVP run's: a column of its own
         n = len(run.shown)
         which = (f"the first {n} of {failed} failures (all of them in tests.csv)" if failed > n
                  else "the failure" if n == 1 else f"the {n} failures")
         parts.append(f"<div class=wide><table class=failures><caption>{which}</caption><thead><tr><th>garage</th>"
-                     "<th>test</th><th>outcome</th><th>reason</th><th>video</th><th>OpenSCENARIO</th></tr></thead><tbody>")
+                     "<th>test</th><th>outcome</th><th>reason</th><th>video</th><th>OpenSCENARIO</th>"
+                     + ("<th>top-down</th>" if pictures else "") + "</tr></thead><tbody>")
         for f in run.shown:
             parts.append(
                 f"<tr><td>{e(f.garage)}</td><td>{f.test}</td><td>{e(f.outcome.replace('_', ' '))}</td>"
                 f"<td>{e(f.reason)}</td><td>{_link(f.video, 'MP4', out_dir)}</td>"
-                f"<td>{_link(f.xosc, f.xosc.name if f.xosc else '', out_dir)}</td></tr>"
+                f"<td>{_link(f.xosc, f.xosc.name if f.xosc else '', out_dir)}</td>"
+                + (f"<td>{_thumb(f.picture, f'{f.garage} test {f.test} top-down', out_dir)}</td>" if pictures else "")
+                + "</tr>"
             )
         parts.append("</tbody></table></div>")
     return "\n".join(parts)
@@ -186,10 +223,11 @@ def render_html(data: ReportData, out_dir: Path) -> str:
         parts.append("<div class=kpi>")
         parts += [f"<div><b>{e(v)}</b>{e(k)}</div>" for k, v in data.kpis.items()]
         parts.append("</div>")
-    parts.append("<h2 id=generation>Generation</h2><div class=figs>")
-    parts.append(_figure(data.convergence_png, "Convergence: episode return, mean over seeds, 95% band", out_dir))
-    parts.append(_figure(data.heatmap_png, "Usable garages by difficulty (x) and coverage (y)", out_dir))
-    parts.append("</div>")
+    if data.convergence_png is not None or data.heatmap_png is not None:  # a cruise run's report has neither
+        parts.append("<h2 id=generation>Generation</h2><div class=figs>")
+        parts.append(_figure(data.convergence_png, "Convergence: episode return, mean over seeds, 95% band", out_dir))
+        parts.append(_figure(data.heatmap_png, "Usable garages by difficulty (x) and coverage (y)", out_dir))
+        parts.append("</div>")
     if data.gallery:
         parts.append("<h2 id=gallery>Garages</h2><div class=gallery>")
         for g in data.gallery:
@@ -215,6 +253,9 @@ def render_html(data: ReportData, out_dir: Path) -> str:
         parts.append("</tbody></table></div>")
         if data.cruise_note:
             parts.append(f"<p class=muted>{e(data.cruise_note)}</p>")
+    if data.park_tables:
+        parts.append("<h2 id=park>Park tests</h2>")
+        parts += [_park_table(t, k) for k, t in enumerate(data.park_tables, 1)]
     if data.failures:
         parts.append("<h2 id=failures>Failures</h2>")
         parts += [_run_failures(f, out_dir) for f in data.failures]
@@ -246,7 +287,8 @@ def write_report(data: ReportData, out_dir: Path, name: str = "report.html") -> 
     ]
     if missing:
         raise FileNotFoundError(f"report images missing: {', '.join(str(m) for m in missing)}")
-    links = [r.tests_csv for r in data.failures] + [p for r in data.failures for f in r.shown for p in (f.video, f.xosc)]
+    links = [r.tests_csv for r in data.failures] + [p for r in data.failures for f in r.shown
+                                                    for p in (f.video, f.xosc, f.picture)]
     missing = [p for p in links if p is not None and not Path(p).is_file()]
     if missing:
         raise FileNotFoundError(f"report links missing: {', '.join(str(m) for m in missing)}")

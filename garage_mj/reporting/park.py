@@ -1,0 +1,242 @@
+"""A park or AVP run (docs/spec.md section 8) as a report shows it: the park table and a top-down picture of
+each failure shown.
+
+- :func:`park_table`: per garage of ``summary.csv`` (and over the run, ``summary.json``) the tests, the
+  infeasible ones, success of the feasible ones and the columns of
+  :data:`~garage_mj.driving.results.PARK_SUMMARY_COLUMNS` (their headers made from the column names, so
+  a new summary column shows up without an edit here), with :data:`SUCCESS_NOTE`. A cruise run's
+  ``summary.csv`` has none of those columns: no table.
+- :func:`park_picture`: one test driven again as the run drove it (its seed, settings and driver, as the
+  failure videos are), drawn from above with matplotlib: the stall outlines and obstacles around the test,
+  the reference plan of the reset info (``park_plan``: forward solid, reverse dashed), the driven path (the
+  car centre each control step), the stall pose and the final footprint.
+  :func:`record_park_pictures` writes them into ``OUT/pictures/<garage>_<test>_<outcome>.png`` for the
+  first failures (the ones the report shows, as :func:`garage_mj.reporting.failures.run_failures` picks).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from garage_mj.core.fsutil import FolderLock, atomic_write  # noqa: E402
+from garage_mj.driving.results import PARK_SUMMARY_COLUMNS  # noqa: E402
+from garage_mj.driving.sources import CruiseSettings, CruiseSource, cruise_seed  # noqa: E402
+from garage_mj.reporting.plots import DPI  # noqa: E402
+from garage_mj.reporting.report import ParkTable, fmt_percent  # noqa: E402
+from garage_mj.scene.car import CarGeometry  # noqa: E402
+from garage_mj.scene.clearance import Obstacles, footprint, scene_obstacles  # noqa: E402
+from garage_mj.scene.park_planning import (  # noqa: E402
+    FAR_END_OVER,
+    HEADING_TOLERANCE,
+    centre_to_rear,
+    park_obstacles,
+)
+
+PICTURES = "pictures"  # a run folder's top-down pictures of park and AVP failures
+#: The CARLA end-to-end parking benchmark's success box, for comparison (SPEC 8).
+CARLA_BOX = {"lateral_m": 0.6, "longitudinal_m": 1.0, "heading_deg": 10.0}
+SUCCESS_NOTE = (
+    f"Success (SPEC 8): at rest, the whole footprint inside the stall's lines (the far end up to {FAR_END_OVER} m "
+    f"past the aisle line), heading within {HEADING_TOLERANCE:g} degrees of the stall axis in the maneuver's "
+    f"direction, no contact at any time; the CARLA parking benchmark's box for comparison: "
+    f"{CARLA_BOX['lateral_m']} m lateral, {CARLA_BOX['longitudinal_m']} m longitudinal, "
+    f"{CARLA_BOX['heading_deg']:g} degrees. Success is over feasible tests; collision and timeout over the "
+    "feasible tests too, the errors over the driven tests, park time and direction changes over the successes.")
+#: A summary column's unit suffix and how its header writes it.
+UNITS = {"_pct": "%", "_m": "[m]", "_deg": "[deg]", "_s": "[s]"}
+VIEW_MARGIN = 4.0  # [m] around the plan, the driven path and the stall
+PICTURE_SIZE = (6.4, 5.6)  # [in] at plots' DPI
+OBSTACLE_COLOURS = {"wall": "#6b7280", "pillar": "#374151", "obstacle": "#92400e", "parked_car": "#93c5fd"}
+
+
+def column_label(column: str) -> str:
+    """A summary column's header: ``mean_position_error_m`` -> ``mean position error [m]``."""
+    for suffix, unit in UNITS.items():
+        if column.endswith(suffix):
+            return f"{column[: -len(suffix)].replace('_', ' ')} {unit}"
+    return column.replace("_", " ")
+
+
+def _cell(column: str, value: Any) -> object:
+    """A park summary value as the table writes it: a rate in percent, a mean with 2 decimals, n/a for none."""
+    if value is None or value == "":
+        return "n/a"
+    return fmt_percent(float(value)) if column.endswith("_pct") else f"{float(value):.2f}"
+
+
+def _row(name: str, r: dict[str, Any]) -> list[object]:
+    return [name, int(r["tests"]), int(r["infeasible"]),
+            fmt_percent(None if r["success_pct"] in (None, "") else float(r["success_pct"])),
+            *(_cell(c, r.get(c)) for c in PARK_SUMMARY_COLUMNS)]
+
+
+def park_table(run_dir: str | Path, label: str | None = None) -> ParkTable | None:
+    """The park table of the run in ``run_dir`` (a row per garage of ``summary.csv``, a last one over the run
+    from ``summary.json``); None for a cruise run (its summary has no park columns)."""
+    run = Path(run_dir)
+    with open(run / "summary.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        rows = list(reader)
+        if not set(PARK_SUMMARY_COLUMNS) <= set(reader.fieldnames or ()):
+            return None
+    stats = json.loads((run / "summary.json").read_text())
+    columns = ["garage", "tests", "infeasible", "success of feasible", *map(column_label, PARK_SUMMARY_COLUMNS)]
+    table = [_row(r["garage"], r) for r in rows] + [_row("all garages", stats)]
+    what = f"{stats.get('driver', '?')}, {stats.get('task', 'park')} tests ({stats.get('maneuver', 'reverse')})"
+    return ParkTable(label or what, columns, table, SUCCESS_NOTE)
+
+
+@dataclass(frozen=True)
+class ParkDrive:
+    """One park or AVP test driven again: what its picture draws."""
+
+    title: str
+    stall: Any  # the target Stall
+    obstacles: Obstacles  # walls, pillars, obstacle blocks and occupied stall outlines of the test
+    stall_corners: list[np.ndarray]  # every stall's outline, (4, 2) each
+    plan: dict[str, Any]  # the reset info's park_plan: poses (N, 3), directions (N,), stall_pose
+    driven: np.ndarray  # (M, 3) the car centre at the reset and after every control step
+    car: CarGeometry
+
+
+def drive_park_test(source: CruiseSource, settings: CruiseSettings, test: int) -> ParkDrive:
+    """Test ``test`` of ``source`` driven again with the run's ``settings`` (same seed: the same test and
+    outcome), the car's pose recorded each step."""
+    from garage_mj.driving.drivers import choose_action_type, load_driver
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+
+    choice = choose_action_type(settings.driver, settings.action_type, warn=False)
+    drv = load_driver(settings.driver, **(settings.driver_kwargs or {}))
+    env = GarageDriveEnv(garage=source.garage, action_type=choice.action_type, occupancy=settings.occupancy,
+                         infeasible="report", **settings.task_kwargs(), **(settings.env or {}))
+    try:
+        seed = cruise_seed(settings.seed, source.hash, test)
+        obs, info = env.reset(seed=seed)
+        plan = info.get("park_plan") or {"poses": np.zeros((0, 3)), "directions": np.zeros(0)}
+        poses = [env.car.pose(env.data)]
+        if info.get("outcome") != "infeasible":
+            drv.reset(env.driver_info(seed))
+            while True:
+                obs, _, term, trunc, info = env.step(drv.act(obs))
+                poses.append(env.car.pose(env.data))
+                if term or trunc:
+                    break
+        obstacles = park_obstacles(scene_obstacles(env.scene), env.target, env.occupied)
+        hit = f" ({info['hit']})" if info.get("hit") else ""
+        return ParkDrive(f"{source.name} test {test}: {info['outcome'].replace('_', ' ')}{hit}",
+                         env.stalls[env.target], obstacles, [np.array(s.corners) for s in env.stalls], plan,
+                         np.array(poses, dtype=float), env.car_geometry)
+    finally:
+        env.close()
+
+
+def _body(car: CarGeometry, pose: Sequence[float]) -> np.ndarray:
+    """(4, 2) corners of the car's body at ``pose`` (car centre)."""
+    rear = centre_to_rear(np.asarray(pose, dtype=float), car)
+    return footprint(car, rear[None, :2], np.array([rear[2]]))[0]
+
+
+def _view(drive: ParkDrive) -> tuple[float, float, float, float]:
+    """The box the picture shows: the plan, the driven path and the stall, with :data:`VIEW_MARGIN`."""
+    pts = [drive.driven[:, :2], np.array(drive.stall.corners)]
+    if len(drive.plan["poses"]):
+        pts.append(np.asarray(drive.plan["poses"])[:, :2])
+    xy = np.vstack(pts)
+    (x0, y0), (x1, y1) = xy.min(axis=0) - VIEW_MARGIN, xy.max(axis=0) + VIEW_MARGIN
+    return float(x0), float(y0), float(x1), float(y1)
+
+
+def _draw_plan(ax, plan: dict[str, Any]) -> None:
+    """The reference plan, one line per run of one gear: forward solid, reverse dashed."""
+    poses, dirs = np.asarray(plan["poses"]), np.asarray(plan["directions"])
+    cuts = [0, *(k for k in range(1, len(poses) - 1) if dirs[k] != dirs[k - 1]), len(poses) - 1]
+    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        ax.plot(poses[a:b + 1, 0], poses[a:b + 1, 1], color="#2563eb", lw=1.6, ls="-" if dirs[a] >= 0 else "--",
+                label="plan (reverse dashed)" if a == 0 else None)
+
+
+def draw_park_picture(drive: ParkDrive, path: str | Path) -> Path:
+    """The top-down PNG of ``drive`` at ``path`` (written atomically)."""
+    from matplotlib.patches import Polygon, Rectangle
+
+    x0, y0, x1, y1 = _view(drive)
+    fig, ax = plt.subplots(figsize=PICTURE_SIZE)
+    for corners in drive.stall_corners:
+        ax.add_patch(Polygon(corners, closed=True, fill=False, ec="#9ca3af", lw=0.8))
+    for (bx0, by0, bx1, by1), cls in zip(drive.obstacles.boxes, drive.obstacles.classes, strict=True):
+        if bx1 >= x0 and bx0 <= x1 and by1 >= y0 and by0 <= y1:
+            ax.add_patch(Rectangle((bx0, by0), bx1 - bx0, by1 - by0, color=OBSTACLE_COLOURS.get(cls, "#9ca3af"),
+                                   alpha=0.8, lw=0))
+    ax.add_patch(Polygon(drive.stall.corners, closed=True, fill=False, ec="#16a34a", lw=2.0, label="target stall"))
+    goal = drive.plan.get("stall_pose")
+    if goal is not None and np.all(np.isfinite(goal)):
+        ax.add_patch(Polygon(_body(drive.car, goal), closed=True, fill=False, ec="#16a34a", ls=":", lw=1.5,
+                             label="stall pose"))
+    if len(drive.plan["poses"]) > 1:
+        _draw_plan(ax, drive.plan)
+    ax.plot(drive.driven[:, 0], drive.driven[:, 1], color="#f97316", lw=1.6, label="driven")
+    ax.add_patch(Polygon(_body(drive.car, drive.driven[0]), closed=True, fill=False, ec="#6b7280", lw=1.0,
+                         label="start"))
+    ax.add_patch(Polygon(_body(drive.car, drive.driven[-1]), closed=True, fc="#dc2626", alpha=0.45, ec="#dc2626",
+                         lw=1.2, label="final footprint"))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(drive.title, fontsize=9)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return atomic_write(Path(path), buf.getvalue())
+
+
+def picture_name(row: dict[str, Any]) -> str:
+    """File name of a test's top-down picture: its video's name (``<garage>_<test>_<outcome>``) as a PNG."""
+    from garage_mj.reporting.cruise import video_name
+
+    return video_name(row)[: -len(".mp4")] + ".png"
+
+
+def park_picture(source: CruiseSource, path: str | Path, settings: CruiseSettings, test: int) -> Path:
+    """Drive test ``test`` again (:func:`drive_park_test`) and draw it into ``path`` (:func:`draw_park_picture`)."""
+    return draw_park_picture(drive_park_test(source, settings, test), path)
+
+
+def record_park_pictures(run_dir: str | Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
+                         n: int) -> list[Path]:
+    """The top-down pictures of the first ``n`` failures of the park or AVP run in ``run_dir`` (garage and test
+    order; a test whose driver crashed or hung is left out) in ``OUT/pictures/``; one already there is kept.
+    A cruise run gets none."""
+    from garage_mj.reporting.cruise import UNWATCHABLE
+    from garage_mj.reporting.failures import first_failures
+
+    run = Path(run_dir)
+    settings = CruiseSettings.from_stored(json.loads((run / "run.json").read_text()))
+    if settings.task == "cruise":
+        return []
+    by_hash = {s.hash: s for s in sources}
+    made = []
+    with FolderLock(run, "garage-mj cruise", remove=True):
+        for row in first_failures(rows, sources, n):
+            if row["outcome"] in UNWATCHABLE:
+                continue
+            path = run / PICTURES / picture_name(row)
+            if not path.is_file():
+                path.parent.mkdir(parents=True, exist_ok=True)
+                park_picture(by_hash[row["garage_hash"]], path, settings, int(row["test"]))
+            made.append(path)
+    return made
