@@ -193,8 +193,8 @@ def test_a_park_run_report_has_the_park_table_and_a_picture_per_failure_shown(ti
     from garage_mj.cli import main
     from garage_mj.driving.results import PARK_SUMMARY_COLUMNS
     from garage_mj.export.pack import export_pack
-    from garage_mj.reporting.cruise import REPORT_FAILURES
     from garage_mj.reporting.park import PICTURES, SUCCESS_NOTE, column_label
+    from garage_mj.reporting.run_report import REPORT_FAILURES
 
     export_pack(tiny_garage, tmp_path / "packs")
     out = tmp_path / "park"
@@ -221,8 +221,9 @@ def test_a_park_run_report_has_the_park_table_and_a_picture_per_failure_shown(ti
 def test_an_oracle_park_run_report_shows_its_success_and_no_picture(tiny_garage, tmp_path):
     from garage_mj.core.backends import Compute
     from garage_mj.driving.sources import CruiseSettings
-    from garage_mj.reporting.cruise import cruise_report, run_cruise
+    from garage_mj.reporting.cruise import run_cruise
     from garage_mj.reporting.park import PICTURES
+    from garage_mj.reporting.run_report import cruise_report
 
     out = tmp_path / "oracle"
     run_cruise([tiny_garage], 2, CruiseSettings("oracle", 0, task="park"), out, compute=Compute(progress=False))
@@ -235,8 +236,9 @@ def test_an_oracle_park_run_report_shows_its_success_and_no_picture(tiny_garage,
 def test_a_cruise_run_report_has_no_park_table(tiny_garage, tmp_path):
     from garage_mj.core.backends import Compute
     from garage_mj.driving.sources import CruiseSettings
-    from garage_mj.reporting.cruise import cruise_report, run_cruise
+    from garage_mj.reporting.cruise import run_cruise
     from garage_mj.reporting.park import PICTURES, park_table
+    from garage_mj.reporting.run_report import cruise_report
 
     out = tmp_path / "cruise"
     env = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short time limits: a quick failure

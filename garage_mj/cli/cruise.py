@@ -289,7 +289,7 @@ def run(args: argparse.Namespace) -> int:
         for path, row in made:
             print(f"  {path.name}: {row['outcome']}{' (' + row['hit'] + ')' if row['hit'] else ''}: {row['reason']}")
     if args.report:
-        from garage_mj.reporting.cruise import REPORT_FAILURES, cruise_report
+        from garage_mj.reporting.run_report import REPORT_FAILURES, cruise_report
 
         print(f"report: {cruise_report(res.out_dir, srcs, max(REPORT_FAILURES, args.videos or 0))}")
     return 0

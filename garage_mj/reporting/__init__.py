@@ -9,5 +9,8 @@
 - ``report``: the HTML report.
 - ``failures``: a cruise run's failures as a report shows them: reasons grouped per class, the first few with an MP4
   and their ``.xosc``.
+- ``park``: a park or AVP run as a report shows it: the park table per garage, a top-down picture of each
+  failure shown (stalls, obstacles, the reference plan, the driven path, the final footprint).
+- ``run_report``: a cruise run's own HTML report (``garage-mj cruise --report``).
 - ``demo``: the main job end to end on a small garage (train, library, packs, cruise, report).
 """

@@ -7,10 +7,8 @@ The driving stage writes the run's numbers (``tests.csv``, ``summary.csv``, ``su
 Pearson r); :func:`cruise_figure` draws the figures from those files, so they can also be
 drawn for a run folder another job filled (the hunt's ``OUT/cruise``). :func:`record_cruise_videos`
 drives chosen tests again with the run's settings and seeds (the same test, the same outcome) into
-``OUT/videos/<garage>_<test>_<outcome>.mp4``, failures first. :func:`cruise_report` writes the run's
-``report.html``: its figures, its failures (with their MP4s and ``.xosc`` files where there are) and, for a
-park or AVP run, the park table and a top-down picture of each failure shown
-(:mod:`garage_mj.reporting.park`).
+``OUT/videos/<garage>_<test>_<outcome>.mp4``, failures first (a run's ``report.html``:
+:mod:`garage_mj.reporting.run_report`).
 """
 
 from __future__ import annotations
@@ -29,7 +27,6 @@ from garage_mj.driving.sim.outcomes import FAILURES, RUNNER_KINDS
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.grid.garage import Garage
 from garage_mj.reporting.analysis import regression_plot
-from garage_mj.reporting.report import ReportData, count_noun, fmt_percent, write_report
 
 _FAILED = {k.value for k in FAILURES}
 UNWATCHABLE = {"infeasible", *(k.value for k in RUNNER_KINDS)}  # never driven, or its driver would crash or hang again
@@ -105,36 +102,3 @@ def run_cruise(*args: Any, **kwargs: Any) -> CruiseResult:
         cruise_figure(result.out_dir, metric)
     return result
 
-
-REPORT_FAILURES = 3  # failures a run's report shows, each with its files
-
-
-def cruise_report(out_dir: str | Path, sources: Sequence[CruiseSource | Garage], shown: int = REPORT_FAILURES) -> Path:
-    """``OUT/report.html`` of the cruise run in ``out_dir``: its success and regression figures, its failures
-    (the first ``shown``, with the MP4s :func:`record_cruise_videos` recorded) and, for a park or AVP run, the
-    park table and a top-down picture of each failure shown (drawn now; one already there is kept)."""
-    from garage_mj.driving.results import read_tests
-    from garage_mj.reporting.failures import run_failures
-    from garage_mj.reporting.park import park_table, record_park_pictures
-
-    out = Path(out_dir)
-    srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
-    rows = read_tests(out / "tests.csv")
-    stats = json.loads((out / "summary.json").read_text())
-    record_park_pictures(out, rows, srcs, shown)
-    park = park_table(out)
-    figures = {m: out / name for m, (name, _) in FIGURES.items()}
-    success = (f"{fmt_percent(stats['success_pct'])} of {stats['feasible']} feasible"
-               if stats["success_pct"] is not None else "no feasible test")
-    data = ReportData(
-        title=f"garage-mj cruise: {stats['driver']}",
-        subtitle=f"{count_noun(stats['tests'], 'test')} on {count_noun(stats['garages'], 'garage')}, "
-                 f"{stats['action_type']} actions",
-        kpis={"success": success, "infeasible tests": str(stats["infeasible"])},
-        park_tables=[park] if park is not None else [],
-        failures=[run_failures(stats["driver"], out, rows, srcs, shown=shown)],
-        regression_png=figures["paper"] if figures["paper"].is_file() else None,
-        regression_route_png=figures["route"] if figures["route"].is_file() else None,
-        notes=["every test, its outcome and reason: tests.csv; per garage: summary.csv; over the run: summary.json"],
-    )
-    return write_report(data, out)

@@ -67,14 +67,13 @@ def first_failures(rows: Sequence[dict[str, str]], sources: Sequence[CruiseSourc
 
 
 def run_failures(label: str, run_dir: Path, rows: Sequence[dict[str, str]], sources: Sequence[CruiseSource],
-                 shown: int = 3) -> RunFailures:
+                 shown: int = 3, pictures: dict[tuple[str, int], Path] | None = None) -> RunFailures:
     """What the report shows of the cruise run in ``run_dir``: counts and reasons per class, and the first
     ``shown`` failures with their ``.xosc`` (``run_cruise(..., xosc=True)`` wrote them) and their MP4
     (:func:`garage_mj.reporting.cruise.record_cruise_videos` wrote them into ``videos/``) and, for a park or AVP
-    run, their top-down picture (:func:`garage_mj.reporting.park.record_park_pictures`, ``pictures/``), each when
-    there."""
+    run, their top-down picture (``pictures``: (garage hash, test) -> PNG, as
+    :func:`garage_mj.reporting.park.record_park_pictures` returns them), each when there."""
     from garage_mj.reporting.cruise import video_name  # matplotlib: deferred, so garage-mj --help stays light
-    from garage_mj.reporting.park import PICTURES, picture_name
 
     run_dir = Path(run_dir)
     settings = json.loads((run_dir / "run.json").read_text())
@@ -84,9 +83,9 @@ def run_failures(label: str, run_dir: Path, rows: Sequence[dict[str, str]], sour
         test = int(r["test"])
         xosc = run_dir / "xosc" / xosc_name(by_hash[r["garage_hash"]], test)
         mp4 = run_dir / "videos" / video_name(r)
-        png = run_dir / PICTURES / picture_name(r)
+        png = (pictures or {}).get((r["garage_hash"], test))
         items.append(FailureItem(r["garage"], test, r["outcome"], r["reason"], mp4 if mp4.is_file() else None,
-                                 xosc if xosc.is_file() else None, png if png.is_file() else None))
+                                 xosc if xosc.is_file() else None, png))
     feasible = driven_tests(rows)
     counts = failure_counts(feasible)
     return RunFailures(label=label, action_type=settings["action_type"], tests_csv=run_dir / "tests.csv",

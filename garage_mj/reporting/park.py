@@ -217,19 +217,19 @@ def park_picture(source: CruiseSource, path: str | Path, settings: CruiseSetting
 
 
 def record_park_pictures(run_dir: str | Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
-                         n: int) -> list[Path]:
+                         n: int) -> dict[tuple[str, int], Path]:
     """The top-down pictures of the first ``n`` failures of the park or AVP run in ``run_dir`` (garage and test
     order; a test whose driver crashed or hung is left out) in ``OUT/pictures/``; one already there is kept.
-    A cruise run gets none."""
+    Returns (garage hash, test) -> path; a cruise run gets none."""
     from garage_mj.reporting.cruise import UNWATCHABLE
     from garage_mj.reporting.failures import first_failures
 
     run = Path(run_dir)
     settings = CruiseSettings.from_stored(json.loads((run / "run.json").read_text()))
     if settings.task == "cruise":
-        return []
+        return {}
     by_hash = {s.hash: s for s in sources}
-    made = []
+    made = {}
     with FolderLock(run, "garage-mj cruise", remove=True):
         for row in first_failures(rows, sources, n):
             if row["outcome"] in UNWATCHABLE:
@@ -238,5 +238,5 @@ def record_park_pictures(run_dir: str | Path, rows: Sequence[dict[str, Any]], so
             if not path.is_file():
                 path.parent.mkdir(parents=True, exist_ok=True)
                 park_picture(by_hash[row["garage_hash"]], path, settings, int(row["test"]))
-            made.append(path)
+            made[row["garage_hash"], int(row["test"])] = path
     return made
