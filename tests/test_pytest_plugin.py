@@ -186,4 +186,4 @@ def test_park_tests_of_a_driver_pass_with_the_oracle_and_fail_readably_standing_
     assert "park tests of test_parking:StandStill on 1 garage(s), 1 test(s): 1 of 1 feasible" in text, text
     assert re.search(r"tiny_7x11-\S+ test 0: (outside_stall|deadlock): .*\(position error \d+\.\d\d m, heading error "
                      r"\d+\.\d deg\)", text), text
-    assert re.search(r"video: \S+\.mp4", text), text
+    assert re.search(r"video: \S+\.mp4", text) and re.search(r"xosc: +\S+\.xosc", text), text

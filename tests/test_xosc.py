@@ -1,4 +1,5 @@
-"""Cruise tests as OpenSCENARIO: the ASAM checker finds zero issues, read gives back what was written.
+"""Cruise, park and AVP tests as OpenSCENARIO: the ASAM checker finds zero issues, read gives back what was
+written, a replayed park test ends as the test did.
 
 Like the OpenDRIVE tests, the real ASAM checker (``qc_openscenario`` in ``.venv-qc``, from
 ``make install``) runs once per session on one batch of files; if it is missing the tests fail
@@ -9,15 +10,22 @@ from __future__ import annotations
 
 import math
 import shutil
+import warnings
 
 import numpy as np
 import pytest
 from lxml import etree
 from scenariogeneration.xosc import ParseOpenScenario
 
+from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.driving.actors.config import ScenarioConfig
 from garage_mj.driving.actors.placement import draw_scenario
+from garage_mj.driving.cruise import run_cruise
+from garage_mj.driving.drivers import ActionTypeWarning
+from garage_mj.driving.replay import replay_xosc
+from garage_mj.driving.sim.drive_env import GarageDriveEnv
+from garage_mj.driving.sources import CruiseSettings
 from garage_mj.export.pack import export_pack
 from garage_mj.export.validate import ToolMissing, check_xosc_batch, qc_xosc_executable
 from garage_mj.export.xosc import XoscError, write_xosc
@@ -25,9 +33,14 @@ from garage_mj.export.xosc_read import read_xosc
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import START_OFFSET, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
+from garage_mj.testing.garages import cruise_sources
 
 META = {"seed": 123456, "driver": "pure_pursuit", "action_type": "continuous", "test": 3, "speed": 2.5,
         "strict": True, "tags": ["a", "b"], "note": None}
+QUIET = Compute(progress=False)
+#: tests.csv cells a replay must give back as the test had them (the wall times aside)
+SAME = ("outcome", "reason", "hit", "time", "path_length", "task", "maneuver", "position_error_m",
+        "heading_error_deg", "lateral_offset_m", "direction_changes", "park_time_s", "min_clearance_m")
 
 
 def _start(plan) -> tuple[float, float, float]:
@@ -101,16 +114,35 @@ def files(case):
 
 
 @pytest.fixture(scope="module")
-def reports(files):
-    names = list(files)
-    return dict(zip(names, check_xosc_batch([files[n] for n in names])))
+def park(case):
+    """Park and AVP runs of the oracle (which parks) and of waypoint (which cannot reverse), each test written
+    with xosc=True: run name -> (tests.csv rows, their .xosc files in test order)."""
+    srcs = cruise_sources([case["pack"]])
+    runs = {"park_oracle": CruiseSettings("oracle", task="park", maneuver="any"),
+            "park_waypoint": CruiseSettings("waypoint", task="park"),
+            "avp_oracle": CruiseSettings("oracle", task="avp", maneuver="forward")}
+    out = {}
+    for name, settings in runs.items():
+        run_dir = case["root"] / name
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ActionTypeWarning)
+            res = run_cruise(srcs, 2 if name == "park_oracle" else 1, settings, run_dir, compute=QUIET, xosc=True)
+        out[name] = (res.rows, sorted((run_dir / "xosc").glob("*.xosc")))
+    return out
+
+
+@pytest.fixture(scope="module")
+def reports(files, park):
+    names = [*files, "park", "avp"]
+    paths = [*files.values(), park["park_oracle"][1][0], park["avp_oracle"][1][0]]
+    return dict(zip(names, check_xosc_batch(paths)))
 
 
 def test_asam_checker_finds_zero_issues(files, reports):
-    for name in ("hand_1_2", "hand_1_1", "drawn"):
+    for name in ("hand_1_2", "hand_1_1", "drawn", "park", "avp"):
         rep = reports[name]
         assert rep.issues == [] and rep.errored == 0, f"{name}: {rep.issues[:5]}"
-    for name in ("hand_1_2", "drawn"):  # 1.2: every checker of the bundle applies
+    for name in ("hand_1_2", "drawn", "park", "avp"):  # 1.2: every checker of the bundle applies
         assert reports[name].completed >= 17 and reports[name].skipped == 0, reports[name]
     # 1.1: the XML and schema checks run; the bundle's rule checks are defined from 1.2 on
     assert reports["hand_1_1"].completed >= 5
@@ -286,3 +318,56 @@ def test_missing_checker_names_the_fix(monkeypatch, tmp_path):
     monkeypatch.setenv("PATH", str(tmp_path))
     with pytest.raises(ToolMissing, match="make install"):
         qc_xosc_executable()
+
+
+def test_a_replayed_park_or_avp_test_ends_as_the_test_did(park):
+    seen = set()
+    for name, (rows, paths) in park.items():
+        assert len(rows) == len(paths) >= 1, name
+        for row, path in zip(rows, paths, strict=True):
+            again = replay_xosc(path)
+            assert {k: str(again[k]) for k in SAME} == {k: str(row[k]) for k in SAME}, (name, path)
+            seen.add(row["outcome"])
+    assert "success" in seen and seen - {"success"}, seen  # the oracle parks, waypoint does not
+
+
+def test_a_park_file_holds_the_start_the_stall_pose_and_the_plan_with_its_reverse_steps(park, painted_tiny):
+    rows, paths = park["park_oracle"]
+    for row, path in zip(rows, paths, strict=True):
+        t = read_xosc(path)
+        assert (t.task, t.meta["maneuver"], t.meta["plan_start"]) == ("park", row["maneuver"], 0)
+        env = GarageDriveEnv(painted_tiny, task="park", maneuver=row["maneuver"], infeasible="report")
+        try:
+            _, info = env.reset(seed=t.seed, options={"target": t.target_stall, "occupied": t.occupied,
+                                                      "start": t.start})
+        finally:
+            env.close()
+        want, got = info["park_plan"], t.park_plan()
+        np.testing.assert_allclose(got["poses"], want["poses"], atol=1e-9)
+        assert list(got["directions"][:-1]) == list(want["directions"][:-1]) and -1 in got["directions"]
+        np.testing.assert_allclose(t.goal, want["stall_pose"], atol=1e-9)
+        np.testing.assert_allclose(t.start, env.start_pose, atol=1e-9)
+    avp = read_xosc(park["avp_oracle"][1][0])
+    assert avp.task == "avp" and 0 < avp.meta["plan_start"] < len(avp.route) - 1
+    assert avp.park_plan()["poses"].shape[1] == 3 and read_xosc(park["park_waypoint"][1][0]).task == "park"
+
+
+PARK_TAMPERS = {
+    "task": ("gmj_task", "valet", "gmj_task: 'valet' is not a park or AVP test"),
+    "maneuver": ("gmj_maneuver", "sideways", "gmj_maneuver: 'sideways' is not one of reverse, forward"),
+    "plan_start": ("gmj_plan_start", "100000", "gmj_plan_start: 100000 is not a vertex"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PARK_TAMPERS))
+def test_a_malformed_park_file_gives_one_clear_line(park, name):
+    param, value, words = PARK_TAMPERS[name]
+    src = park["park_oracle"][1][0]
+    dst = src.parent / f"tampered_{name}.xosc"
+    tree = etree.parse(str(src))
+    tree.getroot().xpath(f"ParameterDeclarations/ParameterDeclaration[@name='{param}']")[0].set("value", value)
+    tree.write(str(dst), xml_declaration=True, encoding="UTF-8")
+    with pytest.raises(XoscError) as info:
+        replay_xosc(dst)
+    msg = str(info.value)
+    assert "\n" not in msg and str(dst) in msg and words in msg, msg

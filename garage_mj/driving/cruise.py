@@ -188,9 +188,6 @@ def run_cruise(
     if len(set(hashes)) != len(hashes):
         raise CruiseError("the same garage is listed twice; give each garage once")
     settings = settings.resolved(choice.action_type)
-    if xosc and settings.task != "cruise":
-        raise CruiseError(f"--xosc writes cruise tests as OpenSCENARIO; {settings.task} tests are not exported: "
-                          "leave it out")
     check_driver(settings)  # a driver that cannot be built stops the run before anything is written
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise", remove=True):  # a second run into `out` is refused, naming this one

@@ -341,7 +341,7 @@ def _export_worst(out: Path, worst: list[Scored], settings: CruiseSettings) -> t
             pack = export_pack(s.source.garage, out / "packs")
             packs.append(pack)
             src = dataclasses.replace(s.source, pack=str(pack.resolve()))
-            for r in s.failures if settings.task == "cruise" else ():  # .xosc files hold cruise tests only
+            for r in s.failures:
                 i = int(r["test"])
                 path = out / "xosc" / xosc_name(src, i)
                 if not path.is_file():

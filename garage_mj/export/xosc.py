@@ -1,6 +1,6 @@
-"""Cruise tests written as OpenSCENARIO XML 1.2 files (with ``scenariogeneration``).
+"""Cruise, park and AVP tests written as OpenSCENARIO XML 1.2 files (with ``scenariogeneration``).
 
-One ``.xosc`` holds one cruise test, exactly enough to replay it in garage-mj. The world frame
+One ``.xosc`` holds one test, exactly enough to replay it in garage-mj. The world frame
 is the pack's OpenDRIVE frame (x east, y north, origin at the grid's south-west corner: the
 same as :mod:`garage_mj.scene.world`), so poses are written as they are, with z = 0.
 
@@ -28,9 +28,14 @@ OpenSCENARIO element                               carries
 ``Init`` ``TeleportAction/WorldPosition``          start pose of every entity (x, y, z=0, h=yaw);
                                                    an actor's is its first waypoint
 ``Init`` ego ``FollowTrajectoryAction``            the planned route: ``Polyline`` of the centre
-                                                   path, no timing (``TimeReference/None``)
+                                                   path, no timing (``TimeReference/None``); a
+                                                   vertex's h is the travel direction (cruise) or
+                                                   the car's heading along the park plan, so h
+                                                   opposite to the travel direction is a reverse
+                                                   stretch (park, AVP: below)
 ``StopTrigger`` (*near* condition, below)          the goal pose (x, y, h=yaw), within 1.0 m,
-                                                   triggering entity ``ego``
+                                                   triggering entity ``ego`` (park, AVP: the stall
+                                                   pose)
 ``Story/Act/ManeuverGroup[<name>_group]``          a moving actor: one Event whose
                                                    ``FollowTrajectoryAction`` has a timed
                                                    ``Polyline`` (vertex time = waypoint t, relative
@@ -46,6 +51,13 @@ The *near* condition ("the ego's reference point within r of a point") is, in Op
 (or 0) it is a ``ReachPositionCondition`` (``tolerance`` r); the reader reads both. The
 ASAM checker runs all of its 17 checks on 1.2 files; on 1.1 only the XML and schema checks
 apply (its rule checks are defined from 1.2 on).
+
+A park or AVP test (``meta`` ``task`` "park" or "avp", ``maneuver`` "reverse" or "forward", the test's
+own, and ``plan_start``, the vertex where the park plan begins: 0 for a park test, after the cruise route
+for an AVP test) writes its route as rows (x, y, yaw): the reference park plan's car poses, one Polyline
+(OpenSCENARIO 1.x has one shape per trajectory and no gear; a vertex's heading is the entity's
+orientation, so a reverse stretch is one whose vertices face away from the next vertex). A cruise
+test's file is as before park tests.
 
 A static actor (one waypoint, no trigger) has no event. Reading a file back is
 :mod:`garage_mj.export.xosc_read` (:func:`~garage_mj.export.xosc_read.read_xosc`); replaying it
@@ -224,12 +236,22 @@ def _with_garage_hash(meta: Mapping[str, Any] | None, pack_dir: Path) -> dict[st
     return meta
 
 
+def travel_headings(pts: np.ndarray) -> np.ndarray:
+    """(N,) direction of travel at each of (N, 2) points: towards the next one (the last: as the one before)."""
+    d = np.diff(pts[:, :2], axis=0)
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    return np.append(heading, heading[-1])
+
+
 def _route_points(route: Any) -> np.ndarray:
-    """The route as (N, 2) finite points, N >= 2 (extra columns dropped)."""
+    """The route as (N, 3) finite rows (x, y, vertex heading), N >= 2: given (N, 3) rows keep their yaw, (N, 2)
+    points get the travel direction (:func:`travel_headings`)."""
     pts = np.asarray(route, dtype=float)
-    if pts.ndim != 2 or pts.shape[1] < 2 or len(pts) < 2 or not np.isfinite(pts[:, :2]).all():
-        raise XoscError(f"route must be (N, 2) finite points with N >= 2, got shape {pts.shape}")
-    return pts[:, :2]
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3) or len(pts) < 2 or not np.isfinite(pts).all():
+        raise XoscError(f"route must be (N, 2) points or (N, 3) poses, finite, with N >= 2, got shape {pts.shape}")
+    if pts.shape[1] == 3:
+        return pts
+    return np.column_stack([pts, travel_headings(pts)])
 
 
 def _checked_actors(actors: Sequence[ActorSpec]) -> list[ActorSpec]:
@@ -262,14 +284,12 @@ def _parameters(xosc, minor: int, target: int, occupied: list[int], actors: list
 
 
 def _add_ego(xosc, entities, init, start: tuple[float, float, float], pts: np.ndarray) -> None:
-    """The ego: its entity, its start pose and its planned route (a Polyline without timing)."""
+    """The ego: its entity, its start pose and its planned route (a Polyline without timing; ``pts`` rows
+    (x, y, vertex heading))."""
     entities.add_scenario_object(EGO, _car(xosc, EGO, *EGO_SIZE))
     init.add_init_action(EGO, xosc.TeleportAction(_wpos(xosc, *start)))
     ego_traj = xosc.Trajectory("ego_route", False)
-    d = np.diff(pts, axis=0)
-    heading = np.arctan2(d[:, 1], d[:, 0])
-    heading = np.append(heading, heading[-1])  # the route's direction at each point (informative)
-    ego_traj.add_shape(xosc.Polyline([], [_wpos(xosc, x, y, h) for (x, y), h in zip(pts, heading)]))
+    ego_traj.add_shape(xosc.Polyline([], [_wpos(xosc, x, y, h) for x, y, h in pts]))
     init.add_init_action(EGO, xosc.FollowTrajectoryAction(ego_traj, xosc.FollowingMode.position))
 
 
@@ -348,7 +368,8 @@ def write_xosc(
 
     ``xodr_path`` defaults to ``pack_dir/garage.xodr``. ``parked_poses``: stall -> (x, y, yaw), or
     the scene layout's ``parked_cars`` placements; a parked car is written for every stall of
-    ``occupied``. ``meta``: ``garage_hash`` (else read from the pack's manifest), ``seed``,
+    ``occupied``. ``route``: (N, 2) centre points (vertex heading: the travel direction) or (N, 3) poses
+    (x, y, yaw: a park plan's, reverse stretches included). ``meta``: ``garage_hash`` (else read from the pack's manifest), ``seed``,
     ``driver``, ``action_type`` and any other scalar / JSON-able entries, all kept as ``gmj_``
     parameters.
     """
@@ -378,12 +399,12 @@ def write_xosc(
     act = _add_actors(xosc, minor, entities, init, actors)
     board = _storyboard(xosc, minor, init, act, goal_p)
     road = xosc.RoadNetwork(roadfile=_logic_path(path, xodr))
-    sce = xosc.Scenario(f"garage-mj cruise test: stall {target}", "garage-mj", params, entities, board, road,
-                        xosc.Catalog(), osc_minor_version=minor)
+    title = f"garage-mj {meta.get('task', 'cruise')} test: stall {target}"
+    sce = xosc.Scenario(title, "garage-mj", params, entities, board, road, xosc.Catalog(), osc_minor_version=minor)
     el = sce.get_element()
     ET.indent(el)
     path.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write(path, ET.tostring(el, encoding="utf-8", xml_declaration=True))
 
 
-__all__ = ["XoscError", "write_xosc", "EGO", "PARKED_PREFIX"]
+__all__ = ["XoscError", "write_xosc", "travel_headings", "EGO", "PARKED_PREFIX"]

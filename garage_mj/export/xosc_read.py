@@ -1,4 +1,4 @@
-"""Reading back a cruise test written as OpenSCENARIO by :func:`garage_mj.export.xosc.write_xosc` (with lxml).
+"""Reading back a cruise, park or AVP test written as OpenSCENARIO by :func:`garage_mj.export.xosc.write_xosc` (with lxml).
 
 Where each field comes from is the table of :mod:`garage_mj.export.xosc`. Both forms of the
 *near* condition are read: a ``ReachPositionCondition`` (OpenSCENARIO 1.0/1.1) and its 1.2
@@ -6,7 +6,9 @@ replacement, a euclidean ``DistanceCondition`` between reference points. A stati
 waypoint, no trigger) reads back with ``trigger_radius`` 0. :func:`read_xosc` rebuilds everything
 from the file alone and raises :class:`~garage_mj.export.xosc.XoscError` (one line naming the file
 and the problem) on anything malformed or inconsistent; :meth:`XoscTest.pack` loads the pack it
-refers to.
+refers to. A park or AVP test's file also gives back its task, maneuver and reference park plan
+(:meth:`XoscTest.park_plan`: poses and gears, the gear of each step from the vertex heading against the
+direction to the next vertex).
 """
 
 from __future__ import annotations
@@ -23,9 +25,11 @@ from lxml import etree
 from garage_mj.export.pack import load_pack
 from garage_mj.export.xosc import EGO, FORMAT, PARKED_PREFIX, XoscError
 from garage_mj.scene.actor_spec import BEHAVIOURS, KINDS, ActorSpec
+from garage_mj.scene.park_planning import MANEUVERS
 
 #: meta keys promoted to :class:`XoscTest` fields
 KNOWN_META = ("garage_hash", "seed", "driver", "action_type")
+PARK_TASKS = ("park", "avp")  # the tasks whose files carry a park plan (a cruise test's file names no task)
 _ENTITY_TAG = {"pedestrian": "Pedestrian", "moving_car": "Vehicle", "clutter": "MiscObject"}
 _SAFE_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False,
                                remove_comments=True)
@@ -51,6 +55,22 @@ class XoscTest:
     driver: str | None = None
     action_type: str | None = None
     meta: dict[str, Any] = field(default_factory=dict)  # every other gmj_ parameter
+    route_heading: np.ndarray | None = None  # (N,) the route's vertex headings [rad]
+
+    @property
+    def task(self) -> str:
+        """``cruise``, ``park`` or ``avp`` (``gmj_task``; a cruise test's file has none)."""
+        return str(self.meta.get("task", "cruise"))
+
+    def park_plan(self) -> dict[str, Any] | None:
+        """A park or AVP test's reference park plan as the env's reset info gives it (``poses`` (N, 3), ``directions``
+        (N,) +1 forward / -1 reverse, driving from pose i to i + 1, the last as the one before); None for a cruise
+        test, or a test without a plan (``plan_start`` -1: infeasible)."""
+        start = int(self.meta.get("plan_start", -1))
+        if self.task == "cruise" or start < 0 or self.route_heading is None:
+            return None
+        poses = np.column_stack([self.route, self.route_heading])[start:]
+        return {"poses": poses, "directions": step_directions(poses), "stall_pose": self.goal}
 
     def pack(self):
         """The verified pack (:func:`garage_mj.export.pack.load_pack`), checked against ``gmj_garage_hash``."""
@@ -59,6 +79,18 @@ class XoscTest:
             raise XoscError(f"scenario file {self.path}: gmj_garage_hash {self.garage_hash[:12]} is not the garage of pack "
                             f"{self.pack_dir} ({pack.manifest['garage_hash'][:12]})")
         return pack
+
+
+def step_directions(poses: np.ndarray) -> np.ndarray:
+    """(N,) gear of each step of (N, 3) poses: +1 where the heading points towards the next pose, -1 where it
+    points away (reverse); a step that does not move keeps the gear before it (the first: +1)."""
+    d = np.diff(poses[:, :2], axis=0)
+    along = d[:, 0] * np.cos(poses[:-1, 2]) + d[:, 1] * np.sin(poses[:-1, 2])
+    out = np.ones(len(poses), dtype=np.int8)
+    for i, a in enumerate(along):
+        out[i] = out[i - 1] if abs(a) < 1e-9 and i > 0 else (1 if a >= -1e-9 else -1)
+    out[-1] = out[-2] if len(out) > 1 else 1
+    return out
 
 
 class _Bad(Exception):
@@ -96,7 +128,7 @@ def _polyline(ft, where: str, timed: bool) -> np.ndarray:
         if timed:
             rows.append((_attr_f(v, "time", f"{where} vertex {i}"), x, y, h))
         else:
-            rows.append((x, y))
+            rows.append((x, y, h))
     if len(rows) < 2:
         raise _Bad(f"{where}: its Polyline has {len(rows)} vertices (2 or more needed)")
     return np.asarray(rows, dtype=float)
@@ -240,7 +272,7 @@ def _entities(root) -> dict[str, str]:
 
 
 def _init(root, ents: dict[str, str]) -> tuple[dict[str, tuple[float, float, float]], np.ndarray]:
-    """From ``Init``: every entity's start pose, and the ego's route."""
+    """From ``Init``: every entity's start pose, and the ego's route (rows x, y, vertex heading)."""
     poses: dict[str, tuple[float, float, float]] = {}
     route = None
     for priv in root.findall("Storyboard/Init/Actions/Private"):
@@ -259,6 +291,21 @@ def _init(root, ents: dict[str, str]) -> tuple[dict[str, tuple[float, float, flo
     if route is None:
         raise _Bad("the ego has no FollowTrajectoryAction (its route) in Init")
     return poses, route
+
+
+def _check_park(meta: dict[str, Any], route_vertices: int) -> None:
+    """A park or AVP test's task, maneuver and ``plan_start`` (the meta entries the writer sets for it)."""
+    task = meta.get("task", "cruise")
+    if task == "cruise" and "task" not in meta:
+        return
+    if task not in PARK_TASKS:
+        raise _Bad(f"parameter gmj_task: {str(task)[:40]!r} is not a park or AVP test ({', '.join(PARK_TASKS)})")
+    if meta.get("maneuver") not in MANEUVERS:
+        raise _Bad(f"parameter gmj_maneuver: {str(meta.get('maneuver'))[:40]!r} is not one of {', '.join(MANEUVERS)}")
+    start = meta.get("plan_start")
+    if not isinstance(start, int) or isinstance(start, bool) or not -1 <= start < route_vertices - 1:
+        raise _Bad(f"parameter gmj_plan_start: {start!r} is not a vertex of the ego's route where a plan of 2 or "
+                   "more poses begins (-1: none)")
 
 
 def _goal(root) -> tuple[float, float, float]:
@@ -375,12 +422,15 @@ def _read(path: Path) -> XoscTest:
     events = _actor_events(root, actor_names)
     _check_all_known(ents, actor_names)
     actors = [_actor(name, ents, poses, events, params) for name in actor_names]
+    promoted = params.promoted()
+    _check_park(promoted["meta"], len(route))
     return XoscTest(path=path, pack_dir=xodr.parent, xodr_path=xodr, target_stall=target, occupied=occupied,
-                    start=poses[EGO], goal=goal, route=route, actors=actors, parked=parked, **params.promoted())
+                    start=poses[EGO], goal=goal, route=route[:, :2], actors=actors, parked=parked,
+                    route_heading=route[:, 2], **promoted)
 
 
 def read_xosc(path: str | Path) -> XoscTest:
-    """The cruise test of a ``.xosc`` written by :func:`~garage_mj.export.xosc.write_xosc`; :class:`XoscError` if it is
+    """The cruise, park or AVP test of a ``.xosc`` written by :func:`~garage_mj.export.xosc.write_xosc`; :class:`XoscError` if it is
     not one."""
     path = Path(path)
     try:
@@ -397,4 +447,4 @@ def read_xosc(path: str | Path) -> XoscTest:
         raise XoscError(f"scenario file {path}: cannot read it ({exc.strerror or exc})") from None
 
 
-__all__ = ["XoscTest", "read_xosc"]
+__all__ = ["PARK_TASKS", "XoscTest", "read_xosc", "step_directions"]

@@ -196,8 +196,7 @@ class DriverTests:
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ActionTypeWarning)  # the first run warned already
-            if self.task == "cruise":  # .xosc files hold cruise tests only
-                run_cruise(**{**self._call, "xosc": True})  # the tests are done: this only writes their .xosc
+            run_cruise(**{**self._call, "xosc": True})  # the tests are done: this only writes their .xosc
         if videos > 0:
             record_cruise_videos(self.result, self.sources, min(videos, len(self.failures)))
 
