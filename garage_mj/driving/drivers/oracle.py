@@ -23,7 +23,9 @@ plan: car-centre ``poses`` and gear ``directions``), the oracle tracks it forwar
 :class:`~garage_mj.driving.drivers.park_tracking.ParkTracker` and answers the continuous park action
 ``[pedal, steer, gear]``. A park test (``task`` "park") is the plan alone; an AVP test (``task`` "avp")
 first drives the cruise route exactly as a cruise test does (in D), and once at rest on its goal tracks
-the plan from there. Without ``park_plan`` nothing of this runs: a cruise test's commands are the same.
+the plan from there (with discrete actions: :class:`~garage_mj.driving.sim.vehicle.ParkAction`, a gear
+selection while the wanted gear is not in, else the closest cruise action, which costs precision).
+Without ``park_plan`` nothing of this runs: a cruise test's commands are the same.
 
 If the oracle fails a feasible test, the test or the testbed is wrong, not the driver under test.
 """
