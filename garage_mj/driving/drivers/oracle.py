@@ -22,8 +22,10 @@ Park and AVP tests (docs/spec.md section 8): when the reset info has ``park_plan
 plan: car-centre ``poses`` and gear ``directions``), the oracle tracks it forward and in reverse with
 :class:`~garage_mj.driving.drivers.park_tracking.ParkTracker` and answers the continuous park action
 ``[pedal, steer, gear]``. A park test (``task`` "park") is the plan alone; an AVP test (``task`` "avp")
-first drives the cruise route exactly as a cruise test does (in D), and once at rest on its goal tracks
-the plan from there (with discrete actions: :class:`~garage_mj.driving.sim.vehicle.ParkAction`, a gear
+first drives the cruise route exactly as a cruise test does (in D), until ``handover`` metres before its
+goal; the tracker then follows that last stretch of the route and the plan after it, without stopping
+at the goal when the plan begins forward (the cruise tracker leaves the car up to a few decimetres off
+the goal after a turn, more than a short first park segment can take out) (with discrete actions: :class:`~garage_mj.driving.sim.vehicle.ParkAction`, a gear
 selection while the wanted gear is not in, else the closest cruise action, which costs precision).
 Without ``park_plan`` nothing of this runs: a cruise test's commands are the same.
 
@@ -44,6 +46,7 @@ from garage_mj.driving.drivers.park_tracking import ParkTrackConfig, ParkTracker
 from garage_mj.driving.sim.vehicle import Gear, ParkAction, clip
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import TestPlan
+from garage_mj.scene.park_planning import rear_to_centre
 
 
 @dataclass(frozen=True)
@@ -78,11 +81,11 @@ class OracleDriver(BaseDriver):
         self.tracker: ParkTracker | None = None
         self.phase = "cruise"  # "cruise" (no park plan, or an AVP test's route) or "park"
         plan = info.get("park_plan")
-        if plan is not None and len(plan["poses"]) >= 2:
+        avp = info.get("task", "park") == "avp"
+        if plan is not None and len(plan["poses"]) >= 2 and not avp:
             self.tracker = ParkTracker(plan["poses"], plan["directions"], self.car, self.park_config, self.dt)
-            if info.get("task", "park") != "avp":
-                self.phase = "park"
-                return
+            self.phase = "park"
+            return
         rear = info.get("rear_path")
         if rear is None or info.get("rear_heading") is None:
             raise ValueError("the oracle driver needs the test's plan (rear_path, rear_heading, rear_curvature) "
@@ -95,6 +98,17 @@ class OracleDriver(BaseDriver):
         self.index = 0
         self.v_limit = self._speed_profile()
         self._actor_blocks(info.get("actors") or [])
+        if plan is not None and len(plan["poses"]) >= 2:  # AVP: the route's last stretch, then the park plan
+            self.tracker = self._handover(plan)
+
+    def _handover(self, plan: dict[str, Any]) -> ParkTracker:
+        """An AVP test's tracker: the last ``handover`` metres of the cruise route (forward), then the park
+        plan, so the car is on the plan's start line when the parking begins, not where the cruise left it."""
+        tail = np.flatnonzero(self.s >= self.s[-1] - self.park_config.handover)
+        rear = np.column_stack([self.path[tail], self.heading[tail]])
+        poses = np.vstack([rear_to_centre(rear, self.car), np.asarray(plan["poses"], dtype=float)])
+        directions = np.concatenate([np.ones(len(tail), dtype=np.int8), np.asarray(plan["directions"])])
+        return ParkTracker(poses, directions, self.car, self.park_config, self.dt)
 
     def to_discrete(self, throttle: float, steer: float, obs: dict[str, Any]) -> int:
         """With the paper's actions it knows the car's answer to each (:meth:`track_discrete`)."""
@@ -210,7 +224,7 @@ class OracleDriver(BaseDriver):
         gear = Gear.D
         if self.phase == "cruise":  # an AVP test's route, driven as in a cruise test
             throttle, steer = self.command(obs)
-            if self.remaining <= self.config.stop_within and abs(speed) < self.tracker.config.at_rest:
+            if self.remaining <= self.park_config.handover:
                 self.phase = "park"
         if self.phase == "park":
             seen = obs.get("gear")
