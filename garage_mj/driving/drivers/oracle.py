@@ -24,9 +24,10 @@ plan: car-centre ``poses`` and gear ``directions``), the oracle tracks it forwar
 ``[pedal, steer, gear]``. A park test (``task`` "park") is the plan alone; an AVP test (``task`` "avp")
 first drives the cruise route exactly as a cruise test does (in D), until ``handover`` metres before its
 goal; the tracker then follows that last stretch of the route and the plan after it, without stopping
-at the goal when the plan begins forward (the cruise tracker leaves the car up to a few decimetres off
-the goal after a turn, more than a short first park segment can take out) (with discrete actions: :class:`~garage_mj.driving.sim.vehicle.ParkAction`, a gear
-selection while the wanted gear is not in, else the closest cruise action, which costs precision).
+at the goal when the plan begins forward (the cruise tracker can leave the car a few decimetres off the
+goal after a turn, more than a short first park segment can take out). With discrete actions it answers
+a :class:`~garage_mj.driving.sim.vehicle.ParkAction`: a gear selection while the wanted gear is not in,
+else the closest cruise action (which costs precision).
 Without ``park_plan`` nothing of this runs: a cruise test's commands are the same.
 
 If the oracle fails a feasible test, the test or the testbed is wrong, not the driver under test.
