@@ -177,3 +177,29 @@ def test_stall_fixes_a_cruise_tests_target_too(painted_tiny):
     assert {env.reset(seed=s)[1]["target_stall"] for s in range(3)} == {3}
     assert env.action_space.n == 4  # still a cruise test
     env.close()
+
+
+def test_a_multi_point_turn_of_short_shuffles_is_progress_until_it_stops(painted_tiny):
+    """Each cusp driven restarts the no-progress clock (wheels turned at rest between short shuffles);
+    the car stopping for good near the stall is then outside_stall."""
+    from garage_mj.scene.car import car_geometry
+    from garage_mj.scene.garage_scene import GarageScene
+
+    scene = GarageScene(painted_tiny)
+    stall, car = scene.stalls.stalls[3], car_geometry()
+    goal = park_pose(stall, car, "reverse")
+    near = (goal[0] + 2.0, goal[1], goal[2])
+    monitor = ParkMonitor(Route([near[:2], goal[:2]]), stall, car, "reverse", 100.0, ParkOutcomeConfig())
+    monitor.start(near)
+    t, sign = 0.0, 1.0
+    for _ in range(12):  # 12 shuffles, 3 s each: 36 s without 0.3 m of progress, far past stuck_time
+        for v in (0.0, 0.0, 0.0, 0.0, 0.2 * sign, 0.0):  # 2.5 s at rest turning the wheels, then a short move
+            t += 0.5
+            assert monitor.update(t, near[:2], v, yaw=near[2]) is None, t
+        sign = -sign
+    assert monitor.direction_changes == 11
+    out = None
+    while out is None:
+        t += 0.5
+        out = monitor.update(t, near[:2], 0.0, yaw=near[2])
+    assert out.kind is OutcomeKind.OUTSIDE_STALL and "no progress for 8.0 s" in out.reason

@@ -11,7 +11,8 @@ cruise route followed by the park plan (AVP test, scored as one test). Checks, i
   (:func:`~garage_mj.scene.park_planning.in_stall` ``.parked``); a contact ends the test first, so a
   success had none at any time;
 - no progress for ``stuck_time``: neither along the reference path nor towards the stall pose by
-  ``stuck_progress``: ``outside_stall`` within ``outside_radius`` of the stall pose (stopped, but not
+  ``stuck_progress``, nor a new direction change (a cusp driven: a multi-point turn of short shuffles,
+  each with the wheels turned at rest, is progress; the time limit still bounds it): ``outside_stall`` within ``outside_radius`` of the stall pose (stopped, but not
   parked: the reason gives the errors), ``deadlock`` farther away;
 - timeout: ``time_limit`` from the reference length (``park_time_limit``), set by the env.
 
@@ -99,6 +100,7 @@ class ParkMonitor:
         self._mark_time = 0.0
         self._mark_progress = 0.0
         self._mark_dist = math.inf
+        self._mark_changes = 0  # direction changes at the mark
 
     def start(self, pose, progress: float = 0.0) -> None:
         """The car at rest at ``pose`` (car centre), ``progress`` metres along the reference: before the first step."""
@@ -139,8 +141,9 @@ class ParkMonitor:
             self.park_start = float(time)
         dist = math.dist((x, y), self.target[:2])
         if hold or self.progress - self._mark_progress >= cfg.stuck_progress or \
-                self._mark_dist - dist >= cfg.stuck_progress:
+                self._mark_dist - dist >= cfg.stuck_progress or self.direction_changes > self._mark_changes:
             self._mark_time, self._mark_progress, self._mark_dist = time, self.progress, min(dist, self._mark_dist)
+            self._mark_changes = self.direction_changes
         elif time - self._mark_time >= cfg.stuck_time:
             why = f"no progress for {time - self._mark_time:.1f} s"
             if dist <= cfg.outside_radius:
