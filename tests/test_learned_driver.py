@@ -145,7 +145,7 @@ def test_specs_name_the_learned_driver_and_its_model(dqn_zip):
         resolve_driver("learned:")
     with pytest.raises(DriverError, match=r"names its model"):
         load_driver(f"learned:{dqn_zip}", model=dqn_zip)
-    with pytest.raises(DriverError, match=r"unknown driver 'learn'.*vision, learned or learned:PATH\) or module:Class"):
+    with pytest.raises(DriverError, match=r"unknown driver 'learn'.*park_assist, learned or learned:PATH\) or module:Class"):
         resolve_driver("learn")
 
 
