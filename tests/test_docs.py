@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -66,3 +67,31 @@ def test_the_docs_python_examples_run(code, tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env,
                          timeout=DOC_BLOCK_TIMEOUT_S)
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def _page_block(page: str, lang: str, containing: str) -> str:
+    """The body of the first ```LANG block of docs/PAGE that contains CONTAINING."""
+    for m in re.finditer(rf"```{lang}\n(.*?)```", (ROOT / "docs" / page).read_text(), re.S):
+        if containing in m.group(1):
+            return m.group(1)
+    raise AssertionError(f"docs/{page} has no ```{lang} block with {containing!r}")
+
+
+def test_a_newcomer_follows_the_docs_to_their_own_driver(tmp_path):
+    """docs/own-driver.md's driver file and commands, then docs/pytest-plugin.md's test file, taken from the
+    pages themselves; `garage-mj` runs as `python -m garage_mj`. The pytest file's `my_stack` is the
+    plugin page's example driver (docs/pytest_example), since the own-driver placeholder only accelerates."""
+    env = {**os.environ, "MUJOCO_GL": "egl", "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    (tmp_path / "my_driver.py").write_text(_page_block("own-driver.md", "python", "class MyDriver"))
+    for line in _page_block("own-driver.md", "sh", "my_driver.py:MyDriver").splitlines():
+        args = shlex.split(line, comments=True)
+        assert args[0] == "garage-mj", line
+        out = subprocess.run([sys.executable, "-m", "garage_mj", *args[1:]], capture_output=True, text=True,
+                             cwd=tmp_path, env=env, timeout=60)
+        assert out.returncode == 0, line + "\n" + out.stdout + out.stderr
+    assert (tmp_path / "runs" / "mine" / "tests.csv").is_file()
+    (tmp_path / "my_stack.py").write_text((ROOT / "docs" / "pytest_example" / "test_my_driver.py").read_text())
+    (tmp_path / "test_my_driver.py").write_text(_page_block("pytest-plugin.md", "python", "from my_stack import"))
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_my_driver.py"],
+                         capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
+    assert out.returncode == 0 and "1 passed" in out.stdout, out.stdout + out.stderr
