@@ -125,15 +125,18 @@ class BaseDriver:
     def command(self, obs: dict[str, Any]) -> tuple[float, float]:
         raise NotImplementedError
 
-    def act(self, obs: dict[str, Any]):
-        """The action for this step: command, plus noise and delay, in the env's action type."""
-        throttle, steer = self.command(obs)
+    def delayed(self, throttle: float, steer: float) -> tuple[float, float]:
+        """``(throttle, steer)`` with the driver's noise added, clipped, and through its delay queue."""
         if self.noise.throttle_std > 0:
             throttle += float(self._rng.normal(0.0, self.noise.throttle_std))
         if self.noise.steer_std > 0:
             steer += float(self._rng.normal(0.0, self.noise.steer_std))
         self._queue.append((clip(throttle, -1.0, 1.0), clip(steer, -1.0, 1.0)))
-        throttle, steer = self._queue.popleft()
+        return self._queue.popleft()
+
+    def act(self, obs: dict[str, Any]):
+        """The action for this step: command, plus noise and delay, in the env's action type."""
+        throttle, steer = self.delayed(*self.command(obs))
         if self.discrete:
             return self.to_discrete(throttle, steer, obs)
         return np.array([throttle, steer], dtype=np.float32)

@@ -44,7 +44,7 @@ import numpy as np
 from garage_mj.driving.actors.scenario import Corridor, actor_poses, sample_times
 from garage_mj.driving.drivers.base import BaseDriver
 from garage_mj.driving.drivers.park_tracking import ParkTrackConfig, ParkTracker
-from garage_mj.driving.sim.vehicle import Gear, ParkAction, clip
+from garage_mj.driving.sim.vehicle import Gear, ParkAction
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.drivable import TestPlan
 from garage_mj.scene.park_planning import rear_to_centre
@@ -234,12 +234,7 @@ class OracleDriver(BaseDriver):
                 np.asarray(obs["pose"]).reshape(-1)[:3], speed,
                 None if seen is None else (Gear.R if float(np.asarray(seen).reshape(-1)[0]) < 0 else Gear.D),
                 None if wheel is None else float(np.asarray(wheel).reshape(-1)[0]))
-        if self.noise.throttle_std > 0:
-            throttle += float(self._rng.normal(0.0, self.noise.throttle_std))
-        if self.noise.steer_std > 0:
-            steer += float(self._rng.normal(0.0, self.noise.steer_std))
-        self._queue.append((clip(throttle, -1.0, 1.0), clip(steer, -1.0, 1.0)))
-        throttle, steer = self._queue.popleft()
+        throttle, steer = self.delayed(throttle, steer)
         if self.discrete:
             return self._park_discrete(throttle, steer, gear, obs)
         return np.array([throttle, steer, gear.sign], dtype=np.float32)
