@@ -20,7 +20,7 @@ BLENDER_STAMP := $(BLENDER_VENV)/.installed
 BPY := bpy==5.0.1
 export MUJOCO_GL ?= egl
 
-.PHONY: install browser test demo bench lint docs clean
+.PHONY: install browser test test-all demo bench lint docs clean
 
 install: $(STAMP) $(QC_STAMP) $(BLENDER_STAMP)
 
@@ -58,7 +58,12 @@ browser:
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium chromium-driver >/dev/null; }
 
+# make test leaves out the tests marked slow (tests/conftest.py SLOW) to stay under 10 minutes on 2 cores;
+# make test-all runs every test.
 test: install browser
+	$(PY) -m pytest -q -m "not slow"
+
+test-all: install browser
 	$(PY) -m pytest -q
 
 demo: $(MAIN_STAMP)

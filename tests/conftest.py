@@ -46,3 +46,32 @@ def junction_garage() -> Garage:
 
     grid = np.array([[int(v) for v in line.split()] for line in JUNCTIONS_7X11.splitlines()])
     return Garage(apply_stall_rule(grid, "NS"), load_map("tiny_7x11").initial, name="junctions_7x11")
+
+
+#: The slowest tests (8-22 s each on 2 cores: Ray clusters, whole demos, real kill -9 of CLI runs), kept out
+#: of ``make test`` so it stays under 10 minutes on a fresh clone; ``make test-all`` runs them too.
+SLOW = frozenset({
+    "tests/test_ray_cluster.py::test_cluster_fills_the_library_the_local_pool_does",
+    "tests/test_ray_cluster.py::test_a_lost_node_resumes_from_the_heads_checkpoint",
+    "tests/test_ray_backend.py::test_workers_get_the_env_and_a_lost_worker_is_retried_then_named",
+    "tests/test_ray_backend.py::test_hunt_on_ray_gives_the_local_hunt",
+    "tests/test_ray_backend.py::test_a_job_past_its_time_limit_or_lost_for_good_goes_to_on_lost",
+    "tests/test_ray_backend.py::test_cruise_rows_equal_local_and_a_rerun_resumes",
+    "tests/test_ray_backend.py::test_generation_experiment_on_ray_gives_the_same_runs",
+    "tests/test_pytest_plugin.py::test_park_tests_of_a_driver_pass_with_the_oracle_and_fail_readably_standing_still",
+    "tests/test_cruise.py::test_cli_videos_of_the_batch_in_out",
+    "tests/test_drivers.py::test_cli_user_driver_by_file_and_by_module_in_two_workers",
+    "tests/test_faults.py::test_kill_9_mid_export_then_resume",
+    "tests/test_faults.py::test_kill_9_during_the_first_cruise_test_then_resume",
+    "tests/test_faults.py::test_demo_with_a_map_path_writes_only_inside_out",
+    "tests/test_faults.py::test_two_cruise_runs_into_one_folder",
+    "tests/test_training.py::test_crash_then_resume_keeps_every_garage_once",
+    "tests/test_train_driver.py::test_hunt_curriculum_trains_on_the_garages_its_hunt_found",
+    "tests/test_generator.py::test_search_stage_fills_a_low_band_the_rollouts_never_reach",
+})
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.nodeid.split("[")[0] in SLOW:
+            item.add_marker(pytest.mark.slow)
