@@ -358,12 +358,7 @@ class GarageDriveEnv(gym.Env):
             target = int(rng.choice(self.targets))
         if target not in self.targets:
             raise ValueError(f"stall {target} cannot be reached; reachable stalls: {self.targets}")
-        occupied_draw = rng.random(len(self.parkable)) < self.occupancy
-        occupied = [sid for sid, o in zip(self.parkable, occupied_draw, strict=True) if o and sid != target]
-        if "occupied" in options:
-            occupied = [int(s) for s in options["occupied"] if int(s) != target]
-        lateral = rng.uniform(-1.0, 1.0) * self.start_noise[0]
-        dyaw = rng.uniform(-1.0, 1.0) * self.start_noise[1]
+        occupied, lateral, dyaw = self.draw_parked_and_noise(rng, target, options)
 
         self.target = target
         self.test_plan = plan = self.planner.plan(target)
@@ -401,6 +396,22 @@ class GarageDriveEnv(gym.Env):
         elif not self.scenario.feasible:
             self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, self.scenario.reason)
         return self._observe(), self._info()
+
+    def draw_parked_and_noise(self, rng: np.random.Generator, target: int,
+                              options: dict[str, Any]) -> tuple[list[int], float, float]:
+        """The parked cars and the start noise of a test on ``target``, as every task draws them.
+
+        Returns (occupied stall ids, never ``target``; lateral offset [m]; yaw offset [rad]), drawn from
+        ``rng`` in this order: one uniform per parkable stall, then lateral, then yaw. ``options["occupied"]``
+        replaces the parked cars drawn (the draw still happens, so the later draws stay the same).
+        """
+        occupied_draw = rng.random(len(self.parkable)) < self.occupancy
+        occupied = [sid for sid, o in zip(self.parkable, occupied_draw, strict=True) if o and sid != target]
+        if "occupied" in options:
+            occupied = [int(s) for s in options["occupied"] if int(s) != target]
+        lateral = rng.uniform(-1.0, 1.0) * self.start_noise[0]
+        dyaw = rng.uniform(-1.0, 1.0) * self.start_noise[1]
+        return occupied, lateral, dyaw
 
     def _reset_park(self, rng, options: dict[str, Any]):
         """:meth:`reset` of a park or AVP test (:mod:`~garage_mj.driving.sim.park_task`)."""

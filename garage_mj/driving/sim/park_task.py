@@ -13,9 +13,10 @@ test (``task="cruise"``, the default) never comes here.
   the park plan from the cruise goal; one test, a success only when parked.
 
 The draws come from the reset's generator in this order: target, parked cars, lateral and yaw noise (as a
-cruise test draws them), then the maneuver where it is ``"any"``. A test without a cruise route to the
-stall, or without a park plan, is ``infeasible`` with the planner's reason; with ``infeasible="skip"``
-another stall is drawn instead (unless the stall is fixed), while one is left.
+cruise test draws them: :meth:`~garage_mj.driving.sim.drive_env.GarageDriveEnv.draw_parked_and_noise`), then
+the maneuver where it is ``"any"``. A test without a cruise route to the stall, or without a park plan, is
+``infeasible`` with the planner's reason; with ``infeasible="skip"`` another stall is drawn instead (unless
+the stall is fixed), while one is left.
 """
 
 from __future__ import annotations
@@ -84,12 +85,7 @@ def _draw_one(env: GarageDriveEnv, rng: np.random.Generator, options: dict[str, 
               fixed: int | None) -> ParkTest:
     """Draw and plan one test on a stall of ``candidates`` (or ``fixed``)."""
     target = fixed if fixed is not None else int(rng.choice(candidates))
-    occupied_draw = rng.random(len(env.parkable)) < env.occupancy
-    occupied = [sid for sid, o in zip(env.parkable, occupied_draw, strict=True) if o and sid != target]
-    if "occupied" in options:
-        occupied = [int(s) for s in options["occupied"] if int(s) != target]
-    lateral = rng.uniform(-1.0, 1.0) * env.start_noise[0]
-    dyaw = rng.uniform(-1.0, 1.0) * env.start_noise[1]
+    occupied, lateral, dyaw = env.draw_parked_and_noise(rng, target, options)
     name = env.maneuver if env.maneuver != "any" else tuple(MANEUVERS)[int(rng.integers(len(MANEUVERS)))]
     cruise = env.planner.plan(target)
     if not cruise.feasible:  # no start pose: never driven, the car waits at the entrance
