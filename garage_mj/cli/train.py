@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"run {m['run']}: {m['timesteps']} timesteps, {m['episodes']} episodes, "
           f"{m['garages_stored']} garages in {m['library']}")
     if s and s["timesteps"]:
-        print(f"this session: {s['timesteps']} timesteps in {s['wall_s']:.1f} s = {s['timesteps_per_s']:.0f} "
+        print(f"this run: {s['timesteps']} timesteps in {s['wall_s']:.1f} s = {s['timesteps_per_s']:.0f} "
               f"timesteps/s, env {100 * s['env_share']:.1f}% of the time, {s['usable_episodes']} usable "
               f"episodes, {s['garages_stored']} new garages")
     else:

@@ -165,7 +165,7 @@ def run_demo(cfg: DemoConfig) -> Path:
             f"asset packs: {packs_dir.relative_to(out).as_posix()}/ ({INDEX} lists them)",
             "cruise runs: cruise/<driver>/ (tests.csv, summary.csv, summary.json, xosc/ with every test "
             "as OpenSCENARIO, videos/ with the failures shown above)",
-            "paper (SPEC section 5): r(difficulty, success) = -0.638 over 16 garages of the 13x13 aligned map",
+            "paper (docs/spec.md section 5): r(difficulty, success) = -0.638 over 16 garages of the 13x13 aligned map",
             "route difficulty: the expected failure rate of a cruise test predicted from the planned routes "
             "(garage-mj difficulty), beside the paper's difficulty, under the shipped model fitted on the driver "
             "and its action type; n/a where none was (summary.json's route_note)",

@@ -49,7 +49,7 @@ PICTURES = "pictures"  # a run folder's top-down pictures of park and AVP failur
 #: The CARLA end-to-end parking benchmark's success box, for comparison (SPEC 8).
 CARLA_BOX = {"lateral_m": 0.6, "longitudinal_m": 1.0, "heading_deg": 10.0}
 SUCCESS_NOTE = (
-    f"Success (SPEC 8): at rest, the footprint inside the stall's lines (the far end up to {FAR_END_OVER} m past "
+    f"Success (docs/spec.md section 8): at rest, the footprint inside the stall's lines (the far end up to {FAR_END_OVER} m past "
     f"the aisle line), heading within {HEADING_TOLERANCE:g} deg of the stall axis, no contact; the CARLA parking "
     f"benchmark's: within {CARLA_BOX['lateral_m']} m lateral, {CARLA_BOX['longitudinal_m']} m longitudinal, "
     f"{CARLA_BOX['heading_deg']:g} deg. Rates are over feasible tests, errors over driven tests, park time and "
