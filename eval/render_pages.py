@@ -1,0 +1,469 @@
+"""Render docs/performance.md and docs/results.md from docs/data/*.toml and the result files they name.
+
+Every figure on the two pages is a record in its page's data file: what it measures, the figure's
+text, the command that made it, the result files under docs/ it comes from (``files``), the date,
+the machine and the commit. A number a result file holds is not copied into the text: a placeholder
+reads it from the file at render time, so a page cannot drift from its files.
+
+    {{FILE:PATH|OP|SPEC}}   e.g. {{bench_fbx.json:fbx_adds_ms|.1f}}, {{bench_park.json:per_kind.*.oracle.sim_s_per_wall_s|range|.0f}}
+
+    FILE  a .json or .csv file under docs/ (a CSV is a list of rows)
+    PATH  dot-separated keys (a list index is a number); ``*`` takes every value, ``k=v,k2=v2`` every
+          item whose keys have those values: both give a list (of the values that have the keys
+          after it), which an OP must reduce
+    OP    on a list: sum, min, max, mean, len, first, range (min and max, written "lo-hi"), list
+          (written "a, b, c"); xNUMBER multiplies (x0.001: bytes to kB)
+    SPEC  a Python format spec for the value (``.1f``, ``,``, ``.0%``, ``+.0f``); last, optional
+
+A result file's own ``provenance`` (written by the benchmarks through eval/_provenance.py) is used
+over the record's command, date, machine and commit. Records whose files do not carry one get their
+date and commit from git once, with ``--stamp`` (the commit that last changed the files' content),
+so that rendering needs neither git nor a full clone.
+
+    .venv/bin/python eval/render_pages.py           # write docs/performance.md and docs/results.md
+    .venv/bin/python eval/render_pages.py --check   # exit 1 if a committed page is not what its data renders
+    .venv/bin/python eval/render_pages.py --stamp   # then render: date and commit from git where files changed
+
+A new figure: its result file under docs/ (the benchmark's ``--json``), one record in
+docs/data/performance.toml or docs/data/results.toml, then ``--stamp`` (after committing the result
+file, unless it carries its provenance) and a render; commit the data file and the page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import fnmatch
+import json
+import re
+import statistics
+import subprocess
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python < 3.11
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[1]
+RENDER = ".venv/bin/python eval/render_pages.py"
+PROVENANCE_FIELDS = ("command", "date", "machine", "commit")
+PLACEHOLDER = re.compile(r"\{\{(?P<file>[^:{}]+):(?P<path>[^|{}]*)(?P<ops>(?:\|[^|{}]*)*)\}\}")
+
+
+class PageError(Exception):
+    """A data file or result file that cannot render: one sentence naming it and the fix."""
+
+
+# --- result files -------------------------------------------------------------------------------
+
+def _number(text: str) -> Any:
+    """A CSV cell as int, float or the text itself."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _drivable_totals(rows: list[dict]) -> dict:
+    """bench_drivable.json's groups summed per "driver/action_type" (tests, infeasible, feasible, success)."""
+    totals: dict[str, dict] = {}
+    for r in rows:
+        t = totals.setdefault(f"{r['driver']}/{r['action_type']}",
+                              {"tests": 0, "infeasible": 0, "feasible": 0, "success": 0})
+        t["tests"] += r["tests"]
+        t["infeasible"] += r["infeasible"]
+        t["feasible"] += r["feasible"]
+        t["success"] += round(r["success_pct"] * r["feasible"] / 100)
+    for t in totals.values():
+        t["infeasible_pct"] = 100 * t["infeasible"] / t["tests"]
+        t["success_pct"] = 100 * t["success"] / t["feasible"]
+        t["failed"] = t["feasible"] - t["success"]
+    return {"rows": rows, "totals": totals}
+
+
+def _protocol_widths(summary: dict) -> dict:
+    """A protocol summary.json with each map's difficulty range width (diff_width = max - min)."""
+    return {m: {**v, "diff_width": v["diff"][1] - v["diff"][0]} if isinstance(v, dict) and "diff" in v else v
+            for m, v in summary.items()}
+
+
+def _actors_replay(data: dict) -> dict:
+    """bench_actors.json with the replay's wall seconds per replayed test."""
+    replay = data.get("replay", {})
+    if replay.get("replayed"):
+        replay = {**replay, "s_per_test": replay["wall_s"] / replay["replayed"]}
+    return {**data, "replay": replay}
+
+
+def _drive_env_meta(data: dict) -> dict:
+    """bench_drive_env.json records its date and measured commit in "meta" (written before "provenance")."""
+    meta = data.get("meta", {})
+    return {"date": meta.get("when", "")[:10], "commit": meta.get("trees", {}).get("after", {}).get("commit", "")}
+
+
+@dataclass(frozen=True)
+class View:
+    """What a result file gives the pages beyond its own keys: derived figures, an older provenance record."""
+
+    file: str  # path under docs/, a glob pattern (fnmatch)
+    derive: Callable[[Any], Any] | None = None  # the data the placeholders read, from the file's
+    provenance: Callable[[Any], dict] | None = None  # fields for a file written before "provenance"
+
+
+VIEWS = (
+    View("bench_drivable.json", derive=_drivable_totals),
+    View("bench_actors.json", derive=_actors_replay),
+    View("bench_drive_env.json", provenance=_drive_env_meta),
+    View("protocol_*/summary.json", derive=_protocol_widths),
+)
+
+
+def _view(name: str) -> View | None:
+    """The view of docs/NAME, if one is registered."""
+    return next((v for v in VIEWS if fnmatch.fnmatch(name, v.file)), None)
+
+
+class Sources:
+    """The result files under a docs/ folder, each read once."""
+
+    def __init__(self, docs: Path) -> None:
+        self.docs = docs
+        self._raw: dict[str, Any] = {}
+
+    def raw(self, name: str) -> Any:
+        """The file's content as written (JSON, or a CSV's rows)."""
+        if name not in self._raw:
+            path = self.docs / name
+            if not path.is_file():
+                raise PageError(f"docs/{name} does not exist: fix the name in the data file or run its benchmark")
+            if path.suffix == ".csv":
+                with path.open(newline="") as f:
+                    self._raw[name] = [{k: _number(v) for k, v in row.items()} for row in csv.DictReader(f)]
+            else:
+                self._raw[name] = json.loads(path.read_text())
+        return self._raw[name]
+
+    def data(self, name: str) -> Any:
+        """What the placeholders read: the file, through its view's derive if it has one."""
+        view = _view(name)
+        return view.derive(self.raw(name)) if view and view.derive else self.raw(name)
+
+    def provenance(self, name: str) -> dict:
+        """The file's own provenance fields ("provenance", or its view's reading of an older record)."""
+        raw = self.raw(name)
+        if isinstance(raw, dict) and isinstance(raw.get("provenance"), dict):
+            return raw["provenance"]
+        view = _view(name)
+        return {k: v for k, v in view.provenance(raw).items() if v} if view and view.provenance else {}
+
+    def fill(self, text: str) -> str:
+        """TEXT with every placeholder replaced by the figure it names."""
+        return PLACEHOLDER.sub(lambda m: self._figure(m), text)
+
+    def _figure(self, m: re.Match) -> str:
+        where = m.group(0)
+        ops = m.group("ops").split("|")[1:]
+        spec = ops.pop() if ops and not _is_op(ops[-1]) else ""
+        value, many = _walk(self.data(m.group("file").strip()), m.group("path").strip(), where)
+        for op in ops:
+            if not _is_op(op):
+                raise PageError(f"{where}: unknown operation {op!r} (one of {', '.join(REDUCE)}, xNUMBER)")
+            if op.startswith("x"):
+                value = [v * float(op[1:]) for v in value] if many else value * float(op[1:])
+                continue
+            if not many:
+                raise PageError(f"{where}: {op} needs a list (a * or k=v step in the path)")
+            value, many = REDUCE[op](value), False
+        if many:
+            raise PageError(f"{where} names {len(value)} values: reduce them with |sum, |range, |list ...")
+        return _format(value, spec, where)
+
+
+def _items(node: Any) -> list[tuple[str, Any]]:
+    """A dict's or list's (key, value) pairs; a result's "provenance" is no figure."""
+    if isinstance(node, dict):
+        return [(k, v) for k, v in node.items() if k != "provenance"]
+    if isinstance(node, list):
+        return [(str(i), v) for i, v in enumerate(node)]
+    return []
+
+
+def _walk(data: Any, path: str, where: str) -> tuple[Any, bool]:
+    """The value (or, after a * or k=v step, the list of values) at PATH, and whether it is a list."""
+    values, many = [data], False
+    for step in path.split(".") if path else []:
+        if step == "*":
+            values, many = [v for node in values for _, v in _items(node)], True
+        elif "=" in step:
+            want = dict(part.split("=", 1) for part in step.split(","))
+            values = [v for node in values for _, v in _items(node)
+                      if isinstance(v, dict) and all(str(v.get(k)) == x for k, x in want.items())]
+            many = True
+        else:
+            found = [v for node in values for k, v in _items(node) if k == step]
+            if not found or (not many and len(found) != len(values)):  # after a * a value may lack it
+                raise PageError(f"{where}: no {step!r} in the file (its keys: "
+                                f"{', '.join(k for k, _ in _items(values[0]))[:200]})")
+            values = found
+    return (values if many else values[0]), many
+
+
+REDUCE: dict[str, Callable[[list], Any]] = {
+    "sum": sum, "min": min, "max": max, "mean": statistics.fmean, "len": len,
+    "first": lambda v: v[0], "range": lambda v: (min(v), max(v)), "list": list,
+}
+
+
+def _is_op(text: str) -> bool:
+    """Whether a |part of a placeholder is an operation (a reduction, or xNUMBER: times NUMBER), not a spec."""
+    return text in REDUCE or re.fullmatch(r"x[0-9.eE+-]+", text) is not None
+
+
+def _format(value: Any, spec: str, where: str) -> str:
+    """A figure as the page writes it; a range as "lo-hi" (one number where both ends read the same)."""
+    if isinstance(value, tuple):
+        lo, hi = (_format(v, spec, where) for v in value)
+        return lo if lo == hi else f"{lo}-{hi}"
+    if isinstance(value, list):
+        return ", ".join(_format(v, spec, where) for v in value)
+    try:
+        return format(value, spec)
+    except (TypeError, ValueError) as exc:
+        raise PageError(f"{where}: cannot write {value!r} as {spec!r} ({exc})") from None
+
+
+# --- records and pages --------------------------------------------------------------------------
+
+def _one_line(text: str) -> str:
+    """A table cell: the data file's line breaks as spaces."""
+    return " ".join(text.split())
+
+
+def _provenance(record: dict, sources: Sources, label: str) -> dict[str, str]:
+    """The record's command, date, machine and commit, each taken from its first file that records it."""
+    out = {k: str(record.get(k, "")) for k in PROVENANCE_FIELDS}
+    for name in reversed(record.get("files", [])):
+        out.update({k: str(v) for k, v in sources.provenance(name).items() if k in PROVENANCE_FIELDS and v})
+    missing = [k for k in PROVENANCE_FIELDS if not out[k]]
+    if missing:
+        fix = f"run `{RENDER} --stamp`" if record.get("files") else "write them into the data file"
+        raise PageError(f"{label} has no {' or '.join(missing)}: {fix}")
+    return out
+
+
+def _machine(name: str, machines: dict[str, str]) -> str:
+    """A machine's short name as the page writes it (a described machine in italics, the legend explains it)."""
+    return f"*{name}*" if name in machines else name
+
+
+def _legend(machines: dict[str, str], used: set[str]) -> list[str]:
+    """The machines the page names, one line each."""
+    return [f"- *{k}*: {v}" for k, v in machines.items() if k in used]
+
+
+def _files_text(record: dict) -> str:
+    """The record's result files as the page writes them."""
+    return ", ".join(f"`docs/{f}`" for f in record.get("files", [])) or "printed by the command"
+
+
+def _header(name: str) -> list[str]:
+    """The comment that opens a rendered page."""
+    return [f"<!-- Generated by `{RENDER}` from docs/data/{name}.toml and the result files it names: "
+            f"edit those, not this page, then run the command. -->"]
+
+
+def render_performance(data: dict, sources: Sources) -> str:
+    """docs/performance.md: one table row per figure, then the prose sections."""
+    machines, used = data.get("machines", {}), set()
+    rows = []
+    for i, row in enumerate(data["row"]):
+        label = f"docs/data/performance.toml row {i + 1} ({_one_line(row['what'])[:40]})"
+        p = _provenance(row, sources, label)
+        used.add(p["machine"])
+        made = (f"{_files_text(row)}; {p['date']}, `{p['commit']}`, {_machine(p['machine'], machines)}")
+        note = f" {row['command_note']}" if row.get("command_note") else ""
+        cells = [row["what"], row["figure"], row.get("target", ""), f"`{p['command']}`{note}", made]
+        rows.append("| " + " | ".join(_one_line(sources.fill(c)) for c in cells) + " |")
+    lines = [*_header("performance"), f"# {data['title']}", "", sources.fill(data["intro"]).strip(), "",
+             *_legend(machines, used), "",
+             "| what | figure | target | command | result, date, commit, machine |", "|---|---|---|---|---|", *rows]
+    for section in data.get("section", []):
+        lines += ["", f"## {section['heading']}", "", sources.fill(section["body"]).strip()]
+    return "\n".join(lines) + "\n"
+
+
+def _protocol_table(section: dict, map_order: list[str], sources: Sources) -> list[str]:
+    """A protocol run's per-map table from docs/PROTOCOL/summary.json (maps: its entries with "garages")."""
+    name = f"{section['protocol']}/summary.json"
+    summary = sources.data(name)
+    maps = [m for m, v in summary.items() if isinstance(v, dict) and "garages" in v]
+    maps.sort(key=lambda m: (map_order.index(m) if m in map_order else len(map_order), m))
+    notes = section.get("notes", {})
+    lines = []
+    if (sources.docs / section["protocol"] / "convergence.png").is_file():
+        alt = section.get("figure_alt", f"convergence of the {section['protocol']} run, mean over seeds")
+        lines += [f"![{alt}]({section['protocol']}/convergence.png)", ""]
+    lines += ["| map | garages stored | difficulty range (0.1 bins) | coverage 0.6-0.8 / >= 0.8 "
+              "| return, last 100 episodes (mean, sd over seeds) |", "|---|---|---|---|---|"]
+    for m in maps:
+        s = summary[m]
+        note = f": {_one_line(notes[m])}" if m in notes else ""
+        lines.append(f"| {m} | {s['garages']:,} | {s['diff'][0]:.2f}-{s['diff'][1]:.2f} ({s['bins']}) "
+                     f"| {s['cov_share_06_08']:.0%} / {s['cov_share_ge_08']:.0%} "
+                     f"| {s['ret_last100']:.1f} ({s['ret_sd']:.1f}){note} |")
+    return lines
+
+
+def _figure_line(record: dict, sources: Sources, machines: dict[str, str], label: str) -> str:
+    """One line of a results section: which files hold its figures, the command, date, commit, machine."""
+    p = _provenance(record, sources, label)
+    what = f"{sources.fill(record['what'])}: " if record.get("what") else ""
+    note = f" {_one_line(record['command_note'])}" if record.get("command_note") else ""
+    return (f"- {what}{_files_text(record)}, made by `{p['command']}`{note}, on {p['date']} at commit "
+            f"`{p['commit']}`, {_machine(p['machine'], machines)}")
+
+
+def render_results(data: dict, sources: Sources) -> str:
+    """docs/results.md: the prose sections, protocol tables from their summary.json, each with its figures' origin."""
+    machines, used = data.get("machines", {}), set()
+    lines = [*_header("results"), f"# {data['title']}", "", sources.fill(data["intro"]).strip()]
+    for section in data["section"]:
+        lines += ["", f"## {section['heading']}", ""]
+        if section.get("body"):
+            lines += [sources.fill(section["body"]).strip(), ""]
+        if section.get("protocol"):
+            lines += [*_protocol_table(section, data.get("map_order", []), sources), ""]
+        if section.get("after"):
+            lines += [sources.fill(section["after"]).strip(), ""]
+        figures = section.get("figure", [])
+        if figures:
+            lines += ["Where the figures come from:", ""]
+        for j, record in enumerate(figures):
+            label = f"docs/data/results.toml section {section['heading']!r}, figure {j + 1}"
+            lines.append(_figure_line(record, sources, machines, label))
+            used.add(_provenance(record, sources, label)["machine"])
+        while lines[-1] == "":
+            lines.pop()
+    lines += ["", "## Machines", "", *_legend(machines, used)]
+    return "\n".join(lines) + "\n"
+
+
+@dataclass(frozen=True)
+class Page:
+    """A rendered page: docs/NAME.md from docs/data/NAME.toml."""
+
+    name: str
+    render: Callable[[dict, Sources], str]
+    records: tuple[str, ...]  # the data file's tables whose entries carry files and provenance
+
+
+PAGES = (Page("performance", render_performance, ("row",)), Page("results", render_results, ("section.figure",)))
+
+
+def render(root: Path, page: Page) -> str:
+    """The page as its data file and result files render it."""
+    data_file = root / "docs" / "data" / f"{page.name}.toml"
+    try:
+        data = tomllib.loads(data_file.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise PageError(f"docs/data/{page.name}.toml cannot be read ({exc})") from None
+    return page.render(data, Sources(root / "docs"))
+
+
+# --- stamping from git ------------------------------------------------------------------------------
+
+def _git(root: Path, *args: str) -> str:
+    out = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise PageError(f"git {' '.join(args)} failed: {out.stderr.strip()}")
+    return out.stdout.strip()
+
+
+def _last_change(root: Path, name: str) -> tuple[int, str, str]:
+    """(time, date, short commit) of the commit that last changed docs/NAME's content (renames followed)."""
+    path = f"docs/{name}"
+    if _git(root, "status", "--porcelain", "--", path):
+        raise PageError(f"{path} has uncommitted changes: commit it, then run `{RENDER} --stamp`")
+    line = _git(root, "log", "-1", "--follow", "--diff-filter=AM", "--format=%ct %cs %h", "--", path)
+    if not line:
+        raise PageError(f"{path} is not in the git history (a shallow clone?): commit it, or stamp on a full clone")
+    t, date, commit = line.split()
+    return int(t), date, commit
+
+
+def _set_field(block: str, key: str, value: str) -> str:
+    """A record's text with KEY = "VALUE" (replaced, or added after its files line)."""
+    line = f'{key} = "{value}"'
+    if re.search(rf"^{key}\s*=.*$", block, re.M):
+        return re.sub(rf"^{key}\s*=.*$", line, block, count=1, flags=re.M)
+    return re.sub(r"^(files\s*=.*)$", rf"\1\n{line}", block, count=1, flags=re.M)
+
+
+def stamp(root: Path, page: Page) -> list[str]:
+    """Write date and commit from git into the data file's records whose files changed since; what changed."""
+    data_file = root / "docs" / "data" / f"{page.name}.toml"
+    text = data_file.read_text()
+    sources, changed = Sources(root / "docs"), []
+    # A record's text runs from its [[table]] line to the next [[...]] line; files = [...] is on one line.
+    blocks = re.split(r"(?m)^(?=\[\[)", text)
+    for i, block in enumerate(blocks):
+        head = block.splitlines()[0] if block else ""
+        if head.strip("[] ") not in page.records:
+            continue
+        record = tomllib.loads(re.sub(r"^\[\[.*\]\]", "", block, count=1))
+        files = record.get("files", [])
+        if not files or all(sources.provenance(f).get("commit") for f in files):
+            continue
+        _, date, commit = max(_last_change(root, f) for f in files)
+        if (record.get("date"), record.get("commit")) != (date, commit):
+            blocks[i] = _set_field(_set_field(block, "date", date), "commit", commit)
+            changed.append(f"docs/data/{page.name}.toml: {', '.join(files)} -> {date} {commit}")
+    data_file.write_text("".join(blocks))
+    return changed
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Render, check or stamp the pages; 0 when done, 1 with one line on what is wrong."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 epilog="The placeholder language and the workflow: the module docstring "
+                                        "(eval/render_pages.py).", formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--check", action="store_true",
+                    help="write nothing; exit 1 naming each page that differs from what its data renders")
+    ap.add_argument("--stamp", action="store_true",
+                    help="first fill date and commit from git into the data files' records whose result files "
+                         "changed since they were stamped (needs the git history), then render")
+    ap.add_argument("--root", type=Path, default=ROOT, help="the repository root (default: this checkout)")
+    args = ap.parse_args(argv)
+    try:
+        if args.stamp:
+            for line in (c for page in PAGES for c in stamp(args.root, page)):
+                print(f"stamped {line}")
+        pages = {page.name: render(args.root, page) for page in PAGES}
+    except PageError as exc:
+        print(f"render_pages: {exc}", file=sys.stderr)
+        return 1
+    stale = [name for name, text in pages.items()
+             if not (args.root / "docs" / f"{name}.md").is_file()
+             or (args.root / "docs" / f"{name}.md").read_text() != text]
+    if args.check:
+        if stale:
+            print(f"render_pages: {', '.join(f'docs/{n}.md' for n in stale)} "
+                  f"{'is' if len(stale) == 1 else 'are'} stale (not what docs/data/*.toml and the result files "
+                  f"render): run `{RENDER}` and commit the result", file=sys.stderr)
+            return 1
+        return 0
+    for name in stale:
+        (args.root / "docs" / f"{name}.md").write_text(pages[name])
+        print(f"wrote docs/{name}.md")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
