@@ -41,6 +41,8 @@ import sys
 import time
 from pathlib import Path
 
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
+
 HERE = Path(__file__).resolve().parent.parent  # this tree
 
 
@@ -181,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.probe:
         print(json.dumps(probe(args.map, args.garage_seed, args.tests, args.wait)))
         return 0
+    prov = provenance(argv)  # before the run: the load it starts at
     trees = {"after": HERE}
     if args.baseline_tree is not None:
         if not (args.baseline_tree / "garage_mj" / "__init__.py").is_file():
@@ -230,7 +233,8 @@ def main(argv: list[str] | None = None) -> int:
                 "map": args.map, "garage_seed": args.garage_seed, "tests": args.tests, "rounds": args.rounds,
                 "cpus": os.cpu_count(), "when": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
                 "trees": {name: {"path": str(tree), "commit": _commit(tree)} for name, tree in trees.items()}}
-        args.json.write_text(json.dumps({"meta": meta, "summary": summary, "rounds": rounds}, indent=2) + "\n")
+        args.json.write_text(json.dumps({"meta": meta, "summary": summary, "rounds": rounds,
+                                          "provenance": prov}, indent=2) + "\n")
     return 0
 
 

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
 from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.garage_set import GarageSet
@@ -42,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rounds", type=int, default=2, help="timed rounds of the cruise part (default 2)")
     p.add_argument("--json", type=Path, help="write the figures here")
     args = p.parse_args(argv)
+    prov = provenance(argv)  # before the run: the load it starts at
     names = args.drivers.split(",")
     drivers = {n: load_driver(n) for n in names}
     garages = list(GarageSet.from_json(HELD_OUT))[: args.tests]
@@ -86,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         out["cruise"] = cruise_cost(names, list(GarageSet.from_json(HELD_OUT))[: args.cruise_garages], args.rounds)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(out, indent=1) + "\n")
+        args.json.write_text(json.dumps({**out, "provenance": prov}, indent=1) + "\n")
     return 0
 
 

@@ -22,6 +22,8 @@ import time
 from pathlib import Path
 from unittest import mock
 
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
+
 from garage_mj.export import fbx as fbx_mod
 from garage_mj.export.meshes import garage_meshes
 from garage_mj.export.pack import _sha256, export_pack
@@ -55,6 +57,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, help="also write the figures here")
     args = ap.parse_args()
+    prov = provenance()  # before the run: the load it starts at
     garages = [paint_garage(args.map, seed=args.seed + i) for i in range(args.garages)]
     meshes = [garage_meshes(GarageScene(g)) for g in garages]
     fbx_mod.fbx_bytes(meshes[0])  # load libassimp once, as the first pack of an export does
@@ -76,7 +79,7 @@ def main() -> None:
         "fbx_adds_ms": statistics.median(alone), "fbx_adds_ms_rounds": alone,
         "pack_with_fbx_ms": statistics.median(with_fbx), "pack_without_fbx_ms": statistics.median(without),
         "pack_difference_ms": statistics.median(added), "pack_difference_ms_rounds": added,
-        "fbx_bytes": statistics.median(sizes), "target_ms": TARGET_MS,
+        "fbx_bytes": statistics.median(sizes), "target_ms": TARGET_MS, "provenance": prov,
     }
     out["met"] = out["fbx_adds_ms"] <= TARGET_MS
     print(f"map {args.map}, {len(garages)} painted garages, median of {args.repeat} rounds, "

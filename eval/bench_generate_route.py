@@ -21,6 +21,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
+
 MAPS = ("m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u")
 BIN = 0.1
 
@@ -90,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=positive_int, default=1)
     p.add_argument("--json", type=Path)
     args = p.parse_args(argv)
+    prov = provenance(argv)  # before the run: the load it starts at
     maps = args.maps.split(",")
     jobs = [(m, args.library, args.sample, args.count, args.max_cpu, args.seed) for m in maps]
     if args.workers > 1:
@@ -104,7 +107,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{r['map']:<18} {len(r['bins']):>3}                             {len(filled):>3}            {worst:.1f}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"count": args.count, "max_cpu_s": args.max_cpu, "maps": results}, indent=1)
+        args.json.write_text(json.dumps({"count": args.count, "max_cpu_s": args.max_cpu, "maps": results,
+                                          "provenance": prov}, indent=1)
                              + "\n")
         print(f"wrote {args.json}")
     return 0

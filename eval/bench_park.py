@@ -28,6 +28,8 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
+
 from garage_mj import list_maps
 from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
@@ -128,6 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("docs/bench_park.json"))
     args = ap.parse_args(argv)
+    prov = provenance(argv)  # before the run: the load it starts at
     maps = args.maps or [m.name for m in list_maps()]
     rows, t0 = [], time.perf_counter()
     for m in maps:
@@ -155,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
               "targets": TARGETS, "targets_met": met,
               "oracle_park": oracle_park, "per_kind": per_kind, "per_map": per_map,
               "failures": [r for r in rows if r["driver"] == "oracle" and r["outcome"] != "success"],
-              "wall_s": round(time.perf_counter() - t0, 1)}
+              "wall_s": round(time.perf_counter() - t0, 1), "provenance": prov}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     for k, per in per_kind.items():

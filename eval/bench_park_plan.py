@@ -23,6 +23,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
 from garage_mj import list_maps
 from garage_mj.driving.sources import painted_sources
@@ -76,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("docs/bench_park_plan.json"))
     args = ap.parse_args(argv)
+    prov = provenance(argv)  # before the run: the load it starts at
     maps = args.maps or [m.name for m in list_maps()]
     car, config = car_geometry(), DEFAULT_PARK
     big = replace(config, iterations=config.iterations * args.budget_factor)
@@ -110,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
                             "budget": big.iterations},
               "infeasible_tests": [{k: r[k] for k in ("map", "garage", "stall", "maneuver", "reason", "replanned")}
                                    for r in rows if not r["found"]],
-              "wall_s": round(time.perf_counter() - t0, 1)}
+              "wall_s": round(time.perf_counter() - t0, 1), "provenance": prov}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     for n, s in per_maneuver.items():

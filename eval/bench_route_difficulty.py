@@ -21,6 +21,8 @@ import sys
 import time
 from pathlib import Path
 
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
+
 MAPS = ("m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u")
 
 
@@ -90,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.plan_only:
         print(json.dumps({m: plan_seconds(args.library, m, args.garages) for m in maps}))
         return 0
+    prov = provenance(argv)  # before the run: the load it starts at
     result = {}
     for m in maps:
         row: dict = {}
@@ -115,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=1) + "\n")
+        args.json.write_text(json.dumps({**result, "provenance": prov}, indent=1) + "\n")
         print(f"wrote {args.json}")
     return 0
 
