@@ -189,7 +189,46 @@ _COLLIDABLE_TABLE = np.zeros(max(Semantic) + 1, dtype=bool)
 _COLLIDABLE_TABLE[[int(c) for c in COLLIDABLE]] = True
 
 
-class OutcomeMonitor:
+class BaseMonitor:
+    """What every outcome monitor shares: a test ends once, and a touch of anything collidable ends it.
+
+    A monitor sets ``outcome`` (None while the test runs) and puts its own checks of a step in
+    :meth:`_update`, calling :meth:`_collision` where the collision check belongs among them.
+    """
+
+    outcome: Outcome | None
+
+    def update(self, time: float, position, speed: float, contacts: Iterable[Contact] = (),
+               yaw: float | None = None, hold: bool = False) -> Outcome | None:
+        """Feed one step; returns the outcome when the test ends (and keeps returning it).
+
+        ``hold``: an actor is moving, so the car may wait: the no-progress clock restarts.
+        """
+        if self.outcome is not None:
+            return self.outcome
+        return self._update(time, position, speed, contacts, yaw, hold)
+
+    def _update(self, time: float, position, speed: float, contacts: Iterable[Contact], yaw: float | None,
+                hold: bool) -> Outcome | None:
+        """The monitor's own checks of one step of a running test."""
+        raise NotImplementedError
+
+    def _collision(self, time: float, speed: float, contacts: Iterable[Contact]) -> Outcome | None:
+        """The collision outcome of the first collidable contact of ``contacts`` (None: no such contact)."""
+        for c in contacts:
+            if c.semantic in COLLIDABLE:
+                # the car's speed tells a ram from being walked into while stopped (actors do not yield)
+                return self._end(OutcomeKind.COLLISION, time,
+                                 f"hit {c.semantic.name.lower()} {c.geom} at {abs(speed):.1f} m/s",
+                                 c.semantic.name.lower(), c.geom)
+        return None
+
+    def _end(self, kind: OutcomeKind, time: float, reason: str, hit_class=None, hit_geom=None) -> Outcome:
+        self.outcome = Outcome(kind, float(time), reason, hit_class, hit_geom)
+        return self.outcome
+
+
+class OutcomeMonitor(BaseMonitor):
     """Watches one test on ``route`` and says when and how it ended."""
 
     def __init__(self, route: Route, config: OutcomeConfig | None = None, goal=None, extra_time: float = 0.0) -> None:
@@ -226,21 +265,12 @@ class OutcomeMonitor:
         self._mark_time = 0.0  # start of the current progress window
         self._mark_progress = 0.0
 
-    def update(self, time: float, position, speed: float, contacts: Iterable[Contact] = (),
-               yaw: float | None = None, hold: bool = False) -> Outcome | None:
-        """Feed one step; returns the outcome when the test ends (and keeps returning it).
-
-        ``hold``: an actor is moving, so the car may wait: the no-progress clock restarts.
-        """
-        if self.outcome is not None:
-            return self.outcome
+    def _update(self, time: float, position, speed: float, contacts: Iterable[Contact], yaw: float | None,
+                hold: bool) -> Outcome | None:
         cfg = self.config
-        for c in contacts:
-            if c.semantic in COLLIDABLE:
-                # the car's speed tells a ram from being walked into while stopped (actors do not yield)
-                return self._end(OutcomeKind.COLLISION, time,
-                                 f"hit {c.semantic.name.lower()} {c.geom} at {abs(speed):.1f} m/s",
-                                 c.semantic.name.lower(), c.geom)
+        hit = self._collision(time, speed, contacts)
+        if hit is not None:
+            return hit
         x, y = float(position[0]), float(position[1])
         dx, dy = x - self._goal_xy[0], y - self._goal_xy[1]
         goal_dist = math.sqrt(dx * dx + dy * dy)
@@ -272,7 +302,3 @@ class OutcomeMonitor:
         if time >= self.time_limit:
             return self._end(OutcomeKind.TIMEOUT, time, f"time limit {self.time_limit:.1f} s reached")
         return None
-
-    def _end(self, kind: OutcomeKind, time: float, reason: str, hit_class=None, hit_geom=None) -> Outcome:
-        self.outcome = Outcome(kind, float(time), reason, hit_class, hit_geom)
-        return self.outcome

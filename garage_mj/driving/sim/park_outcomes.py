@@ -2,7 +2,8 @@
 
 :class:`ParkMonitor` is the park tests' twin of :class:`~garage_mj.driving.sim.outcomes.OutcomeMonitor`
 (which cruise tests keep, untouched), with the same interface (``update``, ``progress``, ``time_limit``,
-``goal_pose``). It watches the car along a reference path: the park plan's poses (park test) or the
+``goal_pose``) and the same end and collision check (their base,
+:class:`~garage_mj.driving.sim.outcomes.BaseMonitor`). It watches the car along a reference path: the park plan's poses (park test) or the
 cruise route followed by the park plan (AVP test, scored as one test). Checks, in this order:
 
 - collision: ego touches a wall, pillar, obstacle, parked car or actor (as in cruise);
@@ -30,12 +31,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from garage_mj.driving.sim.outcomes import Contact, Outcome, OutcomeKind
+from garage_mj.driving.sim.outcomes import BaseMonitor, Contact, Outcome, OutcomeKind
 from garage_mj.scene.car import CarGeometry
 from garage_mj.scene.clearance import Obstacles, nearest_obstacle
 from garage_mj.scene.park_planning import ParkFit, centre_to_rear, in_stall, park_pose
 from garage_mj.scene.route_line import Route
-from garage_mj.scene.semantics import COLLIDABLE
 from garage_mj.scene.stalls import Stall
 
 MOVING_SPEED = 0.1  # [m/s] faster than this the car is moving (a direction change counts between two such stretches)
@@ -64,7 +64,7 @@ def park_time_limit(config: ParkOutcomeConfig, length: float, cusps: int) -> flo
     return length / config.min_mean_speed + config.time_slack + cusps * config.cusp_time
 
 
-class ParkMonitor:
+class ParkMonitor(BaseMonitor):
     """Watches one park (or AVP) test along ``reference`` and says when and how it ended (module docstring).
 
     ``reference``: the reference path of the car's centre; ``stall`` and ``maneuver``: the target;
@@ -110,23 +110,15 @@ class ParkMonitor:
         if self.progress >= self.park_from:
             self.park_start = 0.0
 
-    def update(self, time: float, position, speed: float, contacts: Iterable[Contact] = (),
-               yaw: float | None = None, hold: bool = False) -> Outcome | None:
-        """Feed one step; returns the outcome when the test ends (and keeps returning it).
-
-        ``hold``: an actor is moving, so the car may wait: the no-progress clock restarts.
-        """
-        if self.outcome is not None:
-            return self.outcome
+    def _update(self, time: float, position, speed: float, contacts: Iterable[Contact], yaw: float | None,
+                hold: bool) -> Outcome | None:
         cfg = self.config
         x, y = float(position[0]), float(position[1])
         yaw = self.target[2] if yaw is None else float(yaw)
         self.poses.append((x, y, yaw))
-        for c in contacts:
-            if c.semantic in COLLIDABLE:  # (the bounce of a hit is no direction change)
-                return self._end(OutcomeKind.COLLISION, time,
-                                 f"hit {c.semantic.name.lower()} {c.geom} at {abs(speed):.1f} m/s",
-                                 c.semantic.name.lower(), c.geom)
+        hit = self._collision(time, speed, contacts)  # before the direction (the bounce of a hit is no change)
+        if hit is not None:
+            return hit
         if abs(speed) > MOVING_SPEED:
             sign = 1 if speed > 0 else -1
             self.direction_changes += self._sign != 0 and sign != self._sign
@@ -163,7 +155,3 @@ class ParkMonitor:
         rear = centre_to_rear(np.array(self.poses), self.car)
         dist, _ = nearest_obstacle(obstacles, self.car, rear[:, :2], rear[:, 2])
         return float(dist.min())
-
-    def _end(self, kind: OutcomeKind, time: float, reason: str, hit_class=None, hit_geom=None) -> Outcome:
-        self.outcome = Outcome(kind, float(time), reason, hit_class, hit_geom)
-        return self.outcome
