@@ -431,9 +431,7 @@ def stamp(root: Path, page: Page) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Render, check or stamp the pages; 0 when done, 1 with one line on what is wrong."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 epilog="The placeholder language and the workflow: the module docstring "
-                                        "(eval/render_pages.py).", formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--check", action="store_true",
                     help="write nothing; exit 1 naming each page that differs from what its data renders")
     ap.add_argument("--stamp", action="store_true",
