@@ -408,6 +408,8 @@ def _set_field(block: str, key: str, value: str) -> str:
 
 def stamp(root: Path, page: Page) -> list[str]:
     """Write date and commit from git into the data file's records whose files changed since; what changed."""
+    if _git(root, "rev-parse", "--is-shallow-repository") == "true":  # its oldest commit "adds" every file
+        raise PageError("--stamp needs the full history, and this is a shallow clone: `git fetch --unshallow`")
     data_file = root / "docs" / "data" / f"{page.name}.toml"
     text = data_file.read_text()
     sources, changed = Sources(root / "docs"), []
