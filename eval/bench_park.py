@@ -18,7 +18,6 @@ and >= 98% of feasible AVP tests. park_assist has no target: it is meant to fail
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import platform
@@ -28,12 +27,11 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
+from _park_garages import map_names, painted_garages, park_parser  # eval/_park_garages.py: options, garages
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
-from garage_mj import list_maps
 from garage_mj.driving.drivers import load_driver
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
-from garage_mj.driving.sources import painted_sources
 
 
 @dataclass(frozen=True)
@@ -122,26 +120,20 @@ def _stats(rows: list[dict], driver: str) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--maps", nargs="*", default=None, help="maps (default: every shipped map)")
-    ap.add_argument("--garages", type=int, default=1, help="painted garages per map (default 1)")
+    ap = park_parser(__doc__, garages=1, out=Path("docs/bench_park.json"))
     ap.add_argument("--tests", type=int, default=10, help="tests per garage and kind (default 10)")
-    ap.add_argument("--occupancy", type=float, default=0.5, help="share of the other stalls with a parked car")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=Path("docs/bench_park.json"))
     args = ap.parse_args(argv)
     prov = provenance(argv)  # before the run: the load it starts at
-    maps = args.maps or [m.name for m in list_maps()]
+    maps = map_names(args)
     rows, t0 = [], time.perf_counter()
-    for m in maps:
-        for g, source in enumerate(painted_sources(m, args.garages, seed=args.seed)):
-            for kind in KINDS:
-                got = _garage_rows(source.garage, kind, args.tests, args.occupancy, args.seed * 1000 + g,
-                                   {"map": m, "garage": source.name})
-                rows += got
-                line = "  ".join(f"{d} {_stats(got, d)['success']}/{_stats(got, d)['feasible']}" for d in DRIVERS)
-                print(f"{m:18s} {source.name:28s} {kind.name:13s} infeasible "
-                      f"{_stats(got, DRIVERS[0])['infeasible']}/{args.tests}  {line}", flush=True)
+    for pg in painted_garages(args, maps):
+        for kind in KINDS:
+            got = _garage_rows(pg.source.garage, kind, args.tests, args.occupancy, pg.seed,
+                               {"map": pg.map, "garage": pg.source.name})
+            rows += got
+            line = "  ".join(f"{d} {_stats(got, d)['success']}/{_stats(got, d)['feasible']}" for d in DRIVERS)
+            print(f"{pg.map:18s} {pg.source.name:28s} {kind.name:13s} infeasible "
+                  f"{_stats(got, DRIVERS[0])['infeasible']}/{args.tests}  {line}", flush=True)
     per_map = [{"map": m, "kind": k.name, "driver": d, **_stats([r for r in rows if r["map"] == m and
                                                                  r["kind"] == k.name], d)}
                for m in maps for k in KINDS for d in DRIVERS]

@@ -14,7 +14,6 @@ Targets: median <= 0.5 CPU-s per park test, max <= 3 CPU-s, infeasible <= 10% pe
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import statistics
@@ -23,10 +22,9 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
+from _park_garages import map_names, painted_garages, park_parser  # eval/_park_garages.py: options, garages
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
-from garage_mj import list_maps
-from garage_mj.driving.sources import painted_sources
 from garage_mj.scene.car import car_geometry
 from garage_mj.scene.drivable import drive_planner
 from garage_mj.scene.garage_scene import GarageScene
@@ -69,27 +67,22 @@ def _stats(rows: list[dict]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--maps", nargs="*", default=None, help="maps (default: every shipped map)")
-    ap.add_argument("--garages", type=int, default=2, help="painted garages per map (default 2)")
-    ap.add_argument("--occupancy", type=float, default=0.5, help="share of the other stalls with a parked car")
+    ap = park_parser(__doc__, garages=2, out=Path("docs/bench_park_plan.json"))
     ap.add_argument("--budget-factor", type=int, default=10, help="re-plan each infeasible test with this x the budget")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=Path("docs/bench_park_plan.json"))
     args = ap.parse_args(argv)
     prov = provenance(argv)  # before the run: the load it starts at
-    maps = args.maps or [m.name for m in list_maps()]
+    maps = map_names(args)
     car, config = car_geometry(), DEFAULT_PARK
     big = replace(config, iterations=config.iterations * args.budget_factor)
     rows, scenes, t0 = [], {}, time.perf_counter()
-    for m in maps:
-        for k, source in enumerate(painted_sources(m, args.garages, seed=args.seed)):
-            scene = scenes[m, k] = GarageScene(source.garage)
-            got = _garage_tests(scene, ParkPlanner(scene, car, config), args.occupancy, args.seed * 1000 + k)
-            for r in got:
-                r["map"], r["scene"] = m, (m, k)
-            rows += got
-            print(f"{m:18s} garage {k}: {len(got)} tests, {sum(not r['found'] for r in got)} infeasible", flush=True)
+    for pg in painted_garages(args, maps):
+        scene = scenes[pg.map, pg.index] = GarageScene(pg.source.garage)
+        got = _garage_tests(scene, ParkPlanner(scene, car, config), args.occupancy, pg.seed)
+        for r in got:
+            r["map"], r["scene"] = pg.map, (pg.map, pg.index)
+        rows += got
+        print(f"{pg.map:18s} garage {pg.index}: {len(got)} tests, {sum(not r['found'] for r in got)} infeasible",
+              flush=True)
     # every infeasible test again with a bigger budget
     overturned = []
     for r in (r for r in rows if not r["found"]):
