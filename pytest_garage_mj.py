@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -49,34 +50,27 @@ _OPTIONS = {"maps": "garage_maps", "per_map": "garage_per_map", "tests": "garage
             "stall": "garage_stall"}
 
 
-def _positive(text: str) -> int:
+def _number(text: str, convert: Callable[[str], Any], valid: Callable[[Any], bool], hint: str):
+    """``text`` as ``convert`` reads it; an option error saying ``hint`` where it does not read or is not ``valid``."""
     try:
-        value = int(text)
+        value = convert(text)
     except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a whole number >= 1")
+        value = None
+    if value is None or not valid(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: {hint}")
     return value
+
+
+def _positive(text: str) -> int:
+    return _number(text, int, lambda v: v >= 1, "give a whole number >= 1")
 
 
 def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = 0.0
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"{text!r}: give a number of seconds > 0")
-    return value
+    return _number(text, float, lambda v: 0 < v < float("inf"), "give a number of seconds > 0")
 
 
 def _stall(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a stall id, a whole number >= 0")
-    return value
+    return _number(text, int, lambda v: v >= 0, "give a stall id, a whole number >= 0")
 
 
 def _maps(text: str) -> list[str]:
