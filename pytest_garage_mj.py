@@ -183,18 +183,18 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
 
         __tracebackhide__ = True
         k = next(runs)
+        given = {"maps": garages, "tests": tests, "workers": workers, "test_timeout": test_timeout,
+                 "per_map": per_map, "task": task, "maneuver": maneuver, "stall": stall}
+        use = {key: chosen[key] if value is None else value for key, value in given.items()}  # the call's, else chosen
         try:
             settings = CruiseSettings(seed=seed, action_type=action_type, occupancy=occupancy, env=dict(env or {}),
                                       driver_kwargs=dict(driver_kwargs or {}),  # the driver: run_driver_tests sets it
-                                      task=chosen["task"] if task is None else task,
-                                      maneuver=chosen["maneuver"] if maneuver is None else maneuver,
-                                      stall=chosen["stall"] if stall is None else stall)
-            compute = Compute(workers=chosen["workers"] if workers is None else workers, progress=False)
+                                      task=use["task"], maneuver=use["maneuver"], stall=use["stall"])
+            compute = Compute(workers=use["workers"], progress=False)
             return run_driver_tests(
-                driver, chosen["maps"] if garages is None else garages, chosen["tests"] if tests is None else tests,
+                driver, use["maps"], use["tests"],
                 out_dir=tmp_path / ("cruise" if k == 0 else f"cruise_{k}"), settings=settings, compute=compute,
-                per_map=chosen["per_map"] if per_map is None else per_map,
-                test_timeout=chosen["test_timeout"] if test_timeout is None else test_timeout)
+                per_map=use["per_map"], test_timeout=use["test_timeout"])
         except GarageMJError as exc:  # a bad map, driver or garage list, or a driver that raised: one message
             message = str(exc).replace(_CLI_HINT, "")
             if exc.details:  # the driver's own traceback, from whichever process ran it
