@@ -55,14 +55,30 @@ def road_squares(grid: np.ndarray) -> list[tuple[int, int]]:
     return [(int(r), int(c)) for r, c in np.argwhere(sq)]
 
 
+def _code_table(axis: Axis) -> np.ndarray:
+    """:func:`stall_code` for every (road-side bitmask 0-15, touches obstacle 0/1), as a (16, 2) array."""
+    return np.array([[int(stall_code(sides, bool(obst), axis)) for obst in (0, 1)] for sides in range(16)])
+
+
+_CODE_TABLES = {axis: _code_table(axis) for axis in ("NS", "EW")}
+
+
+def expected_cells(grid: np.ndarray, axis: Axis) -> np.ndarray:
+    """:func:`expected_cell` of every cell at once (meaningful where the cell is FREE or a stall)."""
+    g = np.pad(np.asarray(grid), 1, constant_values=-1)  # off-grid: neither ROAD nor OBSTACLE
+    sides = np.zeros(np.shape(grid), dtype=np.int64)
+    obstacle = np.zeros(np.shape(grid), dtype=np.int64)
+    for d, nb in enumerate((g[1:-1, :-2], g[1:-1, 2:], g[:-2, 1:-1], g[2:, 1:-1])):  # W, E, N, S
+        sides |= (nb == Block.ROAD).astype(np.int64) << d
+        obstacle |= nb == Block.OBSTACLE
+    return _CODE_TABLES[axis][sides, obstacle]
+
+
 def stall_rule_violations(grid: np.ndarray, axis: Axis) -> list[tuple[int, int]]:
-    """Cells that are FREE or a stall but not what the stall rule says."""
-    bad = []
+    """Cells that are FREE or a stall but not what the stall rule says (row by row)."""
     paintable = np.isin(grid, [int(b) for b in PAINTABLE])
-    for r, c in np.argwhere(paintable):
-        if grid[r, c] != expected_cell(grid, int(r), int(c), axis):
-            bad.append((int(r), int(c)))
-    return bad
+    bad = paintable & (np.asarray(grid) != expected_cells(grid, axis))
+    return [(int(r), int(c)) for r, c in np.argwhere(bad)]
 
 
 def apply_stall_rule(grid: np.ndarray, axis: Axis) -> np.ndarray:
