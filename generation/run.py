@@ -29,6 +29,9 @@ from garage_mj.reporting.experiment import run_experiment
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("config", type=Path, help="protocol TOML (generation/paper.toml, generation/smoke.toml)")
+    ap.add_argument("--learner", choices=("fast", "paper"),
+                    help="DQN settings of every run (garage_mj.generation.training.LEARNERS); default: the file's "
+                         "[experiment] learner, else fast")
     ap.add_argument("--scale", type=float, default=1.0, help="multiply the timesteps per run (0 < SCALE <= 1)")
     ap.add_argument("--workers", type=int, default=1, help="runs trained at a time (processes, or Ray CPUs)")
     ap.add_argument("--backend", choices=("local", "ray"), default="local",
@@ -42,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="print where each run stands (status, timesteps, garages, timesteps/s) and exit; trains nothing")
     args = ap.parse_args(argv)
     try:
-        protocol = load_protocol(args.config)
+        protocol = load_protocol(args.config, learner=args.learner)
         if args.scale != 1.0:
             protocol = protocol.scaled(args.scale)
         out = args.out or Path("runs") / protocol.name

@@ -10,6 +10,7 @@ from garage_mj.cli._common import positive_int, seed, user_errors
 from garage_mj.core.fsutil import FolderLock
 
 ALGOS = ("dqn",)
+LEARNER_NAMES = ("fast", "paper")  # garage_mj.generation.training.LEARNERS, named here so --help stays light
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,6 +32,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
     p.add_argument("--algo", default="dqn", choices=ALGOS, help="RL algorithm (default: dqn)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")
+    p.add_argument("--learner", choices=LEARNER_NAMES, default=None,
+                   help="DQN settings to start from: fast (32 garages painted at once, a (64, 64) Q-network, "
+                        "3-step returns; the default) or paper (one env, (256, 256), one gradient step per 4 "
+                        "timesteps, as the paper trains); --config keys override them")
     p.add_argument("--config", type=Path, help="TOML file of DQN hyper-parameters (keys of DQNConfig; unknown keys are an error)")
     p.add_argument("--library", type=Path, help="library file (default: OUT/library.sqlite)")
     p.add_argument("--checkpoint-every", type=positive_int, metavar="N", help="timesteps between checkpoints (overrides the config)")
@@ -40,14 +45,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 @user_errors
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.generation.training import load_dqn_config, train
+    from garage_mj.generation.training import DEFAULT_LEARNER, load_dqn_config, train
 
     overrides = {"checkpoint_every": args.checkpoint_every} if args.checkpoint_every else {}
     if args.config is not None and not args.config.is_file():
         raise UserError(f"config file {args.config} does not exist")
-    config = load_dqn_config(args.config, **overrides) if (args.config or overrides) else None
-    if args.resume and config is not None and args.config is None:
-        raise UserError("--checkpoint-every cannot change a resumed run; drop it or start a new --out")
+    if args.resume and args.config is None and (overrides or args.learner):
+        raise UserError("--checkpoint-every and --learner cannot change a resumed run; drop them or start a new --out")
+    learner = args.learner or DEFAULT_LEARNER
+    config = load_dqn_config(args.config, learner=learner, **overrides) if (args.config or overrides or not args.resume) else None
     with FolderLock(args.out, "garage-mj train", remove=True):  # a second run into the same --out is refused
         m = train(args.map, args.timesteps, args.seed, args.out, config=config, resume=args.resume,
                   library_path=args.library, progress=not args.no_progress)

@@ -141,6 +141,12 @@ class GarageGenEnv(gym.Env):
         a = int(action)
         if not 0 <= a < 4:
             raise ValueError(f"action must be 0-3 (west, east, north, south), got {action!r}")
+        reward, terminated, truncated = self._advance(a)
+        return self._obs(), reward, terminated, truncated, self._info()
+
+    def _advance(self, a: int) -> tuple[float, bool, bool]:
+        """One step of action ``a`` (0-3): the reward, terminated and truncated; no observation or info
+        (:class:`~garage_mj.generation.vec_env.GarageGenVecEnv` builds those only where it needs them)."""
         cfg = self.reward_config
         p = self._pad
         r, c = self.pos
@@ -181,7 +187,7 @@ class GarageGenEnv(gym.Env):
         reward = cfg.k_c * r_c + cfg.k_u * r_u
         self.steps += 1
         truncated = not terminated and self.steps >= self.max_steps
-        return self._obs(), float(reward), terminated, truncated, self._info()
+        return float(reward), terminated, truncated
 
     def render(self):
         if self.render_mode == "ansi":
@@ -237,21 +243,33 @@ class GarageGenEnv(gym.Env):
     def _coverage(self) -> float:
         return 1.0 - self.free / self.free0 if self.free0 else 0.0
 
-    def _obs(self) -> np.ndarray:
+    def _window(self) -> np.ndarray:
+        """The k x k block codes around the car (off-grid cells read OBSTACLE)."""
         r, c = self.pos
         k = self.view_size
-        p = self._pad
-        r0, c0 = r + p - k // 2, c + p - k // 2
-        window = self._padded[r0 : r0 + k, c0 : c0 + k]
+        r0, c0 = r + self._pad - k // 2, c + self._pad - k // 2
+        return self._padded[r0 : r0 + k, c0 : c0 + k]
+
+    def _fill_state(self, out: np.ndarray) -> None:
+        """The 7 values after the window: error index, coverage, connected flag, one-hot heading."""
+        out[0] = self.errors / self.max_errors if self.max_errors else float(self.errors > 0)
+        out[1] = self._coverage()
+        out[2] = float(self.connected)
+        out[3:7] = 0.0
+        out[3 + self.heading] = 1.0
+
+    def _obs(self) -> np.ndarray:
         obs = np.empty(self._n_window + 7, dtype=np.float32)
-        obs[: self._n_window] = self._eye[window].reshape(-1)
-        n = self._n_window
-        obs[n] = self.errors / self.max_errors if self.max_errors else float(self.errors > 0)
-        obs[n + 1] = self._coverage()
-        obs[n + 2] = float(self.connected)
-        obs[n + 3 : n + 7] = 0.0
-        obs[n + 3 + self.heading] = 1.0
+        obs[: self._n_window] = self._eye[self._window()].reshape(-1)
+        self._fill_state(obs[self._n_window :])
         return obs
+
+    def _codes_obs(self, out: np.ndarray) -> None:
+        """The observation with the window as k * k block codes instead of one-hot rows, into ``out``
+        (k * k + 7 values): the one-hot observation is ``eye(NUM_CODES)[codes]`` and the same 7 values."""
+        n = self.view_size * self.view_size
+        out[:n] = self._window().reshape(-1)
+        self._fill_state(out[n:])
 
     def _info(self) -> dict[str, Any]:
         t = self._tracker

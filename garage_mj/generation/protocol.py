@@ -1,7 +1,7 @@
 """The generation protocol: every (map, seed) run of a protocol, into one library.
 
-A protocol TOML (``generation/paper.toml``) names the maps, the seeds, the timesteps per run
-and optionally a ``[dqn]`` table of hyper-parameters. :func:`run_protocol` trains the runs in
+A protocol TOML (``generation/paper.toml``) names the maps, the seeds, the timesteps per run,
+optionally the learner (``fast`` or ``paper``) and a ``[dqn]`` table of hyper-parameters. :func:`run_protocol` trains the runs in
 a process pool or on a Ray cluster (:mod:`garage_mj.core.backends`), each in
 ``out/runs/<map>/seed_<s>/``; a finished run is skipped and an interrupted one resumed, so the
 command can simply be started again after a crash.
@@ -30,7 +30,15 @@ from garage_mj.core.config import ConfigError, read_toml
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.generation.library import Library
 from garage_mj.generation.remote import RunKeeper, run_remote
-from garage_mj.generation.training import MANIFEST, DQNConfig, load_dqn_config, read_manifest, train
+from garage_mj.generation.training import (
+    DEFAULT_LEARNER,
+    LEARNERS,
+    MANIFEST,
+    DQNConfig,
+    load_dqn_config,
+    read_manifest,
+    train,
+)
 from garage_mj.grid.map_io import load_map
 
 LIBRARY = "library.sqlite"
@@ -57,15 +65,19 @@ class Protocol:
                         self.name)
 
 
-def load_protocol(path: str | Path) -> Protocol:
-    """Read a protocol TOML; unknown tables or keys are an error."""
+def load_protocol(path: str | Path, learner: str | None = None) -> Protocol:
+    """Read a protocol TOML; unknown tables or keys are an error.
+
+    The runs' DQN config is the learner's (:data:`~garage_mj.generation.training.LEARNERS`: ``learner``,
+    else the file's ``[experiment] learner``, else the default) with the ``[dqn]`` keys on top.
+    """
     path = Path(path)
     data = read_toml(path, "protocol file")
     unknown = sorted(set(data) - {"experiment", "dqn"})
     if unknown:
         raise ConfigError(f"{path}: unknown table(s) {', '.join(unknown)}; known: experiment, dqn")
     exp = dict(data.get("experiment", {}))
-    known = {"name", "maps", "seeds", "timesteps"}
+    known = {"name", "maps", "seeds", "timesteps", "learner"}
     if set(exp) - known:
         raise ConfigError(f"{path}: unknown key(s) {', '.join(sorted(set(exp) - known))} in [experiment]; "
                           f"known keys: {', '.join(sorted(known))}")
@@ -79,8 +91,11 @@ def load_protocol(path: str | Path) -> Protocol:
         raise ConfigError(f"{path}: [experiment] seeds must be a non-empty list of integers")
     if type(steps) is not int or steps < 1:
         raise ConfigError(f"{path}: [experiment] timesteps must be a positive integer")
+    learner = exp.get("learner", DEFAULT_LEARNER) if learner is None else learner
+    if learner not in LEARNERS:
+        raise ConfigError(f"{path}: [experiment] learner must be one of {', '.join(LEARNERS)}, got {learner!r}")
     try:
-        dqn = load_dqn_config(data.get("dqn", {}))
+        dqn = load_dqn_config(data.get("dqn", {}), learner=learner)
     except ConfigError as exc:
         raise ConfigError(f"{path} [dqn]: {exc}") from None
     return Protocol(tuple(maps), tuple(seeds), steps, dqn, str(exp.get("name", path.stem)))

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -165,13 +166,17 @@ class DQNRun:
         torch.set_num_threads(config.torch_threads)
         self.save_replay_buffer = save_replay_buffer
         if self.checkpoint:
-            model = DQN.load(self.checkpoint[0], env=venv, device="cpu")
+            with warnings.catch_warnings():
+                # the checkpoint names SB3's NStepReplayBuffer with its n_steps and gamma; SB3 warns that
+                # n_steps would be ignored for a custom buffer class, which this one is not
+                warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom")
+                model = DQN.load(self.checkpoint[0], env=venv, device=config.device)
             buffer = self.checkpoint[0].with_name(self.checkpoint[0].stem + "_replay.pkl")
             if buffer.exists():
                 model.load_replay_buffer(buffer)
             model.set_random_seed(seed + self.done_steps)  # a fresh, reproducible stream after the checkpoint
         else:
-            model = DQN("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **config.dqn_kwargs())
+            model = DQN("MlpPolicy", venv, seed=seed, device=config.device, verbose=0, **config.dqn_kwargs())
         self.model = model
         return model
 

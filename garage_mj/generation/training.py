@@ -53,6 +53,7 @@ HEARTBEAT_S = 30.0  # [s] between refreshes of the manifest's ``live`` progress
 
 
 MAX_BUFFER_SIZE = 10_000_000  # [transitions] ~40 GB at ~4 KB each: beyond that the run cannot fit in memory
+DEVICES = ("auto", "cpu", "cuda")
 MAX_VIEW_SIZE = 31  # [cells] side of the observed window; larger than any supported garage needs
 
 
@@ -91,6 +92,10 @@ class DQNConfig:
     n_envs: int = 1  # envs stepped together (DummyVecEnv, one process): one batched action choice
     view_size: int = 7  # env: side of the observed window (odd)
     max_errors: int = 10  # env: errors allowed per episode
+    # the n_envs garages in one GarageGenVecEnv, windows stored as block codes and expanded to one-hot
+    # in the Q-network (OneHotWindow): the same network input, ~9x less replay memory to fill and sample
+    vector_env: bool = False
+    device: str = "auto"  # torch device of the gradient updates: auto (CUDA when torch sees one), cpu or cuda
 
     def __post_init__(self) -> None:
         if not isinstance(self.net_arch, (list, tuple)):
@@ -106,6 +111,8 @@ class DQNConfig:
         if not (isinstance(self.view_size, int) and 1 <= self.view_size <= MAX_VIEW_SIZE and self.view_size % 2):
             raise ConfigError(f"DQNConfig: view_size must be an odd integer from 1 to {MAX_VIEW_SIZE}, "
                               f"got {self.view_size!r}")
+        if self.device not in DEVICES:
+            raise ConfigError(f"DQNConfig: device must be one of {', '.join(DEVICES)}, got {self.device!r}")
         if not isinstance(self.max_errors, int) or self.max_errors < 0:
             raise ConfigError(f"DQNConfig: max_errors must be an integer >= 0, got {self.max_errors!r}")
         arch = tuple(self.net_arch)
@@ -131,6 +138,10 @@ class DQNConfig:
                 "exploration_initial_eps", "exploration_final_eps", "max_grad_norm")
         kw = {k: getattr(self, k) for k in keys}
         kw["policy_kwargs"] = {"net_arch": list(self.net_arch), "optimizer_kwargs": _adam_kwargs()}
+        if self.vector_env:
+            from garage_mj.generation.window_net import OneHotWindow
+
+            kw["policy_kwargs"]["features_extractor_class"] = OneHotWindow
         return kw
 
     def to_dict(self) -> dict[str, Any]:
@@ -147,18 +158,42 @@ def _adam_kwargs() -> dict[str, Any]:
     return {"fused": True} if torch.torch_version.TorchVersion(torch.__version__) >= "2.4" else {}
 
 
-def load_dqn_config(source: str | Path | dict[str, Any] | None = None, **overrides: Any) -> DQNConfig:
-    """A :class:`DQNConfig` from a TOML file or dict (a ``[dqn]`` table or top-level keys)."""
+#: The named learners: DQN settings that ``train --learner``, protocol files and the benchmarks choose
+#: from; a config file's keys override the chosen learner's. ``paper``: the paper's kind of run, one
+#: env, a (256, 256) MLP, one gradient step of 64 transitions per 4 timesteps. ``fast``: 32 garages
+#: painted together (GarageGenVecEnv), a (64, 64) MLP on the same input, 3-step returns, one gradient
+#: step of 256 transitions per 32 timesteps at twice the learning rate (docs/generate.md compares them).
+LEARNERS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "fast": {"vector_env": True, "n_envs": 32, "net_arch": [64, 64], "batch_size": 256, "train_freq": 1,
+             "gradient_steps": 1, "n_steps": 3, "learning_rate": 1e-3},
+}
+DEFAULT_LEARNER = "fast"
+
+
+def learner_settings(learner: str) -> dict[str, Any]:
+    """The :data:`LEARNERS` entry ``learner``; :class:`ConfigError` naming the known ones otherwise."""
+    if learner not in LEARNERS:
+        raise ConfigError(f"unknown learner {learner!r}; choose one of {', '.join(LEARNERS)}")
+    return dict(LEARNERS[learner])
+
+
+def load_dqn_config(source: str | Path | dict[str, Any] | None = None, *, learner: str = "paper",
+                    **overrides: Any) -> DQNConfig:
+    """A :class:`DQNConfig`: the ``learner``'s settings (:data:`LEARNERS`; ``paper`` is the plain
+    :class:`DQNConfig` defaults), then the keys of a TOML file or dict (a ``[dqn]`` table or top-level
+    keys), then ``overrides``."""
+    base = learner_settings(learner)
     if isinstance(source, (str, Path)):
         path = Path(source)
         data = read_toml(path)
         if set(data) == {"dqn"}:
             data = data["dqn"]
         try:
-            return load_config(DQNConfig, data, **overrides)
+            return load_config(DQNConfig, {**base, **data}, **overrides)
         except ConfigError as exc:
             raise ConfigError(f"{path}: {exc}") from None
-    return load_config(DQNConfig, source, **overrides)
+    return load_config(DQNConfig, {**base, **(source or {})}, **overrides)
 
 
 # -- env wrappers ---------------------------------------------------------------------------------
@@ -212,8 +247,17 @@ def make_vec_env(map: str, config: DQNConfig, monitor_path: Path | None):
     from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
-    envs = [make_env(map, config) for _ in range(config.n_envs)]
-    venv = VecMonitor(DummyVecEnv([lambda e=e: e for e in envs]))
+    envs: list[Any]
+    if config.vector_env:
+        from garage_mj.generation.vec_env import GarageGenVecEnv
+
+        inner = GarageGenVecEnv(map, config.n_envs, window="codes", view_size=config.view_size,
+                                max_errors=config.max_errors)
+        envs = [inner]
+    else:
+        envs = [make_env(map, config) for _ in range(config.n_envs)]
+        inner = DummyVecEnv([lambda e=e: e for e in envs])
+    venv = VecMonitor(inner)
     if monitor_path is not None:
         venv.results_writer = ResultsWriter(
             str(monitor_path), header={"t_start": venv.t_start, "env_id": "garage_mj/GarageGen-v0"},
@@ -239,6 +283,9 @@ class LibraryCallback(BaseCallback):
         self.episodes = episodes  # episodes finished so far in this run (continues on resume)
         self.stored = 0  # garages stored by this process
         self.usable = 0  # usable episodes met by this process (stored or duplicate)
+        # garages this process has credited already: crediting one again changes nothing (a lower seed
+        # that takes it over keeps it), so a repeat skips the library and its metrics
+        self._credited: set[str] = set()
 
     def _on_step(self) -> bool:
         for done, info in zip(self.locals["dones"], self.locals["infos"]):
@@ -247,11 +294,14 @@ class LibraryCallback(BaseCallback):
             garage = info.get("final_garage")
             if info.get("usable") and garage is not None:
                 self.usable += 1
-                new = self.library.credit(
-                    garage, map=self.map, run=self.run, seed=self.seed, episode=self.episodes,
-                    timestep=self.num_timesteps,
-                )
-                self.stored += new is not None
+                key = garage.canonical_hash()
+                if key not in self._credited:
+                    self._credited.add(key)
+                    new = self.library.credit(
+                        garage, map=self.map, run=self.run, seed=self.seed, episode=self.episodes,
+                        timestep=self.num_timesteps,
+                    )
+                    self.stored += new is not None
             self.episodes += 1
         return True
 
@@ -351,7 +401,7 @@ def train(
         timesteps: total timesteps of the run (on resume, the run stops when it has this many).
         seed: seeds torch, numpy, the action space and the env.
         out_dir: the run folder (created; must not hold another run unless ``resume``).
-        config: hyper-parameters (default :class:`DQNConfig`); on resume the run's own config is used.
+        config: hyper-parameters (default: the :data:`DEFAULT_LEARNER`'s); on resume the run's own config is used.
         resume: continue the run in ``out_dir`` from its newest checkpoint.
         library_path: where usable garages go (default ``out_dir/library.sqlite``).
         progress: show a tqdm progress bar.
@@ -430,7 +480,7 @@ def _new_manifest(out: Path, map: str, map_name: str, seed: int, config: DQNConf
     """A new run's manifest and config (default :class:`DQNConfig`); ``out`` must not hold a run yet."""
     if (out / MANIFEST).exists():
         raise TrainingError(f"{out} already holds a run; pass --resume to continue it or choose a new --out")
-    config = config or DQNConfig()
+    config = config or load_dqn_config(learner=DEFAULT_LEARNER)
     manifest = {
         "run": run_id or new_run_id(map_name, seed, out),
         "map": map_name, "map_source": str(map), "seed": seed, "algo": "dqn", "config": config.to_dict(),
