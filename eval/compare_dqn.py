@@ -1,12 +1,13 @@
-"""Learning-quality check of DQN configs: seeds x maps x timesteps, resumable, one run at a time.
+"""Learning-quality check of DQN learners: seeds x maps x timesteps, resumable, one run at a time.
 
-    taskset -c 1 .venv/bin/python eval/compare_dqn.py --configs baseline fast \\
-        [--maps tiny_7x11 m5_13x13_aligned] [--seeds 0 1 2] [--timesteps 200000] [--out runs/compare_dqn]
+    .venv/bin/python eval/compare_dqn.py [--configs paper fast] [--maps m5_13x13_aligned m7_13x13_u] \\
+        [--seeds 0 1 2] [--timesteps 200000] [--out runs/compare_learners] [--csv docs/compare_learners.csv]
     .venv/bin/python eval/compare_dqn.py --summary-only      # the table from what has finished
 
-``baseline`` is the DQNConfig that was the default before the throughput work (written out here, so
-it does not move when the default changes); ``default`` is today's ``DQNConfig()``; ``fast`` is
-``generation/dqn_fast.toml`` (8 envs, (64, 64), one step of 128 per 8 timesteps). Each run is a normal
+``paper`` and ``fast`` are the learners of ``garage_mj.generation.training.LEARNERS``; ``baseline`` is the
+DQNConfig that was the default before the throughput work (written out here, so it does not move when
+the default changes); ``dqn_fast`` is ``generation/dqn_fast.toml`` (8 envs, (64, 64), one step of 128 per
+8 timesteps). Each run is a normal
 training run folder ``OUT/<config>/<map>_s<seed>``; a finished one is skipped, an interrupted one
 resumes from its newest checkpoint. Per run: mean return of the last 100 episodes (``monitor.csv``),
 distinct usable garages stored in the run's library, and timesteps/s. The summary (per config and map:
@@ -20,11 +21,12 @@ import csv
 import dataclasses
 import json
 import math
+import sqlite3
 from pathlib import Path
 
 import numpy as np
 
-from garage_mj.generation.training import DQNConfig, load_dqn_config, read_manifest, train
+from garage_mj.generation.training import LEARNERS, DQNConfig, load_dqn_config, read_manifest, train
 
 # the default DQNConfig before the throughput work (commit 1efa9fa), the reference configuration
 BASELINE = dict(
@@ -40,13 +42,26 @@ T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8:
 
 
 def config_named(name: str, checkpoint_every: int) -> DQNConfig:
+    if name in LEARNERS:
+        return load_dqn_config(learner=name, checkpoint_every=checkpoint_every)
     if name == "baseline":
         return DQNConfig(**BASELINE, checkpoint_every=checkpoint_every)
-    if name == "default":
-        return DQNConfig(checkpoint_every=checkpoint_every)
-    if name == "fast":
-        return load_dqn_config(FAST_TOML, checkpoint_every=checkpoint_every)
-    raise SystemExit(f"unknown config {name!r}: use baseline, default or fast")
+    if name == "dqn_fast":
+        return load_dqn_config(FAST_TOML, learner="paper", checkpoint_every=checkpoint_every)
+    raise SystemExit(f"unknown config {name!r}: use {', '.join(LEARNERS)}, baseline or dqn_fast")
+
+
+def difficulty_range(run: Path) -> tuple[float, float] | None:
+    """Lowest and highest difficulty of the garages the run's own library holds."""
+    path = run / "library.sqlite"
+    if not path.exists():
+        return None
+    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    try:
+        lo, hi = con.execute("SELECT MIN(difficulty), MAX(difficulty) FROM garages").fetchone()
+    finally:
+        con.close()
+    return None if lo is None else (float(lo), float(hi))
 
 
 def run_result(run: Path) -> dict | None:
@@ -63,7 +78,9 @@ def run_result(run: Path) -> dict | None:
         "timesteps": manifest["timesteps"], "episodes": manifest["episodes"],
         "return_last100": float(returns[-LAST_EPISODES:].mean()),
         "garages_stored": manifest["garages_stored"],
+        "difficulty_range": difficulty_range(run),
         "timesteps_per_s": session.get("timesteps_per_s"),
+        "timesteps_per_cpu_s": session.get("timesteps_per_cpu_s"),
         "config": manifest["config"],
     }
 
@@ -101,12 +118,18 @@ def summarise(out: Path, csv_path: Path) -> None:
             ret = interval([r["return_last100"] for _, r in runs])
             gar = interval([r["garages_stored"] for _, r in runs])
             tps = interval([r["timesteps_per_s"] for _, r in runs if r["timesteps_per_s"]])
+            cps = interval([r["timesteps_per_cpu_s"] for _, r in runs if r.get("timesteps_per_cpu_s")])
+            ranges = [r["difficulty_range"] for _, r in sorted(runs, key=lambda x: x[0]) if r.get("difficulty_range")]
             rows.append({
                 "config": cfg_dir.name, "map": map_name, "timesteps": steps,
                 "seeds": " ".join(str(s) for s, _ in sorted(runs, key=lambda x: x[0])),
                 "return_last100_mean": round(ret[0], 2), "return_last100_ci95": round(ret[1], 2),
                 "garages_mean": round(gar[0], 1), "garages_ci95": round(gar[1], 1),
                 "timesteps_per_s_mean": round(tps[0], 0),
+                "timesteps_per_cpu_s_mean": round(cps[0], 0) if not math.isnan(cps[0]) else "",
+                "difficulty_lo_mean": round(float(np.mean([a for a, _ in ranges])), 3) if ranges else "",
+                "difficulty_hi_mean": round(float(np.mean([b for _, b in ranges])), 3) if ranges else "",
+                "per_seed_difficulty_range": " ".join(f"{a:.2f}-{b:.2f}" for a, b in ranges),
                 "per_seed_return": " ".join(f"{r['return_last100']:.1f}" for _, r in sorted(runs, key=lambda x: x[0])),
                 "per_seed_garages": " ".join(str(r["garages_stored"]) for _, r in sorted(runs, key=lambda x: x[0])),
                 "config_json": json.dumps(runs[0][1]["config"], sort_keys=True),
@@ -129,12 +152,12 @@ def summarise(out: Path, csv_path: Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--configs", nargs="+", default=["baseline", "fast"])
-    ap.add_argument("--maps", nargs="+", default=["tiny_7x11", "m5_13x13_aligned"])
+    ap.add_argument("--configs", nargs="+", default=["paper", "fast"])
+    ap.add_argument("--maps", nargs="+", default=["m5_13x13_aligned", "m7_13x13_u"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--timesteps", type=int, default=200_000)
-    ap.add_argument("--out", type=Path, default=Path("runs/compare_dqn"))
-    ap.add_argument("--csv", type=Path, default=Path("docs/compare_dqn.csv"))
+    ap.add_argument("--out", type=Path, default=Path("runs/compare_learners"))
+    ap.add_argument("--csv", type=Path, default=Path("docs/compare_learners.csv"))
     ap.add_argument("--summary-only", action="store_true")
     args = ap.parse_args()
     if not args.summary_only:

@@ -1,0 +1,151 @@
+"""The fast learner: GarageGenVecEnv paints what the single env paints, OneHotWindow rebuilds its input,
+and the named learners train, resume and reproduce."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from garage_mj.core.config import ConfigError
+from garage_mj.generation.gen_env import GarageGenEnv
+from garage_mj.generation.library import Library
+from garage_mj.generation.protocol import load_protocol
+from garage_mj.generation.runs import latest_checkpoint
+from garage_mj.generation.training import (
+    DEFAULT_LEARNER,
+    LEARNERS,
+    DQNConfig,
+    FinalGarage,
+    load_dqn_config,
+    train,
+)
+from garage_mj.generation.vec_env import GarageGenVecEnv
+from garage_mj.generation.window_net import OneHotWindow
+
+
+def _one_hot(obs: np.ndarray, window: str) -> np.ndarray:
+    """Codes observations as the single env's one-hot ones, through the Q-network's own input layer."""
+    if window == "one_hot":
+        return obs
+    space = GarageGenVecEnv("tiny_7x11", 1, window="codes").observation_space
+    return OneHotWindow(space)(torch.as_tensor(obs)).numpy()
+
+
+@pytest.mark.parametrize("map_name", ["tiny_7x11", "m5_13x13_aligned"])
+@pytest.mark.parametrize("window", ["one_hot", "codes"])
+def test_vector_env_paints_what_single_envs_paint(map_name, window):
+    """Same seeds and actions: the same observations, rewards, episode ends, final garages and infos as
+    SB3's DummyVecEnv over GarageGenEnv."""
+    n = 4
+    vec = GarageGenVecEnv(map_name, n, window=window)
+    ref = DummyVecEnv([lambda: FinalGarage(GarageGenEnv(map_name)) for _ in range(n)])
+    vec.seed(3)
+    ref.seed(3)
+    assert np.array_equal(_one_hot(vec.reset(), window), ref.reset())
+    rng = np.random.default_rng(0)
+    ends = 0
+    for _ in range(1500):
+        actions = rng.integers(0, 4, n)
+        obs, rewards, dones, infos = vec.step(actions)
+        obs_r, rewards_r, dones_r, infos_r = ref.step(actions)
+        assert np.array_equal(_one_hot(obs, window), obs_r)
+        assert np.array_equal(rewards, rewards_r) and np.array_equal(dones, dones_r)
+        for i in np.flatnonzero(dones):
+            ends += 1
+            mine, theirs = infos[i], infos_r[i]
+            assert np.array_equal(mine["final_garage"].grid, theirs["final_garage"].grid)
+            assert mine["final_garage"].six_stall_axis == theirs["final_garage"].six_stall_axis
+            for key in ("usable", "coverage", "difficulty", "stalls", "errors", "TimeLimit.truncated"):
+                assert mine[key] == theirs[key], key
+            assert np.array_equal(_one_hot(mine["terminal_observation"][None], window)[0],
+                                  theirs["terminal_observation"])
+    assert ends > 20
+
+
+def test_vector_env_refuses_bad_arguments():
+    with pytest.raises(ValueError, match="window must be one of one_hot, codes"):
+        GarageGenVecEnv("tiny_7x11", 2, window="pixels")
+    with pytest.raises(ValueError, match="n_envs must be >= 1"):
+        GarageGenVecEnv("tiny_7x11", 0)
+    vec = GarageGenVecEnv("tiny_7x11", 2)
+    vec.reset()
+    with pytest.raises(ValueError, match="action must be 0-3"):
+        vec.step(np.array([0, 7]))
+
+
+def test_codes_observation_space_holds_every_observation():
+    vec = GarageGenVecEnv("m5_13x13_aligned", 3, window="codes")
+    obs = vec.reset()
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        assert vec.observation_space.contains(obs[0])
+        obs, *_ = vec.step(rng.integers(0, 4, 3))
+
+
+def test_named_learners():
+    assert load_dqn_config(learner="paper") == DQNConfig()
+    fast = load_dqn_config(learner="fast")
+    assert fast.vector_env and fast.n_envs == 32 and fast.net_arch == (64, 64)
+    assert "features_extractor_class" in fast.dqn_kwargs()["policy_kwargs"]
+    assert load_dqn_config({"n_envs": 16}, learner="fast").n_envs == 16  # a file's keys override the learner's
+    assert DEFAULT_LEARNER in LEARNERS
+    with pytest.raises(ConfigError, match="unknown learner 'slow'; choose one of paper, fast"):
+        load_dqn_config(learner="slow")
+    from garage_mj.cli.train import LEARNER_NAMES
+
+    assert sorted(LEARNER_NAMES) == sorted(LEARNERS)
+    with pytest.raises(ConfigError, match="device must be one of"):
+        DQNConfig(device="tpu")
+
+
+def test_protocol_learner(tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text("[experiment]\nmaps = ['tiny_7x11']\nseeds = [0]\ntimesteps = 100\nlearner = 'paper'\n"
+                    "[dqn]\nlearning_rate = 0.002\n")
+    assert load_protocol(path).dqn == DQNConfig(learning_rate=0.002)
+    fast = load_protocol(path, learner="fast").dqn
+    assert fast.vector_env and fast.learning_rate == 0.002
+    path.write_text("[experiment]\nmaps = ['tiny_7x11']\nseeds = [0]\ntimesteps = 100\nlearner = 'quick'\n")
+    with pytest.raises(ConfigError, match="learner must be one of paper, fast"):
+        load_protocol(path)
+
+
+FAST = load_dqn_config(learner="fast", learning_starts=256, checkpoint_every=1000)
+
+
+def test_fast_learner_same_seed_same_run(tmp_path):
+    a = train("tiny_7x11", 1500, 7, tmp_path / "a", FAST, progress=False)
+    b = train("tiny_7x11", 1500, 7, tmp_path / "b", FAST, progress=False)
+    assert a["episodes"] == b["episodes"] > 0
+    ra = np.loadtxt(tmp_path / "a" / "monitor.csv", delimiter=",", skiprows=2, ndmin=2)
+    rb = np.loadtxt(tmp_path / "b" / "monitor.csv", delimiter=",", skiprows=2, ndmin=2)
+    assert np.array_equal(ra[:, :2], rb[:, :2])  # return and length of every episode
+
+
+def test_fast_learner_crash_then_resume_keeps_every_garage_once(tmp_path):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Crash(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= 2600:
+                raise RuntimeError("boom")
+            return True
+
+    out = tmp_path / "run"
+    with pytest.raises(RuntimeError, match="boom"):
+        train("tiny_7x11", 4000, 0, out, FAST, progress=False, callbacks=[Crash()])
+    with Library(out / "library.sqlite") as lib:
+        before = {r.hash: (r.episode, r.timestep) for r in lib.query()}
+    assert before
+    ckpt = latest_checkpoint(out)
+    assert ckpt is not None and 2000 <= ckpt[1]["timesteps"] < 2600
+    manifest = train("tiny_7x11", 4000, 0, out, progress=False, resume=True)
+    assert manifest["status"] == "finished" and manifest["timesteps"] >= 4000
+    assert manifest["config"]["vector_env"] is True
+    with Library(out / "library.sqlite") as lib:
+        after = lib.query()
+    assert len({r.hash for r in after}) == len(after)
+    assert {r.hash: (r.episode, r.timestep) for r in after if r.hash in before} == before
+    assert manifest["garages_stored"] == len(after)
