@@ -7,6 +7,8 @@ Per map: garages stored, difficulty range and 0.1 bins reached, mean coverage an
 garages with coverage in [0.6, 0.8) and >= 0.8, and the mean return of each seed's last 100
 episodes (mean and sd over seeds), read from the run folders' ``monitor.csv`` and the protocol's
 ``library.sqlite`` (sd: sample standard deviation over seeds). ``--copy-figures`` copies ``figures/*.png`` (convergence, heatmaps) beside.
+``runs`` lists every run: map, seed, status, timesteps, episodes, garages credited to it, return of its last
+100 episodes, its learner settings and its timesteps/s.
 """
 
 from __future__ import annotations
@@ -30,6 +32,25 @@ def last_returns(run: Path, n: int = 100) -> float | None:
         next(f)  # the monitor's JSON header line
         rows = [float(r["r"]) for r in csv.DictReader(f)]
     return float(np.mean(rows[-n:])) if rows else None
+
+
+def run_rows(folder: Path) -> list[dict]:
+    """One row per run folder of the protocol, from its manifest and monitor log."""
+    rows = []
+    for manifest_path in sorted((folder / "runs").glob("*/seed_*/run.json")):
+        m = json.loads(manifest_path.read_text())
+        session = m.get("last_session") or {}
+        cfg = m.get("config", {})
+        rows.append({
+            "map": m["map"], "seed": m["seed"], "status": m.get("status"), "timesteps": m.get("timesteps"),
+            "episodes": m.get("episodes"), "garages": m.get("garages_stored"),
+            "ret_last100": None if last_returns(manifest_path.parent) is None
+            else round(last_returns(manifest_path.parent), 1),
+            "vector_env": cfg.get("vector_env", False), "n_envs": cfg.get("n_envs", 1),
+            "net_arch": cfg.get("net_arch"), "timesteps_per_s": session.get("timesteps_per_s"),
+            "timesteps_per_cpu_s": session.get("timesteps_per_cpu_s"), "wall_s": session.get("wall_s"),
+        })
+    return rows
 
 
 def main() -> None:
@@ -56,6 +77,7 @@ def main() -> None:
                 "seeds": len(rets),
             }
             print(m, out[m])
+    out["runs"] = run_rows(args.folder)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(out, indent=1) + "\n")
