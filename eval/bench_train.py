@@ -18,7 +18,9 @@ from __future__ import annotations
 import argparse
 import cProfile
 import io
+import json
 import pstats
+import sys
 import tempfile
 
 try:
@@ -26,6 +28,9 @@ try:
 except ImportError:  # Python 3.10
     import tomli as tomllib
 from pathlib import Path
+
+import numpy as np
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
 from garage_mj.generation.training import LEARNERS, load_dqn_config, train
 
@@ -63,31 +68,54 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--profile", action="store_true", help="print the cProfile top 15 by cumulative time")
     ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="DQNConfig overrides (TOML values)")
+    ap.add_argument("--rounds", type=int, default=1,
+                    help="repeat the whole set of runs (the learners interleaved in each round, so a change in "
+                         "the machine's load hits both)")
+    ap.add_argument("--json", type=Path, help="also write every run's figures here, with their provenance")
     args = ap.parse_args()
+    prov = provenance(sys.argv)  # before the runs: the load they start at
+    rows = []
     print(f"DQN, {args.timesteps} timesteps per map and learner, seed {args.seed}"
           + (f", with {' '.join(args.set)}" if args.set else ""))
     print(f"{'map':<20} {'learner':<8} {'timesteps/s':>12} {'per CPU s':>10} {'env share':>10} {'episodes':>9} "
           f"{'garages':>8}")
-    for m in args.maps:
-        for learner in args.learners:
-            # no checkpoint inside the timed part
-            config = load_dqn_config(_overrides(args.set), learner=learner, checkpoint_every=10 * args.timesteps)
-            with tempfile.TemporaryDirectory() as tmp:
-                prof = cProfile.Profile() if args.profile else None
-                if prof:
-                    prof.enable()
-                manifest = train(m, args.timesteps, args.seed, Path(tmp) / "run", config, progress=False)
-                if prof:
-                    prof.disable()
-            s = manifest["last_session"]
-            print(f"{m:<20} {learner:<8} {s['timesteps_per_s']:>12,.0f} {s['timesteps_per_cpu_s']:>10,.0f} "
-                  f"{100 * s['env_share']:>9.1f}% {manifest['episodes']:>9} {manifest['garages_stored']:>8}", flush=True)
+    for rnd, m, learner in ((r, m, lr) for r in range(args.rounds) for m in args.maps for lr in args.learners):
+        # no checkpoint inside the timed part
+        config = load_dqn_config(_overrides(args.set), learner=learner, checkpoint_every=10 * args.timesteps)
+        with tempfile.TemporaryDirectory() as tmp:
+            prof = cProfile.Profile() if args.profile else None
             if prof:
-                buf = io.StringIO()
-                pstats.Stats(prof, stream=buf).sort_stats("cumulative").print_stats(15)
-                print(buf.getvalue())
-                print("share of learn() under cProfile: " + ", ".join(
-                    f"{k} {100 * v:.1f}%" for k, v in _shares(prof).items()))
+                prof.enable()
+            manifest = train(m, args.timesteps, args.seed, Path(tmp) / "run", config, progress=False)
+            if prof:
+                prof.disable()
+        s = manifest["last_session"]
+        rows.append({"round": rnd, "map": m, "learner": learner, "timesteps": s["timesteps"],
+                     "timesteps_per_s": s["timesteps_per_s"], "timesteps_per_cpu_s": s["timesteps_per_cpu_s"],
+                     "env_share": s["env_share"], "episodes": manifest["episodes"],
+                     "garages": manifest["garages_stored"], "config": manifest["config"]})
+        print(f"{m:<20} {learner:<8} {s['timesteps_per_s']:>12,.0f} {s['timesteps_per_cpu_s']:>10,.0f} "
+              f"{100 * s['env_share']:>9.1f}% {manifest['episodes']:>9} {manifest['garages_stored']:>8}", flush=True)
+        if prof:
+            buf = io.StringIO()
+            pstats.Stats(prof, stream=buf).sort_stats("cumulative").print_stats(15)
+            print(buf.getvalue())
+            print("share of learn() under cProfile: " + ", ".join(
+                f"{k} {100 * v:.1f}%" for k, v in _shares(prof).items()))
+
+    if args.json:
+        summary = {}
+        for m in args.maps:
+            per = {lr: [r["timesteps_per_s"] for r in rows if r["map"] == m and r["learner"] == lr] for lr in args.learners}
+            summary[m] = {lr: {"timesteps_per_s": v, "median": float(np.median(v))} for lr, v in per.items()}
+            if {"fast", "paper"} <= set(per):
+                ratios = [f / p for f, p in zip(per["fast"], per["paper"])]
+                summary[m]["fast_over_paper"] = {"per_round": [round(x, 2) for x in ratios],
+                                                 "median": round(float(np.median(ratios)), 2)}
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"timesteps": args.timesteps, "seed": args.seed, "summary": summary,
+                                         "runs": rows, "provenance": prov}, indent=1) + "\n")
+        print(f"wrote {args.json}")
 
 
 if __name__ == "__main__":
