@@ -11,7 +11,7 @@ the default changes); ``dqn_fast`` is ``generation/dqn_fast.toml`` (8 envs, (64,
 training run folder ``OUT/<config>/<map>_s<seed>``; a finished one is skipped, an interrupted one
 resumes from its newest checkpoint. Per run: mean return of the last 100 episodes (``monitor.csv``),
 distinct usable garages stored in the run's library, and timesteps/s. The summary (per config and map:
-mean and 95% t-interval over seeds) goes to ``docs/compare_dqn.csv`` and is printed.
+mean and 95% t-interval over seeds) goes to ``docs/compare_learners.csv`` and is printed.
 """
 
 from __future__ import annotations
