@@ -62,8 +62,9 @@ def cluster():
 
 def _protocol(tmp_path: Path, seeds: list[int], timesteps: int, every: int):
     path = tmp_path / "p.toml"
+    # the paper learner's one env: timesteps and checkpoints fall on exact multiples
     path.write_text(f"[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = {seeds}\ntimesteps = {timesteps}\n"
-                    + DQN.format(every=every))
+                    "learner = 'paper'\n" + DQN.format(every=every))
     return load_protocol(path)
 
 
