@@ -31,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("config", type=Path, help="protocol TOML (generation/paper.toml, generation/smoke.toml)")
     ap.add_argument("--learner", choices=("fast", "paper"),
                     help="DQN settings of every run (garage_mj.generation.training.LEARNERS); default: the file's "
-                         "[experiment] learner, else fast")
+                         "[experiment] learner, else paper")
     ap.add_argument("--scale", type=float, default=1.0, help="multiply the timesteps per run (0 < SCALE <= 1)")
     ap.add_argument("--workers", type=int, default=1, help="runs trained at a time (processes, or Ray CPUs)")
     ap.add_argument("--backend", choices=("local", "ray"), default="local",

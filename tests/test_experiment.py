@@ -44,7 +44,7 @@ def test_bad_protocol(tmp_path, text, match):
 
 def test_run_then_rerun_skips(tmp_path):
     path = tmp_path / "p.toml"
-    path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 800\n"
+    path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 800\nlearner = 'fast'\n"
                     "[dqn]\ncheckpoint_every = 400\nlearning_starts = 400\n")
     protocol = load_protocol(path)
     first = run_experiment(protocol, tmp_path / "out", compute=Compute(progress=False))

@@ -162,13 +162,16 @@ def _adam_kwargs() -> dict[str, Any]:
 #: from; a config file's keys override the chosen learner's. ``paper``: the paper's kind of run, one
 #: env, a (256, 256) MLP, one gradient step of 64 transitions per 4 timesteps. ``fast``: 32 garages
 #: painted together (GarageGenVecEnv), a (64, 64) MLP on the same input, 3-step returns, one gradient
-#: step of 256 transitions per 32 timesteps at twice the learning rate (docs/generate.md compares them).
+#: step of 256 transitions per 32 timesteps at twice the learning rate; about 7x the timesteps/s
+#: (docs/results.md compares what they store).
 LEARNERS: dict[str, dict[str, Any]] = {
     "paper": {},
     "fast": {"vector_env": True, "n_envs": 32, "net_arch": [64, 64], "batch_size": 256, "train_freq": 1,
              "gradient_steps": 1, "n_steps": 3, "learning_rate": 1e-3},
 }
-DEFAULT_LEARNER = "fast"
+# the paper learner stays the default until the fast one stores as many garages per run (docs/results.md,
+# "The fast learner against the paper's": about as many on m7, fewer on m5 at 200,000 timesteps)
+DEFAULT_LEARNER = "paper"
 
 
 def learner_settings(learner: str) -> dict[str, Any]:
