@@ -20,7 +20,6 @@ import cProfile
 import io
 import json
 import pstats
-import sys
 import tempfile
 
 try:
@@ -73,7 +72,7 @@ def main() -> None:
                          "the machine's load hits both)")
     ap.add_argument("--json", type=Path, help="also write every run's figures here, with their provenance")
     args = ap.parse_args()
-    prov = provenance(sys.argv)  # before the runs: the load they start at
+    prov = provenance()  # before the runs: the load they start at
     rows = []
     print(f"DQN, {args.timesteps} timesteps per map and learner, seed {args.seed}"
           + (f", with {' '.join(args.set)}" if args.set else ""))

@@ -71,12 +71,12 @@ def test_a_new_protocol_summary_adds_its_section(repo):
     summary = json.loads((ROOT / "docs" / "protocol_10pct" / "summary.json").read_text())
     summary["m5_13x13_aligned"]["garages"] = 123456
     summary.update(timesteps_per_run=2_000_000, runs=[{"map": "tiny_7x11", "seed": 0}])
-    (repo / "docs" / "protocol_100pct").mkdir()
-    (repo / "docs" / "protocol_100pct" / "summary.json").write_text(json.dumps(summary))
+    (repo / "docs" / "protocol_new").mkdir()
+    (repo / "docs" / "protocol_new" / "summary.json").write_text(json.dumps(summary))
     with (repo / "docs" / "data" / "results.toml").open("a") as f:
-        f.write('\n[[section]]\nheading = "The full protocol"\nprotocol = "protocol_100pct"\n'
-                'body = "{{protocol_100pct/summary.json:timesteps_per_run|,}} timesteps per run."\n'
-                '[[section.figure]]\nfiles = ["protocol_100pct/summary.json"]\n'
+        f.write('\n[[section]]\nheading = "The full protocol"\nprotocol = "protocol_new"\n'
+                'body = "{{protocol_new/summary.json:timesteps_per_run|,}} timesteps per run."\n'
+                '[[section.figure]]\nfiles = ["protocol_new/summary.json"]\n'
                 'command = "eval/protocol_summary.py runs/paper"\ndate = "2031-01-02"\ncommit = "abcdef1"\n'
                 'machine = "dev"\n')
     assert render_pages.main(["--root", str(repo)]) == 0
