@@ -138,15 +138,15 @@ class GarageGenEnv(gym.Env):
         return self._obs(), self._info()
 
     def step(self, action):
+        reward, terminated, truncated = self._advance(action)
+        return self._obs(), reward, terminated, truncated, self._info()
+
+    def _advance(self, action) -> tuple[float, bool, bool]:
+        """One step of ``action`` (0-3): the reward, terminated and truncated; no observation or info
+        (:class:`~garage_mj.generation.vec_env.GarageGenVecEnv` builds those only where it needs them)."""
         a = int(action)
         if not 0 <= a < 4:
             raise ValueError(f"action must be 0-3 (west, east, north, south), got {action!r}")
-        reward, terminated, truncated = self._advance(a)
-        return self._obs(), reward, terminated, truncated, self._info()
-
-    def _advance(self, a: int) -> tuple[float, bool, bool]:
-        """One step of action ``a`` (0-3): the reward, terminated and truncated; no observation or info
-        (:class:`~garage_mj.generation.vec_env.GarageGenVecEnv` builds those only where it needs them)."""
         cfg = self.reward_config
         p = self._pad
         r, c = self.pos

@@ -86,10 +86,7 @@ class GarageGenVecEnv(VecEnv):
         assert actions is not None, "step_wait() before step_async()"
         infos: list[dict[str, Any]] = [{} for _ in self.envs]
         for i, env in enumerate(self.envs):
-            a = int(actions[i])
-            if not 0 <= a < 4:
-                raise ValueError(f"action must be 0-3 (west, east, north, south), got {actions[i]!r}")
-            reward, terminated, truncated = env._advance(a)
+            reward, terminated, truncated = env._advance(actions[i])
             self._rewards[i] = reward
             done = terminated or truncated
             self._dones[i] = done
