@@ -41,11 +41,11 @@ def run_rows(folder: Path) -> list[dict]:
         m = json.loads(manifest_path.read_text())
         session = m.get("last_session") or {}
         cfg = m.get("config", {})
+        ret = last_returns(manifest_path.parent)
         rows.append({
             "map": m["map"], "seed": m["seed"], "status": m.get("status"), "timesteps": m.get("timesteps"),
             "episodes": m.get("episodes"), "garages": m.get("garages_stored"),
-            "ret_last100": None if last_returns(manifest_path.parent) is None
-            else round(last_returns(manifest_path.parent), 1),
+            "ret_last100": None if ret is None else round(ret, 1),
             "vector_env": cfg.get("vector_env", False), "n_envs": cfg.get("n_envs", 1),
             "net_arch": cfg.get("net_arch"), "timesteps_per_s": session.get("timesteps_per_s"),
             "timesteps_per_cpu_s": session.get("timesteps_per_cpu_s"), "wall_s": session.get("wall_s"),

@@ -23,13 +23,14 @@ from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.progress import format_progress, protocol_progress
 from garage_mj.generation.protocol import load_protocol
+from garage_mj.generation.training import LEARNERS
 from garage_mj.reporting.experiment import run_experiment
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("config", type=Path, help="protocol TOML (generation/paper.toml, generation/smoke.toml)")
-    ap.add_argument("--learner", choices=("fast", "paper"),
+    ap.add_argument("--learner", choices=sorted(LEARNERS),
                     help="DQN settings of every run (garage_mj.generation.training.LEARNERS); default: the file's "
                          "[experiment] learner, else paper")
     ap.add_argument("--scale", type=float, default=1.0, help="multiply the timesteps per run (0 < SCALE <= 1)")
