@@ -88,6 +88,5 @@ def apply_stall_rule(grid: np.ndarray, axis: Axis) -> np.ndarray:
     """
     out = np.array(grid, copy=True)
     paintable = np.isin(out, [int(b) for b in PAINTABLE])
-    for r, c in np.argwhere(paintable):
-        out[r, c] = expected_cell(out, int(r), int(c), axis)
+    out[paintable] = expected_cells(out, axis)[paintable]  # depends on ROAD and OBSTACLE cells only
     return out
