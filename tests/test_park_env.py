@@ -142,16 +142,21 @@ def test_outside_stall_is_a_declared_failure_in_the_deadlock_class():
     assert spec.failure and spec.column == "outside_stalls" and PAPER_CLASS["outside_stall"] == "deadlock"
 
 
-def test_the_park_monitor_counts_direction_changes_and_deadlocks_far_away(painted_tiny):
+def _monitor_east_of_stall_3(garage, dx: float):
+    """A reverse-in ParkMonitor of stall 3, started ``dx`` metres east of its stall pose: (stall, car, start, monitor)."""
     from garage_mj.scene.car import car_geometry
     from garage_mj.scene.garage_scene import GarageScene
 
-    scene = GarageScene(painted_tiny)
-    stall, car = scene.stalls.stalls[3], car_geometry()
+    stall, car = GarageScene(garage).stalls.stalls[3], car_geometry()
     goal = park_pose(stall, car, "reverse")
-    far = (goal[0] + 30.0, goal[1], goal[2])
-    monitor = ParkMonitor(Route([far[:2], goal[:2]]), stall, car, "reverse", 100.0, ParkOutcomeConfig())
-    monitor.start(far)
+    start = (goal[0] + dx, goal[1], goal[2])
+    monitor = ParkMonitor(Route([start[:2], goal[:2]]), stall, car, "reverse", 100.0, ParkOutcomeConfig())
+    monitor.start(start)
+    return stall, car, start, monitor
+
+
+def test_the_park_monitor_counts_direction_changes_and_deadlocks_far_away(painted_tiny):
+    stall, car, far, monitor = _monitor_east_of_stall_3(painted_tiny, 30.0)
     for t, v in enumerate([1.0, 1.0, 0.0, -1.0, -1.0, 0.05, 1.0]):
         assert monitor.update(0.1 * (t + 1), far[:2], v, yaw=far[2]) is None
     assert monitor.direction_changes == 2
@@ -182,15 +187,7 @@ def test_stall_fixes_a_cruise_tests_target_too(painted_tiny):
 def test_a_multi_point_turn_of_short_shuffles_is_progress_until_it_stops(painted_tiny):
     """Each cusp driven restarts the no-progress clock (wheels turned at rest between short shuffles);
     the car stopping for good near the stall is then outside_stall."""
-    from garage_mj.scene.car import car_geometry
-    from garage_mj.scene.garage_scene import GarageScene
-
-    scene = GarageScene(painted_tiny)
-    stall, car = scene.stalls.stalls[3], car_geometry()
-    goal = park_pose(stall, car, "reverse")
-    near = (goal[0] + 2.0, goal[1], goal[2])
-    monitor = ParkMonitor(Route([near[:2], goal[:2]]), stall, car, "reverse", 100.0, ParkOutcomeConfig())
-    monitor.start(near)
+    _, _, near, monitor = _monitor_east_of_stall_3(painted_tiny, 2.0)
     t, sign = 0.0, 1.0
     for _ in range(12):  # 12 shuffles, 3 s each: 36 s without 0.3 m of progress, far past stuck_time
         for v in (0.0, 0.0, 0.0, 0.0, 0.2 * sign, 0.0):  # 2.5 s at rest turning the wheels, then a short move
