@@ -7,7 +7,9 @@
 ``paper`` and ``fast`` are the learners of ``garage_mj.generation.training.LEARNERS``; ``baseline`` is the
 DQNConfig that was the default before the throughput work (written out here, so it does not move when
 the default changes); ``dqn_fast`` is ``generation/dqn_fast.toml`` (8 envs, (64, 64), one step of 128 per
-8 timesteps); ``fast_g2`` is ``fast`` with two gradient steps of 128 transitions per 32 timesteps. Each run is a normal
+8 timesteps); ``fast_eps05`` is ``fast`` as first defined, exploring down to epsilon 0.05 like ``paper``
+(``fast`` ends at 0.1); ``fast_g2`` is ``fast_eps05`` with two gradient steps of 128 transitions per 32
+timesteps. Each run is a normal
 training run folder ``OUT/<config>/<map>_s<seed>``; a finished one is skipped, an interrupted one
 resumes from its newest checkpoint. Per run: mean return of the last 100 episodes (``monitor.csv``),
 distinct usable garages stored in the run's library, and timesteps/s. The summary (per config and map:
@@ -46,11 +48,14 @@ def config_named(name: str, checkpoint_every: int) -> DQNConfig:
         return load_dqn_config(learner=name, checkpoint_every=checkpoint_every)
     if name == "baseline":
         return DQNConfig(**BASELINE, checkpoint_every=checkpoint_every)
-    if name == "fast_g2":  # the fast learner with two gradient steps of 128 per 32 timesteps
-        return load_dqn_config({"batch_size": 128, "gradient_steps": 2}, learner="fast", checkpoint_every=checkpoint_every)
+    if name == "fast_eps05":  # the fast learner as first defined: final epsilon 0.05, like paper's
+        return load_dqn_config({"exploration_final_eps": 0.05}, learner="fast", checkpoint_every=checkpoint_every)
+    if name == "fast_g2":  # fast_eps05 with two gradient steps of 128 per 32 timesteps
+        return load_dqn_config({"batch_size": 128, "gradient_steps": 2, "exploration_final_eps": 0.05},
+                               learner="fast", checkpoint_every=checkpoint_every)
     if name == "dqn_fast":
         return load_dqn_config(FAST_TOML, learner="paper", checkpoint_every=checkpoint_every)
-    raise SystemExit(f"unknown config {name!r}: use {', '.join(LEARNERS)}, fast_g2, baseline or dqn_fast")
+    raise SystemExit(f"unknown config {name!r}: use {', '.join(LEARNERS)}, fast_eps05, fast_g2, baseline or dqn_fast")
 
 
 def difficulty_range(run: Path) -> tuple[float, float] | None:

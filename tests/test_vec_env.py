@@ -1,5 +1,5 @@
 """The fast learner: GarageGenVecEnv paints what the single env paints, OneHotWindow rebuilds its input,
-and the named learners train, resume and reproduce."""
+WindowLayer is the first dense layer on that input, and the named learners train, resume and reproduce."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from garage_mj.generation.training import (
     train,
 )
 from garage_mj.generation.vec_env import GarageGenVecEnv
-from garage_mj.generation.window_net import OneHotWindow
+from garage_mj.generation.window_net import OneHotWindow, WindowLayer
 
 
 def _one_hot(obs: np.ndarray, window: str) -> np.ndarray:
@@ -82,6 +82,52 @@ def test_codes_observation_space_holds_every_observation():
     for _ in range(300):
         assert vec.observation_space.contains(obs[0])
         obs, *_ = vec.step(rng.integers(0, 4, 3))
+
+
+def test_window_layer_is_the_dense_first_layer():
+    """WindowLayer computes ReLU(Linear(one-hot window and state)) from the codes: the same initial weights
+    from the same seed, the same outputs and the same gradients, up to float rounding."""
+    space = GarageGenVecEnv("m5_13x13_aligned", 1, window="codes").observation_space
+    torch.manual_seed(5)
+    layer = WindowLayer(space, width=16)
+    after_layer = torch.rand(4)
+    torch.manual_seed(5)
+    dense = torch.nn.Linear(OneHotWindow(space).features_dim, 16)
+    assert torch.equal(torch.rand(4), after_layer)  # the layers built after it draw what they drew
+    n = layer.window.shape[0]
+    assert torch.equal(layer.window, dense.weight[:, :n].t())
+    assert torch.equal(layer.state.weight, dense.weight[:, n:]) and torch.equal(layer.state.bias, dense.bias)
+
+    vec = GarageGenVecEnv("m5_13x13_aligned", 8, window="codes")
+    vec.seed(0)
+    obs, rng = [vec.reset()], np.random.default_rng(0)
+    for _ in range(40):
+        obs.append(vec.step(rng.integers(0, 4, 8))[0])
+    x = torch.as_tensor(np.concatenate(obs))
+    ours = layer(x)
+    ref = torch.relu(dense(OneHotWindow(space)(x)))
+    assert torch.allclose(ours, ref, atol=1e-6)
+    weights = torch.rand_like(ref)
+    g_ours = torch.autograd.grad((ours * weights).sum(), [layer.window, layer.state.weight, layer.state.bias])
+    g_ref = torch.autograd.grad((ref * weights).sum(), [dense.weight, dense.bias])
+    assert torch.allclose(g_ours[0], g_ref[0][:, :n].t(), atol=1e-4)
+    assert torch.allclose(g_ours[1], g_ref[0][:, n:], atol=1e-4)
+    assert torch.allclose(g_ours[2], g_ref[1], atol=1e-4)
+
+
+def test_fast_learner_network_is_the_one_hot_mlp():
+    """The fast learner's Q-network equals a (64, 64) MLP on OneHotWindow built from the same seed."""
+    from stable_baselines3 import DQN
+
+    vec = GarageGenVecEnv("tiny_7x11", 4, window="codes")
+    kwargs = load_dqn_config(learner="fast").dqn_kwargs()
+    ours = DQN("MlpPolicy", vec, seed=3, device="cpu", **kwargs)
+    kwargs["policy_kwargs"] = {"net_arch": [64, 64], "features_extractor_class": OneHotWindow}
+    ref = DQN("MlpPolicy", vec, seed=3, device="cpu", **kwargs)
+    obs = torch.as_tensor(vec.reset())
+    with torch.no_grad():
+        assert torch.allclose(ours.q_net(obs), ref.q_net(obs), atol=1e-6)
+        assert torch.allclose(ours.q_net_target(obs), ref.q_net_target(obs), atol=1e-6)
 
 
 def test_named_learners():

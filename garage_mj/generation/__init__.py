@@ -3,7 +3,8 @@
 - ``gen_env``: ``GarageGen-v0``, the turtle-style painter of docs/spec.md section 3, and its reward config.
 - ``cond_env``: ``GarageGenCond-v0``, the painter conditioned on a difficulty target.
 - ``vec_env``: ``GarageGenVecEnv``, N painters stepped as one SB3 ``VecEnv`` (the fast learner's env).
-- ``window_net``: ``OneHotWindow``, the Q-network input layer that expands a window of block codes to one-hot.
+- ``window_net``: ``WindowLayer``, the Q-network's first layer computed from a window of block codes, and
+  ``OneHotWindow``, which expands them to the one-hot input (models trained with it).
 - ``runs``: the lifecycle of a resumable DQN run (run folder, checkpoints, resume, Ctrl-C) both trainings share.
 - ``training``: DQN on the painter (the ``paper`` and ``fast`` learners); every usable garage goes to the library as it is found.
 - ``conditioned``: the difficulty-conditioned generator: train it, find the shipped one, load it.

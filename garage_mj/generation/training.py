@@ -92,8 +92,8 @@ class DQNConfig:
     n_envs: int = 1  # envs stepped together (DummyVecEnv, one process): one batched action choice
     view_size: int = 7  # env: side of the observed window (odd)
     max_errors: int = 10  # env: errors allowed per episode
-    # the n_envs garages in one GarageGenVecEnv, windows stored as block codes and expanded to one-hot
-    # in the Q-network (OneHotWindow): the same network input, ~9x less replay memory to fill and sample
+    # the n_envs garages in one GarageGenVecEnv, windows stored as block codes (~9x less replay memory to
+    # fill and sample) and the Q-network's first layer computed from them (WindowLayer): the same network
     vector_env: bool = False
     device: str = "auto"  # torch device of the gradient updates: auto (CUDA when torch sees one), cpu or cuda
 
@@ -139,9 +139,11 @@ class DQNConfig:
         kw = {k: getattr(self, k) for k in keys}
         kw["policy_kwargs"] = {"net_arch": list(self.net_arch), "optimizer_kwargs": _adam_kwargs()}
         if self.vector_env:
-            from garage_mj.generation.window_net import OneHotWindow
+            # the first hidden layer computed from the window's block codes (WindowLayer), the rest as usual
+            from garage_mj.generation.window_net import WindowLayer
 
-            kw["policy_kwargs"]["features_extractor_class"] = OneHotWindow
+            kw["policy_kwargs"].update(net_arch=list(self.net_arch[1:]), features_extractor_class=WindowLayer,
+                                       features_extractor_kwargs={"width": self.net_arch[0]})
         return kw
 
     def to_dict(self) -> dict[str, Any]:
@@ -161,13 +163,15 @@ def _adam_kwargs() -> dict[str, Any]:
 #: The named learners: DQN settings that ``train --learner``, protocol files and the benchmarks choose
 #: from; a config file's keys override the chosen learner's. ``paper``: the paper's kind of run, one
 #: env, a (256, 256) MLP, one gradient step of 64 transitions per 4 timesteps. ``fast``: 32 garages
-#: painted together (GarageGenVecEnv), a (64, 64) MLP on the same input, 3-step returns, one gradient
-#: step of 256 transitions per 32 timesteps at twice the learning rate; about 7x the timesteps/s
-#: (docs/results.md compares what they store).
+#: painted together (GarageGenVecEnv), a (64, 64) MLP on the same input (its first layer read from the
+#: window's codes, WindowLayer), 3-step returns, one gradient step of 256 transitions per 32 timesteps at
+#: twice the learning rate, and epsilon-greedy exploration ending at 0.1 instead of 0.05 (its policy
+#: changes less between episodes, so without it it repeats more of its garages); about 10x the
+#: timesteps/s (docs/results.md compares what they store).
 LEARNERS: dict[str, dict[str, Any]] = {
     "paper": {},
     "fast": {"vector_env": True, "n_envs": 32, "net_arch": [64, 64], "batch_size": 256, "train_freq": 1,
-             "gradient_steps": 1, "n_steps": 3, "learning_rate": 1e-3},
+             "gradient_steps": 1, "n_steps": 3, "learning_rate": 1e-3, "exploration_final_eps": 0.1},
 }
 # the paper learner stays the default until the fast one stores as many garages per run (docs/results.md,
 # "The fast learner against the paper's": about as many on m7, fewer on m5 at 200,000 timesteps)

@@ -4,8 +4,8 @@ It paints exactly what N :class:`~garage_mj.generation.gen_env.GarageGenEnv` wou
 ``DummyVecEnv`` (same resets, seeds, rewards and garages for the same actions), without the
 per-env wrapper calls: the observations are written straight into one (N, D) array and the
 info dict (metrics, the final :class:`Garage`) is built only when an episode ends. Each window
-cell can be observed as its block code (``window="codes"``, k * k + 7 values; the Q-network
-expands it to one-hot, :class:`~garage_mj.generation.window_net.OneHotWindow`), which makes the
+cell can be observed as its block code (``window="codes"``, k * k + 7 values; the Q-network's
+first layer reads the codes, :class:`~garage_mj.generation.window_net.WindowLayer`), which makes the
 replay buffer about 9 times smaller and cheaper to fill and sample than the one-hot rows.
 """
 
