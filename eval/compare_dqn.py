@@ -7,9 +7,8 @@
 ``paper`` and ``fast`` are the learners of ``garage_mj.generation.training.LEARNERS``; ``baseline`` is the
 DQNConfig that was the default before the throughput work (written out here, so it does not move when
 the default changes); ``dqn_fast`` is ``generation/dqn_fast.toml`` (8 envs, (64, 64), one step of 128 per
-8 timesteps); ``fast_eps05`` is ``fast`` as first defined, exploring down to epsilon 0.05 like ``paper``
-(``fast`` ends at 0.1); ``fast_g2`` is ``fast_eps05`` with two gradient steps of 128 transitions per 32
-timesteps. Each run is a normal
+8 timesteps); the ``fast_*`` names are the fast learner with one or more settings changed
+(``FAST_VARIANTS``: its earlier settings and the alternatives measured against it). Each run is a normal
 training run folder ``OUT/<config>/<map>_s<seed>``; a finished one is skipped, an interrupted one
 resumes from its newest checkpoint. Per run: mean return of the last 100 episodes (``monitor.csv``),
 distinct usable garages stored in the run's library, and timesteps/s. The summary (per config and map:
@@ -38,6 +37,24 @@ BASELINE = dict(
     torch_threads=1, view_size=7, max_errors=10,
 )
 FAST_TOML = Path(__file__).resolve().parent.parent / "generation" / "dqn_fast.toml"
+# the fast learner's earlier settings and the alternatives weighed against it, as overrides of
+# LEARNERS["fast"]; each suffix names one: t1k the target network renewed every 1,000 timesteps (31
+# gradient steps) instead of 8,000, eps05 exploration down to 0.05 instead of 0.1, lr5e4 learning rate
+# 5e-4 instead of 1e-3, n1 1-step instead of 3-step returns, g2 two gradient steps of 128 per 32
+# timesteps, 64envs 64 envs and batches of 512. fast_t1k_eps05 is the fast learner as first defined.
+FAST_VARIANTS = {
+    "fast_t1k_eps05": {"target_update_interval": 1_000, "exploration_final_eps": 0.05},
+    "fast_t1k": {"target_update_interval": 1_000},
+    "fast_t1k_lr5e4": {"target_update_interval": 1_000, "learning_rate": 5e-4},
+    "fast_t1k_n1": {"target_update_interval": 1_000, "n_steps": 1},
+    "fast_t1k_64envs": {"target_update_interval": 1_000, "n_envs": 64, "batch_size": 512},
+    "fast_t1k_eps05_64envs": {"target_update_interval": 1_000, "exploration_final_eps": 0.05, "n_envs": 64,
+                              "batch_size": 512},
+    "fast_t1k_eps05_g2": {"target_update_interval": 1_000, "exploration_final_eps": 0.05, "batch_size": 128,
+                          "gradient_steps": 2},
+    "fast_eps05": {"exploration_final_eps": 0.05},
+    "fast_n1": {"n_steps": 1},
+}
 LAST_EPISODES = 100  # episodes averaged for the final return
 # two-sided 95% Student t quantiles by degrees of freedom
 T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
@@ -48,14 +65,12 @@ def config_named(name: str, checkpoint_every: int) -> DQNConfig:
         return load_dqn_config(learner=name, checkpoint_every=checkpoint_every)
     if name == "baseline":
         return DQNConfig(**BASELINE, checkpoint_every=checkpoint_every)
-    if name == "fast_eps05":  # the fast learner as first defined: final epsilon 0.05, like paper's
-        return load_dqn_config({"exploration_final_eps": 0.05}, learner="fast", checkpoint_every=checkpoint_every)
-    if name == "fast_g2":  # fast_eps05 with two gradient steps of 128 per 32 timesteps
-        return load_dqn_config({"batch_size": 128, "gradient_steps": 2, "exploration_final_eps": 0.05},
-                               learner="fast", checkpoint_every=checkpoint_every)
+    # earlier settings of the fast learner and the candidates weighed against them (docs/generate.md)
+    if name in FAST_VARIANTS:
+        return load_dqn_config(FAST_VARIANTS[name], learner="fast", checkpoint_every=checkpoint_every)
     if name == "dqn_fast":
         return load_dqn_config(FAST_TOML, learner="paper", checkpoint_every=checkpoint_every)
-    raise SystemExit(f"unknown config {name!r}: use {', '.join(LEARNERS)}, fast_eps05, fast_g2, baseline or dqn_fast")
+    raise SystemExit(f"unknown config {name!r}: use {', '.join([*LEARNERS, *FAST_VARIANTS])}, baseline or dqn_fast")
 
 
 def difficulty_range(run: Path) -> tuple[float, float] | None:

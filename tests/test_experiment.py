@@ -44,8 +44,9 @@ def test_bad_protocol(tmp_path, text, match):
 
 def test_run_then_rerun_skips(tmp_path):
     path = tmp_path / "p.toml"
-    path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 800\nlearner = 'fast'\n"
-                    "[dqn]\ncheckpoint_every = 400\nlearning_starts = 400\n")
+    # the fast learner with 8 envs: enough gradient steps in 3,000 timesteps to paint usable garages
+    path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 3000\nlearner = 'fast'\n"
+                    "[dqn]\ncheckpoint_every = 1500\nlearning_starts = 500\nn_envs = 8\n")
     protocol = load_protocol(path)
     first = run_experiment(protocol, tmp_path / "out", compute=Compute(progress=False))
     assert sorted(first["trained"]) == [("tiny_7x11", 0), ("tiny_7x11", 1)] and first["skipped"] == []

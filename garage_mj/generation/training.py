@@ -165,13 +165,15 @@ def _adam_kwargs() -> dict[str, Any]:
 #: env, a (256, 256) MLP, one gradient step of 64 transitions per 4 timesteps. ``fast``: 32 garages
 #: painted together (GarageGenVecEnv), a (64, 64) MLP on the same input (its first layer read from the
 #: window's codes, WindowLayer), 3-step returns, one gradient step of 256 transitions per 32 timesteps at
-#: twice the learning rate, and epsilon-greedy exploration ending at 0.1 instead of 0.05 (its policy
-#: changes less between episodes, so without it it repeats more of its garages); about 10x the
-#: timesteps/s (docs/results.md compares what they store).
+#: twice the learning rate, the target network renewed every 250 gradient steps as in ``paper`` (8,000
+#: timesteps), and epsilon-greedy exploration ending at 0.1 instead of 0.05 (its policy changes less
+#: between episodes, so with 0.05 it repeats more of its garages); about 10x the timesteps/s
+#: (docs/results.md compares what they store).
 LEARNERS: dict[str, dict[str, Any]] = {
     "paper": {},
     "fast": {"vector_env": True, "n_envs": 32, "net_arch": [64, 64], "batch_size": 256, "train_freq": 1,
-             "gradient_steps": 1, "n_steps": 3, "learning_rate": 1e-3, "exploration_final_eps": 0.1},
+             "gradient_steps": 1, "n_steps": 3, "learning_rate": 1e-3, "target_update_interval": 8_000,
+             "exploration_final_eps": 0.1},
 }
 # the paper learner stays the default until the fast one stores as many garages per run (docs/results.md,
 # "The fast learner against the paper's": about as many on m7, fewer on m5 at 200,000 timesteps)
