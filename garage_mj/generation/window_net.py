@@ -11,7 +11,7 @@ one-hot rows ``eye(NUM_CODES)[codes]``, then the 7 state values):
   pass looks up k * k rows (``embedding_bag``) instead of multiplying a 497-wide, 90%-zero input.
   The gradient is the usual dense product. The network is the same function of the same
   observation with the same initial weights; on one CPU core a gradient step of the fast learner's
-  (64, 64) network at batch 256 takes about half the time (``eval/bench_window_layer.py``).
+  (64, 64) network at batch 256 takes about three quarters of the time (``eval/bench_window_layer.py``).
 """
 
 from __future__ import annotations
