@@ -27,33 +27,32 @@ from torch import nn
 from garage_mj.generation.vec_env import GarageGenVecEnv
 from garage_mj.generation.window_net import OneHotWindow, WindowLayer
 
-ACTIONS = 4
 
-
-def network(kind: str, space) -> nn.Module:
+def network(kind: str, vec: GarageGenVecEnv) -> nn.Module:
+    space, actions = vec.observation_space, int(vec.action_space.n)
     if kind == "one_hot":
         first = OneHotWindow(space)
         return nn.Sequential(first, nn.Linear(first.features_dim, 64), nn.ReLU(), nn.Linear(64, 64), nn.ReLU(),
-                             nn.Linear(64, ACTIONS))
-    return nn.Sequential(WindowLayer(space, 64), nn.Linear(64, 64), nn.ReLU(), nn.Linear(64, ACTIONS))
+                             nn.Linear(64, actions))
+    return nn.Sequential(WindowLayer(space, 64), nn.Linear(64, 64), nn.ReLU(), nn.Linear(64, actions))
 
 
-def painted_observations(n: int) -> torch.Tensor:
-    vec = GarageGenVecEnv("m5_13x13_aligned", 32, window="codes")
+def painted_observations(vec: GarageGenVecEnv, n: int) -> torch.Tensor:
     vec.seed(0)
     rng, obs = np.random.default_rng(0), [vec.reset()]
     while sum(len(o) for o in obs) < n:
-        obs.append(vec.step(rng.integers(0, ACTIONS, 32))[0])
+        obs.append(vec.step(rng.integers(0, vec.action_space.n, vec.num_envs))[0])
     return torch.as_tensor(np.concatenate(obs)[:n])
 
 
-def time_kind(kind: str, space, obs: torch.Tensor, batch: int, steps: int) -> dict[str, float]:
+def time_kind(kind: str, vec: GarageGenVecEnv, obs: torch.Tensor, batch: int, steps: int) -> dict[str, float]:
     torch.manual_seed(0)
-    net, target = network(kind, space), network(kind, space)
+    net, target = network(kind, vec), network(kind, vec)
     opt = torch.optim.Adam(net.parameters(), lr=1e-3, fused=True)
     rng = np.random.default_rng(0)
     batches = [(obs[rng.integers(0, len(obs), batch)], obs[rng.integers(0, len(obs), batch)],
-                torch.as_tensor(rng.integers(0, ACTIONS, (batch, 1))), torch.rand(batch, 1)) for _ in range(16)]
+                torch.as_tensor(rng.integers(0, vec.action_space.n, (batch, 1))), torch.rand(batch, 1))
+               for _ in range(16)]
 
     def step(i: int) -> None:
         o, o2, a, r = batches[i % len(batches)]
@@ -89,13 +88,13 @@ def main() -> None:
     args = ap.parse_args()
     prov = provenance()
     torch.set_num_threads(1)
-    space = GarageGenVecEnv("m5_13x13_aligned", 1, window="codes").observation_space
-    obs = painted_observations(4096)
+    vec = GarageGenVecEnv("m5_13x13_aligned", 32, window="codes")
+    obs = painted_observations(vec, 4096)
     rows = []
     print(f"gradient step at batch {args.batch} and action choice for 32 envs, one thread (ms)")
     for rnd in range(args.rounds):
         for kind in ("one_hot", "codes"):
-            r = {"round": rnd, "input_layer": kind, **time_kind(kind, space, obs, args.batch, args.steps)}
+            r = {"round": rnd, "input_layer": kind, **time_kind(kind, vec, obs, args.batch, args.steps)}
             rows.append(r)
             print(f"round {rnd}  {kind:<8} train step {r['train_step_ms']:.3f}  act {r['act_32_ms']:.3f}", flush=True)
     summary = {k: {m: float(np.median([r[m] for r in rows if r["input_layer"] == k]))

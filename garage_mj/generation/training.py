@@ -175,8 +175,8 @@ LEARNERS: dict[str, dict[str, Any]] = {
              "gradient_steps": 1, "n_steps": 3, "learning_rate": 1e-3, "target_update_interval": 8_000,
              "exploration_final_eps": 0.1},
 }
-# the paper learner stays the default until the fast one stores as many garages per run (docs/results.md,
-# "The fast learner against the paper's": about as many on m7, fewer on m5 at 200,000 timesteps)
+# the paper learner stays the default until the fast one is shown to learn as well (docs/results.md, "The
+# fast learner against the paper's": at 200,000 timesteps more garages per run on m5, fewer on m7, lower return)
 DEFAULT_LEARNER = "paper"
 
 
