@@ -46,6 +46,10 @@ def _tile_for_mask(mask: int) -> Tile:
 TILE_OF_MASK: tuple[Tile, ...] = tuple(_tile_for_mask(m) for m in range(16))
 #: Intersection degree Y that a tile contributes (None: not counted).
 Y_OF_TILE = {Tile.CURVE: 2, Tile.T: 3, Tile.CROSS: 4}
+# the same tables by neighbour mask, for RoadTracker's inner loops
+_STRAIGHT_MASKS = frozenset(m for m in range(16) if TILE_OF_MASK[m] == Tile.STRAIGHT)
+_Y_OF_MASK: tuple[int | None, ...] = tuple(Y_OF_TILE.get(TILE_OF_MASK[m]) for m in range(16))
+_DIRECTION = {delta: d for d, delta in enumerate(DELTAS)}
 
 
 def road_mask(grid: np.ndarray) -> np.ndarray:
@@ -128,12 +132,12 @@ class RoadAnalysis:
 def _walk(masks_get, start: tuple[int, int], d: int) -> list[tuple[int, int]]:
     """Cells from key node ``start`` stepping ``d`` through straights to the next key node."""
     r, c = start
+    dr, dc = DELTAS[d]
     cells = [start]
     while True:
-        dr, dc = DELTAS[d]
         r, c = r + dr, c + dc
         cells.append((r, c))
-        if TILE_OF_MASK[masks_get((r, c))] != Tile.STRAIGHT:
+        if masks_get((r, c)) not in _STRAIGHT_MASKS:
             return cells  # a straight is entered and left in the same direction
 
 
@@ -159,7 +163,7 @@ def analyse(grid: np.ndarray) -> RoadAnalysis:
 
 
 def _direction(a: tuple[int, int], b: tuple[int, int]) -> int:
-    return DELTAS.index((b[0] - a[0], b[1] - a[1]))
+    return _DIRECTION[(b[0] - a[0], b[1] - a[1])]
 
 
 def _segment_key(cells: list[tuple[int, int]]) -> tuple:
@@ -192,9 +196,8 @@ class RoadTracker:
 
     def _segments_at(self, p: tuple[int, int]) -> dict[tuple, int]:
         m = self.masks[p]
-        tile = TILE_OF_MASK[m]
         out = {}
-        if tile == Tile.STRAIGHT:
+        if m in _STRAIGHT_MASKS:
             # walk to one key end, then walk the whole chain back from there
             half = _walk(self.masks.__getitem__, p, (m & -m).bit_length() - 1)
             cells = _walk(self.masks.__getitem__, half[-1], _direction(half[-1], half[-2]))
@@ -220,7 +223,7 @@ class RoadTracker:
         old: dict[tuple, int] = {}
         for q, _ in touched:
             old.update(self._segments_at(q))
-            y = Y_OF_TILE.get(TILE_OF_MASK[self.masks[q]])
+            y = _Y_OF_MASK[self.masks[q]]
             if y is not None:
                 self.y_hist[y] -= 1
         for k, x in old.items():
@@ -236,7 +239,7 @@ class RoadTracker:
         new: dict[tuple, int] = {}
         for q in [p] + [q for q, _ in touched]:
             new.update(self._segments_at(q))
-            y = Y_OF_TILE.get(TILE_OF_MASK[self.masks[q]])
+            y = _Y_OF_MASK[self.masks[q]]
             if y is not None:
                 self.y_hist[y] += 1
         for k, x in new.items():
