@@ -170,6 +170,37 @@ def test_fast_learner_same_seed_same_run(tmp_path):
     assert np.array_equal(ra[:, :2], rb[:, :2])  # return and length of every episode
 
 
+def test_lean_dqn_trains_what_dqn_trains(monkeypatch, tmp_path):
+    """LeanDQN is DQN with less overhead: from the same seed, the same episodes, network and actions."""
+    from stable_baselines3 import DQN
+
+    import garage_mj.generation.runs as runs
+    from garage_mj.generation.lean_dqn import LeanDQN
+
+    config = load_dqn_config(learner="fast", n_envs=8, learning_starts=200, checkpoint_every=10_000)
+    models = {}
+    for name, algo in (("lean", LeanDQN), ("sb3", DQN)):
+        monkeypatch.setattr(runs, "LeanDQN", algo)
+        out = tmp_path / name
+        train("tiny_7x11", 2000, 5, out, config, progress=False)
+        models[name] = (np.loadtxt(out / "monitor.csv", delimiter=",", skiprows=2, ndmin=2),
+                        DQN.load(out / "final_model.zip", device="cpu"))
+    (ra, lean), (rb, sb3) = models["lean"], models["sb3"]
+    assert len(ra) > 0 and np.array_equal(ra[:, :2], rb[:, :2])  # return and length of every episode
+    for p, q in zip(lean.policy.parameters(), sb3.policy.parameters()):
+        assert torch.equal(p, q)
+    vec = GarageGenVecEnv("tiny_7x11", 8, window="codes")
+    model = LeanDQN("MlpPolicy", vec, seed=1, device="cpu", **config.dqn_kwargs())
+    obs = vec.reset()
+    for eps in (0.0, 0.5):
+        model.exploration_rate = eps
+        np.random.seed(3), model.action_space.seed(3)
+        ours = [model.predict(obs)[0] for _ in range(20)]
+        np.random.seed(3), model.action_space.seed(3)
+        theirs = [DQN.predict(model, obs)[0] for _ in range(20)]
+        assert all(np.array_equal(a, b) for a, b in zip(ours, theirs))
+
+
 def test_fast_learner_crash_then_resume_keeps_every_garage_once(tmp_path):
     from stable_baselines3.common.callbacks import BaseCallback
 
