@@ -5,6 +5,7 @@
 - ``vec_env``: ``GarageGenVecEnv``, N painters stepped as one SB3 ``VecEnv`` (the fast learner's env).
 - ``window_net``: ``WindowLayer``, the Q-network's first layer computed from a window of block codes, and
   ``OneHotWindow``, which expands them to the one-hot input (models trained with it).
+- ``lean_dqn``: ``LeanDQN``, SB3's DQN with the same results and less overhead per step (the fast learner's algorithm).
 - ``runs``: the lifecycle of a resumable DQN run (run folder, checkpoints, resume, Ctrl-C) both trainings share.
 - ``training``: DQN on the painter (the ``paper`` and ``fast`` learners); every usable garage goes to the library as it is found.
 - ``conditioned``: the difficulty-conditioned generator: train it, find the shipped one, load it.
