@@ -13,9 +13,10 @@ from garage_mj import Block, evaluate
 from garage_mj.core.config import ConfigError
 from garage_mj.core.geometry import EAST, NORTH, SOUTH, WEST
 from garage_mj.generation.gen_env import GarageGenEnv
+from garage_mj.grid.garage import Garage
 from garage_mj.grid.metrics import coverage
 from garage_mj.grid.reward import RewardConfig
-from garage_mj.grid.road_segments import analyse
+from garage_mj.grid.road_segments import RoadTracker, analyse
 from garage_mj.grid.rules import road_squares, stall_rule_violations
 
 ENV_ID = "garage_mj/GarageGen-v0"
@@ -159,7 +160,17 @@ def test_invariants_hold_after_every_step(seed, actions, map_name):
         assert not stall_rule_violations(grid, env.six_stall_axis)
         np.testing.assert_array_equal(grid[fixed], initial[fixed])
         assert info["coverage"] == pytest.approx(coverage(grid, initial))
-        m = evaluate(env.garage())
+        painted = env.garage()
+        # the env's garage is the one the validating constructor builds from its grid
+        checked = Garage(grid, initial, six_stall_axis=env.six_stall_axis, name=env.map_name)
+        for f in ("grid", "initial"):
+            got, want = getattr(painted, f), getattr(checked, f)
+            assert got.dtype == want.dtype and np.array_equal(got, want)
+        # and owns its arrays: the next step does not change it
+        assert not np.shares_memory(painted.grid, env._padded) and not np.shares_memory(painted.initial, env.initial)
+        assert (painted.six_stall_axis, painted.name, painted.entrance, painted.exit) == (
+            checked.six_stall_axis, checked.name, checked.entrance, checked.exit)
+        m = evaluate(painted)
         # the incremental statistics equal a full recomputation
         assert info["stalls"] == m.stalls
         assert info["mean_road_length"] == pytest.approx(m.mean_road_length)
@@ -167,6 +178,11 @@ def test_invariants_hold_after_every_step(seed, actions, map_name):
         assert len(env._tracker.segments) == len(analyse(grid).segments)
         if term or trunc:
             break
+    # the next episode starts from the unpainted map's statistics, untouched by this one
+    env.reset(seed=seed + 1)
+    fresh = RoadTracker(initial)
+    assert (env._tracker.masks, env._tracker.segments) == (fresh.masks, fresh.segments)
+    assert (+env._tracker.x_hist, +env._tracker.y_hist) == (+fresh.x_hist, +fresh.y_hist)
 
 
 def test_bad_arguments():

@@ -101,6 +101,7 @@ class GarageGenEnv(gym.Env):
         self.action_space = spaces.Discrete(4)
         self.six_stall_axis: Axis = six_stall_axis or "NS"
         self._padded = self._padded_initial.copy()
+        self._tracker0 = RoadTracker(self.initial)  # the unpainted map's roads, copied at each reset
 
     # -- public state ---------------------------------------------------------------------------
     @property
@@ -113,7 +114,8 @@ class GarageGenEnv(gym.Env):
 
     def garage(self) -> Garage:
         """The current matrix as a :class:`Garage`."""
-        return Garage(self.grid.copy(), self.initial, six_stall_axis=self.six_stall_axis, name=self.map_name)
+        return Garage.painted(self.grid.copy(), self.initial.copy(), self.six_stall_axis, self.map_name,
+                              self.entrance, self.exit)
 
     # -- gym API ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -126,7 +128,7 @@ class GarageGenEnv(gym.Env):
         self.six_stall_axis = axis
         self._padded = self._padded_initial.copy()
         self._padded.flags.writeable = True
-        self._tracker = RoadTracker(self.initial)
+        self._tracker = self._tracker0.copy()
         self.pos = self.entrance
         self.heading = self._inward
         self.errors = 0

@@ -218,6 +218,17 @@ class Garage:
             )
         self.entrance, self.exit = find_gates(self.initial, src)
 
+    @classmethod
+    def painted(cls, grid: np.ndarray, initial: np.ndarray, six_stall_axis: Axis, name: str,
+                entrance: tuple[int, int], exit: tuple[int, int]) -> Garage:
+        """A garage the painter env made on a map it validated: the same object the constructor builds,
+        without its checks (the painter changes only FREE cells into road and stall codes). ``grid`` and
+        ``initial`` are int8 arrays the garage now owns."""
+        garage = cls.__new__(cls)
+        garage.grid, garage.initial, garage.six_stall_axis, garage.name = grid, initial, six_stall_axis, name
+        garage.entrance, garage.exit = entrance, exit
+        return garage
+
     @property
     def shape(self) -> tuple[int, int]:
         return self.grid.shape  # type: ignore[return-value]

@@ -141,6 +141,19 @@ def _walk(masks_get, start: tuple[int, int], d: int) -> list[tuple[int, int]]:
             return cells  # a straight is entered and left in the same direction
 
 
+def _run(masks_get, start: tuple[int, int], d: int) -> tuple[tuple[int, int], int]:
+    """The key node a walk from ``start`` in direction ``d`` ends at, and the cells of the segment (both
+    ends counted): :func:`_walk` without the list, whose key is ``(start, d)`` and ``(end, OPPOSITE[d])``."""
+    r, c = start
+    dr, dc = DELTAS[d]
+    n = 1
+    while True:
+        r, c = r + dr, c + dc
+        n += 1
+        if masks_get((r, c)) not in _STRAIGHT_MASKS:
+            return (r, c), n
+
+
 def analyse(grid: np.ndarray) -> RoadAnalysis:
     """Tiles and segments of ``grid``, computed from scratch."""
     road = road_mask(grid)
@@ -196,18 +209,30 @@ class RoadTracker:
 
     def _segments_at(self, p: tuple[int, int]) -> dict[tuple, int]:
         m = self.masks[p]
-        out = {}
+        get = self.masks.__getitem__
         if m in _STRAIGHT_MASKS:
             # walk to one key end, then walk the whole chain back from there
-            half = _walk(self.masks.__getitem__, p, (m & -m).bit_length() - 1)
-            cells = _walk(self.masks.__getitem__, half[-1], _direction(half[-1], half[-2]))
-            out[_segment_key(cells)] = self._clip(len(cells))
-        else:
-            for d in range(4):
-                if m >> d & 1:
-                    cells = _walk(self.masks.__getitem__, p, d)
-                    out[_segment_key(cells)] = self._clip(len(cells))
+            d = (m & -m).bit_length() - 1
+            a, _ = _run(get, p, d)
+            back = OPPOSITE[d]
+            b, n = _run(get, a, back)
+            x, y = (a, back), (b, d)
+            return {(x, y) if x <= y else (y, x): self._clip(n)}
+        out = {}
+        for d in range(4):
+            if m >> d & 1:
+                b, n = _run(get, p, d)
+                x, y = (p, d), (b, OPPOSITE[d])
+                out[(x, y) if x <= y else (y, x)] = self._clip(n)
         return out
+
+    def copy(self) -> RoadTracker:
+        """An independent tracker in the same state (cheaper than analysing the grid again)."""
+        new = RoadTracker.__new__(RoadTracker)
+        new.x_min, new.x_max = self.x_min, self.x_max
+        new.masks, new.segments = dict(self.masks), dict(self.segments)
+        new.x_hist, new.y_hist = Counter(self.x_hist), Counter(self.y_hist)
+        return new
 
     def add_road(self, r: int, c: int) -> None:
         """Record that (r, c) became road-like."""
