@@ -4,7 +4,9 @@
                                          [--learners fast paper] [--seed 0] [--profile] [--set KEY=VALUE ...]
 
 Each map gets one fresh run per learner (garage_mj.generation.training.LEARNERS: ``fast``, ``paper``)
-in a temporary folder, the learners one after the other in the same minute. The env share is
+in a temporary folder, the learners one after the other in the same minute. ``timesteps/s`` is the
+whole run's rate; ``learning`` the rate from ``learning_starts`` on, once every vector step also trains
+(a learner that starts learning later is not credited with its cheaper first timesteps). The env share is
 the wall time spent inside env.step/reset (GarageGenEnv with its Monitor and FinalGarage
 wrappers, timed by training.StepTimer) over the whole ``learn`` call. ``--profile`` also prints
 the top functions by cumulative time under cProfile (which slows everything down a little) and the
@@ -21,6 +23,7 @@ import io
 import json
 import pstats
 import tempfile
+import time
 
 try:
     import tomllib
@@ -30,8 +33,27 @@ from pathlib import Path
 
 import numpy as np
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
+from stable_baselines3.common.callbacks import BaseCallback
 
 from garage_mj.generation.training import LEARNERS, load_dqn_config, train
+
+
+class LearningClock(BaseCallback):
+    """When the run's gradient updates start (``learning_starts``) and end: the rate while learning."""
+
+    def __init__(self, learning_starts: int) -> None:
+        super().__init__()
+        self.learning_starts, self.start, self.steps0 = learning_starts, None, 0
+
+    def _on_step(self) -> bool:
+        if self.start is None and self.num_timesteps >= self.learning_starts:
+            self.start, self.steps0 = time.perf_counter(), self.num_timesteps
+        return True
+
+    def rate(self) -> float | None:
+        if self.start is None or self.num_timesteps <= self.steps0:
+            return None
+        return (self.num_timesteps - self.steps0) / (time.perf_counter() - self.start)
 
 SHARES = {  # cProfile functions whose cumulative time is reported as a share of learn()
     "gradient updates": ("dqn.py", "train"),
@@ -76,8 +98,8 @@ def main() -> None:
     rows = []
     print(f"DQN, {args.timesteps} timesteps per map and learner, seed {args.seed}"
           + (f", with {' '.join(args.set)}" if args.set else ""))
-    print(f"{'map':<20} {'learner':<8} {'timesteps/s':>12} {'per CPU s':>10} {'env share':>10} {'episodes':>9} "
-          f"{'garages':>8}")
+    print(f"{'map':<20} {'learner':<8} {'timesteps/s':>12} {'learning':>9} {'per CPU s':>10} {'env share':>10} "
+          f"{'episodes':>9} {'garages':>8}")
     for rnd, m, learner in ((r, m, lr) for r in range(args.rounds) for m in args.maps for lr in args.learners):
         # no checkpoint inside the timed part
         config = load_dqn_config(_overrides(args.set), learner=learner, checkpoint_every=10 * args.timesteps)
@@ -85,15 +107,20 @@ def main() -> None:
             prof = cProfile.Profile() if args.profile else None
             if prof:
                 prof.enable()
-            manifest = train(m, args.timesteps, args.seed, Path(tmp) / "run", config, progress=False)
+            clock = LearningClock(config.learning_starts)
+            manifest = train(m, args.timesteps, args.seed, Path(tmp) / "run", config, progress=False,
+                             callbacks=[clock])
             if prof:
                 prof.disable()
         s = manifest["last_session"]
+        learning = clock.rate()
         rows.append({"round": rnd, "map": m, "learner": learner, "timesteps": s["timesteps"],
                      "timesteps_per_s": s["timesteps_per_s"], "timesteps_per_cpu_s": s["timesteps_per_cpu_s"],
+                     "learning_starts": config.learning_starts, "timesteps_per_s_learning": learning,
                      "env_share": s["env_share"], "episodes": manifest["episodes"],
                      "garages": manifest["garages_stored"], "config": manifest["config"]})
-        print(f"{m:<20} {learner:<8} {s['timesteps_per_s']:>12,.0f} {s['timesteps_per_cpu_s']:>10,.0f} "
+        print(f"{m:<20} {learner:<8} {s['timesteps_per_s']:>12,.0f} "
+              f"{'-' if learning is None else f'{learning:,.0f}':>9} {s['timesteps_per_cpu_s']:>10,.0f} "
               f"{100 * s['env_share']:>9.1f}% {manifest['episodes']:>9} {manifest['garages_stored']:>8}", flush=True)
         if prof:
             buf = io.StringIO()
@@ -105,12 +132,19 @@ def main() -> None:
     if args.json:
         summary = {}
         for m in args.maps:
-            per = {lr: [r["timesteps_per_s"] for r in rows if r["map"] == m and r["learner"] == lr] for lr in args.learners}
-            summary[m] = {lr: {"timesteps_per_s": v, "median": float(np.median(v))} for lr, v in per.items()}
-            if {"fast", "paper"} <= set(per):
-                ratios = [f / p for f, p in zip(per["fast"], per["paper"])]
-                summary[m]["fast_over_paper"] = {"per_round": [round(x, 2) for x in ratios],
-                                                 "median": round(float(np.median(ratios)), 2)}
+            summary[m] = {}
+            for key in ("timesteps_per_s", "timesteps_per_s_learning"):
+                per = {lr: [r[key] for r in rows if r["map"] == m and r["learner"] == lr and r[key] is not None]
+                       for lr in args.learners}
+                for lr, v in per.items():
+                    summary[m].setdefault(lr, {})[key] = v
+                    summary[m][lr]["median" if key == "timesteps_per_s" else "median_learning"] = (
+                        float(np.median(v)) if v else None)
+                if {"fast", "paper"} <= set(per) and per["fast"] and len(per["fast"]) == len(per["paper"]):
+                    ratios = [f / p for f, p in zip(per["fast"], per["paper"])]
+                    name = "fast_over_paper" if key == "timesteps_per_s" else "fast_over_paper_learning"
+                    summary[m][name] = {"per_round": [round(x, 2) for x in ratios],
+                                        "median": round(float(np.median(ratios)), 2)}
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"timesteps": args.timesteps, "seed": args.seed, "summary": summary,
                                          "runs": rows, "provenance": prov}, indent=1) + "\n")
