@@ -55,11 +55,9 @@ FAST_TOML = Path(__file__).resolve().parent.parent / "generation" / "dqn_fast.to
 # of 0.1, lr5e4 learning rate 5e-4 instead of 1e-3, n1 1-step instead of 3-step returns, g2 two gradient
 # steps of 128 per 32 timesteps, 64envs 64 envs and batches of 512, f2 / f4 one gradient step of 512 /
 # 1,024 per 64 / 128 timesteps (the same replay ratio in half / a quarter of the steps), ls10k learning
-# from 10,000 timesteps on instead of 1,000. fast_t1k_eps05 is the fast learner as first defined, fast_ls1k
-# as it was before it learned from 10,000 timesteps on.
+# from 10,000 timesteps on instead of 1,000. fast_t1k_eps05 is the fast learner as first defined.
 FAST_BEFORE = {"target_update_interval": 8_000, "learning_starts": 1_000}
 FAST_VARIANTS = {
-    "fast_ls1k": {},
     "fast_t1k_eps05": {"target_update_interval": 1_000, "exploration_final_eps": 0.05},
     "fast_t1k": {"target_update_interval": 1_000},
     "fast_t1k_lr5e4": {"target_update_interval": 1_000, "learning_rate": 5e-4},
@@ -75,6 +73,7 @@ FAST_VARIANTS = {
     "fast_f2_t16k": {"train_freq": 2, "batch_size": 512, "target_update_interval": 16_000},
     "fast_f4": {"train_freq": 4, "batch_size": 1024},
     "fast_f4_t32k": {"train_freq": 4, "batch_size": 1024, "target_update_interval": 32_000},
+    "fast_ls10k": {"learning_starts": 10_000},
     "fast_t1k_ls10k": {"target_update_interval": 1_000, "learning_starts": 10_000},
     "fast_t2k_ls10k": {"target_update_interval": 2_000, "learning_starts": 10_000},
     "fast_t4k_ls10k": {"target_update_interval": 4_000, "learning_starts": 10_000},

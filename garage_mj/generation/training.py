@@ -166,16 +166,14 @@ def _adam_kwargs() -> dict[str, Any]:
 #: painted together (GarageGenVecEnv), a (64, 64) MLP on the same input (its first layer read from the
 #: window's codes, WindowLayer), 3-step returns, one gradient step of 256 transitions per 32 timesteps at
 #: twice the learning rate, the target network renewed every 250 gradient steps as in ``paper`` (8,000
-#: timesteps), epsilon-greedy exploration ending at 0.1 instead of 0.05 (its policy changes less
-#: between episodes, so with 0.05 it repeats more of its garages), and learning from 10,000 timesteps
-#: on (at 1,000 the buffer holds only the first 31 steps of 32 episodes, all near the entrance, and
-#: some runs took hundreds of thousands of timesteps to recover); trained by LeanDQN, about 10x the
+#: timesteps), and epsilon-greedy exploration ending at 0.1 instead of 0.05 (its policy changes less
+#: between episodes, so with 0.05 it repeats more of its garages); trained by LeanDQN, about 10x the
 #: timesteps/s (docs/results.md compares what they store).
 LEARNERS: dict[str, dict[str, Any]] = {
     "paper": {},
     "fast": {"vector_env": True, "n_envs": 32, "net_arch": [64, 64], "batch_size": 256, "train_freq": 1,
              "gradient_steps": 1, "n_steps": 3, "learning_rate": 1e-3, "target_update_interval": 8_000,
-             "exploration_final_eps": 0.1, "learning_starts": 10_000},
+             "exploration_final_eps": 0.1},
 }
 # the paper learner stays the default until the fast one is shown to learn as well (docs/results.md, "The
 # fast learner against the paper's": at 200,000 timesteps more garages per run on m5, fewer on m7, lower return)
