@@ -71,6 +71,7 @@ FAST_VARIANTS = {
     "fast_n1": {"n_steps": 1},
     "fast_f2": {"train_freq": 2, "batch_size": 512},
     "fast_f2_t16k": {"train_freq": 2, "batch_size": 512, "target_update_interval": 16_000},
+    "fast_t16k": {"target_update_interval": 16_000},
     "fast_f4": {"train_freq": 4, "batch_size": 1024},
     "fast_f4_t32k": {"train_freq": 4, "batch_size": 1024, "target_update_interval": 32_000},
     "fast_ls10k": {"learning_starts": 10_000},
