@@ -55,6 +55,9 @@ class LearningClock(BaseCallback):
             return None
         return (self.num_timesteps - self.steps0) / (time.perf_counter() - self.start)
 
+# per-round figure -> (its median's key per learner, the fast/paper ratio's key) in the JSON summary
+SUMMARY_NAMES = {"timesteps_per_s": ("median", "fast_over_paper"),
+                 "timesteps_per_s_learning": ("median_learning", "fast_over_paper_learning")}
 SHARES = {  # cProfile functions whose cumulative time is reported as a share of learn()
     "gradient updates": ("dqn.py", "train"),
     "action choice": ("dqn.py", "predict"),
@@ -133,17 +136,15 @@ def main() -> None:
         summary = {}
         for m in args.maps:
             summary[m] = {}
-            for key in ("timesteps_per_s", "timesteps_per_s_learning"):
+            for key, (median, ratio) in SUMMARY_NAMES.items():
                 per = {lr: [r[key] for r in rows if r["map"] == m and r["learner"] == lr and r[key] is not None]
                        for lr in args.learners}
                 for lr, v in per.items():
                     summary[m].setdefault(lr, {})[key] = v
-                    summary[m][lr]["median" if key == "timesteps_per_s" else "median_learning"] = (
-                        float(np.median(v)) if v else None)
+                    summary[m][lr][median] = float(np.median(v)) if v else None
                 if {"fast", "paper"} <= set(per) and per["fast"] and len(per["fast"]) == len(per["paper"]):
                     ratios = [f / p for f, p in zip(per["fast"], per["paper"])]
-                    name = "fast_over_paper" if key == "timesteps_per_s" else "fast_over_paper_learning"
-                    summary[m][name] = {"per_round": [round(x, 2) for x in ratios],
+                    summary[m][ratio] = {"per_round": [round(x, 2) for x in ratios],
                                         "median": round(float(np.median(ratios)), 2)}
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"timesteps": args.timesteps, "seed": args.seed, "summary": summary,

@@ -202,17 +202,18 @@ def summarise(out: Path, csv_path: Path) -> None:
                 continue
             map_name, seed = run.name.rsplit("_s", 1)
             by_map.setdefault((map_name, res["timesteps"]), []).append((int(seed), res))
-        for (map_name, steps), runs in sorted(by_map.items()):
+        for (map_name, steps), unsorted in sorted(by_map.items()):
+            runs = sorted(unsorted, key=lambda x: x[0])  # by seed
             ret = interval([r["return_last100"] for _, r in runs])
             gar = interval([r["garages_stored"] for _, r in runs])
             pol = interval([r["policy"]["return_mean"] for _, r in runs])
             use = interval([r["policy"]["usable_share"] for _, r in runs])
             tps = interval([r["timesteps_per_s"] for _, r in runs if r["timesteps_per_s"]])
             cps = interval([r["timesteps_per_cpu_s"] for _, r in runs if r.get("timesteps_per_cpu_s")])
-            ranges = [r["difficulty_range"] for _, r in sorted(runs, key=lambda x: x[0]) if r.get("difficulty_range")]
+            ranges = [r["difficulty_range"] for _, r in runs if r.get("difficulty_range")]
             rows.append({
                 "config": cfg_dir.name, "map": map_name, "timesteps": steps,
-                "seeds": " ".join(str(s) for s, _ in sorted(runs, key=lambda x: x[0])),
+                "seeds": " ".join(str(s) for s, _ in runs),
                 "return_last100_mean": round(ret[0], 2), "return_last100_ci95": round(ret[1], 2),
                 "garages_mean": round(gar[0], 1), "garages_ci95": round(gar[1], 1),
                 "policy_return_mean": round(pol[0], 2), "policy_return_ci95": round(pol[1], 2),
@@ -222,10 +223,10 @@ def summarise(out: Path, csv_path: Path) -> None:
                 "difficulty_lo_mean": round(float(np.mean([a for a, _ in ranges])), 3) if ranges else "",
                 "difficulty_hi_mean": round(float(np.mean([b for _, b in ranges])), 3) if ranges else "",
                 "per_seed_difficulty_range": " ".join(f"{a:.2f}-{b:.2f}" for a, b in ranges),
-                "per_seed_return": " ".join(f"{r['return_last100']:.1f}" for _, r in sorted(runs, key=lambda x: x[0])),
-                "per_seed_garages": " ".join(str(r["garages_stored"]) for _, r in sorted(runs, key=lambda x: x[0])),
+                "per_seed_return": " ".join(f"{r['return_last100']:.1f}" for _, r in runs),
+                "per_seed_garages": " ".join(str(r["garages_stored"]) for _, r in runs),
                 "per_seed_policy_return": " ".join(f"{r['policy']['return_mean']:.1f}"
-                                                   for _, r in sorted(runs, key=lambda x: x[0])),
+                                                   for _, r in runs),
                 "config_json": json.dumps(runs[0][1]["config"], sort_keys=True),
             })
     if not rows:

@@ -159,7 +159,7 @@ class GarageGenEnv(gym.Env):
         r_c = cfg.step_penalty
         terminated = False
         moved = False
-        painted = False  # only painting changes the stalls and roads the utility is computed from
+        r_u = 0.0  # the utility changes only when a cell is painted
         if target == _OBST or target == _ENTRANCE:
             self.errors += 1
             r_c += cfg.collision_penalty
@@ -176,7 +176,9 @@ class GarageGenEnv(gym.Env):
         else:
             moved = True
             self._paint(tr, tc, target)
-            painted = True
+            old = self._utility
+            new = self._utility = self._utility_values()
+            r_u = cfg.w_s * (new[0] - old[0]) + cfg.w_r * (new[1] - old[1]) + cfg.w_c * (new[2] - old[2])
         if moved:
             if a == OPPOSITE[self.heading]:
                 r_c += cfg.backward_penalty
@@ -185,11 +187,6 @@ class GarageGenEnv(gym.Env):
         if not terminated and self.errors > self.max_errors:
             terminated = True
             r_c += cfg.failure_penalty
-        r_u = 0.0
-        if painted:
-            old = self._utility
-            new = self._utility = self._utility_values()
-            r_u = cfg.w_s * (new[0] - old[0]) + cfg.w_r * (new[1] - old[1]) + cfg.w_c * (new[2] - old[2])
         reward = cfg.k_c * r_c + cfg.k_u * r_u
         self.steps += 1
         truncated = not terminated and self.steps >= self.max_steps
