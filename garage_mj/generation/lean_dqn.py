@@ -10,12 +10,13 @@ draws, loss, clipping and optimiser step, so the same seed trains the same netwo
 
 - no mode switches when the policy holds no layer that behaves differently in training (dropout,
   batch norm); with such a layer it does what DQN does;
-- the gradient norm is clipped as ``torch.nn.utils.clip_grad_norm_`` does, from one ``foreach``
-  norm over the online network's parameters;
+- the gradient norm is clipped by the two steps ``torch.nn.utils.clip_grad_norm_`` is made of
+  (``get_total_norm``, ``clip_grads_with_norm_``), with ``foreach`` over the online network's gradients
+  gathered once, not through its generic path over both networks' parameters;
 - a batch of observations is answered straight from the Q-network's argmax (epsilon-greedy as DQN's
   ``predict``: with probability epsilon the whole batch acts at random).
 
-``eval/bench_train.py`` measures what it saves. Models it saves load with ``DQN.load`` and the other
+``eval/bench_lean_dqn.py`` measures what it saves. Models it saves load with ``DQN.load`` and the other
 way round.
 """
 
@@ -28,6 +29,7 @@ import torch as th
 import torch.nn.functional as F
 from stable_baselines3 import DQN
 from torch import nn
+from torch.nn.utils import clip_grads_with_norm_, get_total_norm
 
 _MODAL = (nn.modules.dropout._DropoutNd, nn.modules.batchnorm._BatchNorm)  # layers that read .training
 
@@ -63,12 +65,10 @@ class LeanDQN(DQN):
         self.logger.record("train/loss", np.mean(losses))
 
     def _clip_gradients(self) -> None:
-        """``clip_grad_norm_(parameters, max_grad_norm)``: the same total norm, factor and clamp."""
-        grads = [p.grad for p in self._grad_params if p.grad is not None]
-        if not grads:
-            return
-        total = th.linalg.vector_norm(th.stack(th._foreach_norm(grads)))
-        th._foreach_mul_(grads, th.clamp(self.max_grad_norm / (total + 1e-6), max=1.0))
+        """``clip_grad_norm_(parameters, max_grad_norm)``, from its own two steps."""
+        params = self._grad_params
+        total = get_total_norm([p.grad for p in params if p.grad is not None], foreach=True)
+        clip_grads_with_norm_(params, self.max_grad_norm, total, foreach=True)
 
     def predict(self, observation: Any, state: tuple[np.ndarray, ...] | None = None,
                 episode_start: np.ndarray | None = None, deterministic: bool = False):
