@@ -56,3 +56,9 @@ class SleepDriver(_Stop):
 
     def act(self, obs):
         time.sleep(3600)
+
+
+def pid_then_hang(folder: str) -> None:
+    """Writes its worker's pid into ``folder`` (a file named after it), then sleeps for ever."""
+    Path(folder, str(os.getpid())).write_text("")
+    time.sleep(3600)

@@ -3,8 +3,14 @@ pool notices a worker that dies or a job that hangs, and never waits for ever.""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import os
+import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -73,3 +79,38 @@ def test_a_job_past_its_time_limit_is_stopped_and_the_batch_goes_on(workers):
     assert sorted(g for g in got if not isinstance(g, LostJob)) == [0, 1, 9]
     assert [(w.kind, w.reason) for w in lost] == [("timeout", "ran past the time limit of 1.5 s of wall time")]
     assert 1.4 < lost[0].seconds < 5 and time.monotonic() - start < 12
+
+
+def _alive(pid: int) -> bool:
+    """The process runs (a zombie left for a reaper that never comes counts as ended)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process states from /proc (Linux)")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_pool_workers_end_when_their_parent_is_killed(tmp_path, sig):
+    """``kill`` of a batch's process (a scheduler's SIGTERM, kill -9) runs no clean-up in it; its pool workers
+    must not go on with their jobs as orphans."""
+    code = ("import sys\nfrom garage_mj.core.backends import Compute, map_unordered\nfrom tests import _crashing\n"
+            "list(map_unordered(_crashing.pid_then_hang, [sys.argv[1]] * 2, compute=Compute(workers=2, progress=False)))")
+    parent = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], cwd=Path(__file__).parent.parent)
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(tmp_path.iterdir())) < 2 and time.monotonic() < deadline and parent.poll() is None:
+            time.sleep(0.1)
+        workers = [int(p.name) for p in tmp_path.iterdir()]
+        assert len(workers) == 2 and all(map(_alive, workers))
+        parent.send_signal(sig)
+        parent.wait(10)
+        deadline = time.monotonic() + 10
+        while any(map(_alive, workers)) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(map(_alive, workers))
+    finally:
+        parent.kill()
+        for p in tmp_path.iterdir():
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(int(p.name), signal.SIGKILL)

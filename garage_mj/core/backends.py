@@ -66,11 +66,13 @@ WORKER_ENV = ("MUJOCO_GL", "PYOPENGL_PLATFORM", "MUJOCO_EGL_DEVICE_ID", "EGL_DEV
               "MKL_NUM_THREADS")
 #: ... and every variable with this prefix (``GARAGE_MJ_QC_OPENDRIVE`` ...).
 WORKER_ENV_PREFIX = "GARAGE_MJ_"
+#: How many times the local pool gives a job again after its worker process died (a segfault, the OOM killer, kill -9).
+LOCAL_RETRIES = 1
+#: Exit status of a pool worker that ended because its parent process had ended.
+PARENT_GONE_EXIT = 70
 #: The private local Ray: workers at the parent's priority (Ray's default niceness 15 starves them on a machine
 #: busy with other jobs, where pool workers would compete as equals), and no idle workers started ahead (the
 #: actors need their own, with the runtime env).
-#: How many times the local pool gives a job again after its worker process died (a segfault, the OOM killer, kill -9).
-LOCAL_RETRIES = 1
 _LOCAL_CONFIG = {"worker_niceness": 0, "prestart_worker_first_driver": False, "enable_worker_prestart": False}
 
 
@@ -234,10 +236,28 @@ def process_end(exitcode: int | None) -> str:
     return f"exited with code {exitcode}"
 
 
+def _exit_with_parent() -> None:
+    """End this worker process as soon as the process that started it has ended, however it ended.
+
+    A parent stopped by SIGTERM or SIGKILL runs no ``finally``, so it cannot stop its workers; without
+    this they would go on with their jobs (writing into the batch's folder) with nobody to read the results.
+    """
+    parent = mp.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        connection.wait([parent.sentinel])  # readable once the parent is gone
+        os._exit(PARENT_GONE_EXIT)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def _serve(conn, func: Callable[[Any], Any]) -> None:
     """A pool worker: run the jobs that arrive on ``conn`` one at a time, sending ("start", i) as each begins
-    and ("done", i, ok, result or exception) as it ends, until None arrives."""
+    and ("done", i, ok, result or exception) as it ends, until None arrives or the parent process ends."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's: it stops the workers
+    _exit_with_parent()
     while True:
         try:
             msg = conn.recv()
