@@ -83,7 +83,8 @@ def verdict(paper: dict, fast: dict) -> dict:
     return {"seeds": {"paper": paper["seeds"], "fast": fast["seeds"]}, "paper": p, "fast": f,
             "per_seed": {"paper": {k: paper[k] for k in ("garages", "policy_return")},
                          "fast": {k: fast[k] for k in ("garages", "policy_return")}},
-            "checks": checks, "equal": all(checks.values())}
+            "checks": checks, "checks_in_words": {k: "met" if ok else "not met" for k, ok in checks.items()},
+            "equal": all(checks.values())}
 
 
 def main() -> None:
@@ -112,6 +113,7 @@ def main() -> None:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"tables": [str(p) for p in args.csv], "maps": result, "equal": equal,
+                                         "equal_in_words": "yes" if equal else "no",
                                          "provenance": provenance()}, indent=1) + "\n")
         print(f"wrote {args.json}")
 
