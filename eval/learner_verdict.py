@@ -16,7 +16,8 @@ comparison, each against the spread of the paper learner's runs, fixed before an
   learner's mean lowest is at most the paper learner's mean lowest plus one standard deviation, and its
   mean highest at least the paper learner's mean highest minus one standard deviation.
 
-Every run counts, slow starts included: a user gets whichever run their seed gives.
+Every run counts, slow starts included: a user gets whichever run their seed gives. For the record (not a
+criterion) the JSON also holds the policy return of the runs that learned to finish garages (above 0).
 """
 
 from __future__ import annotations
@@ -80,7 +81,11 @@ def verdict(paper: dict, fast: dict) -> dict:
         "difficulty_range": (f["lo"]["mean"] <= p["lo"]["mean"] + p["lo"]["sd"]
                              and f["hi"]["mean"] >= p["hi"]["mean"] - p["hi"]["sd"]),
     }
+    # for the record, not a criterion: the runs that learned to finish garages (a policy return above 0)
+    learned = {lr: stats([r for r in d["policy_return"] if r > 0]) | {"runs": sum(r > 0 for r in d["policy_return"])}
+               for lr, d in (("paper", paper), ("fast", fast))}
     return {"seeds": {"paper": paper["seeds"], "fast": fast["seeds"]}, "paper": p, "fast": f,
+            "policy_return_of_runs_that_learned": learned,
             "per_seed": {"paper": {k: paper[k] for k in ("garages", "policy_return")},
                          "fast": {k: fast[k] for k in ("garages", "policy_return")}},
             "checks": checks, "checks_in_words": {k: "met" if ok else "not met" for k, ok in checks.items()},
