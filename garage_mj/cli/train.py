@@ -33,10 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--algo", default="dqn", choices=ALGOS, help="RL algorithm (default: dqn)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")
     p.add_argument("--learner", choices=LEARNER_NAMES, default=None,
-                   help="DQN settings to start from: paper (one env, (256, 256), one gradient step per 4 "
-                        "timesteps, as the paper trains; the default) or fast (32 garages painted at once, a "
-                        "(64, 64) Q-network, 3-step returns: about 9x the timesteps/s; more garages per run on "
-                        "some maps, fewer on others); --config keys override them")
+                   help="DQN settings to start from: fast (the default: 32 garages painted at once, a (64, 64) "
+                        "Q-network, 3-step returns; about 10x the timesteps/s of paper, more garages per run) or "
+                        "paper (one env, (256, 256), one gradient step per 4 timesteps, as the paper trains); "
+                        "--config keys override them")
     p.add_argument("--config", type=Path, help="TOML file of DQN hyper-parameters (keys of DQNConfig; unknown keys are an error)")
     p.add_argument("--library", type=Path, help="library file (default: OUT/library.sqlite)")
     p.add_argument("--checkpoint-every", type=positive_int, metavar="N", help="timesteps between checkpoints (overrides the config)")
