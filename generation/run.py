@@ -23,7 +23,7 @@ from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.progress import format_progress, protocol_progress
 from garage_mj.generation.protocol import load_protocol
-from garage_mj.generation.training import LEARNERS
+from garage_mj.generation.training import DEFAULT_LEARNER, LEARNERS
 from garage_mj.reporting.experiment import run_experiment
 
 
@@ -32,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("config", type=Path, help="protocol TOML (generation/paper.toml, generation/smoke.toml)")
     ap.add_argument("--learner", choices=sorted(LEARNERS),
                     help="DQN settings of every run (garage_mj.generation.training.LEARNERS); default: the file's "
-                         "[experiment] learner, else paper")
+                         f"[experiment] learner, else {DEFAULT_LEARNER}")
     ap.add_argument("--scale", type=float, default=1.0, help="multiply the timesteps per run (0 < SCALE <= 1)")
     ap.add_argument("--workers", type=int, default=1, help="runs trained at a time (processes, or Ray CPUs)")
     ap.add_argument("--backend", choices=("local", "ray"), default="local",
