@@ -26,7 +26,6 @@ import dataclasses
 import json
 import math
 import sqlite3
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -124,16 +123,15 @@ def policy_eval(run: Path) -> dict:
         got = json.loads(cache.read_text())
         if all(got.get(k) == v for k, v in key.items()):
             return got
-    from stable_baselines3 import DQN
     from stable_baselines3.common.evaluation import evaluate_policy
+
+    from garage_mj.generation.runs import load_dqn
 
     manifest = read_manifest(run)
     config = load_dqn_config(manifest["config"])
     venv, _ = make_vec_env(manifest.get("map_source", manifest["map"]), config, None)
     venv.seed(EVAL_SEED)
-    with warnings.catch_warnings():  # SB3 misreads a saved NStepReplayBuffer as a custom buffer (runs.py)
-        warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom")
-        model = DQN.load(run / "final_model.zip", env=venv, device="cpu")
+    model = load_dqn(run / "final_model.zip", env=venv, device="cpu")
     model.set_random_seed(EVAL_SEED)
     model.exploration_rate = EVAL_EPSILON
     usable: list[bool] = []

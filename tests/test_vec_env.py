@@ -12,7 +12,7 @@ from garage_mj.core.config import ConfigError
 from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.library import Library
 from garage_mj.generation.protocol import load_protocol
-from garage_mj.generation.runs import latest_checkpoint
+from garage_mj.generation.runs import latest_checkpoint, load_dqn
 from garage_mj.generation.training import (
     DEFAULT_LEARNER,
     LEARNERS,
@@ -184,7 +184,7 @@ def test_lean_dqn_trains_what_dqn_trains(monkeypatch, tmp_path):
         out = tmp_path / name
         train("tiny_7x11", 2000, 5, out, config, progress=False)
         models[name] = (np.loadtxt(out / "monitor.csv", delimiter=",", skiprows=2, ndmin=2),
-                        DQN.load(out / "final_model.zip", device="cpu"))
+                        load_dqn(out / "final_model.zip", device="cpu"))
     (ra, lean), (rb, sb3) = models["lean"], models["sb3"]
     assert len(ra) > 0 and np.array_equal(ra[:, :2], rb[:, :2])  # return and length of every episode
     for p, q in zip(lean.policy.parameters(), sb3.policy.parameters()):

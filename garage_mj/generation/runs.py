@@ -98,6 +98,14 @@ def truncate_log(path: Path, header_lines: int, rows: int) -> None:
         os.replace(tmp, path)
 
 
+def load_dqn(path: str | Path, algo: type[DQN] = DQN, **kwargs: Any) -> DQN:
+    """``algo.load(path, **kwargs)`` without SB3's warning that n_steps is ignored: a saved model names SB3's own
+    ``NStepReplayBuffer`` with its n_steps and gamma, which SB3 then takes for a custom buffer class."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom")
+        return algo.load(path, **kwargs)
+
+
 class CheckpointEvery(BaseCallback):
     """Saves a checkpoint every ``every`` timesteps through ``save`` (:meth:`DQNRun.save_checkpoint`)."""
 
@@ -169,11 +177,7 @@ class DQNRun:
         algo = LeanDQN if config.vector_env else DQN
         self.save_replay_buffer = save_replay_buffer
         if self.checkpoint:
-            with warnings.catch_warnings():
-                # the checkpoint names SB3's NStepReplayBuffer with its n_steps and gamma; SB3 warns that
-                # n_steps would be ignored for a custom buffer class, which this one is not
-                warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom")
-                model = algo.load(self.checkpoint[0], env=venv, device=config.device)
+            model = load_dqn(self.checkpoint[0], algo, env=venv, device=config.device)
             buffer = self.checkpoint[0].with_name(self.checkpoint[0].stem + "_replay.pkl")
             if buffer.exists():
                 model.load_replay_buffer(buffer)
