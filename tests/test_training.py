@@ -147,3 +147,18 @@ def test_fast_vectorised_config_trains_and_checkpoints(tmp_path):
     assert len(_monitor_returns(tmp_path / "fast")) == manifest["episodes"] > 0
     ckpt = latest_checkpoint(tmp_path / "fast")
     assert ckpt is not None and ckpt[1]["timesteps"] >= 900
+
+
+def test_latest_checkpoint_passes_over_one_pruned_while_it_reads(tmp_path):
+    """``--status`` reads a running run's checkpoints while the run prunes old ones: a record listed and then
+    gone is passed over, not an error."""
+    ck = tmp_path / "checkpoints"
+    ck.mkdir()
+    for step in (1000, 2000):
+        (ck / f"step_{step:09d}.zip").write_bytes(b"")
+        (ck / f"step_{step:09d}.json").write_text(json.dumps({"timesteps": step, "episodes": 1}))
+    gone = ck / "step_000000500.json"  # listed by the glob, deleted before its read: a dangling link
+    gone.symlink_to(ck / "pruned.json")
+    (ck / "step_000000500.zip").write_bytes(b"")
+    model, state = latest_checkpoint(tmp_path)
+    assert model.name == "step_000002000.zip" and state["timesteps"] == 2000

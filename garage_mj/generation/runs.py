@@ -53,7 +53,11 @@ class EpisodeCounter(Protocol):
 
 
 def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
-    """The newest complete checkpoint (model zip + counters) of a run folder, if any."""
+    """The newest complete checkpoint (model zip + counters) of a run folder, if any.
+
+    Safe while the run trains (``--status`` from another shell, a watcher): a checkpoint that the run prunes
+    between the listing and the reading is passed over.
+    """
     best = None
     for state_path in (out_dir / CHECKPOINTS).glob("step_*.json"):
         model = state_path.with_suffix(".zip")
@@ -61,6 +65,8 @@ def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
             continue
         try:
             state = json.loads(state_path.read_text())
+        except FileNotFoundError:
+            continue  # pruned by the running training since the listing: a newer one exists
         except (ValueError, RecursionError):
             continue  # a torn or foreign checkpoint record: an older one is used
         if best is None or state["timesteps"] > best[1]["timesteps"]:
