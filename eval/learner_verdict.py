@@ -112,7 +112,7 @@ def main() -> None:
             print(f"{m:<18} {lr:<6} {len(v['seeds'][lr]):>4} {s['garages']['mean']:>8,.0f} +-{s['garages']['sd']:>5,.0f} "
                   f"{s['policy_return']['mean']:>7.1f} +-{s['policy_return']['sd']:>5.1f} "
                   f"{s['lo']['mean']:>5.3f} +-{s['lo']['sd']:.3f} {s['hi']['mean']:>5.3f} +-{s['hi']['sd']:.3f}")
-        print(f"{'':<18} checks: " + ", ".join(f"{k} {'met' if ok else 'NOT met'}" for k, ok in v["checks"].items()))
+        print(f"{'':<18} checks: " + ", ".join(f"{k} {word}" for k, word in v["checks_in_words"].items()))
     equal = bool(result) and all(v["equal"] for v in result.values())
     print(f"equal learning quality on {', '.join(result)}: {'yes' if equal else 'no'}")
     if args.json:

@@ -179,11 +179,15 @@ def _direction(a: tuple[int, int], b: tuple[int, int]) -> int:
     return _DIRECTION[(b[0] - a[0], b[1] - a[1])]
 
 
+def _key(a: tuple, b: tuple) -> tuple:
+    """Canonical key of the segment whose two ends are ``a`` and ``b``, each (end cell, direction into the
+    segment): the same whichever end it is seen from."""
+    return (a, b) if a <= b else (b, a)
+
+
 def _segment_key(cells: list[tuple[int, int]]) -> tuple:
     """Canonical key: the smaller of (end, first direction) seen from either end."""
-    a = (cells[0], _direction(cells[0], cells[1]))
-    b = (cells[-1], _direction(cells[-1], cells[-2]))
-    return (a, b) if a <= b else (b, a)
+    return _key((cells[0], _direction(cells[0], cells[1])), (cells[-1], _direction(cells[-1], cells[-2])))
 
 
 class RoadTracker:
@@ -216,14 +220,12 @@ class RoadTracker:
             a, _ = _run(get, p, d)
             back = OPPOSITE[d]
             b, n = _run(get, a, back)
-            x, y = (a, back), (b, d)
-            return {(x, y) if x <= y else (y, x): self._clip(n)}
+            return {_key((a, back), (b, d)): self._clip(n)}
         out = {}
         for d in range(4):
             if m >> d & 1:
                 b, n = _run(get, p, d)
-                x, y = (p, d), (b, OPPOSITE[d])
-                out[(x, y) if x <= y else (y, x)] = self._clip(n)
+                out[_key((p, d), (b, OPPOSITE[d]))] = self._clip(n)
         return out
 
     def copy(self) -> RoadTracker:
