@@ -2,6 +2,9 @@
 
     # one map (a shipped name or your own map file); resumable with --resume
     .venv/bin/python generation/train_conditioned.py --map m5_13x13_aligned --timesteps 60000 --out runs/gen_m5
+    # the same with the fast learner (vector env, codes window, LeanDQN): --learner fast, or learner = "fast" in
+    # the config's [dqn] table (its other keys override the learner's)
+    .venv/bin/python generation/train_conditioned.py --map m5_13x13_aligned --timesteps 60000 --out runs/gen_m5_fast --learner fast
     # every map of the config, one after the other, copied to models/generators/<map>.zip + .json
     .venv/bin/python generation/train_conditioned.py --all generation/conditioned.toml --ship
 
@@ -24,13 +27,15 @@ from garage_mj.generation.conditioned import (
     load_generator_config,
     train_conditioned,
 )
+from garage_mj.generation.training import LEARNERS
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIP_DIR = ROOT / "models" / "generators"
 
 
-def _train(map: str, timesteps: int, seed: int, out: Path, config: Path | None, progress: bool) -> dict:
-    dqn, cond, _ = load_generator_config(config)
+def _train(map: str, timesteps: int, seed: int, out: Path, config: Path | None, progress: bool,
+           learner: str | None = None) -> dict:
+    dqn, cond, _ = load_generator_config(config, learner=learner)
     resume = (out / RUN_MANIFEST).exists()
     t0 = time.perf_counter()
     meta = train_conditioned(map, timesteps, seed, out, dqn=dqn, condition=cond, resume=resume, progress=progress)
@@ -54,6 +59,8 @@ def main() -> None:
     ap.add_argument("--timesteps", type=int, default=50_000)
     ap.add_argument("--out", type=Path, help="run folder (an existing run is resumed)")
     ap.add_argument("--config", type=Path, help="TOML with [dqn] and [condition] tables")
+    ap.add_argument("--learner", choices=sorted(LEARNERS),
+                    help="DQN settings to start from (default: the config's [dqn] learner, else paper)")
     ap.add_argument("--all", type=Path, metavar="CONFIG", help="train every map of CONFIG's [timesteps] table")
     ap.add_argument("--maps", nargs="+", help="with --all: only these maps")
     ap.add_argument("--seed", type=int, default=0)
@@ -66,13 +73,13 @@ def main() -> None:
             if args.maps and name not in args.maps:
                 continue
             out = ROOT / "runs" / "generators" / name
-            _train(name, n, args.seed, out, args.all, not args.no_progress)
+            _train(name, n, args.seed, out, args.all, not args.no_progress, args.learner)
             if args.ship:
                 _ship(out, name)
         return
     if not args.map or not args.out:
         ap.error("pass --map and --out, or --all CONFIG")
-    meta = _train(args.map, args.timesteps, args.seed, args.out, args.config, not args.no_progress)
+    meta = _train(args.map, args.timesteps, args.seed, args.out, args.config, not args.no_progress, args.learner)
     if args.ship:
         _ship(args.out, meta["map"])
     print(json.dumps(meta["curve"][-1] if meta["curve"] else {}))

@@ -122,8 +122,11 @@ class GarageGenCondEnv(GarageGenEnv):
         self._dist = self._distance()
         return self._obs(), self._info()
 
-    def step(self, action):
-        obs, reward, terminated, truncated, info = super().step(action)
+    def _advance(self, action) -> tuple[float, bool, bool]:
+        """The painter's step, plus the shaping toward the bands and, when a usable episode ends, the band
+        bonus or the distance penalty: the conditioned reward in one place, for ``step`` and for
+        :class:`~garage_mj.generation.vec_env.GarageGenVecEnv`."""
+        reward, terminated, truncated = super()._advance(action)
         cfg = self.condition
         self._difficulty = self._current_difficulty()
         dist = self._distance()
@@ -131,7 +134,7 @@ class GarageGenCondEnv(GarageGenEnv):
         self._dist = dist
         if (terminated or truncated) and self.connected and self.errors <= self.max_errors:
             reward += cfg.band_bonus if dist == 0.0 else -cfg.distance_penalty * dist
-        return self._obs(), float(reward), terminated, truncated, self._info()
+        return float(reward), terminated, truncated
 
     # -- internals -------------------------------------------------------------------------------
     def _current_difficulty(self) -> float:
@@ -142,13 +145,23 @@ class GarageGenCondEnv(GarageGenEnv):
         return band_distance(self._difficulty, self.target_difficulty) + band_distance(
             self._coverage(), self.target_coverage)
 
+    def _fill_condition(self, out: np.ndarray) -> None:
+        """The :data:`N_COND` values after the painter's: difficulty lo, hi, current difficulty, coverage lo, hi."""
+        out[0], out[1] = self.target_difficulty
+        out[2] = self._difficulty
+        out[3], out[4] = self.target_coverage
+
     def _obs(self) -> np.ndarray:
         base = super()._obs()
-        if not hasattr(self, "target_difficulty"):  # the painter's reset, before the bands are drawn
-            return base
-        d_lo, d_hi = self.target_difficulty
-        c_lo, c_hi = self.target_coverage
-        return np.concatenate([base, np.array([d_lo, d_hi, self._difficulty, c_lo, c_hi], dtype=np.float32)])
+        obs = np.empty(base.shape[0] + N_COND, dtype=np.float32)
+        obs[: base.shape[0]] = base
+        self._fill_condition(obs[base.shape[0] :])
+        return obs
+
+    def _codes_obs(self, out: np.ndarray) -> None:
+        """The painter's codes observation (k * k codes, 7 state values), then the :data:`N_COND` values."""
+        super()._codes_obs(out)
+        self._fill_condition(out[-N_COND:])
 
     def _info(self) -> dict[str, Any]:
         info = super()._info()

@@ -3,7 +3,9 @@
 :func:`train_conditioned` runs SB3 DQN on ``GarageGenCondEnv`` (the painter with a target band in
 its observation), with the hyper-parameters of :class:`garage_mj.generation.training.DQNConfig` and the
 band settings of :class:`~garage_mj.generation.cond_env.ConditionConfig`, through the resumable run of
-:class:`garage_mj.generation.runs.DQNRun`. The drawn bands cover the
+:class:`garage_mj.generation.runs.DQNRun`; a config with ``vector_env`` (the ``fast`` learner: ``learner = "fast"``
+in the TOML's ``[dqn]``) steps the envs in one :class:`~garage_mj.generation.vec_env.GarageGenVecEnv`, windows as
+block codes, and trains with LeanDQN, as plain training does. The drawn bands cover the
 map's admissible difficulty range as :func:`garage_mj.generation.search.search` estimates it. A run folder
 holds ``run.json``, ``episodes.csv`` (target band and outcome of every episode), checkpoints
 (``resume=True`` continues from the newest), ``generator.zip`` (the Q-network alone, a few hundred
@@ -40,10 +42,12 @@ from stable_baselines3.dqn.policies import DQNPolicy
 from garage_mj.core.config import ConfigError, load_config, read_toml
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import write_json
-from garage_mj.generation.cond_env import ConditionConfig, GarageGenCondEnv
+from garage_mj.generation.cond_env import N_COND, ConditionConfig, GarageGenCondEnv
 from garage_mj.generation.runs import DQNRun
 from garage_mj.generation.search import search
 from garage_mj.generation.training import DQNConfig, load_dqn_config
+from garage_mj.generation.vec_env import GarageGenVecEnv
+from garage_mj.generation.window_net import STATE_VALUES
 from garage_mj.grid.map_io import load_map
 
 if TYPE_CHECKING:
@@ -76,16 +80,26 @@ class GenerationError(GarageMJError):
 
 
 # -- config ---------------------------------------------------------------------------------------
-def load_generator_config(path: str | Path | None) -> tuple[DQNConfig, ConditionConfig, dict[str, int]]:
-    """``[dqn]`` (DQNConfig), ``[condition]`` (ConditionConfig) and ``[timesteps]`` (per map) of a TOML file."""
+def load_generator_config(path: str | Path | None, learner: str | None = None
+                          ) -> tuple[DQNConfig, ConditionConfig, dict[str, int]]:
+    """``[dqn]`` (DQNConfig), ``[condition]`` (ConditionConfig) and ``[timesteps]`` (per map) of a TOML file.
+
+    ``[dqn]``'s ``learner`` key names the learner whose settings its other keys override
+    (:data:`garage_mj.generation.training.LEARNERS`; ``paper``, the plain DQNConfig defaults, when absent);
+    ``learner`` here replaces the file's.
+    """
     if path is None:
-        return DQNConfig(), ConditionConfig(), {}
+        return load_dqn_config(learner=learner or "paper"), ConditionConfig(), {}
     data = read_toml(path)
     unknown = sorted(set(data) - {"dqn", "condition", "timesteps"})
     if unknown:
         raise ConfigError(f"{path}: unknown table(s) {unknown}; known: dqn, condition, timesteps")
+    table = dict(data.get("dqn", {}))
+    chosen = table.pop("learner", "paper")
+    if not isinstance(chosen, str):
+        raise ConfigError(f"{path}: [dqn] learner must be a learner's name such as \"fast\", got {chosen!r}")
     try:
-        dqn = load_dqn_config(data.get("dqn", {}))
+        dqn = load_dqn_config(table, learner=learner or chosen)
         cond = load_config(ConditionConfig, data.get("condition", {}))
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
@@ -209,8 +223,12 @@ def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, 
     manifest.update(target_timesteps=timesteps, status="running")
 
     env_kw = {"map": map, "view_size": dqn.view_size, "max_errors": dqn.max_errors, "condition": condition}
-    venv = VecMonitor(DummyVecEnv([lambda: GarageGenCondEnv(**env_kw) for _ in range(dqn.n_envs)]))
-    model = run.start_model(venv, dqn, seed)
+    if dqn.vector_env:  # windows as block codes, read by WindowLayer: 7 state values and the 5 band values after them
+        venv = VecMonitor(GarageGenVecEnv(n_envs=dqn.n_envs, window="codes", env_cls=GarageGenCondEnv, **env_kw))
+        model = run.start_model(venv, dqn, seed, extractor_kwargs={"state_values": STATE_VALUES + N_COND})
+    else:
+        venv = VecMonitor(DummyVecEnv([lambda: GarageGenCondEnv(**env_kw) for _ in range(dqn.n_envs)]))
+        model = run.start_model(venv, dqn, seed)
     manifest.setdefault("best", {"score": -1.0, "timestep": 0, "episode": 0})
 
     def keep_best(log: EpisodeLog) -> None:

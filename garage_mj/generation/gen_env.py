@@ -274,6 +274,18 @@ class GarageGenEnv(gym.Env):
         out[:n] = self._window().reshape(-1)
         self._fill_state(out[n:])
 
+    def codes_observation_space(self) -> spaces.Box:
+        """The space of :meth:`_codes_obs`: k * k block codes (0 to NUM_CODES - 1), then the values that follow
+        the one-hot window in :attr:`observation_space` (the 7 state values; a subclass's own after them)."""
+        k2 = self.view_size * self.view_size
+        n = self._n_window
+        space = self.observation_space
+        return spaces.Box(
+            low=np.concatenate([np.zeros(k2, dtype=np.float32), space.low[n:]]),
+            high=np.concatenate([np.full(k2, NUM_CODES - 1, dtype=np.float32), space.high[n:]]),
+            dtype=np.float32,
+        )
+
     def _info(self) -> dict[str, Any]:
         t = self._tracker
         ex, ey = t.mean_x(), t.mean_y()

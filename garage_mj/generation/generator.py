@@ -35,6 +35,7 @@ from garage_mj.generation.conditioned import (
 )
 from garage_mj.generation.library import Library
 from garage_mj.generation.search import BandClimber, replay
+from garage_mj.generation.window_net import OneHotWindow, WindowLayer
 from garage_mj.grid.blocks import AXES
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.map_io import list_maps, load_map
@@ -167,30 +168,45 @@ def _generator_meta(path: Path) -> dict[str, Any]:
     return json.loads(meta_path.read_text()) if meta_path.is_file() else {}
 
 
+def reads_codes(policy: Any) -> bool:
+    """Whether a generator's Q-network reads the window as block codes (trained on the vector env, ``fast``
+    learner: :class:`WindowLayer` or :class:`OneHotWindow` first) rather than as the single env's one-hot rows."""
+    return isinstance(policy.q_net.features_extractor, (WindowLayer, OneHotWindow))
+
+
 def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Generator, collector: _Collector,
                   episodes: int, seconds: float | None, pool: list[tuple[float, int, Garage]] | None) -> int:
     """Stage 1: roll the policy out in ``envs`` for up to ``episodes`` episodes (and ``seconds``).
 
     Each episode draws its reset seed and its epsilon from ``rng``. Garages that land in the bands go
     to the collector; when ``pool`` is given, every usable garage goes there too as (distance to
-    the bands, episode, garage), for the search. Returns the env steps taken.
+    the bands, episode, garage), for the search. The policy sees the envs' observations, or their windows
+    as block codes when it :func:`reads_codes`. Returns the env steps taken.
     """
     result, n_envs = collector.result, len(envs)
+    codes = reads_codes(policy)
     by_route = collector.route is not None
     paper_band = tuple(collector.difficulty)
     started = 0
     eps = np.zeros(n_envs)
     episode_of = [0] * n_envs
-    obs = np.zeros((n_envs,) + envs[0].observation_space.shape, dtype=np.float32)
+    space = envs[0].codes_observation_space() if codes else envs[0].observation_space
+    obs = np.zeros((n_envs,) + space.shape, dtype=np.float32)
     active = np.zeros(n_envs, dtype=bool)
+
+    def observe(i: int, one_hot: np.ndarray) -> None:
+        if codes:
+            envs[i]._codes_obs(obs[i])
+        else:
+            obs[i] = one_hot
 
     def start(i: int) -> None:
         nonlocal started
         # by route difficulty, episode j asks the policy for the paper's band j mod 10 (0-0.1, 0.1-0.2, ...):
         # seeds of every kind for the search, which the two difficulties' correlation spreads over route bins
         band = paper_band if not by_route else (started % 10 / 10, (started % 10 + 1) / 10)
-        obs[i] = envs[i].reset(seed=int(rng.integers(2**31)),
-                               options={"difficulty": band, "coverage": collector.coverage})[0]
+        observe(i, envs[i].reset(seed=int(rng.integers(2**31)),
+                                 options={"difficulty": band, "coverage": collector.coverage})[0])
         eps[i] = rng.uniform(*EPS_RANGE)
         episode_of[i] = started
         active[i] = True
@@ -208,7 +224,8 @@ def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Gene
         random_a = rng.integers(4, size=n_envs)
         for i in np.flatnonzero(active):
             a = int(random_a[i] if explore[i] else greedy[i])
-            obs[i], _, term, trunc, info = envs[i].step(a)
+            one_hot, _, term, trunc, info = envs[i].step(a)
+            observe(i, one_hot)
             steps += 1
             if not (term or trunc):
                 continue
@@ -330,9 +347,10 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     policy.set_training_mode(False)
     envs = [GarageGenCondEnv(map=garage0, view_size=meta.get("view_size", 7), max_errors=max_errors)
             for _ in range(n_envs)]
-    if policy.observation_space.shape != envs[0].observation_space.shape:
+    space = envs[0].codes_observation_space() if reads_codes(policy) else envs[0].observation_space
+    if policy.observation_space.shape != space.shape:
         raise GenerationError(f"{path} was trained with observations of shape {policy.observation_space.shape}, "
-                              f"this map's env gives {envs[0].observation_space.shape}")
+                              f"this map's env gives {space.shape}")
     rng = np.random.default_rng(seed)
     run = f"generate:{path.stem if path.name != GENERATOR else path.parent.name}"
     usable_pool: list[tuple[float, int, Garage]] | None = [] if search else None  # of the rollouts, for the search

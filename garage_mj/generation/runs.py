@@ -172,12 +172,15 @@ class DQNRun:
         else:
             path.unlink(missing_ok=True)
 
-    def start_model(self, venv: VecEnv, config: DQNConfig, seed: int, save_replay_buffer: bool = False) -> DQN:
+    def start_model(self, venv: VecEnv, config: DQNConfig, seed: int, save_replay_buffer: bool = False,
+                    extractor_kwargs: dict[str, Any] | None = None) -> DQN:
         """The run's model on ``venv``: the checkpoint's (with its replay buffer, when one was saved), re-seeded
         with ``seed + timesteps``, or a new ``MlpPolicy`` DQN seeded with ``seed``. A config on the vector env
         trains with :class:`~garage_mj.generation.lean_dqn.LeanDQN` (the same results, less overhead per step).
 
-        ``save_replay_buffer``: checkpoints also save the replay buffer.
+        ``save_replay_buffer``: checkpoints also save the replay buffer. ``extractor_kwargs``: more keyword
+        arguments of a vector-env config's first layer (:class:`~garage_mj.generation.window_net.WindowLayer`),
+        e.g. ``state_values`` for an env with more values after the window; a checkpoint keeps its own.
         """
         torch.set_num_threads(config.torch_threads)
         algo = LeanDQN if config.vector_env else DQN
@@ -189,7 +192,10 @@ class DQNRun:
                 model.load_replay_buffer(buffer)
             model.set_random_seed(seed + self.done_steps)  # a fresh, reproducible stream after the checkpoint
         else:
-            model = algo("MlpPolicy", venv, seed=seed, device=config.device, verbose=0, **config.dqn_kwargs())
+            kwargs = config.dqn_kwargs()
+            if extractor_kwargs and config.vector_env:
+                kwargs["policy_kwargs"]["features_extractor_kwargs"].update(extractor_kwargs)
+            model = algo("MlpPolicy", venv, seed=seed, device=config.device, verbose=0, **kwargs)
         self.model = model
         return model
 

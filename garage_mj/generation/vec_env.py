@@ -7,6 +7,8 @@ info dict (metrics, the final :class:`Garage`) is built only when an episode end
 cell can be observed as its block code (``window="codes"``, k * k + 7 values; the Q-network's
 first layer reads the codes, :class:`~garage_mj.generation.window_net.WindowLayer`), which makes the
 replay buffer about 9 times smaller and cheaper to fill and sample than the one-hot rows.
+``env_cls=GarageGenCondEnv`` steps the conditioned painter
+(:class:`~garage_mj.generation.cond_env.GarageGenCondEnv`) the same way: its rewards, infos and band values.
 """
 
 from __future__ import annotations
@@ -20,20 +22,23 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from garage_mj.generation.gen_env import GarageGenEnv
-from garage_mj.grid.blocks import NUM_CODES
 from garage_mj.grid.garage import Garage
 
 WINDOWS = ("one_hot", "codes")
 
 
 class GarageGenVecEnv(VecEnv):
-    """``n_envs`` garages of ``map`` painted at once; keyword arguments go to each :class:`GarageGenEnv`.
+    """``n_envs`` garages of ``map`` painted at once; keyword arguments go to each ``env_cls``.
 
     Args:
         map: shipped map name, map file path, or a :class:`Garage`.
         n_envs: garages painted together.
         window: ``"one_hot"`` (the single env's observation) or ``"codes"`` (the k x k window as block
-            codes 0..NUM_CODES-1, then the same 7 values).
+            codes 0..NUM_CODES-1, then the same values that follow the single env's window: the 7 state
+            values, and for the conditioned env its 5 band values).
+        env_cls: :class:`GarageGenEnv` or a subclass that keeps its reward in ``_advance`` and its
+            observation in ``_obs``/``_codes_obs``, such as the conditioned
+            :class:`~garage_mj.generation.cond_env.GarageGenCondEnv` (``condition=`` then goes to it).
 
     An episode's last step returns the next episode's first observation, as every SB3 ``VecEnv``
     does; its info holds ``terminal_observation``, ``TimeLimit.truncated``, the single env's info
@@ -41,24 +46,16 @@ class GarageGenVecEnv(VecEnv):
     :attr:`seconds` adds up the wall time spent painting.
     """
 
-    def __init__(self, map: str | Garage = "tiny_7x11", n_envs: int = 8, window: str = "one_hot", **env_kwargs: Any) -> None:
+    def __init__(self, map: str | Garage = "tiny_7x11", n_envs: int = 8, window: str = "one_hot",
+                 env_cls: type[GarageGenEnv] = GarageGenEnv, **env_kwargs: Any) -> None:
         if n_envs < 1:
             raise ValueError(f"n_envs must be >= 1, got {n_envs}")
         if window not in WINDOWS:
             raise ValueError(f"window must be one of {', '.join(WINDOWS)}, got {window!r}")
-        self.envs = [GarageGenEnv(map=map, **env_kwargs) for _ in range(n_envs)]
+        self.envs = [env_cls(map=map, **env_kwargs) for _ in range(n_envs)]
         first = self.envs[0]
         self.window = window
-        if window == "codes":
-            k2 = first.view_size * first.view_size
-            high = first.observation_space.high[-7:].copy()
-            space = spaces.Box(
-                low=np.zeros(k2 + 7, dtype=np.float32),
-                high=np.concatenate([np.full(k2, NUM_CODES - 1, dtype=np.float32), high]),
-                dtype=np.float32,
-            )
-        else:
-            space = first.observation_space
+        space: spaces.Box = first.codes_observation_space() if window == "codes" else first.observation_space
         super().__init__(n_envs, space, first.action_space)
         self._buf = np.zeros((n_envs, *space.shape), dtype=np.float32)
         self._rewards = np.zeros(n_envs, dtype=np.float32)

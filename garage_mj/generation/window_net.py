@@ -2,7 +2,8 @@
 
 ``GarageGenVecEnv(window="codes")`` observes the k x k window as k * k block codes and the replay
 buffer stores them so. Two input layers turn them back into what the single env observes (the
-one-hot rows ``eye(NUM_CODES)[codes]``, then the 7 state values):
+one-hot rows ``eye(NUM_CODES)[codes]``, then the state values: the painter's 7, or ``state_values`` of them,
+12 for the conditioned painter's, whose 5 band values follow the 7):
 
 - :class:`OneHotWindow` expands the codes to that one-hot vector, and the MLP's first linear layer
   multiplies it as usual. Models trained with it load with it.
@@ -24,15 +25,25 @@ from torch import nn
 
 from garage_mj.grid.blocks import NUM_CODES
 
-STATE_VALUES = 7  # error index, coverage, connected flag, one-hot heading
+STATE_VALUES = 7  # error index, coverage, connected flag, one-hot heading (the default: saved models built so)
+
+
+def _cells(observation_space: gym.spaces.Box, state_values: int) -> int:
+    """The window cells of a codes observation with ``state_values`` values after them."""
+    cells = observation_space.shape[0] - state_values
+    if state_values < 0 or cells < 1:
+        raise ValueError(f"a codes observation of {observation_space.shape[0]} values cannot hold a window "
+                         f"and {state_values} state values")
+    return cells
 
 
 class OneHotWindow(BaseFeaturesExtractor):
-    """(batch, k * k + 7) codes and state values -> (batch, k * k * NUM_CODES + 7) one-hot window and state."""
+    """(batch, k * k + S) codes and S state values -> (batch, k * k * NUM_CODES + S) one-hot window and state
+    (S = ``state_values``)."""
 
-    def __init__(self, observation_space: gym.spaces.Box) -> None:
-        cells = observation_space.shape[0] - STATE_VALUES
-        super().__init__(observation_space, features_dim=cells * NUM_CODES + STATE_VALUES)
+    def __init__(self, observation_space: gym.spaces.Box, state_values: int = STATE_VALUES) -> None:
+        cells = _cells(observation_space, state_values)
+        super().__init__(observation_space, features_dim=cells * NUM_CODES + state_values)
         self.cells = cells
         # the one-hot rows, looked up by code (5x faster on CPU than one_hot() and a cast)
         self.register_buffer("eye", torch.eye(NUM_CODES), persistent=False)
@@ -65,22 +76,23 @@ class _OneHotProduct(torch.autograd.Function):
 
 
 class WindowLayer(BaseFeaturesExtractor):
-    """(batch, k * k + 7) codes and state values -> ReLU of the Q-network's first layer, ``width`` values.
+    """(batch, k * k + S) codes and S state values -> ReLU of the Q-network's first layer, ``width`` values
+    (S = ``state_values``).
 
-    The same function as ``Linear(k * k * NUM_CODES + 7, width)`` and a ReLU applied to
+    The same function as ``Linear(k * k * NUM_CODES + S, width)`` and a ReLU applied to
     :class:`OneHotWindow`'s output, with the same initial weights (the layer is created as that
     ``Linear`` and its weight split into the window's rows and the state's columns).
     """
 
-    def __init__(self, observation_space: gym.spaces.Box, width: int = 64) -> None:
-        cells = observation_space.shape[0] - STATE_VALUES
+    def __init__(self, observation_space: gym.spaces.Box, width: int = 64, state_values: int = STATE_VALUES) -> None:
+        cells = _cells(observation_space, state_values)
         super().__init__(observation_space, features_dim=width)
         self.cells = cells
-        dense = nn.Linear(cells * NUM_CODES + STATE_VALUES, width)  # its initialisation, then split
+        dense = nn.Linear(cells * NUM_CODES + state_values, width)  # its initialisation, then split
         n = cells * NUM_CODES
         # row p * NUM_CODES + code: the weights of "cell p holds code"
         self.window = nn.Parameter(dense.weight.detach()[:, :n].t().contiguous())
-        self.state = nn.utils.skip_init(nn.Linear, STATE_VALUES, width)  # no draw: the next layers' stay as they were
+        self.state = nn.utils.skip_init(nn.Linear, state_values, width)  # no draw: the next layers' stay as they were
         with torch.no_grad():
             self.state.weight.copy_(dense.weight[:, n:])
             self.state.bias.copy_(dense.bias)
