@@ -191,6 +191,7 @@ def test_lean_dqn_trains_what_dqn_trains(monkeypatch, tmp_path):
         assert torch.equal(p, q)
     vec = GarageGenVecEnv("tiny_7x11", 8, window="codes")
     model = LeanDQN("MlpPolicy", vec, seed=1, device="cpu", **config.dqn_kwargs())
+    assert model._hand is not None  # the run above took its gradients by hand, not through autograd
     obs = vec.reset()
     for eps in (0.0, 0.5):
         model.exploration_rate = eps
@@ -199,6 +200,23 @@ def test_lean_dqn_trains_what_dqn_trains(monkeypatch, tmp_path):
         np.random.seed(3), model.action_space.seed(3)
         theirs = [DQN.predict(model, obs)[0] for _ in range(20)]
         assert all(np.array_equal(a, b) for a, b in zip(ours, theirs))
+
+
+def test_lean_dqn_takes_other_networks_through_autograd():
+    """A Q-network HandGradient does not know (here a plain MLP on the one-hot window) trains as DQN does."""
+    from stable_baselines3 import DQN
+
+    from garage_mj.generation.lean_dqn import LeanDQN
+
+    kw = {"learning_starts": 0, "batch_size": 32, "policy_kwargs": {"net_arch": [32]}}
+    models = {}
+    for algo in (LeanDQN, DQN):
+        model = algo("MlpPolicy", GarageGenVecEnv("tiny_7x11", 4), seed=2, device="cpu", **kw)
+        model.learn(400)
+        models[algo] = model
+    assert models[LeanDQN]._hand is None
+    for p, q in zip(models[LeanDQN].policy.parameters(), models[DQN].policy.parameters()):
+        assert torch.equal(p, q)
 
 
 def test_fast_learner_crash_then_resume_keeps_every_garage_once(tmp_path):

@@ -71,8 +71,13 @@ class _OneHotProduct(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad: torch.Tensor):
         (index,) = ctx.saved_tensors
-        one_hot = grad.new_zeros(index.shape[0], ctx.rows).scatter_(1, index, 1.0)
-        return None, one_hot.t() @ grad
+        return None, one_hot_product_backward(index, ctx.rows, grad)
+
+
+def one_hot_product_backward(index: torch.Tensor, rows: int, grad: torch.Tensor) -> torch.Tensor:
+    """The gradient of ``one_hot(index) @ table`` (``rows`` rows) for the output gradient ``grad``."""
+    one_hot = grad.new_zeros(index.shape[0], rows).scatter_(1, index, 1.0)
+    return one_hot.t() @ grad
 
 
 class WindowLayer(BaseFeaturesExtractor):
@@ -99,6 +104,10 @@ class WindowLayer(BaseFeaturesExtractor):
         self.register_buffer("offsets", torch.arange(cells) * NUM_CODES, persistent=False)
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
-        index = observations[:, : self.cells].long() + self.offsets
+        index, state = self.inputs(observations)
         window = _OneHotProduct.apply(index, self.window)
-        return torch.relu(window + self.state(observations[:, self.cells :]))
+        return torch.relu(window + self.state(state))
+
+    def inputs(self, observations: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The rows of :attr:`window` the observed codes pick (batch, cells) and the state values."""
+        return observations[:, : self.cells].long() + self.offsets, observations[:, self.cells :]
