@@ -50,8 +50,14 @@ def main() -> None:
     torch.set_num_threads(1)
     obs = model._last_obs.copy()  # the 32 envs' current observations
     times: dict[str, list[float]] = {k: [] for k in ("dqn_train_ms", "lean_train_ms", "dqn_act_ms", "lean_act_ms")}
+    # LeanDQN replaces the policy's set_training_mode with a no-op on this instance; DQN is timed with its own
+    lean_mode = model.policy.__dict__["set_training_mode"]
     for _ in range(args.rounds):
         for name, algo in (("dqn", DQN), ("lean", LeanDQN)):
+            if name == "dqn":
+                del model.policy.set_training_mode
+            else:
+                model.policy.set_training_mode = lean_mode
             t = time.perf_counter()
             for _ in range(args.steps):
                 algo.train(model, 1, config.batch_size)

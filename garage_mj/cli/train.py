@@ -34,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")
     p.add_argument("--learner", choices=LEARNER_NAMES, default=None,
                    help="DQN settings to start from: fast (the default: 32 garages painted at once, a (64, 64) "
-                        "Q-network, 3-step returns; about 10x the timesteps/s of paper, more garages per run) or "
+                        "Q-network, 3-step returns; about 13x the timesteps/s of paper, more garages per run) or "
                         "paper (one env, (256, 256), one gradient step per 4 timesteps, as the paper trains); "
                         "--config keys override them")
     p.add_argument("--config", type=Path, help="TOML file of DQN hyper-parameters (keys of DQNConfig; unknown keys are an error)")

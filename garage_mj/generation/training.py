@@ -167,7 +167,7 @@ def _adam_kwargs() -> dict[str, Any]:
 #: window's codes, WindowLayer), 3-step returns, one gradient step of 256 transitions per 32 timesteps at
 #: twice the learning rate, the target network renewed every 250 gradient steps as in ``paper`` (8,000
 #: timesteps), and epsilon-greedy exploration ending at 0.1 instead of 0.05 (its policy changes less
-#: between episodes, so with 0.05 it repeats more of its garages); trained by LeanDQN, about 10x the
+#: between episodes, so with 0.05 it repeats more of its garages); trained by LeanDQN, about 13x the
 #: timesteps/s (docs/results.md compares what they store).
 LEARNERS: dict[str, dict[str, Any]] = {
     "paper": {},
