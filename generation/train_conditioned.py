@@ -1,10 +1,11 @@
 """Train the difficulty-conditioned generators that ``garage-mj generate`` uses.
 
-    # one map (a shipped name or your own map file); resumable with --resume
-    .venv/bin/python generation/train_conditioned.py --map m5_13x13_aligned --timesteps 60000 --out runs/gen_m5
-    # the same with the fast learner (vector env, codes window, LeanDQN): --learner fast, or learner = "fast" in
-    # the config's [dqn] table (its other keys override the learner's)
-    .venv/bin/python generation/train_conditioned.py --map m5_13x13_aligned --timesteps 60000 --out runs/gen_m5_fast --learner fast
+    # one map (a shipped name or your own map file), with the fast learner (the default: vector env, codes
+    # window, LeanDQN); resumed when --out holds a run
+    .venv/bin/python generation/train_conditioned.py --map m5_13x13_aligned --timesteps 200000 --out runs/gen_m5
+    # the paper's DQN settings instead: --learner paper, or learner = "paper" in the config's [dqn] table
+    # (its other keys override the learner's)
+    .venv/bin/python generation/train_conditioned.py --map m5_13x13_aligned --timesteps 60000 --out runs/gen_m5_paper --learner paper
     # every map of the config, one after the other, copied to models/generators/<map>.zip + .json
     .venv/bin/python generation/train_conditioned.py --all generation/conditioned.toml --ship
 
@@ -60,7 +61,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, help="run folder (an existing run is resumed)")
     ap.add_argument("--config", type=Path, help="TOML with [dqn] and [condition] tables")
     ap.add_argument("--learner", choices=sorted(LEARNERS),
-                    help="DQN settings to start from (default: the config's [dqn] learner, else paper)")
+                    help="DQN settings to start from (default: the config's [dqn] learner, else fast)")
     ap.add_argument("--all", type=Path, metavar="CONFIG", help="train every map of CONFIG's [timesteps] table")
     ap.add_argument("--maps", nargs="+", help="with --all: only these maps")
     ap.add_argument("--seed", type=int, default=0)

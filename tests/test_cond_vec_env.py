@@ -117,7 +117,8 @@ def test_generator_config_chooses_the_learner(tmp_path):
     assert dqn == load_dqn_config(learner="fast", n_envs=8) and cond.band_width == 0.2
     assert load_generator_config(path, learner="paper")[0] == load_dqn_config({"n_envs": 8})
     path.write_text("[dqn]\nn_envs = 8\n")
-    assert not load_generator_config(path)[0].vector_env  # the paper learner unless one is named
+    assert load_generator_config(path)[0] == load_dqn_config(learner="fast", n_envs=8)  # the default learner
+    assert not load_generator_config(path, learner="paper")[0].vector_env
     path.write_text('[dqn]\nlearner = "quick"\n')
     with pytest.raises(ConfigError, match="g.toml: unknown learner 'quick'; choose one of paper, fast"):
         load_generator_config(path)

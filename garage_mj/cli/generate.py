@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "generate:<model>+search). The same --seed gives the same garages. If the budget "
             "(--max-episodes, --max-seconds) does not find --count, the ones found are kept and the "
             "command says how many (exit status 2). For your own map file without --model, a "
-            "generator is trained first (--train-timesteps, default 80,000: 15 s to 2 min for a 13x13 "
+            "generator is trained first (--train-timesteps, default 200,000: about 30 s for a 13x13 "
             "map on one core), saved to --model-out (default: next to the library, "
             "<library stem>.<map name>.generator.zip) and reused by later calls; or pass a shipped "
             "generator (--model m4_13x13_offset): generators see only a window around the car, so "
@@ -66,8 +66,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="stop after S seconds of rollouts and search (wall clock)")
     p.add_argument("--no-search", action="store_true",
                    help="policy rollouts only (rejection sampling), no search stage")
-    p.add_argument("--train-timesteps", type=positive_int, default=80_000, metavar="T",
-                   help="map file without a generator: timesteps to train one (default 80,000)")
+    p.add_argument("--train-timesteps", type=positive_int, default=200_000, metavar="T",
+                   help="map file without a generator: timesteps to train one with the fast learner "
+                        "(default 200,000)")
     p.add_argument("--model-out", type=Path, metavar="PATH",
                    help="map file without --model: where the trained generator goes (reused when it exists; "
                    "default <library stem>.<map name>.generator.zip next to the library)")

@@ -45,7 +45,7 @@ from garage_mj.core.fsutil import write_json
 from garage_mj.generation.cond_env import N_COND, ConditionConfig, GarageGenCondEnv
 from garage_mj.generation.runs import DQNRun
 from garage_mj.generation.search import search
-from garage_mj.generation.training import DQNConfig, load_dqn_config
+from garage_mj.generation.training import DEFAULT_LEARNER, DQNConfig, load_dqn_config
 from garage_mj.generation.vec_env import GarageGenVecEnv
 from garage_mj.generation.window_net import STATE_VALUES
 from garage_mj.grid.map_io import load_map
@@ -59,10 +59,11 @@ EPISODES = "episodes.csv"
 GENERATOR = "generator.zip"  # the Q-network (policy) alone
 GENERATOR_META = "generator.json"
 SEARCH_EVALUATIONS = 10_000  # mutations of the search that estimates the admissible range
-TRAIN_TIMESTEPS = 80_000  # default training budget of generate --map FILE
-# the settings the shipped generators were trained with (generation/conditioned.toml's [dqn])
-USER_MAP_DQN = {"net_arch": [64, 64], "n_envs": 8, "learning_starts": 1000, "exploration_fraction": 0.3,
-                "checkpoint_every": 10000}
+TRAIN_TIMESTEPS = 200_000  # default training budget of generate --map FILE (about 30 s on one core)
+# the settings the shipped generators were trained with (generation/conditioned.toml's [dqn]: the fast
+# learner), checkpointed more often
+USER_MAP_LEARNER = "fast"
+USER_MAP_DQN = {"checkpoint_every": 10000}
 CURVE_POINTS = 20  # points of the training curve kept in generator.json
 BEST_WINDOW = 200  # [episodes] the shipped policy is the one with the best score over this many
 USABLE_WEIGHT = 0.25  # score = in-band share + USABLE_WEIGHT * usable share (reaching the exit counts too)
@@ -85,17 +86,17 @@ def load_generator_config(path: str | Path | None, learner: str | None = None
     """``[dqn]`` (DQNConfig), ``[condition]`` (ConditionConfig) and ``[timesteps]`` (per map) of a TOML file.
 
     ``[dqn]``'s ``learner`` key names the learner whose settings its other keys override
-    (:data:`garage_mj.generation.training.LEARNERS`; ``paper``, the plain DQNConfig defaults, when absent);
-    ``learner`` here replaces the file's.
+    (:data:`garage_mj.generation.training.LEARNERS`; the default learner, ``fast``, when absent, as for
+    ``garage-mj train``); ``learner`` here replaces the file's.
     """
     if path is None:
-        return load_dqn_config(learner=learner or "paper"), ConditionConfig(), {}
+        return load_dqn_config(learner=learner or DEFAULT_LEARNER), ConditionConfig(), {}
     data = read_toml(path)
     unknown = sorted(set(data) - {"dqn", "condition", "timesteps"})
     if unknown:
         raise ConfigError(f"{path}: unknown table(s) {unknown}; known: dqn, condition, timesteps")
     table = dict(data.get("dqn", {}))
-    chosen = table.pop("learner", "paper")
+    chosen = table.pop("learner", DEFAULT_LEARNER)
     if not isinstance(chosen, str):
         raise ConfigError(f"{path}: [dqn] learner must be a learner's name such as \"fast\", got {chosen!r}")
     try:
@@ -316,7 +317,7 @@ def train_for_map(map: str, model_out: str | Path, timesteps: int = TRAIN_TIMEST
     resume = (run_dir / RUN_MANIFEST).exists()
     t0 = time.perf_counter()
     try:
-        train_conditioned(map, timesteps, seed, run_dir, dqn=dqn or load_dqn_config(USER_MAP_DQN), resume=resume,
+        train_conditioned(map, timesteps, seed, run_dir, dqn=dqn or load_dqn_config(USER_MAP_DQN, learner=USER_MAP_LEARNER), resume=resume,
                           progress=progress, search_evaluations=search_evaluations)
     except GenerationError as exc:
         raise GenerationError(f"{exc} (remove {run_dir} to start over)") from None
@@ -330,10 +331,11 @@ def train_for_map(map: str, model_out: str | Path, timesteps: int = TRAIN_TIMEST
 
 def train_command(map: str) -> str:
     stem = Path(map).stem
-    return (f"garage-mj generate --map {map} ... (trains one first, {TRAIN_TIMESTEPS} timesteps), or train_for_map; "
-            f"or .venv/bin/python generation/train_conditioned.py --map {map} --timesteps 80000 --out "
-            f"runs/generator_{stem} (about 20-30 s per 10,000 timesteps on one core, plus ~10 s to search the "
-            f"map's difficulty range), then pass --model runs/generator_{stem}/{GENERATOR}; or try a shipped "
+    return (f"garage-mj generate --map {map} ... (trains one first, {TRAIN_TIMESTEPS:,} timesteps), or train_for_map; "
+            f"or .venv/bin/python generation/train_conditioned.py --map {map} --timesteps {TRAIN_TIMESTEPS} --out "
+            f"runs/generator_{stem} (about 10 s per 100,000 timesteps on one core with the fast learner, plus "
+            f"~10 s to search the map's difficulty range), then pass --model runs/generator_{stem}/{GENERATOR}; "
+            f"or try a shipped "
             f"generator on it (a generator sees only a window around the car, so it runs on any map), e.g. "
             f"--model m4_13x13_offset")
 
