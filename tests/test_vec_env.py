@@ -3,6 +3,9 @@ WindowLayer is the first dense layer on that input, and the named learners train
 
 from __future__ import annotations
 
+import json
+import zipfile
+
 import numpy as np
 import pytest
 import torch
@@ -187,6 +190,8 @@ def test_lean_dqn_trains_what_dqn_trains(monkeypatch, tmp_path):
                         load_dqn(out / "final_model.zip", device="cpu"))
     (ra, lean), (rb, sb3) = models["lean"], models["sb3"]
     assert len(ra) > 0 and np.array_equal(ra[:, :2], rb[:, :2])  # return and length of every episode
+    saved = json.loads(zipfile.ZipFile(tmp_path / "lean" / "final_model.zip").read("data"))
+    assert not {"_hand", "_grad_params", "_modeless"} & set(saved)  # rebuilt on load, not saved
     for p, q in zip(lean.policy.parameters(), sb3.policy.parameters()):
         assert torch.equal(p, q)
     vec = GarageGenVecEnv("tiny_7x11", 8, window="codes")

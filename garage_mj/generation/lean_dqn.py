@@ -56,6 +56,11 @@ class LeanDQN(DQN):
         if self._modeless:  # nothing reads .training: collect_rollouts' switch before every step has nothing to do
             self.policy.set_training_mode = _keep_mode  # type: ignore[method-assign]
 
+    def _excluded_save_params(self) -> list[str]:
+        # built from the policy by _setup_model, which a load runs again: not saved (the hand gradient's
+        # modules and the parameter list would double the size of every checkpoint)
+        return [*super()._excluded_save_params(), "_modeless", "_grad_params", "_hand"]
+
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         if not self._modeless:
             return super().train(gradient_steps, batch_size)
