@@ -144,11 +144,7 @@ class HandGradient:
         Q-values of ``actions`` and ``target_q``; returns the loss."""
         with th.no_grad():
             window, linears = self.window, self.linears
-            index, state, h = _first_layer(window, observations)
-            inputs = [h]
-            for lin in linears[:-1]:
-                inputs.append(th.relu(F.linear(inputs[-1], lin.weight, lin.bias)))
-            q = F.linear(inputs[-1], linears[-1].weight, linears[-1].bias)
+            index, state, inputs, q = _forward(window, linears, observations)
             current_q = th.gather(q, 1, actions)
             loss = F.smooth_l1_loss(current_q, target_q)
             g = th.ops.aten.smooth_l1_loss_backward(self._ones, current_q, target_q, 1, 1.0)  # 1: mean
@@ -179,13 +175,15 @@ def _keep_mode(mode: bool) -> None:
 
 
 def _q_values(window: WindowLayer, linears: list[nn.Linear], observations: th.Tensor) -> th.Tensor:
-    h = _first_layer(window, observations)[2]
+    return _forward(window, linears, observations)[3]
+
+
+def _forward(window: WindowLayer, linears: list[nn.Linear], observations: th.Tensor
+             ) -> tuple[th.Tensor, th.Tensor, list[th.Tensor], th.Tensor]:
+    """The Q-network's forward pass outside autograd: the window rows the codes pick, the state values, the
+    input of each linear layer (the first one :meth:`WindowLayer.forward`'s output) and the Q-values."""
+    index, state = window.inputs(observations)
+    inputs = [th.relu(F.embedding_bag(index, window.window, mode="sum") + window.state(state))]
     for lin in linears[:-1]:
-        h = th.relu(F.linear(h, lin.weight, lin.bias))
-    return F.linear(h, linears[-1].weight, linears[-1].bias)
-
-
-def _first_layer(layer: WindowLayer, observations: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
-    """:meth:`WindowLayer.forward` outside autograd: the picked rows, the state values and the layer's output."""
-    index, state = layer.inputs(observations)
-    return index, state, th.relu(F.embedding_bag(index, layer.window, mode="sum") + layer.state(state))
+        inputs.append(th.relu(F.linear(inputs[-1], lin.weight, lin.bias)))
+    return index, state, inputs, F.linear(inputs[-1], linears[-1].weight, linears[-1].bias)
