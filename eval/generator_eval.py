@@ -23,7 +23,7 @@ from pathlib import Path
 
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
-from garage_mj.generation.generator import GenerationError, generate
+from garage_mj.generation.generator import GenerationError, generate, generator_meta
 
 MAPS = ["tiny_7x11", "m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u"]
 N_BINS = 10
@@ -52,8 +52,9 @@ def main() -> None:
     print(f"{args.label}: distinct in-band garages in {args.episodes} policy episodes per bin")
     for map_name in args.maps:  # a shipped map's name or a map file (its generator named by the file's stem)
         path = generator_file(args.generators, Path(map_name).stem)
-        meta = json.loads(path.with_suffix(".json").read_text() if path.with_suffix(".json").is_file()
-                          else (path.parent / "generator.json").read_text())
+        meta = generator_meta(path)
+        if not meta:
+            raise SystemExit(f"{path}: no {path.stem}.json or generator.json beside it (the generator's settings)")
         lo, hi = meta["condition"]["difficulty_lo"], meta["condition"]["difficulty_hi"]
         line = []
         for b in range(N_BINS):

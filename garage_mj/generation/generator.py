@@ -162,7 +162,7 @@ def _generator_path(map: str, garage0: Garage, model: str | Path | None) -> Path
     return path
 
 
-def _generator_meta(path: Path) -> dict[str, Any]:
+def generator_meta(path: Path) -> dict[str, Any]:
     """The ``generator.json`` beside a generator (its env settings), or {} when there is none."""
     meta_path = path.with_suffix(".json") if path.with_suffix(".json").is_file() else path.with_name(GENERATOR_META)
     return json.loads(meta_path.read_text()) if meta_path.is_file() else {}
@@ -172,6 +172,12 @@ def reads_codes(policy: Any) -> bool:
     """Whether a generator's Q-network reads the window as block codes (trained on the vector env, ``fast``
     learner: :class:`WindowLayer` or :class:`OneHotWindow` first) rather than as the single env's one-hot rows."""
     return isinstance(policy.q_net.features_extractor, (WindowLayer, OneHotWindow))
+
+
+def policy_observation_space(policy: Any, env: GarageGenCondEnv) -> Any:
+    """The space of the observations ``policy`` reads from ``env``: its codes window when it :func:`reads_codes`,
+    else the env's own (one-hot) observation."""
+    return env.codes_observation_space() if reads_codes(policy) else env.observation_space
 
 
 def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Generator, collector: _Collector,
@@ -190,8 +196,7 @@ def _policy_stage(policy: Any, envs: list[GarageGenCondEnv], rng: np.random.Gene
     started = 0
     eps = np.zeros(n_envs)
     episode_of = [0] * n_envs
-    space = envs[0].codes_observation_space() if codes else envs[0].observation_space
-    obs = np.zeros((n_envs,) + space.shape, dtype=np.float32)
+    obs = np.zeros((n_envs,) + policy_observation_space(policy, envs[0]).shape, dtype=np.float32)
     active = np.zeros(n_envs, dtype=bool)
 
     def observe(i: int, one_hot: np.ndarray) -> None:
@@ -337,7 +342,7 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
         raise GenerationError(f"--count must be >= 1, got {count}")
     garage0 = load_map(map)
     path = _generator_path(map, garage0, model)
-    meta = _generator_meta(path)
+    meta = generator_meta(path)
     if max_episodes is None:
         max_episodes = 2_000 + 200 * count if route is None else 100 + 20 * count
     rated = _Rated(route) if route is not None else None
@@ -347,7 +352,7 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     policy.set_training_mode(False)
     envs = [GarageGenCondEnv(map=garage0, view_size=meta.get("view_size", 7), max_errors=max_errors)
             for _ in range(n_envs)]
-    space = envs[0].codes_observation_space() if reads_codes(policy) else envs[0].observation_space
+    space = policy_observation_space(policy, envs[0])
     if policy.observation_space.shape != space.shape:
         raise GenerationError(f"{path} was trained with observations of shape {policy.observation_space.shape}, "
                               f"this map's env gives {space.shape}")
@@ -387,4 +392,5 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     return result
 
 
-__all__ = ["GenerateResult", "GenerationError", "RouteMetric", "generate"]
+__all__ = ["GenerateResult", "GenerationError", "RouteMetric", "generate", "generator_meta", "policy_observation_space",
+           "reads_codes"]
