@@ -7,7 +7,8 @@ reads it from the file at render time, so a page cannot drift from its files.
 
     {{FILE:PATH|OP|SPEC}}   e.g. {{bench_fbx.json:fbx_adds_ms|.1f}}, {{bench_park.json:per_kind.*.oracle.sim_s_per_wall_s|range|.0f}}
 
-    FILE  a .json or .csv file under docs/ (a CSV is a list of rows)
+    FILE  a .json or .csv file under docs/ (a CSV is a list of rows); a name leading outside docs/ (``..``, an
+          absolute path, a symlink) is refused, and so is a file holding a NaN or infinite number
     PATH  dot-separated keys (a list index is a number); ``*`` takes every value, ``k=v,k2=v2`` every
           item whose keys have those values: both give a list (of the values that have the keys
           after it), which an OP must reduce
@@ -35,6 +36,7 @@ import argparse
 import csv
 import fnmatch
 import json
+import math
 import re
 import statistics
 import subprocess
@@ -69,6 +71,38 @@ def _number(text: str) -> Any:
         except ValueError:
             pass
     return text
+
+
+def _csv_rows(path: Path, name: str) -> list[dict]:
+    """A CSV result file's rows (cells as numbers where they read as one); a row whose cells do not match the
+    header is a :class:`PageError`."""
+    with path.open(newline="") as f:
+        reader = csv.DictReader(f)
+        rows = []
+        for i, row in enumerate(reader, 1):
+            if None in row or None in row.values():
+                raise PageError(f"docs/{name} row {i} has {'more' if None in row else 'fewer'} cells than its "
+                                "header: run its benchmark again")
+            rows.append({k: _number(v) for k, v in row.items()})
+    return rows
+
+
+def _not_finite(node: Any, path: tuple = ()) -> tuple[tuple, float] | None:
+    """The key path and value of the first NaN or infinite number in a result file's data, if any."""
+    if isinstance(node, float) and not math.isfinite(node):
+        return path, node
+    for key, value in (node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()):
+        found = _not_finite(value, (*path, key))
+        if found:
+            return found
+    return None
+
+
+def _where_in(name: str, path: tuple) -> str:
+    """A key path of docs/NAME as its error names it: "key a.b.c", or a CSV's "row N, column C"."""
+    if name.endswith(".csv") and len(path) == 2:
+        return f"row {path[0] + 1}, column {path[1]}"
+    return f"key {'.'.join(str(k) for k in path)}"
 
 
 def _drivable_totals(rows: list[dict]) -> dict:
@@ -140,15 +174,39 @@ class Sources:
     def raw(self, name: str) -> Any:
         """The file's content as written (JSON, or a CSV's rows)."""
         if name not in self._raw:
-            path = self.docs / name
-            if not path.is_file():
-                raise PageError(f"docs/{name} does not exist: fix the name in the data file or run its benchmark")
-            if path.suffix == ".csv":
-                with path.open(newline="") as f:
-                    self._raw[name] = [{k: _number(v) for k, v in row.items()} for row in csv.DictReader(f)]
-            else:
-                self._raw[name] = json.loads(path.read_text())
+            path = self._path(name)
+            try:
+                if path.suffix == ".csv":
+                    raw = _csv_rows(path, name)
+                else:
+                    raw = json.loads(path.read_text())
+            except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError (a binary file)
+                what = "valid JSON" if path.suffix == ".json" else "a valid CSV file"
+                raise PageError(f"docs/{name} is not {what} ({str(exc)[:120]}): run its benchmark again, "
+                                f"or restore it (git checkout -- docs/{name})") from None
+            except (OSError, csv.Error) as exc:
+                raise PageError(f"docs/{name} cannot be read ({exc}): check the file and its permissions") from None
+            bad = _not_finite(raw)
+            if bad:
+                key, value = bad
+                said = "NaN" if math.isnan(value) else str(value)
+                raise PageError(f"docs/{name}: {_where_in(name, key)} is {said}, not a figure a page can show: "
+                                "run its benchmark again (or write null where it measured nothing)")
+            self._raw[name] = raw
         return self._raw[name]
+
+    def _path(self, name: str) -> Path:
+        """docs/NAME, which must be a .json or .csv file inside docs/ (symlinks resolved)."""
+        docs = self.docs.resolve()
+        path = (self.docs / name).resolve()
+        if not path.is_relative_to(docs):
+            raise PageError(f"{name!r} is outside docs/: placeholders and a record's files read result files "
+                            "under docs/ only (e.g. bench_fbx.json); move the file there and name it so")
+        if path.suffix not in (".json", ".csv"):
+            raise PageError(f"docs/{name} is not a .json or .csv file: name the result file a benchmark wrote")
+        if not path.is_file():
+            raise PageError(f"docs/{name} does not exist: fix the name in the data file or run its benchmark")
+        return path
 
     def data(self, name: str) -> Any:
         """What the placeholders read: the file, through its view's derive if it has one."""
@@ -175,12 +233,18 @@ class Sources:
         for op in ops:
             if not _is_op(op):
                 raise PageError(f"{where}: unknown operation {op!r} (one of {', '.join(REDUCE)}, xNUMBER)")
-            if op.startswith("x"):
-                value = [v * float(op[1:]) for v in value] if many else value * float(op[1:])
-                continue
-            if not many:
-                raise PageError(f"{where}: {op} needs a list (a * or k=v step in the path)")
-            value, many = REDUCE[op](value), False
+            try:
+                if op.startswith("x"):
+                    factor = _factor(op, where)
+                    value = [v * factor for v in value] if many else value * factor
+                    continue
+                if not many:
+                    raise PageError(f"{where}: {op} needs a list (a * or k=v step in the path)")
+                value, many = REDUCE[op](value), False
+            except PageError:
+                raise
+            except (TypeError, ValueError, IndexError) as exc:  # a reduction of no values, or of text
+                raise PageError(f"{where}: cannot take {op} of {str(value)[:80]} ({exc}): check the path") from None
         if many:
             raise PageError(f"{where} names {len(value)} values: reduce them with |sum, |range, |list ...")
         return _format(value, spec, where)
@@ -202,6 +266,8 @@ def _walk(data: Any, path: str, where: str) -> tuple[Any, bool]:
         if step == "*":
             values, many = [v for node in values for _, v in _items(node)], True
         elif "=" in step:
+            if not all("=" in part for part in step.split(",")):
+                raise PageError(f"{where}: {step!r} mixes k=v and plain keys; write k=v,k2=v2")
             want = dict(part.split("=", 1) for part in step.split(","))
             values = [v for node in values for _, v in _items(node)
                       if isinstance(v, dict) and all(str(v.get(k)) == x for k, x in want.items())]
@@ -209,8 +275,8 @@ def _walk(data: Any, path: str, where: str) -> tuple[Any, bool]:
         else:
             found = [v for node in values for k, v in _items(node) if k == step]
             if not found or (not many and len(found) != len(values)):  # after a * a value may lack it
-                raise PageError(f"{where}: no {step!r} in the file (its keys: "
-                                f"{', '.join(k for k, _ in _items(values[0]))[:200]})")
+                keys = f"its keys: {', '.join(k for k, _ in _items(values[0]))[:200]}" if values else "no values"
+                raise PageError(f"{where}: no {step!r} in the file ({keys})")
             values = found
     return (values if many else values[0]), many
 
@@ -226,6 +292,17 @@ def _is_op(text: str) -> bool:
     return text in REDUCE or re.fullmatch(r"x[0-9.eE+-]+", text) is not None
 
 
+def _factor(op: str, where: str) -> float:
+    """The finite number of an xNUMBER operation."""
+    try:
+        factor = float(op[1:])
+    except ValueError:
+        factor = math.nan
+    if not math.isfinite(factor):
+        raise PageError(f"{where}: {op!r} does not multiply by a finite number (write e.g. x0.001)")
+    return factor
+
+
 def _format(value: Any, spec: str, where: str) -> str:
     """A figure as the page writes it; a range as "lo-hi" (one number where both ends read the same)."""
     if isinstance(value, tuple):
@@ -233,6 +310,10 @@ def _format(value: Any, spec: str, where: str) -> str:
         return lo if lo == hi else f"{lo}-{hi}"
     if isinstance(value, list):
         return ", ".join(_format(v, spec, where) for v in value)
+    if value is None:
+        raise PageError(f"{where} is null in the file: name a key that holds a figure")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise PageError(f"{where} is {value}: check the path and its xNUMBER")
     try:
         return format(value, spec)
     except (TypeError, ValueError) as exc:
@@ -372,7 +453,7 @@ def render(root: Path, page: Page) -> str:
     data_file = root / "docs" / "data" / f"{page.name}.toml"
     try:
         data = tomllib.loads(data_file.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # TOMLDecodeError, UnicodeDecodeError
         raise PageError(f"docs/data/{page.name}.toml cannot be read ({exc})") from None
     return page.render(data, Sources(root / "docs"))
 

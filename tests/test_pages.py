@@ -112,3 +112,63 @@ def test_provenance_names_the_command_date_machine_and_commit():
     p = _module("_provenance").provenance(["--json", "out.json"], script=str(ROOT / "eval" / "bench_fbx.py"))
     assert p["command"] == ".venv/bin/python eval/bench_fbx.py --json out.json"
     assert re.fullmatch(r"\d{4}-\d\d-\d\d", p["date"]) and p["machine"] and p["commit"]
+
+
+def _one_error_line(repo: Path, capsys) -> str:
+    """render_pages' error for REPO: exit status 1, one line, no page written."""
+    before = {p: p.read_text() for p in (repo / "docs" / "performance.md", repo / "docs" / "results.md")}
+    assert render_pages.main(["--root", str(repo)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("render_pages: "), err
+    assert {p: p.read_text() for p in before} == before  # nothing written
+    return err
+
+
+def test_a_truncated_result_file_is_one_line_naming_it(repo, capsys):
+    path = repo / "docs" / "bench_fbx.json"
+    path.write_text(path.read_text()[:40])
+    err = _one_error_line(repo, capsys)
+    assert "docs/bench_fbx.json is not valid JSON" in err and "run its benchmark again" in err
+
+
+def test_a_nan_in_a_result_file_is_refused_naming_the_file_and_key(repo, capsys):
+    _edit_json(repo / "docs" / "bench_fbx.json", lambda d: d.update(fbx_adds_ms=float("nan")))
+    err = _one_error_line(repo, capsys)
+    assert "docs/bench_fbx.json" in err and "fbx_adds_ms" in err and "NaN" in err and "nan**" not in err
+
+
+def test_a_nan_in_a_csv_result_file_is_refused_naming_the_row(repo, capsys):
+    import csv
+
+    path = repo / "docs" / "compare_learners.csv"
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    rows[1][rows[0].index("garages_mean")] = "inf"
+    with path.open("w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    err = _one_error_line(repo, capsys)
+    assert "docs/compare_learners.csv" in err and "row 1" in err and "garages_mean" in err and "inf" in err
+
+
+@pytest.mark.parametrize("name", ["../outside.json", "../../../../../../{tmp}/outside.json", "/{tmp}/outside.json",
+                                  "/etc/passwd", "link.json"])
+def test_a_placeholder_reads_only_files_under_docs(repo, capsys, name):
+    (repo / "outside.json").write_text('{"x": 123456789}')
+    (repo / "docs" / "link.json").symlink_to(repo / "outside.json")
+    name = name.format(tmp=str(repo).lstrip("/"))
+    path = repo / "docs" / "data" / "performance.toml"
+    path.write_text(path.read_text().replace("{{bench_fbx.json:fbx_adds_ms|.1f}}", f"{{{{{name}:x}}}}"))
+    err = _one_error_line(repo, capsys)
+    assert "outside docs/" in err and "123456789" not in err
+
+
+def test_a_bad_placeholder_operation_is_one_line(repo, capsys):
+    path = repo / "docs" / "data" / "performance.toml"
+    text = path.read_text()
+    for bad, said in (("{{bench_fbx.json:fbx_adds_ms|x.|.1f}}", "x."),
+                      ("{{bench_fbx.json:fbx_adds_ms|x1e999|.1f}}", "x1e999"),
+                      ("{{bench_drivable.json:rows.driver=nobody.tests|sum}}", "no 'tests'"),
+                      ("{{bench_drivable.json:rows.driver=nobody|max}}", "max"),
+                      ("{{bench_drivable.json:rows.driver|max}}", "driver")):
+        path.write_text(text.replace("{{bench_fbx.json:fbx_adds_ms|.1f}}", bad))
+        assert said in _one_error_line(repo, capsys)
