@@ -131,7 +131,7 @@ def policy_eval(run: Path) -> dict:
     config = load_dqn_config(manifest["config"])
     venv, _ = make_vec_env(manifest.get("map_source", manifest["map"]), config, None)
     venv.seed(EVAL_SEED)
-    model = load_dqn(run / "final_model.zip", env=venv, device="cpu")
+    model = load_dqn(run / "final_model.zip", config, env=venv)
     model.set_random_seed(EVAL_SEED)
     model.exploration_rate = EVAL_EPSILON
     usable: list[bool] = []

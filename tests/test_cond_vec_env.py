@@ -14,7 +14,12 @@ from stable_baselines3.dqn.policies import DQNPolicy
 
 from garage_mj.core.config import ConfigError
 from garage_mj.generation.cond_env import N_COND, ConditionConfig, GarageGenCondEnv
-from garage_mj.generation.conditioned import load_generator_config, load_policy, train_conditioned
+from garage_mj.generation.conditioned import (
+    load_generator_config,
+    load_policy,
+    save_policy,
+    train_conditioned,
+)
 from garage_mj.generation.generator import GenerationError, generate, reads_codes
 from garage_mj.generation.library import Library
 from garage_mj.generation.training import FinalGarage, load_dqn_config
@@ -136,7 +141,7 @@ def test_fast_learner_trains_a_generator_that_generate_uses(tmp_path):
     # codes policy the codes of the window it gives the one-hot policy
     twin = tmp_path / "twin" / "generator.zip"
     twin.parent.mkdir()
-    _one_hot_twin(policy, GarageGenCondEnv("tiny_7x11")).save(str(twin))
+    save_policy(_one_hot_twin(policy, GarageGenCondEnv("tiny_7x11")), twin)
     assert not reads_codes(load_policy(twin))
     found = []
     for name, model in (("codes", out / "generator.zip"), ("one_hot", twin)):

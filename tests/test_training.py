@@ -162,3 +162,32 @@ def test_latest_checkpoint_passes_over_one_pruned_while_it_reads(tmp_path):
     (ck / "step_000000500.zip").write_bytes(b"")
     model, state = latest_checkpoint(tmp_path)
     assert model.name == "step_000002000.zip" and state["timesteps"] == 2000
+
+
+def test_every_dqn_setting_declares_its_bounds():
+    """Each number, list and string of DQNConfig has a declared range, checked for every TOML key."""
+    import dataclasses
+
+    from garage_mj.core.config import BOUNDS
+
+    unbounded = [f.name for f in dataclasses.fields(DQNConfig) if f.type != "bool" and BOUNDS not in f.metadata]
+    assert not unbounded
+
+
+@pytest.mark.parametrize(("line", "says"), [
+    ("n_envs = 100000000", "n_envs = 100000000 is not allowed: n_envs must be an integer in [1, 1_024]"),
+    ("batch_size = 10000000", "batch_size = 10000000 is not allowed: batch_size must be an integer in [1, 65_536]"),
+    ("net_arch = [64, 100000]",
+     "net_arch = [64, 100000] is not allowed: net_arch must be a non-empty list of integers, each in [1, 4_096]"),
+    ("target_update_interval = 0",
+     "target_update_interval = 0 is not allowed: target_update_interval must be an integer in [1, 1_000_000_000]"),
+])
+def test_train_refuses_a_setting_out_of_bounds_before_writing(line, says, tmp_path, capsys):
+    from tests.test_faults import one_line_error
+
+    config = tmp_path / "dqn.toml"
+    config.write_text(line + "\n")
+    out = tmp_path / "run"
+    err = one_line_error(capsys, ["train", "--map", "tiny_7x11", "--timesteps", "100", "--out", str(out),
+                                  "--config", str(config), "--no-progress"])
+    assert f"{config}: {says}" in err and not out.exists()

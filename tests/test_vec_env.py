@@ -168,7 +168,7 @@ def test_lean_dqn_trains_what_dqn_trains(monkeypatch, tmp_path):
         out = tmp_path / name
         train("tiny_7x11", 2000, 5, out, config, progress=False)
         models[name] = (np.loadtxt(out / "monitor.csv", delimiter=",", skiprows=2, ndmin=2),
-                        load_dqn(out / "final_model.zip", device="cpu"))
+                        load_dqn(out / "final_model.zip", config))
     (ra, lean), (rb, sb3) = models["lean"], models["sb3"]
     assert len(ra) > 0 and np.array_equal(ra[:, :2], rb[:, :2])  # return and length of every episode
     saved = json.loads(zipfile.ZipFile(tmp_path / "lean" / "final_model.zip").read("data"))

@@ -36,18 +36,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.torch_layers import FlattenExtractor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 from stable_baselines3.dqn.policies import DQNPolicy
 
 from garage_mj.core.config import ConfigError, load_config, read_toml
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import write_json
+from garage_mj.core.model_file import ModelFileError, read_weights, write_weights
 from garage_mj.generation.cond_env import N_COND, ConditionConfig, GarageGenCondEnv
 from garage_mj.generation.runs import DQNRun
 from garage_mj.generation.search import search
 from garage_mj.generation.training import DEFAULT_LEARNER, DQNConfig, load_dqn_config
 from garage_mj.generation.vec_env import GarageGenVecEnv
-from garage_mj.generation.window_net import STATE_VALUES
+from garage_mj.generation.window_net import STATE_VALUES, OneHotWindow, WindowLayer
 from garage_mj.grid.map_io import load_map
 
 if TYPE_CHECKING:
@@ -240,8 +242,7 @@ def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, 
         usable = sum(u for _, u in log.recent) / len(log.recent)
         score = in_band + USABLE_WEIGHT * usable
         if score > manifest["best"].get("score", -1.0):
-            model.policy.save(out / (GENERATOR + ".tmp"))
-            os.replace(out / (GENERATOR + ".tmp"), out / GENERATOR)
+            save_policy(model.policy, out / GENERATOR)
             manifest["best"] = {"score": round(score, 4), "in_band": round(in_band, 4), "usable": round(usable, 4),
                                 "timestep": model.num_timesteps, "episode": log.episodes}
 
@@ -253,7 +254,7 @@ def train_conditioned(map: str, timesteps: int, seed: int, out_dir: str | Path, 
               checkpoint_fields=lambda: {"wall_s": round(wall0 + time.perf_counter() - t0, 1)})
     run.save_checkpoint()
     if not (out / GENERATOR).exists():  # too few episodes to choose: the last policy
-        model.policy.save(out / GENERATOR)
+        save_policy(model.policy, out / GENERATOR)
         manifest["best"] = {"in_band": None, "timestep": model.num_timesteps, "episode": log.episodes}
     manifest["status"] = "finished"
     run.write_manifest()
@@ -340,14 +341,74 @@ def train_command(map: str) -> str:
             f"--model m4_13x13_offset")
 
 
-def load_policy(path: Path):
-    """The Q-network policy saved at ``path`` (a ``generator.zip``); :class:`GenerationError` if it is not one."""
+#: The first layers a generator's Q-network may start with, by the name its file records.
+_EXTRACTORS = {cls.__name__: cls for cls in (FlattenExtractor, WindowLayer, OneHotWindow)}
+POLICY_FORMAT = "garage-mj generator policy 1"  # the ``format`` field of a generator file
+
+
+def save_policy(policy: DQNPolicy, path: Path) -> None:
+    """The generator ``policy`` to ``path`` (atomically) as weights and plain fields only (:func:`load_policy`)."""
+    import torch
+
+    params = policy._get_constructor_parameters()
+    space = policy.observation_space
+    extractor_kwargs = dict(params.get("features_extractor_kwargs") or {})
+    write_weights({"format": POLICY_FORMAT, "state_dict": policy.state_dict(),
+                   "observation_low": torch.as_tensor(space.low), "observation_high": torch.as_tensor(space.high),
+                   "n_actions": int(policy.action_space.n), "net_arch": [int(w) for w in params["net_arch"]],
+                   "features_extractor": params["features_extractor_class"].__name__,
+                   "features_extractor_kwargs": {k: int(v) for k, v in extractor_kwargs.items()}}, path)
+
+
+def _policy_from(payload: Any) -> DQNPolicy:
+    """The Q-network policy a :func:`save_policy` payload describes, its weights in place; ``ValueError`` (one
+    line) for any other payload."""
+    import torch
+    from gymnasium import spaces
+
+    if not isinstance(payload, dict) or payload.get("format") != POLICY_FORMAT:
+        raise ValueError(f"it is not a {POLICY_FORMAT!r} file")
+    low, high, n = payload.get("observation_low"), payload.get("observation_high"), payload.get("n_actions")
+    arch, name = payload.get("net_arch"), payload.get("features_extractor")
+    kwargs, state = payload.get("features_extractor_kwargs"), payload.get("state_dict")
+    if not (isinstance(low, torch.Tensor) and isinstance(high, torch.Tensor) and low.shape == high.shape
+            and low.dim() == 1 and 0 < low.numel() <= 100_000):
+        raise ValueError("its observation bounds are not two vectors of one size")
+    if not (type(n) is int and 1 <= n <= 64) or not (isinstance(arch, list) and len(arch) <= 16 and all(
+            type(w) is int and 1 <= w <= 4_096 for w in arch)):
+        raise ValueError("its actions or hidden layers are not small positive integers")
+    if name not in _EXTRACTORS or not isinstance(kwargs, dict) or not set(kwargs) <= {"width", "state_values"} or \
+            not all(type(v) is int and 1 <= v <= 4_096 for v in kwargs.values()):
+        raise ValueError(f"its first layer {str(name)[:40]!r} is not one of {', '.join(_EXTRACTORS)}")
+    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise ValueError("its state_dict is not a table of tensors")
+    if not all(bool(torch.isfinite(v).all()) for v in state.values() if v.is_floating_point()):
+        raise ValueError("a weight is NaN or infinite")
+    space = spaces.Box(low.numpy(), high.numpy(), dtype=np.float32)
+    policy = DQNPolicy(space, spaces.Discrete(n), lambda _: 0.0, net_arch=arch,
+                       features_extractor_class=_EXTRACTORS[name], features_extractor_kwargs=kwargs)
     try:
-        return DQNPolicy.load(str(path), device="cpu")
-    except Exception as exc:  # a foreign or corrupt file: torch and pickle raise many kinds
-        raise GenerationError(f"{path} is not a generator saved by garage-mj ({type(exc).__name__}); "
-                              "pass a generator.zip from generation/train_conditioned.py") from None
+        policy.load_state_dict(state)
+    except RuntimeError as exc:
+        raise ValueError(f"its weights do not fit its network ({' '.join(str(exc).split())[:120]})") from None
+    return policy
 
 
-__all__ = ["GenerationError", "admissible_range", "default_model_out", "load_generator_config", "load_policy",
+def load_policy(path: Path) -> DQNPolicy:
+    """The Q-network policy saved at ``path`` by :func:`save_policy` (a ``generator.zip``), read as data
+    (:func:`~garage_mj.core.model_file.read_weights`: tensors and plain fields, nothing in it run);
+    :class:`GenerationError` in one line if it is not one."""
+    try:
+        policy = _policy_from(read_weights(path))
+    except (ModelFileError, ValueError) as exc:
+        raise GenerationError(f"{path} is not a generator saved by garage-mj: {exc}; pass a generator.zip from "
+                              "generation/train_conditioned.py (or remove it, and garage-mj generate --map trains a "
+                              "new one)") from None
+    except OSError as exc:
+        raise GenerationError(f"{path} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    policy.set_training_mode(False)
+    return policy
+
+
+__all__ = ["GenerationError", "admissible_range", "default_model_out", "load_generator_config", "load_policy", "save_policy",
            "shipped_generator", "train_command", "train_conditioned", "train_for_map", "training_curve"]

@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import os
 import time
-import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -34,6 +33,16 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecEnv
 
 from garage_mj.core.fsutil import write_json
+from garage_mj.core.model_file import (
+    ModelFileError,
+    Rebuild,
+    load_replay_buffer,
+    load_sb3,
+    policy_class,
+    rebuilds,
+    save_replay_buffer,
+    sb3_settings,
+)
 from garage_mj.generation.lean_dqn import LeanDQN
 
 if TYPE_CHECKING:
@@ -69,9 +78,27 @@ def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
             continue  # pruned by the running training since the listing: a newer one exists
         except (ValueError, RecursionError):
             continue  # a torn or foreign checkpoint record: an older one is used
+        if not isinstance(state, dict) or not isinstance(state.get("timesteps"), int):
+            continue  # a foreign record: check_counters refuses a forged one that names a number
         if best is None or state["timesteps"] > best[1]["timesteps"]:
             best = (model, state)
     return best
+
+
+def check_counters(model: Path, state: dict[str, Any]) -> None:
+    """Refuse a checkpoint whose counters (``step_N.json``) are not the model's own: ``timesteps`` must be the
+    model zip's ``num_timesteps`` and ``episodes`` a count no larger (each episode takes a timestep)."""
+    steps, episodes = state.get("timesteps"), state.get("episodes")
+    try:
+        saved = sb3_settings(model).get("num_timesteps")
+    except ModelFileError as exc:
+        raise ModelFileError(f"checkpoint {model} cannot be resumed: {exc}; remove it to resume from the one "
+                             "before, or start a new run in another folder") from None
+    ints = all(isinstance(v, int) and not isinstance(v, bool) for v in (steps, episodes, saved))
+    if not ints or steps != saved or not 0 <= episodes <= steps:
+        raise ModelFileError(f"checkpoint {model.with_suffix('.json')} says {steps!r} timesteps and {episodes!r} "
+                             f"episodes, but its model has trained {saved!r} timesteps; remove both files to resume "
+                             "from the checkpoint before, or start a new run in another folder")
 
 
 def checkpoint_files(out_dir: Path) -> list[Path]:
@@ -80,15 +107,20 @@ def checkpoint_files(out_dir: Path) -> list[Path]:
     if found is None:
         return []
     model = found[0]
-    replay = model.with_name(model.stem + "_replay.pkl")
+    replay = replay_path(model)
     return [model, *([replay] if replay.exists() else []), model.with_suffix(".json")]
+
+
+def replay_path(checkpoint: Path) -> Path:
+    """Where the replay buffer of the checkpoint ``step_N.zip`` (or its stem) is kept: ``step_N_replay.npz``."""
+    return checkpoint.with_name(checkpoint.with_suffix("").name + "_replay.npz")
 
 
 def prune_checkpoints(out_dir: Path) -> None:
     """Delete all but the newest :data:`KEEP_CHECKPOINTS` checkpoints of a run folder."""
     states = sorted((out_dir / CHECKPOINTS).glob("step_*.json"))
     for old in states[:-KEEP_CHECKPOINTS]:
-        for path in (old, old.with_suffix(".zip"), old.with_name(old.stem + "_replay.pkl")):
+        for path in (old, old.with_suffix(".zip"), replay_path(old)):
             path.unlink(missing_ok=True)
 
 
@@ -104,12 +136,69 @@ def truncate_log(path: Path, header_lines: int, rows: int) -> None:
         os.replace(tmp, path)
 
 
-def load_dqn(path: str | Path, algo: type[DQN] = DQN, **kwargs: Any) -> DQN:
-    """``algo.load(path, **kwargs)`` without SB3's warning that n_steps is ignored: a saved model names SB3's own
-    ``NStepReplayBuffer`` with its n_steps and gamma, which SB3 then takes for a custom buffer class."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom")
-        return algo.load(path, **kwargs)
+def _policy_kwargs(config: DQNConfig, extractor_kwargs: dict[str, Any] | None) -> dict[str, Any]:
+    """The policy kwargs a run of ``config`` builds its Q-network with (:meth:`DQNRun.start_model`)."""
+    kwargs = config.dqn_kwargs()["policy_kwargs"]
+    if extractor_kwargs and config.vector_env:
+        kwargs["features_extractor_kwargs"].update(extractor_kwargs)
+    return kwargs
+
+
+def run_rebuilds(config: DQNConfig, extractor_kwargs: dict[str, Any] | None = None) -> dict[str, Rebuild]:
+    """How each pickled entry of a run's model zip is made again: from the run's own ``config`` (the policy,
+    its network, the train frequency) and the env it is loaded on (the observation space), never unpickled
+    (:mod:`garage_mj.core.model_file`). A zip whose plain fields describe another network is refused."""
+    from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
+
+    policy_kwargs = _policy_kwargs(config, extractor_kwargs)
+
+    def network(entry: dict, data: dict, algo: type, env: Any) -> Any:
+        extractor = policy_kwargs.get("features_extractor_class")
+        named = str(entry.get("features_extractor_class", ""))
+        if str(entry.get("net_arch")) != str(policy_kwargs["net_arch"]) or (
+                extractor is not None and f".{extractor.__name__}'" not in named):
+            raise ModelFileError(f"its network (net_arch {str(entry.get('net_arch'))[:40]}, {named[:80]}) is not "
+                                 f"the one its run's config builds (net_arch {policy_kwargs['net_arch']})")
+        return policy_kwargs
+
+    def observations(entry: dict, data: dict, algo: type, env: Any) -> Any:
+        space = env.observation_space if env is not None else box_from_fields(entry)
+        if entry.get("_shape") != list(space.shape) or entry.get("dtype") != str(space.dtype):
+            raise ModelFileError(f"its observations are {entry.get('dtype')}{entry.get('_shape')}, the env's "
+                                 f"{space.dtype}{list(space.shape)}")
+        return space
+
+    def train_freq(entry: dict, data: dict, algo: type, env: Any) -> Any:
+        return TrainFreq(config.train_freq, TrainFrequencyUnit.STEP)
+
+    return rebuilds(Rebuild("policy_class", policy_class(lambda algo: algo.policy_aliases["MlpPolicy"],
+                                                         "DQN's MlpPolicy (a garage-mj training run's)")),
+                    Rebuild("policy_kwargs", network), Rebuild("observation_space", observations),
+                    Rebuild("train_freq", train_freq))
+
+
+def box_from_fields(entry: dict) -> Any:
+    """The ``Box`` whose plain fields (``low``, ``high``, ``_shape``, ``dtype`` as SB3 writes them) ``entry`` holds."""
+    import numpy as np
+    from gymnasium import spaces
+
+    try:
+        shape = tuple(int(n) for n in entry["_shape"])
+        dtype = np.dtype(str(entry["dtype"]))
+        low, high = (np.array(str(entry[k]).strip("[]").split(), dtype=dtype) for k in ("low", "high"))
+        return spaces.Box(low.reshape(shape), high.reshape(shape), dtype=dtype)
+    except (KeyError, TypeError, ValueError):
+        raise ModelFileError("its observation space has no plain low, high and shape (pass the env)") from None
+
+
+def load_dqn(path: str | Path, config: DQNConfig, env: Any = None, extractor_kwargs: dict[str, Any] | None = None,
+             **kwargs: Any) -> DQN:
+    """The model zip of a run trained with ``config`` (a checkpoint or ``final_model.zip``), as
+    :class:`~garage_mj.generation.lean_dqn.LeanDQN` when the config trains on the vector env, else SB3's DQN,
+    on ``env`` (None: observation space from the file's plain fields); read as data (:func:`run_rebuilds`).
+    ``extractor_kwargs``: those the run gave its first layer (:meth:`DQNRun.start_model`)."""
+    algo = LeanDQN if config.vector_env else DQN
+    return load_sb3(path, algo, run_rebuilds(config, extractor_kwargs), env=env, **kwargs)
 
 
 class CheckpointEvery(BaseCallback):
@@ -151,6 +240,8 @@ class DQNRun:
         out.mkdir(parents=True, exist_ok=True)
         (out / CHECKPOINTS).mkdir(exist_ok=True)
         self.checkpoint = latest_checkpoint(out) if resume else None
+        if self.checkpoint:
+            check_counters(*self.checkpoint)
         state = self.checkpoint[1] if self.checkpoint else {"timesteps": 0, "episodes": 0}
         self.done_steps: int = state["timesteps"]
         self.done_episodes: int = state["episodes"]
@@ -186,15 +277,19 @@ class DQNRun:
         algo = LeanDQN if config.vector_env else DQN
         self.save_replay_buffer = save_replay_buffer
         if self.checkpoint:
-            model = load_dqn(self.checkpoint[0], algo, env=venv, device=config.device)
-            buffer = self.checkpoint[0].with_name(self.checkpoint[0].stem + "_replay.pkl")
-            if buffer.exists():
-                model.load_replay_buffer(buffer)
+            path = self.checkpoint[0]
+            try:
+                model = load_dqn(path, config, env=venv, extractor_kwargs=extractor_kwargs, device=config.device)
+                buffer = replay_path(path)
+                if buffer.exists():
+                    load_replay_buffer(model.replay_buffer, buffer)
+            except ModelFileError as exc:
+                raise ModelFileError(f"checkpoint {path} cannot be resumed: {exc}; remove it to resume from the "
+                                     "one before, or start a new run in another folder") from None
             model.set_random_seed(seed + self.done_steps)  # a fresh, reproducible stream after the checkpoint
         else:
             kwargs = config.dqn_kwargs()
-            if extractor_kwargs and config.vector_env:
-                kwargs["policy_kwargs"]["features_extractor_kwargs"].update(extractor_kwargs)
+            kwargs["policy_kwargs"] = _policy_kwargs(config, extractor_kwargs)
             model = algo("MlpPolicy", venv, seed=seed, device=config.device, verbose=0, **kwargs)
         self.model = model
         return model
@@ -211,10 +306,8 @@ class DQNRun:
         os.replace(tmp, stem.with_suffix(".zip"))
         files = [stem.with_suffix(".zip")]
         if self.save_replay_buffer:
-            tmp_buf = stem.with_name(stem.name + "_replay.tmp.pkl")
-            model.save_replay_buffer(tmp_buf)
-            os.replace(tmp_buf, stem.with_name(stem.name + "_replay.pkl"))
-            files.append(stem.with_name(stem.name + "_replay.pkl"))
+            save_replay_buffer(model.replay_buffer, replay_path(stem))
+            files.append(replay_path(stem))
         write_json(stem.with_suffix(".json"), {"timesteps": step, "episodes": self.counter.episodes})
         prune_checkpoints(self.out)
         self.manifest.update(timesteps=step, episodes=self.counter.episodes)

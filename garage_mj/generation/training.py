@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import gymnasium as gym
 from stable_baselines3.common.callbacks import BaseCallback
 
-from garage_mj.core.config import ConfigError, load_config, read_toml, refuse_other_settings
+from garage_mj.core.config import ConfigError, bounded, load_config, read_toml, refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.gen_env import GarageGenEnv
 from garage_mj.generation.library import Library
@@ -55,6 +55,9 @@ HEARTBEAT_S = 30.0  # [s] between refreshes of the manifest's ``live`` progress
 MAX_BUFFER_SIZE = 10_000_000  # [transitions] ~40 GB at ~4 KB each: beyond that the run cannot fit in memory
 DEVICES = ("auto", "cpu", "cuda")
 MAX_VIEW_SIZE = 31  # [cells] side of the observed window; larger than any supported garage needs
+MAX_ENVS = 1_024  # envs of one run, stepped in one process
+MAX_TIMESTEPS = 1_000_000_000  # [timesteps] the longest schedule a setting may name
+MAX_WIDTH = 4_096  # units of one hidden layer
 
 
 class TrainingError(GarageMJError):
@@ -71,31 +74,35 @@ class DQNConfig:
     per 8 timesteps) but not yet shown to learn as well (README, "Throughput and learning quality").
     """
 
-    learning_rate: float = 5e-4
-    buffer_size: int = 50_000  # [transitions] ~4 KB each with the 7x7 view
-    learning_starts: int = 1_000  # [timesteps] of random actions before the first update
-    batch_size: int = 64  # [transitions] per gradient step
-    tau: float = 1.0  # 1: hard target-network update
-    gamma: float = 0.99
-    train_freq: int = 4  # [vector steps] between updates; a vector step is n_envs timesteps
-    gradient_steps: int = 1  # gradient steps per update
-    n_steps: int = 1  # n-step returns
-    target_update_interval: int = 1_000  # [timesteps]
-    exploration_fraction: float = 0.2  # share of the run over which epsilon decays
-    exploration_initial_eps: float = 1.0
-    exploration_final_eps: float = 0.05
-    max_grad_norm: float = 10.0
-    net_arch: tuple[int, ...] = (256, 256)  # hidden layer widths of the Q-network
-    checkpoint_every: int = 25_000  # [timesteps] between checkpoints
+    learning_rate: float = bounded(5e-4, gt=0.0, le=1.0)
+    # [transitions] ~4 KB each with the 7x7 view
+    buffer_size: int = bounded(50_000, ge=1, le=MAX_BUFFER_SIZE, why="~4 KB each: more cannot fit in memory")
+    learning_starts: int = bounded(1_000, ge=0, le=MAX_TIMESTEPS)  # [timesteps] of random actions before the first update
+    batch_size: int = bounded(64, ge=1, le=65_536)  # [transitions] per gradient step
+    tau: float = bounded(1.0, ge=0.0, le=1.0)  # 1: hard target-network update
+    gamma: float = bounded(0.99, gt=0.0, le=1.0)
+    train_freq: int = bounded(4, ge=1, le=MAX_TIMESTEPS)  # [vector steps] between updates; a vector step is n_envs timesteps
+    gradient_steps: int = bounded(1, ge=1, le=10_000)  # gradient steps per update
+    n_steps: int = bounded(1, ge=1, le=1_000)  # n-step returns
+    target_update_interval: int = bounded(1_000, ge=1, le=MAX_TIMESTEPS)  # [timesteps]
+    exploration_fraction: float = bounded(0.2, ge=0.0, le=1.0)  # share of the run over which epsilon decays
+    exploration_initial_eps: float = bounded(1.0, ge=0.0, le=1.0)
+    exploration_final_eps: float = bounded(0.05, ge=0.0, le=1.0)
+    max_grad_norm: float = bounded(10.0, gt=0.0, le=1e6)
+    # hidden layer widths of the Q-network
+    net_arch: tuple[int, ...] = bounded((256, 256), ge=1, le=MAX_WIDTH, min_items=1)
+    checkpoint_every: int = bounded(25_000, ge=1, le=MAX_TIMESTEPS)  # [timesteps] between checkpoints
     save_replay_buffer: bool = False  # also checkpoint the replay buffer (large: buffer_size x 4 KB)
-    torch_threads: int = 1  # CPU threads for torch; 1 is fastest for this small MLP
-    n_envs: int = 1  # envs stepped together (DummyVecEnv, one process): one batched action choice
-    view_size: int = 7  # env: side of the observed window (odd)
-    max_errors: int = 10  # env: errors allowed per episode
+    torch_threads: int = bounded(1, ge=1, le=256)  # CPU threads for torch; 1 is fastest for this small MLP
+    # envs stepped together (DummyVecEnv or GarageGenVecEnv, one process): one batched action choice
+    n_envs: int = bounded(1, ge=1, le=MAX_ENVS, why="stepped in one process, each with its own garage and buffers")
+    view_size: int = bounded(7, ge=1, le=MAX_VIEW_SIZE)  # env: side of the observed window (odd)
+    max_errors: int = bounded(10, ge=0, le=10_000)  # env: errors allowed per episode
     # the n_envs garages in one GarageGenVecEnv, windows stored as block codes (~9x less replay memory to
     # fill and sample) and the Q-network's first layer computed from them (WindowLayer): the same network
     vector_env: bool = False
-    device: str = "auto"  # torch device of the gradient updates: auto (CUDA when torch sees one), cpu or cuda
+    # torch device of the gradient updates: auto (CUDA when torch sees one), cpu or cuda
+    device: str = bounded("auto", choices=DEVICES)
 
     def __post_init__(self) -> None:
         if not isinstance(self.net_arch, (list, tuple)):
@@ -199,10 +206,7 @@ def load_dqn_config(source: str | Path | dict[str, Any] | None = None, *, learne
         data = read_toml(path)
         if set(data) == {"dqn"}:
             data = data["dqn"]
-        try:
-            return load_config(DQNConfig, {**base, **data}, **overrides)
-        except ConfigError as exc:
-            raise ConfigError(f"{path}: {exc}") from None
+        return load_config(DQNConfig, {**base, **data}, where=path, **overrides)
     return load_config(DQNConfig, {**base, **(source or {})}, **overrides)
 
 

@@ -8,7 +8,7 @@ the paper's 4 actions by argmax, so the same test gives the same drive. ``--driv
 the shipped model ``models/drivers/<DEFAULT_MODEL>.zip``; ``--driver learned:PATH`` another one.
 
 A model file is data: its weights and plain settings are read, nothing in it is unpickled or run
-(:mod:`~garage_mj.driving.learning.model_file`). A process loads each model file once (:func:`load_model`, keyed by path and modification time),
+(:mod:`~garage_mj.core.model_file`, the one loading door). A process loads each model file once (:func:`load_model`, keyed by path and modification time),
 so a cruise worker that drives many tests reads the zip and imports torch once.
 """
 
@@ -22,9 +22,10 @@ from typing import Any
 
 import numpy as np
 
+from garage_mj.core.model_file import ModelFileError
 from garage_mj.driving.drivers import DriverError
-from garage_mj.driving.learning.model_file import ModelFileError, load_sb3
 from garage_mj.driving.learning.observation import learned_observation, learned_space
+from garage_mj.driving.learning.saved_model import load_driver_model
 from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction
 
 DRIVER_MODELS = "drivers"  # the folder of models/ that holds the shipped driver models
@@ -81,7 +82,7 @@ def _algorithm(path: Path) -> str:
 def load_model(path: str | Path) -> Any:
     """The SB3 model at ``path`` on the CPU, loaded once per process and file version.
 
-    The file is read as data (:func:`~garage_mj.driving.learning.model_file.load_sb3`): weights and plain
+    The file is read as data (:func:`~garage_mj.driving.learning.saved_model.load_driver_model`): weights and plain
     settings, nothing in it unpickled or run. Checks that it acts with the paper's 4 actions; a missing,
     unreadable, corrupt or code-carrying file, or another action space, is a one-line :class:`DriverError`
     naming the file, what is wrong and the fix.
@@ -100,7 +101,7 @@ def load_model(path: str | Path) -> Any:
     import stable_baselines3  # heavy (torch): only when a learned driver is built
 
     try:  # the file read as data: weights and plain settings, nothing in it unpickled or run
-        model = load_sb3(path, getattr(stable_baselines3, algo))
+        model = load_driver_model(path, getattr(stable_baselines3, algo))
     except ModelFileError as exc:
         raise _no_model(path, f" (cannot load it as {algo}: {exc})") from None
     except Exception as exc:  # torch/zip errors of a damaged file: name the file, keep one short line

@@ -63,11 +63,12 @@ from garage_mj.core.backends import Compute, process_end
 from garage_mj.core.config import bounded, check_bounds, load_config, refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_json
+from garage_mj.core.model_file import ModelFileError
 from garage_mj.driving.cruise import run_test
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
 from garage_mj.driving.hunt import HuntConfig, hunt
-from garage_mj.driving.learning.model_file import ModelFileError, load_sb3
+from garage_mj.driving.learning.saved_model import load_driver_model
 from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 
@@ -294,13 +295,14 @@ def _success(counts: dict[str, int]) -> float | None:
     return round(counts.get("success", 0) / feasible, 4) if feasible else None
 
 
-def _load_checkpoint(path: Path, venv):
-    """A checkpoint saved by :func:`_save`, read as data (:func:`~garage_mj.driving.learning.model_file.load_sb3`:
-    weights and plain settings, nothing in it unpickled or run)."""
+def _load_checkpoint(path: Path, venv, **kwargs: Any):
+    """A checkpoint saved by :func:`_save` on ``venv`` (None: none), ``kwargs`` set on the model, read as data
+    (:func:`~garage_mj.driving.learning.saved_model.load_driver_model`: weights and plain settings, nothing in
+    it unpickled or run)."""
     from stable_baselines3 import DQN
 
     try:
-        return load_sb3(path, DQN, env=venv)
+        return load_driver_model(path, DQN, env=venv, **kwargs)
     except ModelFileError as exc:
         raise TrainDriverError(f"checkpoint {path} cannot be resumed: {exc}; "
                                "run garage-mj train-driver again with another --out") from None
@@ -620,7 +622,6 @@ def _final_model(workers: _Workers, out: Path, manifest: dict[str, Any], state: 
     """``model.zip`` unless it is there: the selected iteration's network, then the DQN stage when
     ``rl_timesteps`` asks for one (module docstring, stage 2; validated into the manifest's ``rl``)."""
     import torch
-    from stable_baselines3 import DQN
 
     last = out / "checkpoints" / f"iter_{state['selected_iteration']:03d}.zip"
     if cfg.rl_timesteps > 0 and not (out / MODEL).exists():
@@ -630,7 +631,7 @@ def _final_model(workers: _Workers, out: Path, manifest: dict[str, Any], state: 
                                                  str(out / RL_MONITOR)))
         venv.seed(seed * 1_000 + cfg.iterations)
         torch.set_num_threads(cfg.torch_threads)
-        model = DQN.load(last, env=venv, device="cpu", exploration_initial_eps=0.05, exploration_final_eps=0.05,
+        model = _load_checkpoint(last, venv, exploration_initial_eps=0.05, exploration_final_eps=0.05,
                          exploration_fraction=1.0, learning_starts=min(1_000, cfg.rl_timesteps // 2),
                          buffer_size=50_000, batch_size=64, learning_rate=1e-4, target_update_interval=1_000)
         model.set_random_seed(seed + cfg.iterations)
@@ -641,6 +642,6 @@ def _final_model(workers: _Workers, out: Path, manifest: dict[str, Any], state: 
         state["rl"] = {"timesteps": cfg.rl_timesteps, "val": val, "val_success": _success(val)}
         _write_manifest(out, manifest, state)
     elif not (out / MODEL).exists():
-        _save(DQN.load(last, device="cpu"), out / MODEL, exclude=["replay_buffer"])
+        _save(_load_checkpoint(last, None), out / MODEL, exclude=["replay_buffer"])
         if state.pop("rl", None) is not None:  # a DQN stage asked for before and not now
             _write_manifest(out, manifest, state)

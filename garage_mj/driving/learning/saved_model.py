@@ -1,0 +1,60 @@
+"""How a learned driver's model zip is read as data (:mod:`garage_mj.core.model_file`, the one loading door).
+
+:data:`DRIVER_REBUILDS` makes each pickled entry a ``train-driver`` model holds from its plain fields:
+the policy class (the algorithm's ``MultiInputPolicy``), the network (``CameraRouteExtractor``), the
+observation space (:func:`~garage_mj.driving.learning.observation.learned_space` at the recorded camera
+size), the action space and schedules (:data:`~garage_mj.core.model_file.COMMON`). Any other pickled
+entry refuses the file. Imported by the learned driver and by ``train-driver``'s resume.
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+from pathlib import Path
+from typing import Any
+
+from garage_mj.core.model_file import ModelFileError, Rebuild, load_sb3, policy_class, rebuilds
+
+
+def _policy_kwargs(entry: dict, data: dict, algo: type, env: Any) -> Any:
+    from garage_mj.driving.learning.network import saved_policy_kwargs
+
+    kwargs = saved_policy_kwargs(data)
+    if kwargs is None:
+        raise ModelFileError("its policy_kwargs name a network other than CameraRouteExtractor (train-driver's)")
+    return kwargs
+
+
+def _observation_space(entry: dict, data: dict, algo: type, env: Any) -> Any:
+    """:func:`learned_space` for the camera size the entry records, if the entry's plain fields are that space."""
+    from garage_mj.driving.learning.observation import learned_space
+
+    text = str(entry.get("spaces"))
+    size = re.search(r"'image': Box\(0, 255, \(2, (\d+), (\d+)\), uint8\)", text)
+    space = learned_space(int(size.group(1)), int(size.group(2))) if size else None
+    if space is None or str(dict(space.spaces)) != text:
+        raise ModelFileError(f"its observation space {text[:120]} is not a learned driver's (learned_space)")
+    return space
+
+
+def _train_freq(entry: dict, data: dict, algo: type, env: Any) -> Any:
+    return inspect.signature(algo).parameters["train_freq"].default  # the algorithm's own; a driver does not train
+
+
+#: Every pickled ``data`` entry a learned-driver model may hold, by key; any other refuses the file.
+DRIVER_REBUILDS: dict[str, Rebuild] = rebuilds(
+    Rebuild("policy_class", policy_class(lambda algo: algo.policy_aliases["MultiInputPolicy"],
+                                         "the algorithm's MultiInputPolicy (the learned driver's)")),
+    Rebuild("policy_kwargs", _policy_kwargs),
+    Rebuild("observation_space", _observation_space),
+    Rebuild("train_freq", _train_freq),
+)
+
+
+def load_driver_model(path: str | Path, algo: type, env: Any = None, **kwargs: Any) -> Any:
+    """The learned-driver model zip at ``path`` as an ``algo`` (DQN or PPO), read as data (module docstring)."""
+    return load_sb3(path, algo, DRIVER_REBUILDS, env=env, **kwargs)
+
+
+__all__ = ["DRIVER_REBUILDS", "load_driver_model"]
