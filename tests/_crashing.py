@@ -62,3 +62,24 @@ def pid_then_hang(folder: str) -> None:
     """Writes its worker's pid into ``folder`` (a file named after it), then sleeps for ever."""
     Path(folder, str(os.getpid())).write_text("")
     time.sleep(3600)
+
+
+def square_or_exit(n: int) -> int:
+    """``n * n``, except job 2 raises SystemExit(0) (as ``sys.exit(0)`` in a user's code would)."""
+    if n == 2:
+        raise SystemExit(0)
+    return n * n
+
+
+class ExitDriver(_Stop):
+    """Calls ``sys.exit(0)`` on its first action."""
+
+    def act(self, obs):
+        raise SystemExit(0)
+
+
+class InterruptDriver(_Stop):
+    """Raises KeyboardInterrupt on its first action (as Ctrl-C during act() would)."""
+
+    def act(self, obs):
+        raise KeyboardInterrupt

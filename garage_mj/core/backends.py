@@ -212,14 +212,33 @@ def _time_limit(seconds: float | None) -> Iterator[None]:
                 continue
 
 
+def _exits(exc: BaseException) -> bool:
+    """An exception a job raised that would end the process running it (``SystemExit`` from ``sys.exit``, or another
+    ``BaseException`` that is not an ``Exception``): the job is lost as a crash, as when its worker process dies.
+    Not Ctrl-C (``KeyboardInterrupt`` stops the batch) and not a time limit running out."""
+    return not isinstance(exc, (Exception, KeyboardInterrupt, _JobTimeout))
+
+
+def exit_reason(exc: BaseException) -> str:
+    """What a job that raised ``exc`` (:func:`_exits`) is told, the same wherever it ran: ``it raised SystemExit(0)``."""
+    args = ", ".join(map(repr, exc.args))
+    text = f"{type(exc).__name__}({args})"
+    return f"it raised {text if len(text) <= 200 else text[:197] + '...'}"
+
+
 def _limited(func: Callable[[Any], Any], job: Any, timeout: float | None) -> Any:
-    """``func(job)``, or a :class:`LostJob` of kind ``"timeout"`` when it runs past ``timeout`` seconds."""
+    """``func(job)``, or a :class:`LostJob` of kind ``"timeout"`` when it runs past ``timeout`` seconds, or of kind
+    ``"crash"`` when it raises ``SystemExit`` (or another exception that would end the process, :func:`_exits`)."""
     start = time.perf_counter()
     try:
         with _time_limit(timeout):
             return func(job)
     except _JobTimeout:
         return LostJob("timeout", timeout_reason(timeout), time.perf_counter() - start)
+    except BaseException as exc:
+        if not _exits(exc):
+            raise
+        return LostJob("crash", exit_reason(exc), time.perf_counter() - start)
 
 
 def _tries(n: int) -> str:
@@ -267,10 +286,17 @@ def _serve(conn, func: Callable[[Any], Any]) -> None:
             return
         index, job = msg
         conn.send(("start", index))
+        start = time.perf_counter()
         try:
             reply = ("done", index, True, func(job))
         except Exception as exc:  # noqa: BLE001  (the job's own error: re-raised in the parent)
             reply = ("done", index, False, exc)
+        except BaseException as exc:
+            if not _exits(exc):
+                raise
+            # sys.exit in the job: lost as a crash, as in the parent's own process; the parent starts a fresh worker
+            conn.send(("done", index, True, LostJob("crash", exit_reason(exc), time.perf_counter() - start)))
+            return
         try:
             conn.send(reply)
         except Exception as exc:  # noqa: BLE001  (a result or error that does not pickle)
@@ -369,6 +395,11 @@ def _supervised(func: Callable[[Any], Any], jobs: list, size: int, limits: list[
                     ok, value = event[1]
                     if not ok:
                         raise value  # the job's own error, as it raised it
+                    if isinstance(value, LostJob):  # it raised SystemExit: its worker has ended, a fresh one
+                        w.stop(kill=True)
+                        pool[k] = _Worker(ctx, func)
+                        yield lost(jobs[index], value)
+                        continue
                     if queue:  # its next job first: it works while the caller writes this result down
                         w.give(queue[0], jobs[queue.popleft()])
                     yield value

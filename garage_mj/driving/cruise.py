@@ -40,7 +40,16 @@ from garage_mj.driving.difficulty.rating import RouteModelChoice, choose_route_m
 from garage_mj.driving.episode import cached_env, check_driver, close_cached_env, drive_test, forget_cached
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
 from garage_mj.driving.replay import write_test_xosc
-from garage_mj.driving.results import TEST_COLUMNS, check_settings, read_tests, write_csv, write_outputs
+from garage_mj.driving.results import (
+    TEST_COLUMNS,
+    check_rows,
+    check_settings,
+    parse_tests,
+    read_tests,  # noqa: F401  (imported from here by callers)
+    repair_tests,
+    write_csv,
+    write_outputs,
+)
 from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
@@ -188,10 +197,47 @@ def run_cruise(
     if len(set(hashes)) != len(hashes):
         raise CruiseError("the same garage is listed twice; give each garage once")
     settings = settings.resolved(choice.action_type)
+    check_task(settings)  # a driver made for other tasks, or a stall a garage lacks, is refused before any write
+    check_stall(srcs, settings.stall)
     check_driver(settings)  # a driver that cannot be built stops the run before anything is written
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise", remove=True):  # a second run into `out` is refused, naming this one
         return _run_locked(srcs, tests, out, settings, choice, compute, max_tests, xosc, route)
+
+
+def check_task(settings: CruiseSettings) -> None:
+    """Refuse a driver whose class declares ``tasks`` without the run's task, unless it is a cruise driver in a park
+    or AVP run (:func:`garage_mj.cli.cruise.task_warning` warns of that one: it drives them forward only). A
+    :class:`CruiseError` line naming the driver, its tasks and the fix, before anything is written."""
+    from garage_mj.driving.drivers import resolve_driver
+
+    declared = getattr(resolve_driver(settings.driver), "tasks", ("cruise",))
+    tasks = (declared,) if isinstance(declared, str) else tuple(map(str, declared))
+    if settings.task in tasks or "cruise" in tasks:
+        return
+    fix = " or ".join(f"--task {t}" for t in tasks) or "another --task"
+    raise CruiseError(f"driver {settings.driver!r} is not made for {settings.task} tests (its class declares tasks = "
+                      f"{tasks!r}); give {fix}, or a --driver made for {settings.task} tests")
+
+
+def check_stall(sources: Sequence[CruiseSource], stall: int | None) -> None:
+    """Refuse a ``stall`` id that a garage of ``sources`` lacks (a :class:`CruiseError` line naming the garage and the
+    ids every garage has), before anything is written or any test runs."""
+    if stall is None:
+        return
+    from garage_mj.scene.stalls import stall_layout
+
+    counts = [(s, len(stall_layout(s.garage).stalls)) for s in sources]
+    lacking = [(s, n) for s, n in counts if not 0 <= stall < n]
+    if not lacking:
+        return
+    s, n = lacking[0]
+    common = min(n for _, n in counts)
+    others = f" and {len(lacking) - 1} other garage(s)" if len(lacking) > 1 else ""
+    fix = f"a --stall in 0..{common - 1} (every garage has those)" if common > 0 else "another garage"
+    has = f"its stalls are 0..{n - 1}" if n else "it has no stall"
+    raise CruiseError(f"stall {stall} does not exist in garage {s.name!r}{others} ({has}); "
+                      f"give {fix}, or leave --stall out to draw one per test")
 
 
 def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
@@ -222,11 +268,15 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: C
                 compute: Compute, max_tests: int | None, xosc: bool = False,
                 route_choice: RouteModelChoice | None = None) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
+    csv_path = out / "tests.csv"
+    # refused before anything is written: a run of other settings, then a resumed row that is not one of this run
+    check_settings(out, settings, choice.source, write=False)
+    parsed = parse_tests(csv_path)
+    check_rows(csv_path, parsed, settings)
     clean_temp(out)  # temp files of a killed run's atomic writes
     check_settings(out, settings, choice.source)
     _write_garages(out, srcs)
-    csv_path = out / "tests.csv"
-    rows = read_tests(csv_path)
+    rows = repair_tests(csv_path, parsed)
     done = {(r["garage_hash"], int(r["test"])) for r in rows}
     xosc_dir, exported = None, None
     if xosc:
@@ -241,7 +291,7 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: C
     if jobs:
         from tqdm import tqdm
 
-        if not csv_path.is_file():  # read_tests left an existing file with its header and whole lines
+        if not csv_path.is_file():  # repair_tests left an existing file with its header and whole lines
             write_csv(csv_path, TEST_COLUMNS, [])
         with csv_path.open("a", newline="") as f, tqdm(total=len(jobs), disable=not compute.progress,
                                                        desc="cruise", unit="test") as bar:

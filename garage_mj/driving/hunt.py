@@ -46,7 +46,7 @@ from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, check_backend, ray
 from garage_mj.core.config import refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir, write_json
-from garage_mj.driving.cruise import run_cruise, run_test, xosc_name
+from garage_mj.driving.cruise import check_task, run_cruise, run_test, xosc_name
 from garage_mj.driving.episode import check_driver, close_cached_env
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests, failure_counts, read_tests
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings, CruiseSource
@@ -191,8 +191,13 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
     # a bad driver fails here; one warning for all the runs
     choice = choose_action_type(settings.driver, settings.action_type)
     settings = settings.resolved(choice.action_type)
+    if settings.stall is not None:
+        raise HuntError(f"hunt: stall {settings.stall}: the hunt's garages change, so each test draws its stall; "
+                        "leave stall out")
+    check_task(settings)  # a driver made for other tasks is refused before anything is written
     check_backend(compute)
     check_driver(settings)  # a driver that cannot be built stops the hunt before hunt.json is written
+    start = _starting(map, library, cfg.population, settings.seed)  # a bad map or library: before any write
     out = ensure_dir(out_dir, "--out")
     stored = {"driver": settings.driver, "map": map, "library": str(Path(library).resolve()) if library else None,
               "seed": settings.seed, "action_type": settings.action_type, "occupancy": settings.occupancy,
@@ -203,20 +208,34 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
     with FolderLock(out, "garage-mj hunt", remove=True), session:
         state_path = _state_file(out)
         if state_path.is_file():
-            old = json.loads(state_path.read_text()).get("settings") or {}
-            if isinstance(old, dict):  # a hunt.json from before the setting holds the default
-                old.setdefault("test_timeout", DEFAULT_TEST_TIMEOUT)
+            old = _read_state(state_path).get("settings") or {}
+            if not isinstance(old, dict):
+                raise HuntError(f"{state_path} is damaged (its settings are not an object); restore it, or use "
+                                "another --out")
+            old.setdefault("test_timeout", DEFAULT_TEST_TIMEOUT)  # a hunt.json from before the setting: the default
             refuse_other_settings(old, stored, lambda diff: HuntError(
                 f"{out} holds a hunt with other settings ({', '.join(diff)}); use another --out or the same settings"))
         else:
             write_json(state_path, {"settings": stored, "action_type_from": choice.source})
-        result = _hunt(settings, choice, out, map, library, cfg, compute, cruise_kwargs)
+        result = _hunt(settings, choice, out, start, cfg, compute, cruise_kwargs)
     result.action_type, result.action_label = choice.action_type, choice.label
     return result
 
 
-def _hunt(settings: CruiseSettings, choice: ActionChoice, out: Path, map_name: str | None,
-          library: str | Path | None, cfg: HuntConfig, compute: Compute, cruise_kwargs: dict[str, Any]) -> HuntResult:
+def _read_state(path: Path) -> dict[str, Any]:
+    """``hunt.json``; a damaged one is a :class:`HuntError` line naming it and the fix."""
+    try:
+        state = json.loads(path.read_bytes().decode("utf-8"))
+        if not isinstance(state, dict):
+            raise ValueError("not an object")
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+        raise HuntError(f"{path} is damaged ({type(exc).__name__}: {exc}); it holds the hunt's settings: restore "
+                        "it, or use another --out") from None
+    return state
+
+
+def _hunt(settings: CruiseSettings, choice: ActionChoice, out: Path, start: list[CruiseSource], cfg: HuntConfig,
+          compute: Compute, cruise_kwargs: dict[str, Any]) -> HuntResult:
     from tqdm import tqdm
 
     seed = settings.seed
@@ -240,7 +259,6 @@ def _hunt(settings: CruiseSettings, choice: ActionChoice, out: Path, map_name: s
         bar.update(cfg.tests * len(batch))
 
     bar = tqdm(total=cfg.budget, disable=not compute.progress, desc="hunt", unit="test")
-    start = _starting(map_name, library, cfg.population, seed)
     for s in start:
         scored[s.hash] = Scored(s)
     run([(scored[s.hash], 0) for s in start])
@@ -272,7 +290,7 @@ def _hunt(settings: CruiseSettings, choice: ActionChoice, out: Path, map_name: s
     ranked = sorted(scored.values(), key=lambda s: (-(s.rate if s.feasible else -1.0), -len(s.feasible),
                                                       s.source.hash))
     files, worst, table = _write_outputs(out, ranked, cfg, settings)
-    state = json.loads(_state_file(out).read_text())
+    state = _read_state(_state_file(out))
     state.update({"action_type_from": choice.source, "generations": generation,
                   "tests": sum(len(s.rows) for s in scored.values()),
                   "garages": len(scored), "files": {k: str(v) for k, v in files.items() if not isinstance(v, list)}})

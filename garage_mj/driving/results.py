@@ -30,7 +30,7 @@ import io
 import json
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,13 @@ from garage_mj.core.config import refuse_other_settings
 from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.driving.difficulty.regression import PAPER_R, regression
 from garage_mj.driving.sim.outcomes import FAILURES, HIT_KINDS, OUTCOMES, PAPER_CLASS, OutcomeKind
-from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseError, CruiseSettings, CruiseSource
+from garage_mj.driving.sources import (
+    DEFAULT_TEST_TIMEOUT,
+    CruiseError,
+    CruiseSettings,
+    CruiseSource,
+    cruise_seed,
+)
 
 #: The columns of ``tests.csv`` before park tests (a file with these alone is repaired to :data:`TEST_COLUMNS`).
 LEGACY_TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome",
@@ -85,18 +91,20 @@ def _complete(row: dict[str, str]) -> bool:
     return row.get("garage_hash", "") != "" and row.get("test", "").isdigit()
 
 
-def read_tests(path: Path) -> list[dict[str, str]]:
-    """The complete rows of ``tests.csv``, each (garage_hash, test) once; the file is repaired in place.
+@dataclass(frozen=True)
+class ParsedTests:
+    """What :func:`parse_tests` read of a ``tests.csv``: the complete rows, the line each starts on, and whether the
+    file needs writing back (:func:`repair_tests`) to hold just those under the :data:`TEST_COLUMNS` header."""
 
-    Repairs what a crash, a second run or a careless edit can leave, never dropping a complete
-    row: an empty file or a missing header (the header is written back), a torn last line (a
-    ``kill -9`` mid-write: dropped), a header of other columns (rewritten with
-    :data:`TEST_COLUMNS`), and duplicate (garage_hash, test) rows (the first one is kept). A file from
-    before park tests (:data:`LEGACY_TEST_COLUMNS`, with or without its header) is a cruise run's: its
-    rows get task ``cruise`` and empty park columns.
-    """
+    rows: list[dict[str, str]]
+    lines: list[int]  # the file's line (1: the first) each row starts on
+    repair: bool
+
+
+def parse_tests(path: Path) -> ParsedTests:
+    """:func:`read_tests` without the repair: nothing is written."""
     if not path.is_file():
-        return []
+        return ParsedTests([], [], False)
     text = path.read_bytes().decode("utf-8", errors="replace")
     parts = text.split("\n")  # not splitlines(): it also breaks at \r, \x0b, \u2028... inside fields
     lines = [p + "\n" for p in parts[:-1]] + ([parts[-1]] if parts[-1] else [])
@@ -108,9 +116,13 @@ def read_tests(path: Path) -> list[dict[str, str]]:
     if torn:
         body = body[:-1]
     good: list[dict[str, str]] = []
+    starts: list[int] = []
     seen: set[tuple[str, str]] = set()
     dropped = 0
-    for fields in csv.reader(body):
+    reader = csv.reader(body)
+    ended = 0  # the body lines read so far
+    for fields in reader:
+        start, ended = ended + 1 + has_header, reader.line_num
         row = dict(zip(columns, fields)) if len(fields) == len(columns) else None
         if row is None and not has_header and len(fields) == len(LEGACY_TEST_COLUMNS):
             row = dict(zip(LEGACY_TEST_COLUMNS, fields))
@@ -121,9 +133,102 @@ def read_tests(path: Path) -> list[dict[str, str]]:
             continue
         seen.add((row["garage_hash"], row["test"]))
         good.append(row)
-    if torn or dropped or not has_header or tuple(columns) != TEST_COLUMNS:
-        write_csv(path, TEST_COLUMNS, good)
-    return good
+        starts.append(start)
+    return ParsedTests(good, starts, bool(torn or dropped or not has_header or tuple(columns) != TEST_COLUMNS))
+
+
+def repair_tests(path: Path, parsed: ParsedTests) -> list[dict[str, str]]:
+    """Write ``path`` back as :func:`parse_tests` found it should be (when it should); its rows."""
+    if parsed.repair:
+        write_csv(path, TEST_COLUMNS, parsed.rows)
+    return parsed.rows
+
+
+def read_tests(path: Path) -> list[dict[str, str]]:
+    """The complete rows of ``tests.csv``, each (garage_hash, test) once; the file is repaired in place.
+
+    Repairs what a crash, a second run or a careless edit can leave, never dropping a complete
+    row: an empty file or a missing header (the header is written back), a torn last line (a
+    ``kill -9`` mid-write: dropped), a header of other columns (rewritten with
+    :data:`TEST_COLUMNS`), and duplicate (garage_hash, test) rows (the first one is kept). A file from
+    before park tests (:data:`LEGACY_TEST_COLUMNS`, with or without its header) is a cruise run's: its
+    rows get task ``cruise`` and empty park columns. The values are not checked: a run that resumes
+    checks them against its settings (:func:`check_rows`).
+    """
+    return repair_tests(path, parse_tests(path))
+
+
+#: Cells that hold a whole number >= 0 where not empty, and cells that hold a finite number where not empty.
+_COUNT_CELLS = ("target_stall", "pedestrians", "moving_cars", "clutter", "direction_changes", "plan_cusps")
+_NUMBER_CELLS = ("time", "path_length", "route_length", "difficulty", "mean_road_length", "mean_intersection_degree",
+                 "wall_s", "position_error_m", "heading_error_deg", "lateral_offset_m", "park_time_s",
+                 "min_clearance_m", "plan_length_m", "plan_clearance_m")
+#: Cells every row of a test holds (the rest are empty where a test was not driven or its process died).
+_REQUIRED_CELLS = ("garage", "garage_hash", "test", "seed", "driver", "outcome", "difficulty", "mean_road_length",
+                   "mean_intersection_degree", "wall_s", "task")
+_OUTCOME_NAMES = tuple(s.kind for s in OUTCOMES)
+
+
+def _finite(text: str) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False
+
+
+def row_problem(row: dict[str, str], settings: CruiseSettings) -> tuple[str, str] | None:
+    """Why ``row`` (read back from ``tests.csv``) is not a row a run with ``settings`` writes: ``(column, what is
+    wrong)``, or None for a good row."""
+    for col in _REQUIRED_CELLS:
+        if row[col] == "":
+            return col, "is empty; every test's row holds it"
+    if row["outcome"] not in _OUTCOME_NAMES:
+        return "outcome", f"is not a test outcome (one of {', '.join(_OUTCOME_NAMES)})"
+    if row["task"] != settings.task:
+        return "task", f"is not this run's task ({settings.task})"
+    if row["driver"] != settings.driver:
+        return "driver", f"is not this run's driver ({settings.driver!r})"
+    for col in ("test", "seed"):
+        if not (row[col].isascii() and row[col].isdigit()):
+            return col, "is not a whole number >= 0"
+    if int(row["seed"]) != cruise_seed(settings.seed, row["garage_hash"], int(row["test"])):
+        return "seed", f"is not the seed of test {row['test']} of this garage under the run's seed {settings.seed}"
+    for col in _COUNT_CELLS:
+        if row[col] != "" and not (row[col].isascii() and row[col].isdigit()):
+            return col, "is not a whole number >= 0"
+    for col in _NUMBER_CELLS:
+        if row[col] != "" and not _finite(row[col]):
+            return col, "is not a finite number"
+    if row["feasible"] not in ("", "0", "1"):
+        return "feasible", "is not 0, 1 or empty"
+    if row["feasible"] != "" and (row["feasible"] == "0") != (row["outcome"] == OutcomeKind.INFEASIBLE.value):
+        return "feasible", f"does not go with outcome {row['outcome']!r} (0 for infeasible tests alone)"
+    if settings.stall is not None and row["target_stall"] not in ("", str(settings.stall)):
+        return "target_stall", f"is not this run's stall ({settings.stall})"
+    if settings.task == "cruise":
+        extra = next((c for c in PARK_COLUMNS if c != "task" and row[c] != ""), None)
+        if extra is not None:
+            return extra, "is filled in a cruise test's row (park columns are empty there)"
+    elif row["maneuver"] not in ("", "reverse", "forward") or (
+            settings.maneuver != "any" and row["maneuver"] not in ("", settings.maneuver)):
+        return "maneuver", f"is not this run's maneuver ({settings.maneuver})"
+    return None
+
+
+def check_rows(path: Path, parsed: ParsedTests, settings: CruiseSettings) -> None:
+    """Refuse a resumed ``tests.csv`` row that a run with ``settings`` does not write (:func:`row_problem`): a
+    :class:`CruiseError` line naming the file, the line, the cell and the fix. Counting such a row would change
+    the run's results, and dropping it would too."""
+    for row, line in zip(parsed.rows, parsed.lines):
+        problem = row_problem(row, settings)
+        if problem is not None:
+            col, why = problem
+            raise CruiseError(f"{path} line {line}: {col} {_shown_cell(row[col])} {why}; delete that line to run its "
+                              f"test again (or restore the file), or use another --out")
+
+
+def _shown_cell(text: str) -> str:
+    return repr(text if len(text) <= 40 else text[:37] + "...")
 
 
 def _csv_text(columns: Sequence[str], rows: Iterable[dict[str, Any]]) -> str:
@@ -143,11 +248,13 @@ def _shown(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--action-type") -> None:
+def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--action-type",
+                   write: bool = True) -> None:
     """Store the settings in ``run.json`` (atomically), or refuse a run whose settings differ.
 
     ``action_from`` (``"driver"`` or ``"--action-type"``) is recorded beside them, not compared: the same
-    action type chosen another way runs the same tests, so the run resumes.
+    action type chosen another way runs the same tests, so the run resumes. ``write=False``: only refuse,
+    writing nothing.
     """
     path = out / "run.json"
     mine = json.loads(json.dumps(asdict(settings)))
@@ -160,11 +267,12 @@ def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--ac
             if not isinstance(theirs, dict):
                 raise ValueError("not an object")
         except (ValueError, UnicodeDecodeError, RecursionError) as exc:
-            if read_tests(out / "tests.csv"):
+            if parse_tests(out / "tests.csv").rows:
                 raise CruiseError(f"{path} is damaged ({type(exc).__name__}: {exc}); it holds the settings "
                                   f"of the tests in {out / 'tests.csv'}: restore it, or use another --out") from None
             theirs = record  # no test was recorded under it: nothing to lose, write it afresh
-            write_json(path, record)
+            if write:
+                write_json(path, record)
         theirs = {k: v for k, v in theirs.items() if k not in PROVENANCE_KEYS}
         theirs.setdefault("test_timeout", DEFAULT_TEST_TIMEOUT)  # a run.json from before the setting: the default
         for key, default in TASK_DEFAULTS.items():  # left out (a cruise run's), or from before park tests
@@ -177,7 +285,7 @@ def check_settings(out: Path, settings: CruiseSettings, action_from: str = "--ac
                                f"use another --out or the same settings to resume it{hint}")
 
         refuse_other_settings(theirs, mine, refuse)
-    else:
+    elif write:
         write_json(path, record)
 
 

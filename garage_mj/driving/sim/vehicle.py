@@ -99,6 +99,16 @@ def clip(x: float, lo: float, hi: float) -> float:
     return min(max(float(x), lo), hi)
 
 
+def _discrete_index(arr: np.ndarray) -> int | None:
+    """A 0-d action array as a discrete action's index: an integer, or a float with an integer value (``2.0``);
+    None for anything else (``2.7``, ``True``, a string), which is never rounded or floored into an action."""
+    if arr.dtype.kind in "iu":
+        return int(arr)
+    if arr.dtype.kind == "f" and float(arr).is_integer():
+        return int(arr)
+    return None
+
+
 def command_from_action(action) -> tuple[float, float]:
     """``(throttle, steer)`` from a discrete action (int) or a continuous ``[throttle, steer]``; a driver's
     action that is neither (NaN or infinite included) is a ``ValueError`` naming it, never a command."""
@@ -108,7 +118,7 @@ def command_from_action(action) -> tuple[float, float]:
             raise ValueError(f"the driver's action {action!r} is not finite (NaN or infinity); a discrete action "
                              f"is one of 0..{len(DiscreteAction) - 1}")
         try:
-            return DISCRETE_COMMANDS[DiscreteAction(int(arr))]
+            return DISCRETE_COMMANDS[DiscreteAction(_discrete_index(arr))]
         except (ValueError, TypeError):
             raise ValueError(f"discrete action {action!r} is not one of 0..{len(DiscreteAction) - 1}") from None
     if arr.shape != (2,):
@@ -136,7 +146,7 @@ def park_command_from_action(action) -> tuple[float, float, Gear | None]:
             raise ValueError(f"the driver's action {action!r} is not finite (NaN or infinity); a discrete park "
                              f"action is one of 0..{len(ParkAction) - 1}")
         try:
-            return PARK_DISCRETE_COMMANDS[ParkAction(int(arr))]
+            return PARK_DISCRETE_COMMANDS[ParkAction(_discrete_index(arr))]
         except (ValueError, TypeError):
             raise ValueError(f"park action {action!r} is not one of 0..{len(ParkAction) - 1}") from None
     if arr.shape != (PARK_CONTINUOUS_SIZE,):
