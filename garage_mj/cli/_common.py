@@ -73,6 +73,23 @@ def positive_int(text: str) -> int:
     return _int_at_least(text, 1, "must be >= 1")
 
 
+def int_in(low: int, high: int) -> Callable[[str], int]:
+    """argparse type: an integer in [low, high] (``1_000`` allowed); the message names the range."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text.replace("_", ""))
+        except ValueError:  # "1e12", "nan", and numbers of more than 4,300 digits
+            n = None
+        if n is None or not low <= n <= high:
+            shown = text if len(text) <= 40 else f"{text[:20]}...({len(text)} characters)"
+            raise argparse.ArgumentTypeError(f"{shown} is not allowed: give an integer from {low:,} to {high:,}")
+        return n
+
+    parse.__name__ = f"integer from {low:,} to {high:,}"
+    return parse
+
+
 def positive_seconds(text: str) -> float:
     """argparse type: a number of seconds > 0 (``--test-timeout``)."""
     try:

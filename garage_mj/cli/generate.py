@@ -7,10 +7,22 @@ import functools
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, positive_int, seed, unit_range, user_errors
+from garage_mj.cli._common import (
+    SHIPPED_ROUTE_MODELS,
+    int_in,
+    positive_seconds,
+    seed,
+    unit_range,
+    user_errors,
+)
 from garage_mj.generation.library import check_writable
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
+
+#: garage_mj.generation.generator's bounds, named here so that --help stays light (no torch import)
+MAX_COUNT = 1_000_000  # [garages] one call's --count
+MAX_EPISODES = 1_000_000_000  # --max-episodes
+MAX_TRAIN_TIMESTEPS = 1_000_000_000  # --train-timesteps (a shipped protocol run is 2,000,000)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -54,21 +66,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--route-model", type=Path, metavar="FILE",
                    help=f"with --metric route: a model of garage-mj difficulty fit (default: the shipped one; {SHIPPED_ROUTE_MODELS})")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"), help="coverage band [LO, HI] (0-1)")
-    p.add_argument("--count", required=True, type=positive_int, help="distinct garages to find")
+    p.add_argument("--count", required=True, type=int_in(1, MAX_COUNT),
+                   help=f"distinct garages to find (1 to {MAX_COUNT:,})")
     p.add_argument("--library", required=True, type=Path, help="library file (created if missing)")
     p.add_argument("--model", help="generator file, or a shipped map's name to use its generator "
                    "(default: the shipped generator of --map)")
     p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
-    p.add_argument("--max-episodes", type=positive_int, metavar="E",
+    p.add_argument("--max-episodes", type=int_in(1, MAX_EPISODES), metavar="E",
                    help="episode budget (default 2,000 + 200 x COUNT; with --metric route, where each garage "
-                        "rated counts as an episode, 100 + 20 x COUNT)")
-    p.add_argument("--max-seconds", type=float, metavar="S",
-                   help="stop after S seconds of rollouts and search (wall clock)")
+                        f"rated counts as an episode, 100 + 20 x COUNT; at most {MAX_EPISODES:,})")
+    p.add_argument("--max-seconds", type=positive_seconds, metavar="S",
+                   help="stop after S seconds of rollouts and search (wall clock; a number of seconds > 0)")
     p.add_argument("--no-search", action="store_true",
                    help="policy rollouts only (rejection sampling), no search stage")
-    p.add_argument("--train-timesteps", type=positive_int, default=200_000, metavar="T",
+    p.add_argument("--train-timesteps", type=int_in(1, MAX_TRAIN_TIMESTEPS), default=200_000, metavar="T",
                    help="map file without a generator: timesteps to train one with the fast learner "
-                        "(default 200,000)")
+                        f"(default 200,000; at most {MAX_TRAIN_TIMESTEPS:,})")
     p.add_argument("--model-out", type=Path, metavar="PATH",
                    help="map file without --model: where the trained generator goes (reused when it exists; "
                    "default <library stem>.<map name>.generator.zip next to the library)")

@@ -15,6 +15,7 @@ is stored is what the painter makes.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -50,6 +51,8 @@ SEARCH_STEPS_PER_EPISODE = 20  # search mutations that count as one episode of t
 #                                against ~5-10 ms for a rollout episode on a 13x13 map; a replay counts as one)
 SEARCH_SEEDS = 8  # garages of the scripted painter per six-stall axis that seed the search next to the policy's
 ROUTE_POLICY_EPISODES = 20  # by route difficulty: policy episodes (each usable garage rated) before the search
+MAX_COUNT = 1_000_000  # [garages] the most one call stores (--count)
+MAX_EPISODES = 1_000_000_000  # the largest episode budget (--max-episodes)
 
 
 @dataclass(frozen=True)
@@ -338,8 +341,13 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     for name, band in (("difficulty", difficulty), ("coverage", coverage)):
         if band is not None and not 0.0 <= band[0] <= band[1] <= 1.0:
             raise GenerationError(f"--{name} {band[0]} {band[1]}: need 0 <= LO <= HI <= 1")
-    if count < 1:
-        raise GenerationError(f"--count must be >= 1, got {count}")
+    if not 1 <= count <= MAX_COUNT:
+        raise GenerationError(f"--count {count} is not allowed: give an integer from 1 to {MAX_COUNT:,}")
+    if max_episodes is not None and not 1 <= max_episodes <= MAX_EPISODES:
+        raise GenerationError(f"--max-episodes {max_episodes} is not allowed: give an integer from 1 to "
+                              f"{MAX_EPISODES:,}")
+    if max_seconds is not None and not (math.isfinite(max_seconds) and max_seconds > 0):
+        raise GenerationError(f"--max-seconds {max_seconds:g} is not allowed: give a number of seconds > 0")
     garage0 = load_map(map)
     path = _generator_path(map, garage0, model)
     meta = generator_meta(path)

@@ -1,0 +1,104 @@
+"""Bad numbers and paths given to the commands: exit status 2, one error line, nothing written.
+
+NaN, infinite, negative, zero and huge numbers, missing files, files of the wrong kind and an
+output path that is a file or a folder, for the light commands' options (no training, no rollouts).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import pytest
+
+from garage_mj.cli import build_parser, main
+
+GENERATE = ["generate", "--map", "tiny_7x11", "--difficulty", "0.3", "0.4"]
+
+
+def one_error_line(capsys, argv: list[str]) -> str:
+    """Run the CLI in-process: exit status 2, one error line (after argparse's usage, for a bad option), no
+    traceback."""
+    try:
+        rc = main(argv)
+    except SystemExit as exc:  # argparse: its usage, then one error line
+        rc = exc.code
+    out, err = capsys.readouterr()
+    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("usage:") and not ln.startswith(" ")]
+    assert rc == 2, (rc, out, err)
+    assert "Traceback" not in err + out, err
+    assert len(lines) == 1 and "error: " in lines[0], err
+    return lines[0]
+
+
+def snapshot(folder: Path) -> dict[str, str]:
+    """Every file under ``folder`` (its path and content digest): what "nothing written" compares."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir"
+            for p in sorted(folder.rglob("*"))}
+
+
+@pytest.mark.parametrize("option, value, said", [
+    ("--max-seconds", "nan", "a number of seconds > 0"),
+    ("--max-seconds", "inf", "a number of seconds > 0"),
+    ("--max-seconds", "-5", "a number of seconds > 0"),
+    ("--max-seconds", "0", "a number of seconds > 0"),
+    ("--count", "0", "from 1 to 1,000,000"),
+    ("--count", "1000001", "from 1 to 1,000,000"),
+    ("--count", "1e12", "from 1 to 1,000,000"),
+    ("--count", "1" + "0" * 5000, "from 1 to 1,000,000"),
+    ("--max-episodes", "0", "from 1 to 1,000,000,000"),
+    ("--max-episodes", "-3", "from 1 to 1,000,000,000"),
+    ("--max-episodes", "10000000000", "from 1 to 1,000,000,000"),
+    ("--train-timesteps", "0", "from 1 to 1,000,000,000"),
+    ("--train-timesteps", "nan", "from 1 to 1,000,000,000"),
+    ("--train-timesteps", "99999999999", "from 1 to 1,000,000,000"),
+    ("--seed", "-1", "seeds are integers from 0 to 4294967295"),
+    ("--difficulty", "nan", "outside [0, 1]"),
+])
+def test_generate_refuses_a_bad_number_before_it_writes(tmp_path, capsys, option, value, said):
+    argv = [*GENERATE, "--count", "2", "--library", str(tmp_path / "l.sqlite")]
+    if option == "--difficulty":
+        argv[argv.index("--difficulty") + 1] = value
+    elif option == "--count":
+        argv[argv.index("--count") + 1] = value
+    else:
+        argv += [option, value]
+    line = one_error_line(capsys, argv)
+    assert line.startswith("garage-mj generate: error: argument ") and option in line and said in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_declares_its_bounds_in_its_help(capsys):
+    with pytest.raises(SystemExit):
+        main(["generate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "1 to 1,000,000)" in text  # --count
+    assert "seconds > 0" in text  # --max-seconds
+
+
+def test_the_cli_bounds_are_the_generators():
+    from garage_mj.cli import generate as cli
+    from garage_mj.generation import generator
+
+    assert (cli.MAX_COUNT, cli.MAX_EPISODES) == (generator.MAX_COUNT, generator.MAX_EPISODES)
+
+
+@pytest.mark.parametrize("kwargs, said", [
+    ({"max_seconds": float("nan")}, "--max-seconds nan"),
+    ({"max_seconds": -5.0}, "--max-seconds -5"),
+    ({"max_episodes": 0}, "--max-episodes 0"),
+    ({"count": 10**12}, "--count 1000000000000"),
+])
+def test_generate_refuses_a_bad_budget_before_it_writes(tmp_path, kwargs, said):
+    from garage_mj.generation.generator import GenerationError, generate
+
+    args = {"count": 2, **kwargs}
+    with pytest.raises(GenerationError, match=said):
+        generate("tiny_7x11", (0.3, 0.4), args.pop("count"), tmp_path / "l.sqlite", progress=False, **args)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_parser_takes_good_numbers():
+    args = build_parser().parse_args([*GENERATE, "--count", "1_000_000", "--library", "l", "--max-seconds", "0.5",
+                                      "--max-episodes", "7", "--train-timesteps", "2_000"])
+    assert (args.count, args.max_seconds, args.max_episodes, args.train_timesteps) == (1_000_000, 0.5, 7, 2000)
