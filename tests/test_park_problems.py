@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
 
 from garage_mj.cli import main
+from garage_mj.core.fsutil import LOCK_NAME, FolderLock
 from garage_mj.export.park_problems import (
     INDEX,
     ParkProblemError,
@@ -19,6 +21,7 @@ from garage_mj.scene.car import car_geometry
 from garage_mj.scene.drivable import drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.park_planning import centre_to_rear, park_pose
+from tests.test_faults import _unprivileged, one_line_error, shared_tmp, snapshot  # noqa: F401 (a fixture)
 
 
 @pytest.fixture(scope="module")
@@ -101,3 +104,211 @@ def test_export_cli_writes_park_problems(painted_tiny, tmp_path, capsys):
     assert main(["export", "--garage", str(garage), "--park-problems", str(tmp_path / "park")]) == 0
     index = json.loads((tmp_path / "park" / INDEX).read_text())
     assert f"{len(index['problems'])} park problem(s) of 1 garage(s)" in capsys.readouterr().out
+
+
+# -- every bad file is one line ------------------------------------------------------------------------
+def _good(written) -> tuple[Path, dict]:
+    out, index = written
+    path = out / index["problems"][0]["json"]
+    return path, json.loads(path.read_text())
+
+
+def _at(data: dict, *keys):
+    for k in keys:
+        data = data[k]
+    return data
+
+
+def _set(*keys, v):
+    def edit(d: dict) -> None:
+        _at(d, *keys[:-1])[keys[-1]] = v
+    return edit
+
+
+def _del(*keys):
+    def edit(d: dict) -> None:
+        del _at(d, *keys[:-1])[keys[-1]]
+    return edit
+
+
+class _Text:
+    """An edit of the good file's text rather than of its object: ``edit(text)`` gives the file's text or bytes."""
+
+    def __init__(self, edit) -> None:
+        self.edit = edit
+
+
+def _rows(edit):
+    """An edit of the garage grid's rows (a list of strings of block codes)."""
+    def apply(d: dict) -> None:
+        d["garage_grid"] = edit(list(d["garage_grid"]))
+    return apply
+
+
+#: (what, an edit of the good problem's JSON object (or a :class:`_Text` edit of its text), what the message says). Each file is refused with ParkProblemError in one line naming the file.
+BAD_PROBLEMS = [
+    ("start too large an integer", _set("start", 0, v=10**400), "start"),
+    ("nested 100,000 deep", _Text(lambda t: "[" * 100_000 + "]" * 100_000), "nested too deeply"),
+    ("nested deep in car", _Text(lambda t: t.replace('"car": {', '"car": {"x": ' + "[" * 100_000 + "]" * 100_000
+                                                     + ", ", 1)), "nested too deeply"),
+    ("garage name with an escape", _set("garage", v="evil\x1b[2J"), "control character"),
+    ("garage name with a newline", _set("garage", v="a\nb"), "control character"),
+    ("garage name with a bidi override", _set("garage", v="a\u202eb"), "control character"),
+    ("garage name too long", _set("garage", v="a" * 500), "128 characters"),
+    *[(f"car.{k} {v}", _set("car", k, v=v), f"car.{k}")
+      for k in ("wheelbase", "length", "width", "min_turning_radius") for v in (-1.0, 0.0, 1e300)],
+    ("car.wheelbase NaN", _set("car", "wheelbase", v=float("nan")), "car.wheelbase holds nan, not a finite number"),
+    ("car.wheelbase inf", _set("car", "wheelbase", v=float("inf")), "car.wheelbase holds inf, not a finite number"),
+    ("car.front_overhang negative", _set("car", "front_overhang", v=-0.5), "car.front_overhang"),
+    ("car.rear_overhang negative", _set("car", "rear_overhang", v=-0.5), "car.rear_overhang"),
+    ("car.max_steer negative", _set("car", "max_steer", v=-0.7), "car.max_steer"),
+    ("car.max_steer past a right angle", _set("car", "max_steer", v=2.0), "car.max_steer"),
+    ("car length not its parts", _set("car", "length", v=9.0), "car.length"),
+    ("car turning radius not its steering", _set("car", "min_turning_radius", v=9.0), "car.min_turning_radius"),
+    ("car without wheelbase", _del("car", "wheelbase"), "car has no 'wheelbase' key"),
+    ("car with an unknown key", _set("car", "colour", v=1.0), "car.colour"),
+    ("car a list", _set("car", v=[1.0]), "car is not an object"),
+    ("planner margin negative", _set("planner", "margin", v=-0.1), "planner.margin"),
+    ("planner turning radius zero", _set("planner", "turning_radius", v=0.0), "planner.turning_radius"),
+    ("planner without margin", _del("planner", "margin"), "planner has no 'margin' key"),
+    ("planner with an unknown key", _set("planner", "seed", v=3), "planner.seed"),
+    ("region inverted in x", lambda d: d.update(region=[d["region"][2], d["region"][1], d["region"][0], d["region"][3]]),
+     "region"),
+    ("region inverted in y", lambda d: d.update(region=[d["region"][0], d["region"][3], d["region"][2], d["region"][1]]),
+     "region"),
+    ("region empty", _set("region", v=[1.0, 1.0, 1.0, 1.0]), "region"),
+    ("start outside the region", lambda d: d["start"].__setitem__(0, d["region"][2] + 50), "start"),
+    ("goal outside the region", lambda d: d["goal"].__setitem__(1, d["region"][1] - 50), "goal"),
+    ("start yaw huge", _set("start", 2, v=1e300), "start"),
+    ("obstacle vertex far away", _set("obstacles", 0, "vertices", 0, v=[1e300, 0.0]), "obstacle 0"),
+    ("forged garage_hash", _set("garage_hash", v="0" * 64), "garage_hash"),
+    ("garage_hash not hex", _set("garage_hash", v="xyz"), "garage_hash"),
+    ("garage_grid ragged", _rows(lambda r: [r[0][:-1], *r[1:]]), "garage_grid"),
+    ("garage_grid with a letter", _rows(lambda r: ["x" + r[0][1:], *r[1:]]), "garage_grid"),
+    ("garage_grid of other digits", _rows(lambda r: ["\u0661" + r[0][1:], *r[1:]]), "garage_grid"),
+    ("garage_grid too large", _rows(lambda r: ["2" * 65] * 65), "garage_grid"),
+    ("garage_grid not a list", _set("garage_grid", v="2222"), "garage_grid"),
+    ("six_stall_axis unknown", _set("six_stall_axis", v="UP"), "six_stall_axis"),
+    ("version true", _set("version", v=True), "version True"),
+    ("version a float", lambda d: d.update(version=float(d["version"])), "version"),
+    ("stall past the garage's stalls", _set("stall", v=10**6), "stall 1000000"),
+    ("stall far too large", _set("stall", v=10**30), "stall"),
+    ("maneuver a list", _set("maneuver", v=["reverse"]), "maneuver"),
+    ("obstacle of an unknown class", _set("obstacles", 0, "class", v="tree"), "'tree'"),
+    ("obstacle with an unknown key", _set("obstacles", 0, "height", v=2.0), "obstacle 0"),
+    ("obstacle of zero area", _set("obstacles", 0, "vertices", v=[[0, 0], [1, 0], [2, 0]]), "obstacle 0"),
+    ("obstacle clockwise", lambda d: d["obstacles"][0]["vertices"].reverse(), "counter-clockwise"),
+    ("stall_outline of zero area", _set("stall_outline", v=[[0, 0], [1, 1], [2, 2]]), "stall_outline"),
+    ("an unknown key", _set("colour", v="red"), "'colour'"),
+    ("a key twice", _Text(lambda t: t.replace('"start": ', '"start": [0, 0, 0], "start": ', 1)), "'start' twice"),
+    ("UTF-16", _Text(lambda t: t.encode("utf-16")), "UTF-8"),
+    ("more than the size limit", _Text(lambda t: b" " * (17 << 20) + t.encode()), "MiB"),
+    ("empty", _Text(lambda t: ""), "is not JSON"),
+]
+
+
+@pytest.mark.parametrize(("edit", "says"), [b[1:] for b in BAD_PROBLEMS], ids=[b[0] for b in BAD_PROBLEMS])
+def test_every_bad_problem_file_is_one_line(written, tmp_path, edit, says):
+    path, good = _good(written)
+    assert read_park_problem(path).to_json() == good  # the file the edits start from is good
+    if isinstance(edit, _Text):
+        data = edit.edit(json.dumps(good, indent=2))
+    else:
+        edited = json.loads(json.dumps(good))
+        edit(edited)
+        data = json.dumps(edited, indent=2)
+    bad = tmp_path / "bad.json"
+    bad.write_bytes(data if isinstance(data, bytes) else data.encode())
+    with pytest.raises(ParkProblemError) as err:
+        read_park_problem(bad)
+    message = str(err.value)
+    assert says in message and str(bad) in message and "\n" not in message, message
+    assert "garage-mj export --park-problems" in message, message  # the fix
+
+
+def test_a_folder_or_a_pipe_is_not_a_problem_file(tmp_path):
+    fifo = tmp_path / "fifo.json"
+    os.mkfifo(fifo)
+    for reader in (read_park_problem, read_tpcap_case):
+        for path in (tmp_path, fifo):  # a pipe without a writer would block the read for ever
+            with pytest.raises(ParkProblemError, match="is not a file") as err:
+                reader(path)
+            assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def _case(lines: list[str]) -> str:
+    return "".join(f"{v}\n" for v in lines)
+
+
+#: (what, a function of the good case's lines giving the file's text or bytes, what the message says)
+BAD_CASES = [
+    ("obstacle count NaN", lambda v: _case([*v[:6], "nan", *v[7:]]), "V[7] holds nan, not a finite number"),
+    ("obstacle count inf", lambda v: _case([*v[:6], "inf", *v[7:]]), "V[7] holds inf, not a finite number"),
+    ("obstacle count -inf", lambda v: _case([*v[:6], "-inf", *v[7:]]), "V[7] holds -inf"),
+    ("obstacle count 1e400", lambda v: _case([*v[:6], "1e400", *v[7:]]), "V[7] holds 1e400"),
+    ("vertex count NaN", lambda v: _case([*v[:7], "nan", *v[8:]]), "V[8] holds nan"),
+    ("vertex count inf", lambda v: _case([*v[:7], "inf", *v[8:]]), "V[8] holds inf"),
+    ("start x NaN", lambda v: _case(["nan", *v[1:]]), "V[1] holds nan"),
+    ("start yaw inf", lambda v: _case([*v[:2], "inf", *v[3:]]), "V[3] holds inf"),
+    ("goal yaw 1e400", lambda v: _case([*v[:5], "1e400", *v[6:]]), "V[6] holds 1e400"),
+    ("vertex x NaN", lambda v: _case([*v[:-2], "nan", v[-1]]), "holds nan, not a finite number"),
+    ("vertex y -inf", lambda v: _case([*v[:-1], "-inf"]), "holds -inf, not a finite number"),
+    ("vertex far away", lambda v: _case([*v[:-1], "1e300"]), "= 1e+300 is not allowed"),
+    ("yaw huge", lambda v: _case([*v[:2], "1e300", *v[3:]]), "V[3] = 1e+300 is not allowed"),
+    ("a number with an underscore", lambda v: _case(["1_0", *v[1:]]), "V[1] holds '1_0', not a number"),
+    ("a digit of another script", lambda v: _case(["\u0661", *v[1:]]), "not a number"),
+    ("a polygon of zero area", lambda v: _case([*v[:6], "1", "3", "0", "0", "1", "1", "2", "2"]), "zero area"),
+    ("latin-1", lambda v: _case(v).encode() + "\u00e9\n".encode("latin-1"), "UTF-8"),
+    ("more than the size limit", lambda v: _case(v) + " " * (17 << 20), "MiB"),
+]
+
+
+@pytest.mark.parametrize(("edit", "says"), [b[1:] for b in BAD_CASES], ids=[b[0] for b in BAD_CASES])
+def test_every_bad_tpcap_case_is_one_line(written, tmp_path, edit, says):
+    out, index = written
+    good = out / index["problems"][0]["csv"]
+    read_tpcap_case(good)
+    data = edit(good.read_text().split())
+    bad = tmp_path / "Case1.csv"
+    bad.write_bytes(data if isinstance(data, bytes) else data.encode())
+    with pytest.raises(ParkProblemError) as err:
+        read_tpcap_case(bad)
+    message = str(err.value)
+    assert says in message and str(bad) in message and "\n" not in message, message
+
+
+# -- the export's folder ----------------------------------------------------------------------------------
+def test_a_second_park_problems_export_into_a_busy_folder_is_one_line(painted_tiny, tmp_path, capsys):
+    garage = tmp_path / "garage.json"
+    garage.write_text(painted_tiny.to_json())
+    out = tmp_path / "park"
+    with FolderLock(out, "garage-mj export"):  # a first export, still running
+        before = snapshot(out)
+        line = one_line_error(capsys, ["export", "--garage", str(garage), "--park-problems", str(out)])
+        assert f"{out} is in use by garage-mj export (pid {os.getpid()})" in line, line
+        assert snapshot(out) == before  # nothing written
+    for flag in ("--out", "--carla-package"):  # one folder for two kinds of output: refused before any work
+        line = one_line_error(capsys, ["export", "--garage", str(garage), "--park-problems", str(out), flag, str(out)])
+        assert "--park-problems" in line and flag in line and "a folder of their own" in line, line
+    assert main(["export", "--garage", str(garage), "--park-problems", str(out)]) == 0
+    assert not (out / LOCK_NAME).exists()
+
+
+def test_a_read_only_park_problems_target_is_one_line_naming_it(painted_tiny, shared_tmp):  # noqa: F811
+    garage = shared_tmp / "garage.json"
+    garage.write_text(painted_tiny.to_json())
+    out = shared_tmp / "park"
+    assert main(["export", "--garage", str(garage), "--park-problems", str(out)]) == 0
+    folder = next(p for p in out.iterdir() if p.is_dir())
+    os.chmod(out, 0o777)
+    for target in (folder, out):  # the garage's folder, then the whole output folder
+        os.chmod(folder, 0o777)
+        os.chmod(target, 0o555)
+        before = snapshot(shared_tmp)
+        done = _unprivileged(["export", "--garage", str(garage), "--park-problems", str(out), "--quiet",
+                              "--out", str(shared_tmp / "packs")], shared_tmp)
+        err = [ln for ln in done.stderr.splitlines() if ln.strip()]
+        assert done.returncode == 2 and len(err) == 1, done.stderr
+        assert f"--park-problems {out}:" in err[0] and str(target) in err[0] and ".tmp" not in err[0], err[0]
+        assert "read-only" in err[0] and "writable" in err[0], err[0]
+        assert snapshot(shared_tmp) == before and not (shared_tmp / "packs").exists()  # refused before any pack

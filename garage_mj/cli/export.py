@@ -95,13 +95,25 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None and args.carla_package is not None and \
             args.out.resolve() == args.carla_package.resolve():
         raise UserError(f"--out and --carla-package both name {args.out}; give the package a folder of its own")
+    if args.park_problems is not None:
+        for flag, other in (("--out", args.out), ("--carla-package", args.carla_package)):
+            if other is not None and other.resolve() == args.park_problems.resolve():
+                raise UserError(f"{flag} and --park-problems both name {other}; give the park problems a folder of "
+                                "their own")
     with ExitStack() as stack:
         if args.carla_package is not None:
             from garage_mj.export.carla_package import package_lock
 
             # a bad or busy folder is refused before any work; the lock is held to the end
             stack.enter_context(package_lock(args.carla_package))
-        _export(args, _garages(args))
+        if args.park_problems is not None:
+            from garage_mj.export.park_problems import check_park_problems_targets, park_problems_lock
+
+            stack.enter_context(park_problems_lock(args.park_problems))  # the same, for the park problems' folder
+        garages = _garages(args)
+        if args.park_problems is not None:
+            check_park_problems_targets(garages, args.park_problems)  # a read-only one: refused before any pack
+        _export(args, garages)
     return 0
 
 
@@ -141,6 +153,6 @@ def _export(args: argparse.Namespace, garages: list[Garage]) -> None:
     if args.park_problems is not None:
         from garage_mj.export.park_problems import write_park_problems
 
-        index = write_park_problems(garages, args.park_problems)
+        index = write_park_problems(garages, args.park_problems, locked=True)
         count = len(json.loads(index.read_text())["problems"])
         print(f"{count} park problem(s) of {len(garages)} garage(s) in {args.park_problems} (index: {index})")

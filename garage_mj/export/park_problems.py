@@ -16,16 +16,20 @@ stall, is where the park test starts) and per maneuver (``reverse``: reverse-in,
 - ``DIR/park_problems.json``: the index of this export: every problem's two files, and the stalls
   left out (no feasible cruise test, so no start pose) with the reason.
 
-``<garage>`` is the garage's asset pack folder name (its name and 12 hex digits of its hash).
+``<garage>`` is the garage's asset pack folder name (its name and 12 hex digits of its hash). The export
+holds the lock of ``DIR`` (:class:`~garage_mj.core.fsutil.FolderLock`), so a second export into it meanwhile
+stops in one line; a folder it cannot write is named in one line before anything is written.
 
 The obstacles are those of the reference planner (:mod:`garage_mj.scene.park_planning`) within reach
 of its planning area: walls, obstacle blocks, pillars, and a parked car in every other stall (the
 outline of the stall, which a parked car lies inside: the worst case of any occupancy), each an
 axis-aligned rectangle written as its four corners, counter-clockwise. The target stall is empty.
 
-JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 1; lengths in metres, angles in radians)::
+JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 2; lengths in metres, angles in radians)::
 
     garage, garage_hash        the garage's name and canonical hash (Garage.canonical_hash)
+    garage_grid, six_stall_axis  the garage's block codes, one string of digits per row, and its six-stall
+                               axis: what garage_hash is the hash of, so a reader can check it
     stall, maneuver            the stall id and "reverse" or "forward"
     start, goal                [x, y, yaw] of the rear-axle midpoint (TPCAP's reference point)
     start_centre, goal_centre  [x, y, yaw] of the car's centre (the drive env's Car.pose)
@@ -40,17 +44,25 @@ JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 1; lengths in 
 
 from __future__ import annotations
 
+import errno
 import json
 import math
-from collections.abc import Iterable
+import os
+import re
+import stat
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from garage_mj.core.errors import GarageMJError
-from garage_mj.core.fsutil import atomic_write, ensure_dir, write_json
+import numpy as np
+
+from garage_mj.core.errors import GarageMJError, control_character
+from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp
 from garage_mj.export.pack import pack_name
-from garage_mj.grid.garage import Garage
+from garage_mj.grid.blocks import AXES, STALL_TABLE
+from garage_mj.grid.garage import MAX_NAME, MAX_SIDE, Garage, grid_hash
 from garage_mj.scene.car import CarGeometry, car_geometry
 from garage_mj.scene.drivable import drive_planner
 from garage_mj.scene.garage_scene import GarageScene
@@ -65,13 +77,24 @@ from garage_mj.scene.park_planning import (
 )
 
 FORMAT = "garage-mj park problem"
-VERSION = 1
+VERSION = 2  # 2: the garage's grid and six-stall axis, so that garage_hash can be checked
 INDEX = "park_problems.json"
 _POSE = ("x", "y", "yaw")
+#: The keys of a problem file, each required; any other key is refused.
+KEYS = ("format", "version", "garage", "garage_hash", "garage_grid", "six_stall_axis", "stall", "maneuver", "start",
+        "goal", "start_centre", "goal_centre", "stall_outline", "region", "car", "planner", "obstacles")
+CAR_KEYS = ("wheelbase", "length", "width", "front_overhang", "rear_overhang", "max_steer", "min_turning_radius")
+PLANNER_KEYS = ("margin", "turning_radius")
+CLASSES = ("wall", "obstacle", "pillar", "parked_car")
+MAX_BYTES = 16 << 20  # [bytes] of a file read: far above any problem (a 64x64 garage's is some 100 kB)
+MAX_COORD = 10_000.0  # [m] |x| and |y| of any point: a garage is at most 576 m across
+MAX_CAR = 100.0  # [m] any length of the car
+_FIX = "write it again with garage-mj export --park-problems"
 
 
 class ParkProblemError(GarageMJError):
-    """A park problem file that cannot be read; the message names the file and what is wrong."""
+    """A park problem file that cannot be read, or a park problems folder that cannot be written; the
+    message names the file or folder, what is wrong and the fix."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +103,8 @@ class ParkProblem:
 
     garage: str
     garage_hash: str
+    garage_grid: tuple[str, ...]  # block codes, one string of digits per row
+    six_stall_axis: str
     stall: int
     maneuver: str
     start: tuple[float, float, float]  # rear-axle midpoint
@@ -99,7 +124,7 @@ class ParkProblem:
 
     def to_json(self) -> dict[str, Any]:
         return {"format": FORMAT, "version": VERSION, "garage": self.garage, "garage_hash": self.garage_hash,
-                "stall": self.stall, "maneuver": self.maneuver, "start": list(self.start), "goal": list(self.goal),
+                "garage_grid": list(self.garage_grid), "six_stall_axis": self.six_stall_axis, "stall": self.stall, "maneuver": self.maneuver, "start": list(self.start), "goal": list(self.goal),
                 "start_centre": list(self.start_centre), "goal_centre": list(self.goal_centre),
                 "stall_outline": [list(p) for p in self.stall_outline], "region": list(self.region),
                 "car": dict(self.car), "planner": dict(self.planner),
@@ -130,6 +155,8 @@ def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: Pa
     car = car or car_geometry()
     planner, cruise = ParkPlanner(scene, car, config), drive_planner(scene, car)
     problems, skipped = [], {}
+    garage = scene.garage
+    rows = tuple("".join(str(int(v)) for v in row) for row in garage.grid)
     for stall in scene.stalls.stalls:
         test = cruise.plan(stall.id)
         if not test.feasible:
@@ -141,7 +168,8 @@ def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: Pa
             near = planner.near(obs, region)
             goal = park_pose(stall, car, name)
             problems.append(ParkProblem(
-                garage=scene.name, garage_hash=scene.garage.canonical_hash(), stall=stall.id, maneuver=name,
+                garage=scene.name, garage_hash=garage.canonical_hash(), garage_grid=rows,
+                six_stall_axis=garage.six_stall_axis, stall=stall.id, maneuver=name,
                 start=_pose(centre_to_rear(test.goal, car)), goal=_pose(centre_to_rear(goal, car)),
                 start_centre=_pose(test.goal), goal_centre=_pose(goal),
                 stall_outline=tuple((float(x), float(y)) for x, y in stall.corners),
@@ -161,119 +189,401 @@ def _corners(box: list[float]) -> tuple[tuple[float, float], ...]:
 
 
 def write_park_problems(garages: Iterable[Garage | GarageScene], out_dir: str | Path, car: CarGeometry | None = None,
-                        config: ParkConfig = DEFAULT_PARK) -> Path:
-    """Write every park test of ``garages`` under ``out_dir`` (module docstring); returns the index file."""
-    out_dir = ensure_dir(out_dir)
+                        config: ParkConfig = DEFAULT_PARK, *, locked: bool = False) -> Path:
+    """Write every park test of ``garages`` under ``out_dir`` (module docstring); returns the index file.
+
+    ``locked``: the caller holds :func:`park_problems_lock` on ``out_dir`` (the CLI takes it before any
+    work); else this takes it. A folder that cannot be written is a :class:`ParkProblemError` naming it.
+    """
+    if not locked:
+        with park_problems_lock(out_dir):
+            return write_park_problems(garages, out_dir, car, config, locked=True)
+    out_dir = Path(out_dir)
+    items = list(garages)
+    folders = check_park_problems_targets(items, out_dir)
     entries, left_out = [], []
-    for item in garages:
-        scene = item if isinstance(item, GarageScene) else GarageScene(item)
-        folder = ensure_dir(out_dir / pack_name(scene.garage))
-        problems, skipped = park_problems(scene, car, config)
-        for p in problems:
-            write_json(folder / f"{p.name}.json", p.to_json())
-            atomic_write(folder / f"{p.name}.csv", p.tpcap())
-            entries.append({"garage": p.garage, "stall": p.stall, "maneuver": p.maneuver,
-                            "json": f"{folder.name}/{p.name}.json", "csv": f"{folder.name}/{p.name}.csv"})
-        left_out += [{"garage": scene.name, "folder": folder.name, "stall": s, "reason": r} for s, r in skipped.items()]
-    return write_json(out_dir / INDEX, {"format": "garage-mj park problems", "version": VERSION,
-                                        "problems": entries, "skipped": left_out})
+    try:
+        for item, folder in zip(items, folders, strict=True):
+            scene = item if isinstance(item, GarageScene) else GarageScene(item)
+            problems, skipped = park_problems(scene, car, config)
+            if folder.is_dir():
+                clean_temp(folder)  # what a killed export left (under the lock: no other writer)
+            else:
+                folder.mkdir()
+            for p in problems:
+                for target, text in ((folder / f"{p.name}.json", json.dumps(p.to_json(), indent=2) + "\n"),
+                                     (folder / f"{p.name}.csv", p.tpcap())):
+                    _write(out_dir, target, text)
+                entries.append({"garage": p.garage, "stall": p.stall, "maneuver": p.maneuver,
+                                "json": f"{folder.name}/{p.name}.json", "csv": f"{folder.name}/{p.name}.csv"})
+            left_out += [{"garage": scene.name, "folder": folder.name, "stall": s, "reason": r}
+                         for s, r in skipped.items()]
+    except OSError as exc:  # a folder made read-only meanwhile, a full disk: name it, not a temp file
+        raise _write_error(out_dir, Path(exc.filename) if exc.filename else out_dir, exc) from None
+    index = {"format": "garage-mj park problems", "version": VERSION, "problems": entries, "skipped": left_out}
+    return _write(out_dir, out_dir / INDEX, json.dumps(index, indent=2) + "\n")
+
+
+def check_park_problems_targets(garages: Iterable[Garage | GarageScene], out_dir: str | Path) -> list[Path]:
+    """The folder of each garage's problems in ``out_dir``; ParkProblemError naming one that is there already and
+    cannot be written (read-only, or a file), so that nothing is written (the CLI checks before any pack)."""
+    out_dir = Path(out_dir)
+    folders = [out_dir / pack_name(item.garage if isinstance(item, GarageScene) else item) for item in garages]
+    for folder in folders:
+        if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+            raise ParkProblemError(f"--park-problems {out_dir}: {folder} is not a folder; remove it or choose "
+                                   "another folder")
+        if folder.is_dir():
+            _check_writable(out_dir, folder)
+    return folders
+
+
+@contextmanager
+def park_problems_lock(out_dir: str | Path) -> Iterator[Path]:
+    """Check that ``out_dir`` can be written and hold its lock (:class:`FolderLock`, ``garage-mj export``) for
+    the whole export: a second export into it meanwhile stops in one line naming this one. Under the lock a
+    killed export's temp files are removed; the lock file goes when the export ends, and so does a folder
+    made only to hold it."""
+    out_dir = Path(out_dir)
+    if out_dir.is_symlink() or (out_dir.exists() and not out_dir.is_dir()):
+        raise ParkProblemError(f"--park-problems {out_dir} is not a folder; give a new folder or one of park "
+                               "problems")
+    _check_writable(out_dir, out_dir)
+    made = not out_dir.exists()
+    try:
+        with FolderLock(out_dir, "garage-mj export", remove=True):
+            clean_temp(out_dir)
+            yield out_dir
+    finally:
+        if made:
+            with suppress(OSError):
+                out_dir.rmdir()  # only if empty: the export failed before writing anything
+
+
+def _check_writable(out_dir: Path, folder: Path) -> None:
+    """Refuse ``folder`` (``out_dir`` or one of its garage folders) when this process cannot write in it; a
+    folder not made yet is made in the nearest folder above that exists, so that one must be writable."""
+    there = folder if folder.is_dir() else next((p for p in folder.resolve().parents if p.exists()), None)
+    if there is not None and not os.access(there, os.W_OK | os.X_OK):
+        raise ParkProblemError(f"--park-problems {out_dir}: the folder {there} is read-only; make it writable or "
+                               "choose another folder")
+
+
+def _write(out_dir: Path, target: Path, text: str) -> Path:
+    """:func:`atomic_write` ``text`` to ``target``; a failure names ``target`` (not the temp file) and the fix."""
+    try:
+        return atomic_write(target, text)
+    except OSError as exc:
+        raise _write_error(out_dir, target, exc) from None
+
+
+def _write_error(out_dir: Path, target: Path, exc: OSError) -> ParkProblemError:
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        hint = "free some disk space and run again"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        hint = "the folder is read-only; make it writable or choose another folder"
+    else:
+        hint = "check the path and run again"
+    if target.name.startswith("."):  # a temp file beside the target: name the folder it was made in
+        target = target.parent
+    return ParkProblemError(f"--park-problems {out_dir}: cannot write {target} ({exc.strerror or exc}); {hint}")
 
 
 # -- reading ------------------------------------------------------------------------------------------
-def read_park_problem(path: str | Path) -> ParkProblem:
-    """The :class:`ParkProblem` in a JSON file written by :func:`write_park_problems`; ParkProblemError otherwise."""
-    path = Path(path)
+def _read(path: Path, what: str) -> bytes:
+    """The bytes of the file ``path`` (a ``what``), at most :data:`MAX_BYTES`; ParkProblemError otherwise."""
+    fix = f"give the path of a {what} file (garage-mj export --park-problems writes them)"
     try:
-        data = json.loads(path.read_bytes())
+        if not stat.S_ISREG(os.stat(path).st_mode):  # a folder, or a pipe that would block the read for ever
+            raise ParkProblemError(f"{what} {path} is not a file; {fix}")
+        with open(path, "rb") as f:
+            raw = f.read(MAX_BYTES + 1)
     except OSError as exc:
-        raise ParkProblemError(f"cannot read park problem {path}: {exc.strerror or exc}") from None
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ParkProblemError(f"park problem {path} is not JSON ({exc}); write it again with "
-                               "garage-mj export --park-problems") from None
+        raise ParkProblemError(f"cannot read {what} {path}: {exc.strerror or exc}; {fix}") from None
+    if len(raw) > MAX_BYTES:
+        raise ParkProblemError(f"{what} {path} is larger than {MAX_BYTES >> 20} MiB, far larger than any park "
+                               f"problem; {fix}")
+    return raw
+
+
+class _Duplicate(ValueError):
+    """A JSON object holding a key twice."""
+
+
+def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``json.loads``'s ``object_pairs_hook``: a dict, refusing a key given twice (which one would count?)."""
+    out: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in out:
+            raise _Duplicate(f"it holds the key {k[:40]!r} twice; keep one")
+        out[k] = v
+    return out
+
+
+def read_park_problem(path: str | Path) -> ParkProblem:
+    """The :class:`ParkProblem` in a JSON file written by :func:`write_park_problems`; ParkProblemError otherwise.
+
+    Every key is checked: types, ranges (finite numbers, points within :data:`MAX_COORD`, positive car
+    lengths, a region with min < max holding start and goal, counter-clockwise polygons), that the
+    ``garage_hash`` is the hash of the ``garage_grid`` the file holds, and that no key is missing, unknown
+    or given twice.
+    """
+    path = Path(path)
+    raw = _read(path, "park problem")
+    try:
+        data = json.loads(raw.decode("utf-8-sig"), object_pairs_hook=_object)  # a BOM is harmless
+    except UnicodeDecodeError as exc:
+        raise ParkProblemError(f"park problem {path} is not UTF-8 text ({exc.reason} at byte {exc.start}); "
+                               f"{_FIX}") from None
+    except _Duplicate as exc:
+        raise ParkProblemError(f"park problem {path} is malformed: {exc}; {_FIX}") from None
+    except RecursionError:
+        raise ParkProblemError(f"park problem {path} is not a park problem: JSON nested too deeply; {_FIX}") from None
+    except ValueError as exc:
+        raise ParkProblemError(f"park problem {path} is not JSON ({exc}); {_FIX}") from None
     try:
         return _problem(data)
     except (KeyError, TypeError, ValueError) as exc:
         why = f"no {exc.args[0]!r} key" if isinstance(exc, KeyError) else str(exc)
-        raise ParkProblemError(f"park problem {path} is malformed: {why}; write it again with "
-                               "garage-mj export --park-problems") from None
+        raise ParkProblemError(f"park problem {path} is malformed: {why}; {_FIX}") from None
 
 
 def _problem(data: Any) -> ParkProblem:
     if not isinstance(data, dict):
         raise TypeError("the file holds no JSON object")
-    if data.get("format") != FORMAT or data.get("version") != VERSION:
-        raise ValueError(f"format {data.get('format')!r} version {data.get('version')!r}, "
+    version = data.get("version")
+    if data.get("format") != FORMAT or type(version) is not int or version != VERSION:
+        raise ValueError(f"format {repr(data.get('format'))[:40]} version {repr(version)[:20]}, "
                          f"not {FORMAT!r} version {VERSION}")
-    if data["maneuver"] not in MANEUVERS:
-        raise ValueError(f"maneuver {data['maneuver']!r} is not one of {', '.join(MANEUVERS)}")
-    if not isinstance(data["stall"], int) or isinstance(data["stall"], bool) or data["stall"] < 0:
-        raise ValueError(f"stall {data['stall']!r} is not a stall id")
-    for key in ("garage", "garage_hash"):
-        if not isinstance(data[key], str):
-            raise TypeError(f"{key} is not a string")
+    for key in KEYS:
+        if key not in data:
+            raise KeyError(key)
+    extra = [k for k in data if k not in KEYS]
+    if extra:
+        raise ValueError(f"unknown key {extra[0][:40]!r} (a park problem holds {', '.join(KEYS)}); remove it")
+    if not isinstance(data["maneuver"], str) or data["maneuver"] not in MANEUVERS:
+        raise ValueError(f"maneuver {str(data['maneuver'])[:40]!r} is not one of {', '.join(MANEUVERS)}")
+    grid, stalls = _grid(data)
+    stall = data["stall"]
+    if type(stall) is not int or not 0 <= stall < stalls:
+        raise ValueError(f"stall {str(stall)[:20]} is not a stall id of the garage (an integer in [0, {stalls - 1}])")
     obstacles = data["obstacles"]
     if not isinstance(obstacles, list) or not all(isinstance(o, dict) for o in obstacles):
         raise TypeError("obstacles is not a list of objects")
+    region = _numbers(data, "region", 4)
+    if not (region[0] < region[2] and region[1] < region[3]):
+        raise ValueError(f"region {list(region)} is inverted or empty; it needs xmin < xmax and ymin < ymax")
+    start, goal = _read_pose(data, "start"), _read_pose(data, "goal")
+    for key, (x, y, _) in (("start", start), ("goal", goal)):
+        if not (region[0] <= x <= region[2] and region[1] <= y <= region[3]):
+            raise ValueError(f"{key} ({x!r}, {y!r}) lies outside the region {list(region)}, the planning area "
+                             "of the rear axle")
     return ParkProblem(
-        garage=data["garage"], garage_hash=data["garage_hash"], stall=data["stall"], maneuver=data["maneuver"],
-        start=_numbers(data, "start", 3), goal=_numbers(data, "goal", 3),
-        start_centre=_numbers(data, "start_centre", 3), goal_centre=_numbers(data, "goal_centre", 3),
-        stall_outline=_polygon(data["stall_outline"], "stall_outline"), region=_numbers(data, "region", 4),
-        car=_table(data, "car"), planner=_table(data, "planner"),
-        obstacles=tuple((_name(o["class"], k), _polygon(o["vertices"], f"obstacle {k}"))
-                        for k, o in enumerate(obstacles)))
+        garage=_garage_name(data["garage"]), garage_hash=data["garage_hash"], garage_grid=grid,
+        six_stall_axis=data["six_stall_axis"], stall=stall, maneuver=data["maneuver"], start=start, goal=goal,
+        start_centre=_read_pose(data, "start_centre"), goal_centre=_read_pose(data, "goal_centre"),
+        stall_outline=_polygon(data["stall_outline"], "stall_outline"), region=region,
+        car=_car_table(data["car"]), planner=_planner_table(data["planner"]),
+        obstacles=tuple(_obstacle(o, k) for k, o in enumerate(obstacles)))
+
+
+def _garage_name(v: Any) -> str:
+    if not isinstance(v, str):
+        raise TypeError("garage is not a string")
+    if len(v) > MAX_NAME:
+        raise ValueError(f"garage name {v[:40]!r}... is longer than {MAX_NAME} characters")
+    bad = control_character(v)
+    if bad is not None:
+        raise ValueError(f"garage name {v[:40]!r} holds the control character {bad!r}")
+    return v
+
+
+_ROW = re.compile(r"[0-9]+", re.ASCII)
+
+
+def _grid(data: dict) -> tuple[tuple[str, ...], int]:
+    """The garage grid rows, checked against ``garage_hash``; and the garage's number of stalls."""
+    rows, axis, digest = data["garage_grid"], data["six_stall_axis"], data["garage_hash"]
+    if not isinstance(rows, list) or not 3 <= len(rows) <= MAX_SIDE or \
+            not all(isinstance(r, str) and _ROW.fullmatch(r) and 3 <= len(r) <= MAX_SIDE for r in rows):
+        raise ValueError(f"garage_grid is not a list of 3 to {MAX_SIDE} rows, each a string of 3 to {MAX_SIDE} "
+                         "block codes 0-9")
+    if any(len(r) != len(rows[0]) for r in rows):
+        raise ValueError(f"garage_grid is ragged, not rectangular; every row needs {len(rows[0])} codes")
+    if axis not in AXES:
+        raise ValueError(f"six_stall_axis {str(axis)[:20]!r} is not one of {', '.join(AXES)}")
+    if not isinstance(digest, str):
+        raise TypeError("garage_hash is not a string")
+    grid = np.array([[int(c) for c in r] for r in rows], dtype=np.int8)
+    actual = grid_hash(grid, axis)
+    if digest != actual:
+        shown = repr(digest) if len(digest) <= 16 else f"{digest[:16]!r}..."
+        raise ValueError(f"garage_hash {shown} is not the hash of the garage the file holds "
+                         f"(garage_grid and six_stall_axis hash to {actual[:16]}...)")
+    return tuple(rows), int(STALL_TABLE[grid].sum())
 
 
 def _finite(v: Any, what: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ValueError(f"{what} holds {v!r}, not a finite number")
-    return float(v)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"{what} holds {str(v)[:20]!r}, not a number")
+    try:
+        x = float(v)
+    except OverflowError:  # an integer of hundreds of digits
+        raise ValueError(f"{what} holds an integer of {len(str(abs(v)))} digits, not a finite number") from None
+    if not math.isfinite(x):
+        raise ValueError(f"{what} holds {x!r}, not a finite number")
+    return x
+
+
+def _bounded(v: Any, what: str, lo: float, hi: float, *, open_lo: bool = False, unit: str = "m") -> float:
+    """``v`` as a float in ``[lo, hi]`` (``(lo, hi]`` with ``open_lo``), or ValueError in the config's words."""
+    x = _finite(v, what)
+    if x > hi or x < lo or (open_lo and x == lo):
+        span = f"{'(' if open_lo else '['}{lo:g}, {hi:g}]"
+        raise ValueError(f"{what} = {x!r} is not allowed: it must be a number in {span} ({unit})")
+    return x
+
+
+def _coord(v: Any, what: str) -> float:
+    return _bounded(v, what, -MAX_COORD, MAX_COORD)
 
 
 def _numbers(data: dict, key: str, n: int) -> tuple[float, ...]:
     v = data[key]
     if not isinstance(v, list) or len(v) != n:
         raise ValueError(f"{key} is not a list of {n} numbers")
-    return tuple(_finite(x, key) for x in v)
+    return tuple(_coord(x, key) for x in v)
+
+
+def _read_pose(data: dict, key: str) -> tuple[float, float, float]:
+    v = data[key]
+    if not isinstance(v, list) or len(v) != 3:
+        raise ValueError(f"{key} is not a list of 3 numbers")
+    return _coord(v[0], f"{key} x"), _coord(v[1], f"{key} y"), \
+        _bounded(v[2], f"{key} yaw", -math.tau, math.tau, unit="radians")
 
 
 def _polygon(v: Any, what: str) -> tuple[tuple[float, float], ...]:
     if not isinstance(v, list) or len(v) < 3 or not all(isinstance(p, list) and len(p) == 2 for p in v):
         raise ValueError(f"{what} is not a list of at least 3 [x, y] vertices")
-    return tuple((_finite(p[0], what), _finite(p[1], what)) for p in v)
+    poly = tuple((_coord(p[0], f"{what} vertex {j} x"), _coord(p[1], f"{what} vertex {j} y")) for j, p in enumerate(v))
+    if _area(poly) <= 0:
+        raise ValueError(f"{what} is not counter-clockwise with a positive area (signed area {_area(poly):.6g} m²)")
+    return poly
 
 
-def _table(data: dict, key: str) -> dict[str, float]:
-    v = data[key]
+def _area(poly) -> float:
+    """The signed area of ``poly`` (positive: counter-clockwise)."""
+    return sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(poly, poly[1:] + poly[:1])) / 2
+
+
+def _keys(v: Any, key: str, keys: tuple[str, ...]) -> dict:
     if not isinstance(v, dict):
         raise TypeError(f"{key} is not an object")
-    return {str(k): _finite(x, f"{key}.{k}") for k, x in v.items()}
-
-
-def _name(v: Any, k: int) -> str:
-    if not isinstance(v, str):
-        raise TypeError(f"the class of obstacle {k} is not a string")
+    for k in keys:
+        if k not in v:
+            raise ValueError(f"{key} has no {k!r} key")
+    extra = [k for k in v if k not in keys]
+    if extra:
+        raise ValueError(f"{key}.{extra[0][:40]} is not a key of {key} (it holds {', '.join(keys)}); remove it")
     return v
+
+
+def _car_table(v: Any) -> dict[str, float]:
+    v = _keys(v, "car", CAR_KEYS)
+    car = {k: _bounded(v[k], f"car.{k}", 0.0, MAX_CAR, open_lo=k not in ("front_overhang", "rear_overhang"))
+           for k in CAR_KEYS if k != "max_steer"}
+    car["max_steer"] = _bounded(v["max_steer"], "car.max_steer", 0.0, math.pi / 2, open_lo=True, unit="radians")
+    if car["max_steer"] == math.pi / 2:
+        raise ValueError("car.max_steer = pi/2 is not allowed: the wheels would turn across the car")
+    parts = car["front_overhang"] + car["wheelbase"] + car["rear_overhang"]
+    if not math.isclose(car["length"], parts, rel_tol=1e-6, abs_tol=1e-6):
+        raise ValueError(f"car.length = {car['length']!r} is not front_overhang + wheelbase + rear_overhang "
+                         f"= {parts!r}")
+    radius = car["wheelbase"] / math.tan(car["max_steer"])
+    if not math.isclose(car["min_turning_radius"], radius, rel_tol=1e-6):
+        raise ValueError(f"car.min_turning_radius = {car['min_turning_radius']!r} is not wheelbase / "
+                         f"tan(max_steer) = {radius!r}")
+    return {k: car[k] for k in CAR_KEYS}
+
+
+def _planner_table(v: Any) -> dict[str, float]:
+    v = _keys(v, "planner", PLANNER_KEYS)
+    return {"margin": _bounded(v["margin"], "planner.margin", 0.0, MAX_CAR),
+            "turning_radius": _bounded(v["turning_radius"], "planner.turning_radius", 0.0, MAX_COORD, open_lo=True)}
+
+
+def _obstacle(o: dict, k: int) -> tuple[str, tuple[tuple[float, float], ...]]:
+    extra = [key for key in o if key not in ("class", "vertices")]
+    if extra:
+        raise ValueError(f"obstacle {k} holds the unknown key {extra[0][:40]!r} (it holds class and vertices); "
+                         "remove it")
+    cls = o["class"]
+    if not isinstance(cls, str):
+        raise TypeError(f"the class of obstacle {k} is not a string")
+    if cls not in CLASSES:
+        raise ValueError(f"the class {cls[:40]!r} of obstacle {k} is not one of {', '.join(CLASSES)}")
+    return cls, _polygon(o["vertices"], f"obstacle {k}")
+
+
+_NUMBER = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
+_CASE_FIX = "give a TPCAP case: one number per line (garage-mj export --park-problems writes them)"
 
 
 def read_tpcap_case(path: str | Path) -> tuple[tuple[float, ...], tuple[float, ...], list[list[tuple[float, float]]]]:
     """A TPCAP case file: start pose, goal pose (rear-axle midpoint) and obstacle polygons; ParkProblemError
-    when it is not one."""
+    when it is not one (a word that is not a decimal number, a NaN or infinite one, counts that are not
+    counts, a point beyond :data:`MAX_COORD`, a yaw beyond two turns, a polygon of zero area)."""
     path = Path(path)
+    raw = _read(path, "TPCAP case")
     try:
-        v = [float(line) for line in path.read_text().split()]
-    except OSError as exc:
-        raise ParkProblemError(f"cannot read TPCAP case {path}: {exc.strerror or exc}") from None
+        words = raw.decode("utf-8-sig").split()
+    except UnicodeDecodeError as exc:
+        raise ParkProblemError(f"TPCAP case {path} is not UTF-8 text ({exc.reason} at byte {exc.start}); "
+                               f"{_CASE_FIX}") from None
+    v = []
+    for i, word in enumerate(words, 1):
+        if not _NUMBER.fullmatch(word):
+            try:
+                x = float(word)
+            except ValueError:
+                x = 0.0
+            if math.isfinite(x):  # a word float() would take, but no decimal number: 1_0, a digit of another script
+                raise ParkProblemError(f"TPCAP case {path}: V[{i}] holds {word[:20]!r}, not a number; {_CASE_FIX}")
+        x = float(word)
+        if not math.isfinite(x):
+            raise ParkProblemError(f"TPCAP case {path}: V[{i}] holds {word[:20]}, not a finite number; {_CASE_FIX}")
+        v.append(x)
+    try:
+        return _case(v)
     except ValueError as exc:
-        raise ParkProblemError(f"TPCAP case {path} holds a line that is not a number ({exc})") from None
+        raise ParkProblemError(f"TPCAP case {path} {exc}; {_CASE_FIX}") from None
+
+
+def _case(v: list[float]) -> tuple[tuple[float, ...], tuple[float, ...], list[list[tuple[float, float]]]]:
+    """The poses and polygons of the finite numbers ``v`` of a TPCAP case; ValueError saying what is wrong."""
     if len(v) < 7 or v[6] != int(v[6]) or v[6] < 0:
-        raise ParkProblemError(f"TPCAP case {path} is too short or its obstacle count V[7] is not a count")
+        raise ValueError("is too short or its obstacle count V[7] is not a count")
     n = int(v[6])
     counts = v[7:7 + n]
     if len(counts) < n or any(c != int(c) or c < 3 for c in counts) or len(v) != 7 + n + 2 * int(sum(counts)):
-        raise ParkProblemError(f"TPCAP case {path} does not hold the vertices its counts announce")
+        raise ValueError("does not hold the vertices its counts announce")
+    for i, x in enumerate(v):
+        yaw = i in (2, 5)
+        if i < 6 or i >= 7 + n:
+            try:
+                if yaw:
+                    _bounded(x, f"V[{i + 1}]", -math.tau, math.tau, unit="radians")
+                else:
+                    _coord(x, f"V[{i + 1}]")
+            except ValueError as exc:
+                raise ValueError(f"holds a number out of range: {exc}") from None
     polys, at = [], 7 + n
-    for c in map(int, counts):
-        polys.append([(v[at + 2 * j], v[at + 2 * j + 1]) for j in range(c)])
+    for k, c in enumerate(map(int, counts)):
+        poly = [(v[at + 2 * j], v[at + 2 * j + 1]) for j in range(c)]
+        if _area(tuple(poly)) == 0:
+            raise ValueError(f"holds obstacle {k + 1}, a polygon of zero area (its vertices V[{at + 1}] to "
+                             f"V[{at + 2 * c}] lie on a line)")
+        polys.append(poly)
         at += 2 * c
     return tuple(v[0:3]), tuple(v[3:6]), polys

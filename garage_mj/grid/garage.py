@@ -125,6 +125,15 @@ def decode_json(text: str | bytes, source: str = "garage JSON") -> Any:
         raise MapError(f"{source} is not a garage: JSON nested too deeply") from None
 
 
+def grid_hash(grid: np.ndarray, six_stall_axis: str) -> str:
+    """:meth:`Garage.canonical_hash` of a garage with ``grid`` and ``six_stall_axis``: SHA-256 of shape, axis
+    and block codes (a reader that holds only the grid checks a stored hash with it)."""
+    h = hashlib.sha256()
+    h.update(f"{grid.shape[0]}x{grid.shape[1]}:{six_stall_axis}:".encode())
+    h.update(np.ascontiguousarray(grid, dtype=np.int8).tobytes())
+    return h.hexdigest()
+
+
 def _shown(v: Any) -> str:
     """A cell's value as the message quotes it (a long integer by its first digits and its length)."""
     if isinstance(v, _LongInteger):
@@ -280,11 +289,8 @@ class Garage:
         return validate_garage(garage, source) if usable else garage
 
     def canonical_hash(self) -> str:
-        """SHA-256 of shape, grid and six-stall axis: equal garages hash equal."""
-        h = hashlib.sha256()
-        h.update(f"{self.grid.shape[0]}x{self.grid.shape[1]}:{self.six_stall_axis}:".encode())
-        h.update(np.ascontiguousarray(self.grid, dtype=np.int8).tobytes())
-        return h.hexdigest()
+        """SHA-256 of shape, grid and six-stall axis: equal garages hash equal (:func:`grid_hash`)."""
+        return grid_hash(self.grid, self.six_stall_axis)
 
     def to_text(self) -> str:
         """The grid as text, one row per line (the maps/ format)."""
