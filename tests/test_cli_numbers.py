@@ -102,3 +102,66 @@ def test_the_parser_takes_good_numbers():
     args = build_parser().parse_args([*GENERATE, "--count", "1_000_000", "--library", "l", "--max-seconds", "0.5",
                                       "--max-episodes", "7", "--train-timesteps", "2_000"])
     assert (args.count, args.max_seconds, args.max_episodes, args.train_timesteps) == (1_000_000, 0.5, 7, 2000)
+
+
+@pytest.fixture
+def read_only_mount(tmp_path, monkeypatch):
+    """``tmp_path/ro`` as a read-only mount looks: ``statvfs`` has ``ST_RDONLY`` and ``access(W_OK)`` is False
+    (EROFS), for root too; a library made there before the "mount"."""
+    import os
+
+    from garage_mj.generation.library import Library
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    Library(ro / "lib.sqlite").close()
+    real_statvfs, real_access = os.statvfs, os.access
+
+    def inside(path) -> bool:
+        return Path(os.fspath(path)).resolve().is_relative_to(ro)
+
+    class ReadOnly:
+        def __init__(self, st):
+            self._st = st
+            self.f_flag = st.f_flag | os.ST_RDONLY
+
+        def __getattr__(self, name):
+            return getattr(self._st, name)
+
+    monkeypatch.setattr(os, "statvfs", lambda p: ReadOnly(real_statvfs(p)) if inside(p) else real_statvfs(p))
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: (False if mode & os.W_OK and inside(p)
+                                                                 else real_access(p, mode, **kw)))
+    return ro
+
+
+@pytest.mark.parametrize("name", ["lib.sqlite", "new.sqlite", "sub/new.sqlite"])
+def test_a_library_on_a_read_only_file_system_says_so(read_only_mount, capsys, name):
+    from garage_mj.generation.library import LibraryError, check_writable
+
+    lib = read_only_mount / name
+    before = snapshot(read_only_mount)
+    with pytest.raises(LibraryError) as info:
+        check_writable(lib)
+    said = str(info.value)
+    assert "read-only file system" in said and "chmod" not in said and "a writable place" in said, said
+    line = one_error_line(capsys, [*GENERATE, "--count", "1", "--library", str(lib)])
+    assert "read-only file system" in line and str(lib) in line and "chmod" not in line, line
+    assert snapshot(read_only_mount) == before
+
+
+def test_a_library_on_a_read_only_file_system_can_still_be_listed(read_only_mount, capsys):
+    assert main(["library", "ls", str(read_only_mount / "lib.sqlite")]) == 0
+    assert "0 garage(s)" in capsys.readouterr().out
+
+
+def test_an_oserror_of_a_read_only_file_system_says_so(monkeypatch, capsys):
+    import errno
+    import os
+
+    def refuse(args):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), "/mnt/ro/picture.png")
+
+    monkeypatch.setattr("garage_mj.cli.show.run", refuse)
+    line = one_error_line(capsys, ["show", "1"])
+    assert line.startswith("garage-mj show: error: /mnt/ro/picture.png: Read-only file system; ") and \
+        "mounted read-only" in line and "permissions" not in line, line

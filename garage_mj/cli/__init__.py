@@ -130,8 +130,12 @@ def _run(argv: list[str] | None) -> int:
         if args.debug:
             traceback.print_exc()
         where = f" {exc.filename}" if exc.filename else ""
-        hint = ("free some disk space and run again (finished work is kept)"
-                if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "check the path and its permissions")
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            hint = "free some disk space and run again (finished work is kept)"
+        elif exc.errno == errno.EROFS:
+            hint = "the file system is mounted read-only: write to a path in a writable place"
+        else:
+            hint = "check the path and its permissions"
         print(f"garage-mj {args.command}: error:{where}: {one_line(exc.strerror or exc)}; {hint}",
               file=sys.stderr)
         return 2

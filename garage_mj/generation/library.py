@@ -60,6 +60,26 @@ BUSY_TIMEOUT_S = 60.0  # [s] a writer waits this long for another writer's lock
 DIFFICULTY_BIN = 0.1  # width of the difficulty strata of :meth:`Library.sample`
 
 
+def on_read_only_mount(path: Path) -> bool:
+    """Whether ``path`` (or, for a path not made yet, its nearest existing folder) lies on a file system
+    mounted read-only, where no ``chmod`` helps (``EROFS``)."""
+    for where in (path, *path.absolute().parents):
+        try:
+            return bool(os.statvfs(where).f_flag & os.ST_RDONLY)
+        except FileNotFoundError:
+            continue
+        except OSError:
+            return False
+    return False
+
+
+def read_only_mount_error(path: Path) -> LibraryError:
+    """The one-line refusal of a library to be written on a read-only file system."""
+    fix = ("copy the library to a writable place and pass the copy (or another library path)" if path.exists()
+           else "pass a library path in a writable place")
+    return LibraryError(f"{path} is on a read-only file system (mounted read-only); {fix}")
+
+
 def check_writable(path: str | Path) -> None:
     """Refuse, before anything is written, a library file (or its folder) this process may not write.
 
@@ -67,6 +87,8 @@ def check_writable(path: str | Path) -> None:
     read-only file or folder fails at the first insert, after the work before it.
     """
     path = Path(path)
+    if on_read_only_mount(path):
+        raise read_only_mount_error(path)
     if path.exists() and not os.access(path, os.W_OK):
         raise LibraryError(f"{path} is read-only; make it writable (chmod u+w {path}) or copy the library "
                            "to a file you may write")
@@ -116,6 +138,8 @@ class Library:
                 self._con.execute("PRAGMA journal_mode = WAL")
             self._con.execute("PRAGMA synchronous = NORMAL")  # WAL + NORMAL: durable across a process kill
         except sqlite3.DatabaseError as exc:
+            if on_read_only_mount(self.path):  # "attempt to write a readonly database": the mount, not the file
+                raise read_only_mount_error(self.path) from None
             raise LibraryError(f"{self.path}: cannot open the library ({exc})") from None
 
     def _connect_readonly(self) -> sqlite3.Connection:
