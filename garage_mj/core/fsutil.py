@@ -186,6 +186,46 @@ def clean_temp(folder: str | Path) -> list[Path]:
 HOLDER_WAIT = 2.0  # [s] how long a refused job waits for the holder to write its name into the lock file
 
 
+def _alive(pid: Any) -> bool:
+    """Whether a process ``pid`` exists (on this machine)."""
+    if not isinstance(pid, int) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it exists, as another user's
+        return True
+    return True
+
+
+def lock_holder(folder: str | Path) -> dict | None:
+    """Who holds ``folder``'s :class:`FolderLock` now (the lock file's ``pid``, ``what``, ``argv``), or None.
+
+    Asks the kernel (a shared ``flock`` tried without waiting, and let go at once), so a lock file left by a
+    job killed with ``kill -9`` reads as free; creates and writes nothing, and never blocks a holder.
+    """
+    try:
+        fd = os.open(Path(folder) / LOCK_NAME, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
+            except (ValueError, UnicodeDecodeError):
+                holder = {}
+            return holder if isinstance(holder, dict) else {}
+        except OSError:
+            return None
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)
+
+
 class FolderLock:
     """Exclusive lock of an output folder for one long job; a context manager.
 
@@ -234,8 +274,12 @@ class FolderLock:
                 except (ValueError, UnicodeDecodeError):
                     holder = {}
             # An empty file: the holder has just taken the lock and not yet said who it is, or is
-            # just letting go. Look again shortly, so the message names it (or the lock is ours).
-            if holder or time.monotonic() >= deadline:
+            # just letting go. A file naming a process that is gone: a killed job's, and the one
+            # holding it now only looks (lock_holder) or has not yet written its name. Look again
+            # shortly, so the message names the holder (or the lock is ours).
+            named = isinstance(holder, dict) and _alive(holder.get("pid"))
+            if named or time.monotonic() >= deadline:
+                holder = holder if isinstance(holder, dict) else {}
                 os.close(fd)
                 who = f"{holder.get('what', 'another garage-mj process')} (pid {holder.get('pid', '?')})"
                 raise FolderBusy(f"{self.folder} is in use by {who}; wait for it to finish or use "

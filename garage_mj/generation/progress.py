@@ -7,10 +7,13 @@ shell while the protocol runs, locally or on Ray (where the head keeps the run f
 it stopped. Statuses:
 
 - ``new``: not started;
-- ``running``: its ``live`` progress is younger than :data:`STALE_S` (refreshed every
-  :data:`~garage_mj.generation.training.HEARTBEAT_S` and at each checkpoint);
+- ``running``: a process holds the protocol folder's lock (:func:`~garage_mj.core.fsutil.lock_holder`:
+  the kernel drops it when the process dies, even by ``kill -9``) and the run's ``live`` progress is
+  younger than :data:`STALE_S` (refreshed every :data:`~garage_mj.generation.training.HEARTBEAT_S`
+  and at each checkpoint);
 - ``resume``: started and stopped (Ctrl-C, a killed process, a lost node): a re-run of the same
-  command continues it from its newest checkpoint, whose timesteps are shown;
+  command continues it from its newest checkpoint, whose timesteps are shown (the total line then
+  says "stopped (not running; run the same command to resume)");
 - ``finished``: nothing left to do.
 """
 
@@ -21,6 +24,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from garage_mj.core.fsutil import lock_holder
 from garage_mj.generation.library import Library, LibraryError
 from garage_mj.generation.protocol import LIBRARY, Protocol, run_dir, run_status
 from garage_mj.generation.runs import latest_checkpoint
@@ -51,7 +55,7 @@ def _age_s(stamp: str | None) -> float:
     return (datetime.now(timezone.utc) - t).total_seconds()
 
 
-def _run_progress(folder: Path, map: str, seed: int, target: int, lib: Library | None) -> RunProgress:
+def _run_progress(folder: Path, map: str, seed: int, target: int, lib: Library | None, held: bool) -> RunProgress:
     status = run_status(folder, target)
     if status == "new":
         return RunProgress(map, seed, "new", 0, target, 0, None, "")
@@ -69,7 +73,7 @@ def _run_progress(folder: Path, map: str, seed: int, target: int, lib: Library |
     if status == "finished":
         rate = (m.get("last_session") or {}).get("timesteps_per_s")
         return RunProgress(map, seed, status, int(m.get("timesteps", 0)), target, garages, rate, where)
-    if m.get("status") == "running" and _age_s(live.get("updated_at")) < STALE_S:
+    if held and m.get("status") == "running" and _age_s(live.get("updated_at")) < STALE_S:
         return RunProgress(map, seed, "running", int(live.get("timesteps", m.get("timesteps", 0))), target, garages,
                            live.get("timesteps_per_s"), where)
     found = latest_checkpoint(folder)
@@ -80,6 +84,7 @@ def _run_progress(folder: Path, map: str, seed: int, target: int, lib: Library |
 def protocol_progress(protocol: Protocol, out: str | Path) -> list[RunProgress]:
     """Every (map, seed) run of ``protocol`` in ``out``, in the protocol's order."""
     out = Path(out)
+    held = lock_holder(out) is not None  # a process runs the protocol now (a killed one holds nothing)
     lib = None
     if (out / LIBRARY).exists():
         try:
@@ -87,7 +92,7 @@ def protocol_progress(protocol: Protocol, out: str | Path) -> list[RunProgress]:
         except LibraryError:
             lib = None
     try:
-        return [_run_progress(run_dir(out, m, s), Path(m).stem, s, protocol.timesteps, lib)
+        return [_run_progress(run_dir(out, m, s), Path(m).stem, s, protocol.timesteps, lib, held)
                 for m in protocol.maps for s in protocol.seeds]
     finally:
         if lib is not None:
@@ -114,5 +119,7 @@ def format_progress(rows: list[RunProgress], title: str = "") -> str:
     rate = sum(r.timesteps_per_s or 0.0 for r in rows if r.status == "running")
     if rate > 0:
         summary += f"; about {(total - done) / rate / 3600:.1f} h left at the running runs' {rate:,.0f} timesteps/s"
+    elif counts["resume"] and not counts["running"]:
+        summary += "; stopped (not running; run the same command to resume)"
     text.append("total: " + summary)
     return "\n".join(text)
