@@ -165,3 +165,62 @@ def test_an_oserror_of_a_read_only_file_system_says_so(monkeypatch, capsys):
     line = one_error_line(capsys, ["show", "1"])
     assert line.startswith("garage-mj show: error: /mnt/ro/picture.png: Read-only file system; ") and \
         "mounted read-only" in line and "permissions" not in line, line
+
+
+@pytest.fixture
+def files(tmp_path):
+    """A small library, a text file, a foreign SQLite file, a plain file and a folder."""
+    import sqlite3
+
+    from garage_mj.generation.library import Library
+    from garage_mj.grid.painters import paint_garage
+
+    with Library(tmp_path / "lib.sqlite") as lib:
+        for s in (1, 2):
+            lib.add(paint_garage("tiny_7x11", seed=s), map="tiny_7x11", run="r", seed=0, episode=s, timestep=s)
+    (tmp_path / "text.txt").write_text("hello\n")
+    con = sqlite3.connect(tmp_path / "foreign.sqlite")
+    con.execute("CREATE TABLE t (x)")
+    con.close()
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "adir").mkdir()
+    return tmp_path
+
+
+@pytest.mark.parametrize("library, said", [
+    ("adir", "is a folder"),
+    ("text.txt", "not an SQLite database"),
+    ("foreign.sqlite", "not a garage-mj library"),
+    ("afile/lib.sqlite", "afile is a file, not a folder"),
+])
+def test_generate_refuses_a_bad_library_before_it_rolls_out(files, capsys, library, said):
+    before = snapshot(files)
+    line = one_error_line(capsys, [*GENERATE, "--count", "1", "--library", str(files / library)])
+    assert said in line, line
+    assert snapshot(files) == before
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["library", "ls", "{lib}", "--limit", "99999999999999999999999"], "argument --limit"),
+    (["library", "sample", "{lib}", "-n", "99999999999999999999999"], "argument -n"),
+    (["library", "sample", "{lib}", "-n", "2", "--limit", "99999999999999999999999"], "argument --limit"),
+    (["library", "export-json", "{lib}", "--limit", "99999999999999999999999", "--out", "{tmp}/x.json"],
+     "argument --limit"),
+    (["library", "rate", "{lib}", "--limit", "99999999999999999999999"], "argument --limit"),
+    (["library", "rate", "{lib}", "--workers", "99999999999999999999"], "argument --workers"),
+    (["check", "--library", "{lib}", "--limit", "-1"], "argument --limit"),
+    (["check", "--library", "{lib}", "--limit", "99999999999999999999999"], "argument --limit"),
+    (["check", "--library", "{lib}", "--difficulty", "nan", "1"], "argument --difficulty"),
+    (["plot", "convergence", "{tmp}", "--smooth", "99999999999999999999999"], "argument --smooth"),
+])
+def test_huge_and_nan_numbers_are_one_line(files, capsys, argv, said):
+    before = snapshot(files)
+    line = one_error_line(capsys, [a.format(lib=files / "lib.sqlite", tmp=files) for a in argv])
+    assert said in line and any(s in line for s in ("from 0 to 1,000,000,000", "from 1 to", "outside [0, 1]")), line
+    assert snapshot(files) == before
+
+
+def test_a_file_where_a_folder_should_be_is_named(files, capsys):
+    line = one_error_line(capsys, ["show", "1", "--library", str(files / "lib.sqlite"), "--png",
+                                   str(files / "afile" / "x.png")])
+    assert str(files / "afile") in line and "it is a file, not a folder" in line, line

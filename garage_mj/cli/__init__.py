@@ -134,6 +134,8 @@ def _run(argv: list[str] | None) -> int:
             hint = "free some disk space and run again (finished work is kept)"
         elif exc.errno == errno.EROFS:
             hint = "the file system is mounted read-only: write to a path in a writable place"
+        elif exc.errno in (errno.EEXIST, errno.ENOTDIR) and exc.filename and os.path.isfile(exc.filename):
+            hint = "it is a file, not a folder; name a path in a folder"
         else:
             hint = "check the path and its permissions"
         print(f"garage-mj {args.command}: error:{where}: {one_line(exc.strerror or exc)}; {hint}",

@@ -42,6 +42,12 @@ def compute(args: argparse.Namespace) -> Compute:
                    address=getattr(args, "address", None), progress=not quiet)
 
 
+#: The most garages a --limit or -n counts (a library of the paper's full protocol holds about 500,000).
+MAX_ROWS = 1_000_000_000
+#: The most worker processes a --workers starts.
+MAX_WORKERS = 1024
+
+
 def unit_range(text: str) -> float:
     """argparse type: a number in [0, 1]."""
     try:
@@ -141,7 +147,7 @@ def add_filters(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feasible", nargs=2, type=unit_range, metavar=("LO", "HI"),
                    help="only garages whose share of stalls with a feasible cruise test is in [LO, HI] "
                    "(stored by 'garage-mj check --library FILE --store')")
-    p.add_argument("--limit", type=non_negative_int, help="at most N garages")
+    p.add_argument("--limit", type=int_in(0, MAX_ROWS), help=f"at most N garages (0 to {MAX_ROWS:,})")
 
 
 #: The options that select library garages by their metrics (attribute -> flag); --ids leaves them out.

@@ -15,6 +15,7 @@ import json
 from pathlib import Path
 
 from garage_mj.cli import UserError
+from garage_mj.cli._common import MAX_ROWS, checked_range, int_in, unit_range
 from garage_mj.generation.library import Library
 
 
@@ -28,8 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("packs", nargs="*", type=Path, metavar="PACK", help="asset pack folders (garage-mj export)")
     p.add_argument("--library", type=Path, metavar="FILE", help="check a scenario library's garages instead")
     p.add_argument("--map", help="library filter: map name")
-    p.add_argument("--difficulty", type=float, nargs=2, metavar=("LO", "HI"), help="library filter, inclusive")
-    p.add_argument("--limit", type=int, help="library filter: at most N garages")
+    p.add_argument("--difficulty", type=unit_range, nargs=2, metavar=("LO", "HI"),
+                   help="library filter, inclusive (0-1)")
+    p.add_argument("--limit", type=int_in(0, MAX_ROWS), help=f"library filter: at most N garages (0 to {MAX_ROWS:,})")
     p.add_argument("--max-steer", type=float, metavar="RAD",
                    help="the car's full-lock road-wheel angle [rad] (default: CarConfig, 0.7)")
     p.add_argument("--store", action="store_true",
@@ -46,7 +48,7 @@ def _garages(args: argparse.Namespace) -> list[tuple[str, object]]:
             raise UserError("give pack folders or --library, not both")
 
         with Library(args.library, create=False) as lib:
-            records = lib.query(map=args.map, difficulty=tuple(args.difficulty) if args.difficulty else None,
+            records = lib.query(map=args.map, difficulty=checked_range(args.difficulty, "difficulty"),
                                 limit=args.limit)
             if not records:
                 raise UserError(f"no garage in {args.library} matches the filters; widen them or check --map")

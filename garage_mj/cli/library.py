@@ -10,12 +10,13 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import (
+    MAX_ROWS,
+    MAX_WORKERS,
     SHIPPED_ROUTE_MODELS,
     add_filters,
     compute,
     filters,
-    non_negative_int,
-    positive_int,
+    int_in,
     route_key,
     seed,
     user_errors,
@@ -55,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     stats.set_defaults(func=_stats)
     sample = lsub.add_parser("sample", help="a seeded sample, spread evenly over difficulty")
     sample.add_argument("library", type=Path, metavar="LIBRARY", help="library file (library.sqlite)")
-    sample.add_argument("-n", type=non_negative_int, required=True, help="garages to draw")
+    sample.add_argument("-n", type=int_in(0, MAX_ROWS), required=True, help=f"garages to draw (0 to {MAX_ROWS:,})")
     sample.add_argument("--seed", type=seed, default=0, help="random seed (default: 0)")
     sample.add_argument("--uniform", action="store_true", help="draw uniformly, not stratified by difficulty")
     add_filters(sample)
@@ -75,8 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     rate.add_argument("--map", help="only garages of this map (name as stored)")
     rate.add_argument("--model", "--route-model", dest="route_model", type=Path, metavar="FILE",
                       help=f"route difficulty model (default: the shipped one; {SHIPPED_ROUTE_MODELS}; 'garage-mj difficulty fit' writes others)")
-    rate.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
-    rate.add_argument("--limit", type=non_negative_int, help="rate at most N garages (the rest on a later call)")
+    rate.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=1,
+                      help=f"worker processes, 1 to {MAX_WORKERS:,} (default 1)")
+    rate.add_argument("--limit", type=int_in(0, MAX_ROWS),
+                      help=f"rate at most N garages (0 to {MAX_ROWS:,}; the rest on a later call)")
     rate.add_argument("--quiet", action="store_true", help="no progress bar")
     rate.set_defaults(func=_rate)
 

@@ -6,8 +6,10 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, route_key, user_errors
+from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, int_in, route_key, user_errors
 from garage_mj.generation.library import Library
+
+MAX_SMOOTH = 1_000_000  # [episodes] of --smooth's moving mean
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     c.add_argument("runs", nargs="+", type=Path, metavar="RUN", help="run folders (or their monitor.csv)")
     c.add_argument("--out", type=Path, default=Path("convergence.png"), help="PNG file (default: convergence.png)")
-    c.add_argument("--smooth", type=int, default=1, metavar="N", help="moving mean over N episodes (default: 1, none)")
+    c.add_argument("--smooth", type=int_in(1, MAX_SMOOTH), default=1, metavar="N",
+                   help=f"moving mean over N episodes (1 to {MAX_SMOOTH:,}; default: 1, none)")
     c.set_defaults(func=_convergence)
     h = psub.add_parser(
         "heatmap",
@@ -52,8 +55,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _convergence(args: argparse.Namespace) -> int:
     from garage_mj.reporting.plots import convergence
 
-    if args.smooth < 1:
-        raise UserError(f"--smooth must be >= 1, got {args.smooth}")
     out = convergence(args.runs, args.out, smooth=args.smooth)
     print(f"convergence of {len(args.runs)} run(s) -> {out}")
     return 0

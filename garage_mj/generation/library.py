@@ -60,6 +60,16 @@ BUSY_TIMEOUT_S = 60.0  # [s] a writer waits this long for another writer's lock
 DIFFICULTY_BIN = 0.1  # width of the difficulty strata of :meth:`Library.sample`
 
 
+def _shown(path: Path, ancestor: Path) -> Path:
+    """``ancestor`` (an absolute folder above ``path``) as the user wrote it: relative when ``path`` was."""
+    if path.is_absolute():
+        return ancestor
+    try:
+        return ancestor.relative_to(Path.cwd())
+    except ValueError:
+        return ancestor
+
+
 def on_read_only_mount(path: Path) -> bool:
     """Whether ``path`` (or, for a path not made yet, its nearest existing folder) lies on a file system
     mounted read-only, where no ``chmod`` helps (``EROFS``)."""
@@ -80,13 +90,22 @@ def read_only_mount_error(path: Path) -> LibraryError:
     return LibraryError(f"{path} is on a read-only file system (mounted read-only); {fix}")
 
 
-def check_writable(path: str | Path) -> None:
+def check_writable(path: str | Path, *, contents: bool = True) -> None:
     """Refuse, before anything is written, a library file (or its folder) this process may not write.
 
     SQLite writes the file and, in WAL mode, ``-wal``/``-shm`` files beside it; without this check a
-    read-only file or folder fails at the first insert, after the work before it.
+    read-only file or folder fails at the first insert, after the work before it. A folder at ``path``,
+    a file where one of its folders should be and (``contents``) a file that is not a garage-mj
+    library are refused too.
     """
     path = Path(path)
+    if path.is_dir():
+        raise LibraryError(f"{path} is a folder; pass the library file (library.sqlite)")
+    above = next((p for p in path.absolute().parents if p.exists()), None)
+    if above is not None and not above.is_dir():
+        raise LibraryError(f"{path}: {_shown(path, above)} is a file, not a folder; pass a library path in a folder")
+    if contents and path.exists() and check_header(path):
+        check_body(path)
     if on_read_only_mount(path):
         raise read_only_mount_error(path)
     if path.exists() and not os.access(path, os.W_OK):
@@ -127,7 +146,7 @@ class Library:
             return
         if not exists:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-        check_writable(self.path)
+        check_writable(self.path, contents=False)  # the header and body are checked above
         try:
             self._con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
             _register_functions(self._con)
