@@ -743,7 +743,22 @@ def test_a_lock_that_removes_its_file_is_never_held_twice(tmp_path, monkeypatch,
     with FolderLock(out, "garage-mj export", remove=True):
         with pytest.raises(FolderBusy, match=f"{out} is in use by garage-mj export"):
             FolderLock(out, "garage-mj export", remove=True).acquire()
-    assert os.listdir(out) == []
+    assert not out.exists()  # the folder the locks made goes with the last one, as nothing was written in it
+
+
+def test_a_lock_leaves_no_folder_it_made_when_nothing_was_written(tmp_path):
+    from garage_mj.core.fsutil import FolderLock
+
+    with FolderLock(tmp_path / "a" / "b" / "out", "garage-mj test"):
+        pass
+    assert os.listdir(tmp_path) == []  # the parents it made go too
+    with FolderLock(tmp_path / "kept" / "out", "garage-mj test", remove=True):
+        (tmp_path / "kept" / "out" / "result.csv").write_text("x")
+    assert os.listdir(tmp_path / "kept" / "out") == ["result.csv"]  # a job's first file keeps its folder
+    (tmp_path / "mine").mkdir()
+    with FolderLock(tmp_path / "mine", "garage-mj test", remove=True):
+        pass
+    assert (tmp_path / "mine").is_dir()  # a folder that was there stays
 
 
 # -- a driver that crashes its process or never returns ---------------------------------------------------

@@ -83,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
         config = load_config(DriverTrainConfig, args.config, **flags)  # a bad value: the file (or flag), key, range
     except ValueError as exc:
         raise UserError(f"driver training config: {exc}") from None
+    if args.resume and not (args.out / "run.json").is_file():
+        raise UserError(f"--resume: {args.out} holds no driver run to continue; drop --resume to start one there")
     scen = scenario(args)  # bad actor settings are refused before any garage is drawn
     garages = load_garage_set(args.garages, map=args.map, difficulty=checked_range(args.difficulty, "difficulty"),
                               run_seeds=args.run_seeds, n=args.n, seed=args.seed)

@@ -234,6 +234,9 @@ class FolderLock:
     ``remove=True`` deletes the lock file on release (while still holding it); a job that then
     locks the deleted file notices that the name now leads elsewhere and locks afresh. Every job
     that holds its folder's lock from start to end passes it, so no lock file stays behind.
+
+    The folders the lock made (``folder`` and any missing parents) go again on release when nothing but
+    the lock file is in them: a job refused before its first write leaves no trace.
     """
 
     def __init__(self, folder: str | Path, what: str, *, remove: bool = False) -> None:
@@ -241,11 +244,13 @@ class FolderLock:
         self.what = what
         self.remove = remove
         self._fd: int | None = None
+        self._made: list[Path] = []  # the folders acquire() created, deepest first
 
     def acquire(self) -> FolderLock:
-        ensure_dir(self.folder)
+        self._made = [p for p in (self.folder, *self.folder.absolute().parents) if not p.exists()]
         path = self.folder / LOCK_NAME
         while True:
+            ensure_dir(self.folder)  # again after a holder that made the folder removed it as it let go
             try:
                 fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, public_mode())
             except OSError as exc:
@@ -305,8 +310,21 @@ class FolderLock:
                     os.ftruncate(self._fd, 0)
             except OSError:
                 pass
+            self._remove_made()  # still held: a job waiting for this lock finds the name gone and starts afresh
             os.close(self._fd)  # closing drops the flock; without remove the empty file stays (harmless)
             self._fd = None
+
+    def _remove_made(self) -> None:
+        """Remove the folders :meth:`acquire` made when nothing but the lock file is in them (deepest first)."""
+        made, self._made = self._made, []
+        try:
+            if not made or sorted(p.name for p in self.folder.iterdir()) not in ([LOCK_NAME], []):
+                return
+            (self.folder / LOCK_NAME).unlink(missing_ok=True)
+            for folder in made:
+                folder.rmdir()  # only when empty: a job's first file keeps it (and its parents)
+        except OSError:
+            pass
 
     def __enter__(self) -> FolderLock:
         return self.acquire()

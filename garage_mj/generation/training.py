@@ -37,7 +37,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from garage_mj.core.config import ConfigError, bounded, load_config, read_toml, refuse_other_settings
 from garage_mj.core.errors import GarageMJError
 from garage_mj.generation.gen_env import GarageGenEnv
-from garage_mj.generation.library import Library
+from garage_mj.generation.library import Library, check_writable
 from garage_mj.generation.runs import DQNRun
 from garage_mj.grid.map_io import load_map
 
@@ -435,8 +435,10 @@ def train(
         manifest, config = _resumed_manifest(out, map_name, seed, config)
     else:
         manifest, config = _new_manifest(out, map, map_name, seed, config, run_id)
-    run = DQNRun(out, manifest, MANIFEST, resume)
     library_path = None if sink is not None else Path(library_path) if library_path is not None else out / LIBRARY
+    if library_path is not None:
+        check_writable(library_path)  # before the run folder is written: the first usable garage goes there
+    run = DQNRun(out, manifest, MANIFEST, resume)
     manifest.update(target_timesteps=timesteps, library=None if library_path is None else str(library_path))
     if resume and run.done_steps >= timesteps and manifest.get("status") == "finished":
         return manifest

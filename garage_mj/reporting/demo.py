@@ -113,10 +113,9 @@ def run_demo(cfg: DemoConfig) -> Path:
 
     t0 = time.perf_counter()
     out = Path(cfg.out)
-    figs = out / FIGURES
-    figs.mkdir(parents=True, exist_ok=True)
-
     map_name = load_map(cfg.map).name  # the library stores garages under the map's name, not its path
+    figs = out / FIGURES  # after the map is read: a bad --map writes nothing
+    figs.mkdir(parents=True, exist_ok=True)
     library_path, runs = _train(cfg, out, map_name)
     with Library(library_path) as lib:
         total = lib.count(map=map_name)
