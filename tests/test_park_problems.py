@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import csv
 import json
+import math
 import os
+import random
 from pathlib import Path
 
 import pytest
@@ -47,6 +50,7 @@ def test_every_stall_with_a_cruise_test_gives_two_problems(painted_tiny, written
         assert problem.start_centre == pytest.approx(drive_planner(scene).plan(problem.stall).goal)
         assert {c for c, _ in problem.obstacles} <= {"wall", "obstacle", "pillar", "parked_car"}
         assert problem.obstacles  # walls at least
+        assert problem.car == index["car"]  # the vehicle of every problem, which a TPCAP case has no place for
 
 
 def test_json_and_tpcap_files_round_trip(written):
@@ -55,11 +59,12 @@ def test_json_and_tpcap_files_round_trip(written):
         path = out / entry["json"]
         problem = read_park_problem(path)
         assert problem.to_json() == json.loads(path.read_text())
-        text = (out / entry["csv"]).read_text()
-        lines = text.splitlines()
-        assert all("," not in line for line in lines)  # an N-row, one-column vector
+        raw = (out / entry["csv"]).read_bytes()
+        assert raw.endswith(b"\r\n") and raw.count(b"\n") == 1 and b" " not in raw  # one line, as TPCAP's CaseN.csv
+        fields = raw.decode("ascii")[:-2].split(",")
         n = len(problem.obstacles)
-        assert len(lines) == 7 + n + 2 * sum(len(v) for _, v in problem.obstacles) and int(lines[6]) == n
+        assert len(fields) == 7 + n + 2 * sum(len(v) for _, v in problem.obstacles) and int(fields[6]) == n
+        assert fields[7:7 + n] == [str(len(v)) for _, v in problem.obstacles]  # counts written as integers
         start, goal, polygons = read_tpcap_case(out / entry["csv"])
         assert start == problem.start and goal == problem.goal  # exact: every float to its last bit
         assert polygons == [list(v) for _, v in problem.obstacles]
@@ -237,44 +242,203 @@ def test_a_folder_or_a_pipe_is_not_a_problem_file(tmp_path):
 
 
 def _case(lines: list[str]) -> str:
+    """The numbers ``lines`` as a case one number per line (the column vector V)."""
     return "".join(f"{v}\n" for v in lines)
 
 
-#: (what, a function of the good case's lines giving the file's text or bytes, what the message says)
+def _row(values: list[str]) -> str:
+    """The numbers ``values`` as a case laid out as TPCAP publishes it: one comma-separated line, CRLF."""
+    return ",".join(values) + "\r\n"
+
+
+def _fields(path: Path) -> list[str]:
+    """The numbers of the case file ``path`` as written, in either layout."""
+    text = path.read_text()
+    return text.strip().split(",") if "," in text else text.split()
+
+
+#: (what, a function of the good case's numbers and a layout (:func:`_row` or :func:`_case`) giving the
+#: file's text or bytes, what the message says)
 BAD_CASES = [
-    ("obstacle count NaN", lambda v: _case([*v[:6], "nan", *v[7:]]), "V[7] holds nan, not a finite number"),
-    ("obstacle count inf", lambda v: _case([*v[:6], "inf", *v[7:]]), "V[7] holds inf, not a finite number"),
-    ("obstacle count -inf", lambda v: _case([*v[:6], "-inf", *v[7:]]), "V[7] holds -inf"),
-    ("obstacle count 1e400", lambda v: _case([*v[:6], "1e400", *v[7:]]), "V[7] holds 1e400"),
-    ("vertex count NaN", lambda v: _case([*v[:7], "nan", *v[8:]]), "V[8] holds nan"),
-    ("vertex count inf", lambda v: _case([*v[:7], "inf", *v[8:]]), "V[8] holds inf"),
-    ("start x NaN", lambda v: _case(["nan", *v[1:]]), "V[1] holds nan"),
-    ("start yaw inf", lambda v: _case([*v[:2], "inf", *v[3:]]), "V[3] holds inf"),
-    ("goal yaw 1e400", lambda v: _case([*v[:5], "1e400", *v[6:]]), "V[6] holds 1e400"),
-    ("vertex x NaN", lambda v: _case([*v[:-2], "nan", v[-1]]), "holds nan, not a finite number"),
-    ("vertex y -inf", lambda v: _case([*v[:-1], "-inf"]), "holds -inf, not a finite number"),
-    ("vertex far away", lambda v: _case([*v[:-1], "1e300"]), "= 1e+300 is not allowed"),
-    ("yaw huge", lambda v: _case([*v[:2], "1e300", *v[3:]]), "V[3] = 1e+300 is not allowed"),
-    ("a number with an underscore", lambda v: _case(["1_0", *v[1:]]), "V[1] holds '1_0', not a number"),
-    ("a digit of another script", lambda v: _case(["\u0661", *v[1:]]), "not a number"),
-    ("a polygon of zero area", lambda v: _case([*v[:6], "1", "3", "0", "0", "1", "1", "2", "2"]), "zero area"),
-    ("latin-1", lambda v: _case(v).encode() + "\u00e9\n".encode("latin-1"), "UTF-8"),
-    ("more than the size limit", lambda v: _case(v) + " " * (17 << 20), "MiB"),
+    ("obstacle count NaN", lambda v, case: case([*v[:6], "nan", *v[7:]]), "V[7] holds nan, not a finite number"),
+    ("obstacle count inf", lambda v, case: case([*v[:6], "inf", *v[7:]]), "V[7] holds inf, not a finite number"),
+    ("obstacle count -inf", lambda v, case: case([*v[:6], "-inf", *v[7:]]), "V[7] holds -inf"),
+    ("obstacle count 1e400", lambda v, case: case([*v[:6], "1e400", *v[7:]]), "V[7] holds 1e400"),
+    ("vertex count NaN", lambda v, case: case([*v[:7], "nan", *v[8:]]), "V[8] holds nan"),
+    ("vertex count inf", lambda v, case: case([*v[:7], "inf", *v[8:]]), "V[8] holds inf"),
+    ("start x NaN", lambda v, case: case(["nan", *v[1:]]), "V[1] holds nan"),
+    ("start yaw inf", lambda v, case: case([*v[:2], "inf", *v[3:]]), "V[3] holds inf"),
+    ("goal yaw 1e400", lambda v, case: case([*v[:5], "1e400", *v[6:]]), "V[6] holds 1e400"),
+    ("vertex x NaN", lambda v, case: case([*v[:-2], "nan", v[-1]]), "holds nan, not a finite number"),
+    ("vertex y -inf", lambda v, case: case([*v[:-1], "-inf"]), "holds -inf, not a finite number"),
+    ("vertex far away", lambda v, case: case([*v[:-1], "1e300"]), "= 1e+300 is not allowed"),
+    ("yaw huge", lambda v, case: case([*v[:2], "1e300", *v[3:]]), "V[3] = 1e+300 is not allowed"),
+    ("a number with an underscore", lambda v, case: case(["1_0", *v[1:]]), "V[1] holds '1_0', not a number"),
+    ("a digit of another script", lambda v, case: case(["\u0661", *v[1:]]), "not a number"),
+    ("a polygon of zero area", lambda v, case: case([*v[:6], "1", "3", "0", "0", "1", "1", "2", "2"]), "zero area"),
+    ("goal 20 km from the start", lambda v, case: case([*v[:3], repr(float(v[0]) + 20_000), *v[4:]]),
+     "V[4], V[5] = ("),
+    ("vertex 20 km from the start", lambda v, case: case([*v[:-1], repr(float(v[1]) - 20_000)]),
+     "a case spans at most 10000 m"),
+    ("latin-1", lambda v, case: case(v).encode() + "\u00e9\n".encode("latin-1"), "UTF-8"),
+    ("more than the size limit", lambda v, case: case(v) + " " * (17 << 20), "MiB"),
 ]
 
 
+@pytest.mark.parametrize("layout", [_row, _case], ids=["row", "column"])
 @pytest.mark.parametrize(("edit", "says"), [b[1:] for b in BAD_CASES], ids=[b[0] for b in BAD_CASES])
-def test_every_bad_tpcap_case_is_one_line(written, tmp_path, edit, says):
+def test_every_bad_tpcap_case_is_one_line(written, tmp_path, edit, says, layout):
     out, index = written
     good = out / index["problems"][0]["csv"]
     read_tpcap_case(good)
-    data = edit(good.read_text().split())
+    data = edit(_fields(good), layout)
     bad = tmp_path / "Case1.csv"
     bad.write_bytes(data if isinstance(data, bytes) else data.encode())
     with pytest.raises(ParkProblemError) as err:
         read_tpcap_case(bad)
     message = str(err.value)
     assert says in message and str(bad) in message and "\n" not in message, message
+
+
+#: (what, a function of the good case's numbers giving a file in a layout TPCAP's readers do not read as V, what
+#: the message says)
+BAD_LAYOUTS = [
+    ("two lines of comma-separated numbers", lambda v: _row(v[:7]) + _row(v[7:]), "2 lines with commas"),
+    ("an empty field", lambda v: _row([*v[:3], "", *v[3:]]), "empty field V[4]"),
+    ("a leading comma", lambda v: "," + _row(v), "empty field V[1]"),
+    ("two trailing commas", lambda v: ",".join(v) + ",,\r\n", "empty field"),
+    ("two numbers on one of several lines", lambda v: _case([f"{v[0]} {v[1]}", *v[2:]]), "numbers on"),
+    ("semicolons", lambda v: ";".join(v) + "\r\n", "V[1] holds"),
+]
+
+
+@pytest.mark.parametrize(("edit", "says"), [b[1:] for b in BAD_LAYOUTS], ids=[b[0] for b in BAD_LAYOUTS])
+def test_a_tpcap_case_in_another_layout_is_one_line(written, tmp_path, edit, says):
+    out, index = written
+    bad = tmp_path / "Case1.csv"
+    bad.write_text(edit(_fields(out / index["problems"][0]["csv"])), newline="")
+    with pytest.raises(ParkProblemError) as err:
+        read_tpcap_case(bad)
+    message = str(err.value)
+    assert says in message and str(bad) in message and "\n" not in message, message
+    assert "one line of comma-separated numbers" in message, message  # the fix
+
+
+#: (what, a function of the good case's numbers giving a file that TPCAP's readers read as the same V)
+GOOD_LAYOUTS = [
+    ("one number per line", _case),
+    ("one number per line, CRLF", lambda v: "".join(f"{x}\r\n" for x in v)),
+    ("LF", lambda v: ",".join(v) + "\n"),
+    ("no line end", lambda v: ",".join(v)),
+    ("a trailing comma", lambda v: ",".join(v) + ",\r\n"),
+    ("spaces around the commas", lambda v: " " + " , ".join(v) + " \r\n"),
+    ("blank lines after it", lambda v: _row(v) + "\r\n \r\n"),
+    ("a byte-order mark", lambda v: "\ufeff" + _row(v)),
+]
+
+
+@pytest.mark.parametrize("edit", [b[1] for b in GOOD_LAYOUTS], ids=[b[0] for b in GOOD_LAYOUTS])
+def test_a_tpcap_case_is_read_in_every_layout_tpcap_reads(written, tmp_path, edit):
+    out, index = written
+    good = out / index["problems"][0]["csv"]
+    other = tmp_path / "Case1.csv"
+    other.write_text(edit(_fields(good)), newline="")
+    assert read_tpcap_case(other) == read_tpcap_case(good)
+
+
+def _tpcap_reader(path: Path) -> tuple[tuple, tuple, list[list[tuple[float, float]]], int]:
+    """A case as TPCAP's own demos read it (re-implemented here): the first row of the CSV file as floats V
+    (its Python demo's ``csv.reader``; MATLAB's ``readmatrix``), then V taken in order as its MATLAB
+    ``LoadCase`` does: start, goal, n, the n vertex counts, then each obstacle's x, y pairs. Also the count
+    of numbers left over (TPCAP ignores them; a good case has none)."""
+    with open(path) as f:
+        v = [float(x) for x in next(csv.reader(f))]
+    start, goal, n = (v[0], v[1], v[2]), (v[3], v[4], v[5]), int(v[6])
+    counts, rest = [int(c) for c in v[7:7 + n]], v[7 + n:]
+    obstacles = []
+    for c in counts:
+        obstacles.append([(rest[2 * j], rest[2 * j + 1]) for j in range(c)])
+        rest = rest[2 * c:]
+    return start, goal, obstacles, len(rest)
+
+
+def test_tpcap_s_own_reader_takes_the_exported_case(written):
+    out, index = written
+    for entry in index["problems"][:6]:
+        problem = read_park_problem(out / entry["json"])
+        start, goal, obstacles, left = _tpcap_reader(out / entry["csv"])
+        assert start == problem.start and goal == problem.goal and left == 0
+        assert obstacles == [list(v) for _, v in problem.obstacles]
+
+
+#: The shape of TPCAP's 20 published cases (Case1.csv ... Case20.csv of github.com/libai1943/TPCAP_benchmarks):
+#: the vertex count of each obstacle, in order. The files are published without a licence, so they are not
+#: copied here; :func:`_published_like` writes cases of their shape and layout instead.
+TPCAP_SHAPES = {
+    1: [4] * 3, 2: [4] * 3, 3: [4] * 3, 4: [4] * 33, 5: [4] * 53, 6: [4] * 29, 7: [4] * 3, 8: [4] * 3, 9: [4] * 2,
+    10: [4, 4, 5, 5, 5], 11: [5, 4, 6, 5, 5], 12: [4, 4, 5, 5, 4], 13: [4] * 4, 14: [4] * 4, 15: [4] * 4,
+    16: [5] * 10 + [4], 17: [7] * 9 + [4], 18: [8] * 10 + [4, 4], 19: [11] * 27 + [4, 4] + [6] * 8,
+    20: [5, 5, 5, 4, 3] + [6] * 11,
+}
+#: Roughly where the published cases that lie far from the origin are (x, y) [m].
+TPCAP_FAR = {13: (4.484e9, -3.543e8), 14: (4.509e9, -5.511e9), 15: (7.009e9, -8.722e9)}
+
+
+def _tpcap_text(v: list[float]) -> str:
+    """Numbers as TPCAP's case files spell them: each of TPCAP's 20 published files is exactly this."""
+    return ",".join(f"{x:.15g}" for x in v) + "\r\n"
+
+
+def _published_like(k: int, folder: Path) -> Path:
+    """A case of the shape of TPCAP's ``Case<k>.csv`` in its layout: seeded poses within 20 m of its place (yaws
+    up to a turn either way, as the published ones), star-shaped obstacles of its vertex counts, and in the
+    far cases a 1 cm sliver (their published obstacles hold such)."""
+    rng = random.Random(k)
+    ox, oy = TPCAP_FAR.get(k, (0.0, 0.0))
+    shape = TPCAP_SHAPES[k]
+
+    def xy() -> list[float]:
+        return [ox + rng.uniform(-20, 20), oy + rng.uniform(-20, 20)]
+
+    v = [*xy(), rng.uniform(-6.2, 6.2), *xy(), rng.uniform(-6.2, 6.2), len(shape), *shape]
+    for i, c in enumerate(shape):
+        (cx, cy), turn, r = xy(), rng.uniform(0, math.tau), rng.uniform(0.5, 3.0)
+        if k in TPCAP_FAR and i == 2:  # a sliver: a long thin quadrilateral
+            v += [cx, cy, cx + 1.6, cy + 0.01, cx + 1.6, cy + 0.02, cx, cy + 0.01]
+            continue
+        for j in range(c):
+            a = turn + math.tau * (j + rng.uniform(0.0, 0.5)) / c
+            v += [cx + r * math.cos(a), cy + r * math.sin(a)]
+    path = folder / f"Case{k}.csv"
+    path.write_text(_tpcap_text(v), newline="")
+    return path
+
+
+def _check_tpcap_case(path: Path, k: int) -> None:
+    start, goal, polygons = read_tpcap_case(path)
+    ref_start, ref_goal, ref_obstacles, left = _tpcap_reader(path)
+    assert (start, goal, left) == (ref_start, ref_goal, 0), path
+    assert [len(p) for p in polygons] == TPCAP_SHAPES[k], path
+    assert polygons == ref_obstacles, path
+
+
+@pytest.mark.parametrize("k", sorted(TPCAP_SHAPES))
+def test_cases_of_the_shape_and_layout_of_tpcap_s_published_ones_read(tmp_path, k):
+    _check_tpcap_case(_published_like(k, tmp_path), k)
+
+
+TPCAP_CASES = os.environ.get("GARAGE_MJ_TPCAP_CASES")
+
+
+@pytest.mark.skipif(not TPCAP_CASES, reason="GARAGE_MJ_TPCAP_CASES names no folder of TPCAP's Case1.csv ... "
+                                            "Case20.csv (a clone of github.com/libai1943/TPCAP_benchmarks)")
+def test_tpcap_s_published_cases_read():
+    for k in sorted(TPCAP_SHAPES):
+        path = Path(TPCAP_CASES) / f"Case{k}.csv"
+        _check_tpcap_case(path, k)
+        start, goal, polygons = read_tpcap_case(path)
+        values = [*start, *goal, len(polygons), *map(len, polygons), *(c for p in polygons for xy in p for c in xy)]
+        assert path.read_bytes() == _tpcap_text(values).encode(), path  # what _published_like writes
 
 
 # -- the export's folder ----------------------------------------------------------------------------------

@@ -7,14 +7,21 @@ stall, is where the park test starts) and per maneuver (``reverse``: reverse-in,
 - ``DIR/<garage>/stall<NNN>_<maneuver>.json``: the problem (schema below); :func:`read_park_problem`
   reads it back, and refuses a malformed file in one line (:class:`ParkProblemError`).
 - ``DIR/<garage>/stall<NNN>_<maneuver>.csv``: the same problem as a case of the TPCAP benchmark (the
-  Trajectory Planning Competition for Automated Parking, Tsinghua; its ``CaseX.csv`` files), in its
-  layout exactly: an N-row, one-column vector V, one number per line. V[1..3] = x0, y0, theta0, the
-  start pose; V[4..6] = xf, yf, thetaf, the goal pose (both of the rear-axle midpoint, yaw in
-  radians); V[7] = the number of obstacles; V[7 + i] = the number of vertices of obstacle i; then
-  the vertices of each obstacle in turn, x and y alternating (x11, y11, x12, y12, ..., x21, y21, ...).
-  :func:`read_tpcap_case` reads one.
-- ``DIR/park_problems.json``: the index of this export: every problem's two files, and the stalls
-  left out (no feasible cruise test, so no start pose) with the reason.
+  Trajectory Planning Competition for Automated Parking; its ``Case1.csv`` ... ``Case20.csv``), laid out
+  as TPCAP publishes them: one line of comma-separated numbers V, ended by CRLF, no header, no spaces.
+  V[1..3] = x0, y0, theta0, the start pose; V[4..6] = xf, yf, thetaf, the goal pose (both of the
+  rear-axle midpoint, yaw in radians); V[7] = n, the number of obstacles; V[7 + i] = the number of
+  vertices of obstacle i (i = 1..n); then the vertices of each obstacle in turn, x and y alternating
+  (x11, y11, x12, y12, ..., x21, y21, ...). TPCAP's own readers take it: its MATLAB demo
+  (``readmatrix``, then V(1), V(2), ...) and its Python one (``csv.reader``, the first row's fields as
+  floats). Integers are written plain and every other number to its last bit (Python's ``repr``).
+  The format has no place for the vehicle: the car of these cases is the one in the JSON beside each
+  (``car``) and in the index (TPCAP's own cases are for :data:`TPCAP_CAR`). :func:`read_tpcap_case`
+  reads a case: this layout, and also one number per line (the column vector V, which ``readmatrix``
+  reads the same; park problem folders holding that layout read as they are).
+- ``DIR/park_problems.json``: the index of this export: the car of every problem (``car``, the keys of
+  the JSON's), every problem's two files, and the stalls left out (no feasible cruise test, so no start
+  pose) with the reason.
 
 ``<garage>`` is the garage's asset pack folder name (its name and 12 hex digits of its hash). The export
 holds the lock of ``DIR`` (:class:`~garage_mj.core.fsutil.FolderLock`), so a second export into it meanwhile
@@ -90,6 +97,12 @@ MAX_BYTES = 16 << 20  # [bytes] of a file read: far above any problem (a 64x64 g
 MAX_COORD = 10_000.0  # [m] |x| and |y| of any point: a garage is at most 576 m across
 MAX_CAR = 100.0  # [m] any length of the car
 _FIX = "write it again with garage-mj export --park-problems"
+#: The vehicle of TPCAP's own cases [m] (its demos' ``InitializeParams``): a case file has no place for it.
+TPCAP_CAR = {"wheelbase": 2.8, "front_overhang": 0.96, "rear_overhang": 0.929, "width": 1.942}
+#: [m] |x| and |y| of a point of a TPCAP case. Cases of TPCAP's set lie some 10^10 m from the origin (Case15's
+#: x is 7.0e9), where a float64 still resolves 2e-6 m; :data:`MAX_COORD` bounds a case's span instead
+#: (every point within it of the start). Subtract the start before float32 tools see a case.
+MAX_CASE_COORD = 1e11
 
 
 class ParkProblemError(GarageMJError):
@@ -131,11 +144,12 @@ class ParkProblem:
                 "obstacles": [{"class": c, "vertices": [list(v) for v in vs]} for c, vs in self.obstacles]}
 
     def tpcap(self) -> str:
-        """The problem as a TPCAP case file: one number per line (module docstring)."""
+        """The problem as a TPCAP case file: one line of comma-separated numbers ended by CRLF, as TPCAP's
+        ``CaseN.csv`` (module docstring)."""
         values: list[float] = [*self.start, *self.goal, len(self.obstacles)]
         values += [len(vs) for _, vs in self.obstacles]
         values += [c for _, vs in self.obstacles for v in vs for c in v]
-        return "".join(f"{_num(v)}\n" for v in values)
+        return ",".join(_num(v) for v in values) + "\r\n"
 
 
 def _num(v: float) -> str:
@@ -220,7 +234,8 @@ def write_park_problems(garages: Iterable[Garage | GarageScene], out_dir: str | 
                          for s, r in skipped.items()]
     except OSError as exc:  # a folder made read-only meanwhile, a full disk: name it, not a temp file
         raise _write_error(out_dir, Path(exc.filename) if exc.filename else out_dir, exc) from None
-    index = {"format": "garage-mj park problems", "version": VERSION, "problems": entries, "skipped": left_out}
+    index = {"format": "garage-mj park problems", "version": VERSION, "car": _car(car or car_geometry()),
+             "problems": entries, "skipped": left_out}
     return _write(out_dir, out_dir / INDEX, json.dumps(index, indent=2) + "\n")
 
 
@@ -473,8 +488,11 @@ def _polygon(v: Any, what: str) -> tuple[tuple[float, float], ...]:
 
 
 def _area(poly) -> float:
-    """The signed area of ``poly`` (positive: counter-clockwise)."""
-    return sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(poly, poly[1:] + poly[:1])) / 2
+    """The signed area of ``poly`` (positive: counter-clockwise), about its first vertex: far from the origin
+    (a TPCAP case at 10^9 m) the products of raw coordinates would lose the area to rounding."""
+    ox, oy = poly[0]
+    rel = [(x - ox, y - oy) for x, y in poly]
+    return sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(rel, rel[1:] + rel[:1])) / 2
 
 
 def _keys(v: Any, key: str, keys: tuple[str, ...]) -> dict:
@@ -527,20 +545,35 @@ def _obstacle(o: dict, k: int) -> tuple[str, tuple[tuple[float, float], ...]]:
 
 
 _NUMBER = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
-_CASE_FIX = "give a TPCAP case: one number per line (garage-mj export --park-problems writes them)"
+_CASE_FIX = ("give a TPCAP case: one line of comma-separated numbers, as TPCAP's CaseN.csv (garage-mj export "
+             "--park-problems writes them)")
+TpcapCase = tuple[tuple[float, float, float], tuple[float, float, float], list[list[tuple[float, float]]]]
 
 
-def read_tpcap_case(path: str | Path) -> tuple[tuple[float, ...], tuple[float, ...], list[list[tuple[float, float]]]]:
-    """A TPCAP case file: start pose, goal pose (rear-axle midpoint) and obstacle polygons; ParkProblemError
-    when it is not one (a word that is not a decimal number, a NaN or infinite one, counts that are not
-    counts, a point beyond :data:`MAX_COORD`, a yaw beyond two turns, a polygon of zero area)."""
+def read_tpcap_case(path: str | Path) -> TpcapCase:
+    """A TPCAP case file: start pose, goal pose (rear-axle midpoint, yaw in radians) and the obstacle polygons
+    (lists of (x, y)); the vehicle is not in the file (TPCAP's own cases: :data:`TPCAP_CAR`).
+
+    Read as TPCAP's readers read it: one line of comma-separated numbers (its ``CaseN.csv``: fields may be
+    padded with spaces, the line may end in one trailing comma, CRLF, LF or nothing, blank lines after it
+    are ignored), or the same vector V one number per line (a column, as MATLAB's ``readmatrix`` also reads
+    it). ParkProblemError, one line naming the file, when it is not one: several lines of comma-separated
+    numbers (a matrix ``readmatrix`` would read column by column), an empty field, a word that is not a
+    decimal number, a NaN or infinite one, counts that are not counts or do not match the vertices, a point
+    beyond :data:`MAX_CASE_COORD` or more than :data:`MAX_COORD` from the start, a yaw beyond two turns, a
+    polygon of zero area.
+    """
     path = Path(path)
     raw = _read(path, "TPCAP case")
     try:
-        words = raw.decode("utf-8-sig").split()
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ParkProblemError(f"TPCAP case {path} is not UTF-8 text ({exc.reason} at byte {exc.start}); "
                                f"{_CASE_FIX}") from None
+    try:
+        words = _case_words(text)
+    except ValueError as exc:
+        raise ParkProblemError(f"TPCAP case {path} {exc}; {_CASE_FIX}") from None
     v = []
     for i, word in enumerate(words, 1):
         if not _NUMBER.fullmatch(word):
@@ -560,7 +593,30 @@ def read_tpcap_case(path: str | Path) -> tuple[tuple[float, ...], tuple[float, .
         raise ParkProblemError(f"TPCAP case {path} {exc}; {_CASE_FIX}") from None
 
 
-def _case(v: list[float]) -> tuple[tuple[float, ...], tuple[float, ...], list[list[tuple[float, float]]]]:
+def _case_words(text: str) -> list[str]:
+    """The fields of a case's text, V[1], V[2], ... in order; ValueError for a layout that is neither one line of
+    comma-separated fields nor one field per line (nor, without commas, one line of blank-separated ones)."""
+    lines = [line for line in text.splitlines() if line.strip()]
+    if "," not in text:
+        words = text.split()
+        if len(lines) > 1 and len(words) != len(lines):
+            raise ValueError(f"holds {len(words)} numbers on {len(lines)} lines; V is one line of comma-separated "
+                             "numbers or one number per line")
+        return words
+    if len(lines) != 1:
+        raise ValueError(f"holds {len(lines)} lines with commas (a matrix, which TPCAP's readers read otherwise); "
+                         "V is one line of comma-separated numbers")
+    fields = [f.strip() for f in lines[0].split(",")]
+    if len(fields) > 1 and not fields[-1]:
+        fields.pop()  # one trailing comma
+    for i, field in enumerate(fields, 1):
+        if not field:
+            raise ValueError(f"has an empty field V[{i}] (two commas in a row, or a leading comma); give a number "
+                             "between every two commas")
+    return fields
+
+
+def _case(v: list[float]) -> TpcapCase:
     """The poses and polygons of the finite numbers ``v`` of a TPCAP case; ValueError saying what is wrong."""
     if len(v) < 7 or v[6] != int(v[6]) or v[6] < 0:
         raise ValueError("is too short or its obstacle count V[7] is not a count")
@@ -575,9 +631,15 @@ def _case(v: list[float]) -> tuple[tuple[float, ...], tuple[float, ...], list[li
                 if yaw:
                     _bounded(x, f"V[{i + 1}]", -math.tau, math.tau, unit="radians")
                 else:
-                    _coord(x, f"V[{i + 1}]")
+                    _bounded(x, f"V[{i + 1}]", -MAX_CASE_COORD, MAX_CASE_COORD)
             except ValueError as exc:
                 raise ValueError(f"holds a number out of range: {exc}") from None
+    x0, y0 = v[0], v[1]
+    for i in [3, *range(7 + n, len(v), 2)]:
+        far = max(abs(v[i] - x0), abs(v[i + 1] - y0))
+        if far > MAX_COORD:
+            raise ValueError(f"holds the point V[{i + 1}], V[{i + 2}] = ({v[i]!r}, {v[i + 1]!r}), {far:.6g} m from "
+                             f"the start (V[1], V[2]) in x or y; a case spans at most {MAX_COORD:g} m")
     polys, at = [], 7 + n
     for k, c in enumerate(map(int, counts)):
         poly = [(v[at + 2 * j], v[at + 2 * j + 1]) for j in range(c)]
@@ -586,4 +648,4 @@ def _case(v: list[float]) -> tuple[tuple[float, ...], tuple[float, ...], list[li
                              f"V[{at + 2 * c}] lie on a line)")
         polys.append(poly)
         at += 2 * c
-    return tuple(v[0:3]), tuple(v[3:6]), polys
+    return (v[0], v[1], v[2]), (v[3], v[4], v[5]), polys
