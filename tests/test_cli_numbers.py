@@ -224,3 +224,36 @@ def test_a_file_where_a_folder_should_be_is_named(files, capsys):
     line = one_error_line(capsys, ["show", "1", "--library", str(files / "lib.sqlite"), "--png",
                                    str(files / "afile" / "x.png")])
     assert str(files / "afile") in line and "it is a file, not a folder" in line, line
+
+
+def test_check_store_with_a_bad_json_path_changes_no_library(files, capsys):
+    before = snapshot(files)
+    for target in ("adir", "afile/x.json", "missing/x.json"):
+        line = one_error_line(capsys, ["check", "--library", str(files / "lib.sqlite"), "--limit", "1", "--store",
+                                       "--json", str(files / target)])
+        assert "--json" in line and str(files / target) in line, line
+        assert snapshot(files) == before  # no drivability stored before the refusal
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["train", "--map", "tiny_7x11", "--timesteps", "99999999999999999999999", "--out", "{tmp}/t"],
+     "argument --timesteps"),
+    (["difficulty", "show", "tiny_7x11", "-n", "99999999999999999999"], "argument -n"),
+    (["difficulty", "show", "tiny_7x11", "-n", "1", "--stalls", "99999999999999999999"], "argument --stalls"),
+])
+def test_a_huge_count_of_work_is_refused(files, capsys, argv, said):
+    before = snapshot(files)
+    line = one_error_line(capsys, [a.format(tmp=files) for a in argv])
+    assert said in line and "from 1 to" in line, line
+    assert snapshot(files) == before
+
+
+def test_generate_names_a_file_in_the_way_of_its_model_out(files, capsys):
+    mine = files / "mine.txt"
+    mine.write_text("2 2 7 2 2\n2 0 0 0 2\n2 0 0 0 2\n2 0 0 0 2\n2 2 8 2 2\n")
+    before = snapshot(files)
+    line = one_error_line(capsys, ["generate", "--map", str(mine), "--difficulty", "0.1", "0.9", "--count", "1",
+                                   "--library", str(files / "new.sqlite"), "--model-out",
+                                   str(files / "afile" / "g.zip")])
+    assert f"--model-out {files / 'afile' / 'g.zip'}" in line and "is a file, not a folder" in line, line
+    assert snapshot(files) == before

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import functools
 import math
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -160,6 +161,20 @@ def add_ids(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ids", type=positive_int, nargs="+", metavar="ID",
                    help="with --library: exactly these garages, by row id (the first column of 'garage-mj library "
                         "ls'), in the order given; instead of the filters")
+
+
+def check_output_file(path: Path, flag: str) -> None:
+    """Refuse, before any work, an output file ``flag`` names that cannot be written: a folder, a folder
+    that does not exist, a file where a folder should be, a folder this process may not write."""
+    folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise UserError(f"{flag} {path} is a folder; name a file")
+    if folder.exists() and not folder.is_dir():
+        raise UserError(f"{flag} {path}: {folder} is a file, not a folder; name a file in a folder")
+    if not folder.is_dir():
+        raise UserError(f"{flag} {path}: the folder {folder} does not exist; make it or name a file in another one")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise UserError(f"{flag} {path}: the folder {folder} is read-only; name a file in a folder you may write")
 
 
 def records_by_id(lib: Any, args: argparse.Namespace) -> list:

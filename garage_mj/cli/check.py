@@ -15,7 +15,8 @@ import json
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import MAX_ROWS, checked_range, int_in, unit_range
+from garage_mj.cli._common import MAX_ROWS, check_output_file, checked_range, int_in, unit_range
+from garage_mj.core.fsutil import atomic_write
 from garage_mj.generation.library import Library
 
 
@@ -74,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
     report = []
     if args.store and args.library is None:
         raise UserError("--store writes into a library: give --library FILE")
+    if args.json is not None:
+        check_output_file(args.json, "--json")  # before any figure is stored (--store) or computed
     found = _garages(args)
     store = None
     if args.store:
@@ -105,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         store.close()
         print(f"stored the drivability of {len(report)} garage(s) in {args.library}")
     if args.json:
-        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        atomic_write(args.json, json.dumps(report, indent=2) + "\n")
         print(f"wrote {args.json}")
     return 0
 

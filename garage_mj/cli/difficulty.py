@@ -6,13 +6,16 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, positive_int, seed, user_errors
+from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, int_in, seed, user_errors
 from garage_mj.core.fsutil import write_json
 from garage_mj.driving.difficulty.fit import driver_agreement, fit_runs, load_runs, score
 from garage_mj.driving.difficulty.regression import r_text, too_few
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.scene.route_difficulty import load_route_model
 from garage_mj.scene.route_features import FEATURES, garage_features, mean_features
+
+MAX_SHOWN = 1_000_000  # garages 'difficulty show -n' rates and prints (painted: ~10 ms each)
+MAX_STALLS = 10_000  # stalls it lists per garage (a 64x64 garage has fewer)
 
 FIT_EPILOG = """\
 RESULTS are cruise run folders (garage-mj cruise --out): their tests.csv and garages.json. Runs of an
@@ -75,10 +78,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                      formatter_class=argparse.RawDescriptionHelpFormatter)
     w.add_argument("garages", metavar="GARAGES", help="where the garages come from (see below)")
     w.add_argument("--map", help="only this map's garages (library)")
-    w.add_argument("-n", type=positive_int, help="at most N garages (a seeded sample of a library; painted: N)")
+    w.add_argument("-n", type=int_in(1, MAX_SHOWN),
+                   help=f"at most N garages (a seeded sample of a library; painted: N; 1 to {MAX_SHOWN:,})")
     w.add_argument("--seed", type=seed, default=0, help="seed of the sample or of the painting (default 0)")
     w.add_argument("--model", type=Path, help=f"model file (default: the shipped one; {SHIPPED_ROUTE_MODELS})")
-    w.add_argument("--stalls", type=positive_int, default=3, metavar="K", help="hardest stalls to list (default 3)")
+    w.add_argument("--stalls", type=int_in(1, MAX_STALLS), default=3, metavar="K",
+                   help=f"hardest stalls to list (1 to {MAX_STALLS:,}; default 3)")
     w.set_defaults(func=run_show)
 
 

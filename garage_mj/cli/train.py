@@ -6,10 +6,11 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import positive_int, seed, user_errors
+from garage_mj.cli._common import int_in, positive_int, seed, user_errors
 from garage_mj.core.fsutil import FolderLock
 
 ALGOS = ("dqn",)
+MAX_TIMESTEPS = 1_000_000_000  # of one run (a shipped protocol run is 2,000,000; 1e9 is days of training)
 LEARNER_NAMES = ("fast", "paper")  # garage_mj.generation.training.LEARNERS, named here so --help stays light
 
 
@@ -27,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         epilog="example: garage-mj train --map tiny_7x11 --timesteps 20000 --seed 0 --out runs/tiny_s0",
     )
     p.add_argument("--map", required=True, help="shipped map name (garage-mj maps list) or map file")
-    p.add_argument("--timesteps", required=True, type=positive_int, help="total timesteps of the run")
+    p.add_argument("--timesteps", required=True, type=int_in(1, MAX_TIMESTEPS),
+                   help=f"total timesteps of the run (1 to {MAX_TIMESTEPS:,})")
     p.add_argument("--seed", type=seed, default=0, help="random seed of the run (default 0)")
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
     p.add_argument("--algo", default="dqn", choices=ALGOS, help="RL algorithm (default: dqn)")
