@@ -211,3 +211,49 @@ def test_the_plugin_says_a_stall_the_garage_lacks_in_one_line(pytester):
     text = result.stdout.str()
     assert "garage_cruise: stall 99999 does not exist" in text, text
     assert "Traceback" not in text and "drive_env.py" not in text and "backends.py" not in text, text
+
+
+@pytest.mark.parametrize(("extra", "said"), [
+    (["--tests", "99999999999999999999"], "from 1 to 1,000,000"),
+    (["--workers", "5000"], "from 1 to 1,024"),
+    (["--test-timeout", "1e308"], "at most 1,000,000 seconds"),
+    (["--task", "park", "--stall", "999"], "stall 999 does not exist"),  # waypoint: no cruise-driver warning first
+    (["--backend", "ray", "--address", "127.0.0.1:1"], "cannot reach the Ray cluster at 127.0.0.1:1"),
+])
+def test_cruise_refuses_a_bad_option_in_one_line_and_writes_nothing(packs, tmp_path, capsys, extra, said):
+    line = one_line_error(capsys, ["cruise", "--packs", str(packs), "--driver", "waypoint", "--quiet", "--tests", "1",
+                                   *extra, "--out", str(tmp_path / "new" / "D")])
+    assert said in line, line
+    assert not (tmp_path / "new").exists()
+
+
+def test_run_cruise_refuses_a_number_of_tests_it_cannot_hold(tiny, tmp_path):
+    with pytest.raises(CruiseError, match="tests must be an integer from 1 to 1,000,000"):
+        run_cruise([tiny], 10**20, CruiseSettings("waypoint"), tmp_path / "D", compute=QUIET, route_model=False)
+    with pytest.raises(CruiseError, match="test_timeout must be a number of seconds > 0 and at most 1,000,000"):
+        CruiseSettings("waypoint", test_timeout=1e308)
+    assert not (tmp_path / "D").exists()
+
+
+@pytest.mark.parametrize(("extra", "said"), [
+    (["--map", "no_such_map"], "no map named or at 'no_such_map'"),
+    (["--map", "tiny_7x11", "--budget", "99999999999999999999"], "from 1 to 100,000,000"),
+    (["--map", "tiny_7x11", "--population", "99999999999"], "from 1 to 100,000"),
+    (["--map", "tiny_7x11", "--test-timeout", "1e308"], "at most 1,000,000 seconds"),
+])
+def test_hunt_refuses_a_bad_option_in_one_line_and_writes_nothing(tmp_path, capsys, extra, said):
+    argv = ["hunt", "--quiet", "--no-videos", "--budget", "4", "--population", "2", "--elites", "1", "--tests", "2"]
+    line = one_line_error(capsys, [*argv, *extra, "--out", str(tmp_path / "new" / "H")])
+    assert said in line, line
+    assert not (tmp_path / "new").exists()
+
+
+def test_hunt_says_a_damaged_hunt_json_in_one_line(tmp_path, capsys):
+    out = tmp_path / "H"
+    out.mkdir()
+    (out / "hunt.json").write_text("{broken")
+    before = snapshot(out)
+    line = one_line_error(capsys, ["hunt", "--quiet", "--no-videos", "--budget", "4", "--population", "2",
+                                   "--elites", "1", "--tests", "2", "--map", "tiny_7x11", "--out", str(out)])
+    assert f"{out / 'hunt.json'} is damaged" in line and "restore it" in line, line
+    assert snapshot(out) == before

@@ -18,6 +18,7 @@ from garage_mj.cli._common import (
     add_ids,
     compute,
     filters,
+    int_in,
     non_negative_int,
     positive_int,
     positive_seconds,
@@ -33,7 +34,13 @@ from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import TEST_COLUMNS
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
 from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
-from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings, CruiseSource
+from garage_mj.driving.sources import (
+    DEFAULT_TEST_TIMEOUT,
+    MAX_TEST_TIMEOUT,
+    MAX_TESTS,
+    CruiseSettings,
+    CruiseSource,
+)
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
 
@@ -58,11 +65,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_ids(p)
     p.add_argument("--sample", type=positive_int, metavar="N",
                    help="with --library: N garages stratified by difficulty (seeded by --seed)")
-    p.add_argument("--tests", type=positive_int, default=50, help="tests per garage (default 50)")
+    p.add_argument("--tests", type=int_in(1, MAX_TESTS), default=50,
+                   help=f"tests per garage, 1 to {MAX_TESTS:,} (default 50)")
     p.add_argument("--driver", help="built-in driver (oracle, waypoint, vision; learned: the shipped deep-RL "
                                     "model), learned:PATH (a model zip of garage-mj train-driver), module:Class (a module "
                                     "on the Python path or in the current folder) or path/to/file.py:Class (default vision; with --scenario-file: the one the file records)")
-    p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
+    p.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=1,
+                   help=f"worker processes, 1 to {MAX_WORKERS:,} (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local: this process or a process pool (default); ray: --workers Ray actors, on a private "
                         "local Ray or the cluster at --address (pip install 'garage-mj[ray]')")
@@ -76,8 +85,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "action_type attribute is taken as discrete); another one than the driver's own is "
                         "warned about")
     p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
-    p.add_argument("--test-timeout", type=positive_seconds, default=DEFAULT_TEST_TIMEOUT, metavar="SECONDS",
-                   help=f"wall time a test may take (default {DEFAULT_TEST_TIMEOUT:g} s, far above any honest test); "
+    p.add_argument("--test-timeout", type=test_seconds, default=DEFAULT_TEST_TIMEOUT, metavar="SECONDS",
+                   help=f"wall time a test may take, at most {MAX_TEST_TIMEOUT:,.0f} s (default {DEFAULT_TEST_TIMEOUT:g} s, "
+                        "far above any honest test); "
                         "a test past it is a driver_timeout (its worker is stopped) and the run goes on; stored in "
                         "run.json like the seed")
     p.add_argument("--videos", type=video_count, default=0, metavar="N",
@@ -116,8 +126,8 @@ def add_task_args(p: argparse.ArgumentParser, stall: bool = False) -> None:
                    help="park and avp: reverse-in (default), forward (nose-in), or any (drawn per test)")
     if stall:
         p.add_argument("--stall", type=non_negative_int, metavar="ID",
-                       help="test this stall every time (default: drawn per test); an id the garage lacks is "
-                            "refused naming its range")
+                       help="test this stall every time (default: drawn per test); an id a garage lacks is "
+                            "refused before anything is written, naming its range")
 
 
 def task_warning(command: str, driver: str, task: str) -> None:
@@ -132,6 +142,18 @@ def task_warning(command: str, driver: str, task: str) -> None:
         print(f"garage-mj {command}: warning: driver {driver!r} is a cruise driver (its class declares no "
               f"tasks = (..., {task!r})): it cannot select reverse, so it drives the {task} tests forward only",
               file=sys.stderr)
+
+
+#: The most --workers of cruise and hunt: more processes than tests or cores only cost memory.
+MAX_WORKERS = 1024
+
+
+def test_seconds(text: str) -> float:
+    """argparse type of --test-timeout: a number of seconds > 0, at most :data:`MAX_TEST_TIMEOUT`."""
+    value = positive_seconds(text)
+    if value > MAX_TEST_TIMEOUT:
+        raise argparse.ArgumentTypeError(f"{text} is too long: give at most {MAX_TEST_TIMEOUT:,.0f} seconds")
+    return value
 
 
 def video_count(text: str) -> int:
@@ -255,6 +277,7 @@ def runner_failures(failures: dict[str, int]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from garage_mj.driving.cruise import check_stall, check_task
     from garage_mj.reporting.cruise import run_cruise  # matplotlib, for regression.png
 
     if args.scenario_file is not None:
@@ -269,6 +292,8 @@ def run(args: argparse.Namespace) -> int:
         settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
                                   test_timeout=args.test_timeout, task=args.task, maneuver=args.maneuver,
                                   stall=args.stall)
+        check_task(settings)  # refused before the warning below, as run_cruise would
+        check_stall(srcs, settings.stall)
         task_warning("cruise", args.driver, args.task)
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)

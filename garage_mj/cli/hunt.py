@@ -6,10 +6,18 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import compute, positive_int, positive_seconds, seed, unit_range
-from garage_mj.cli.cruise import action_warnings, add_task_args, runner_failures, scenario, task_warning
-from garage_mj.driving.hunt import HuntConfig, HuntResult
-from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings
+from garage_mj.cli._common import compute, int_in, positive_int, seed, unit_range
+from garage_mj.cli.cruise import (
+    MAX_WORKERS,
+    action_warnings,
+    add_task_args,
+    runner_failures,
+    scenario,
+    task_warning,
+    test_seconds,
+)
+from garage_mj.driving.hunt import MAX_BUDGET, MAX_POPULATION, HuntConfig, HuntResult
+from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, MAX_TEST_TIMEOUT, MAX_TESTS, CruiseSettings
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,10 +37,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="built-in driver (oracle, waypoint, vision; learned: the shipped deep-RL model), "
                         "learned:PATH (a model zip of garage-mj train-driver), module:Class (a module on the Python path or "
                         "in the current folder) or path/to/file.py:Class (default vision)")
-    p.add_argument("--budget", type=positive_int, default=1000, help="cruise tests to spend in all (default 1000)")
-    p.add_argument("--tests", type=positive_int, default=5, help="tests per garage per evaluation (default 5)")
-    p.add_argument("--population", type=positive_int, default=20, help="garages per generation (default 20)")
-    p.add_argument("--elites", type=positive_int, default=5, help="best garages kept and mutated (default 5)")
+    p.add_argument("--budget", type=int_in(1, MAX_BUDGET), default=1000,
+                   help=f"cruise tests to spend in all, 1 to {MAX_BUDGET:,} (default 1000)")
+    p.add_argument("--tests", type=int_in(1, MAX_TESTS), default=5,
+                   help=f"tests per garage per evaluation, 1 to {MAX_TESTS:,} (default 5)")
+    p.add_argument("--population", type=int_in(1, MAX_POPULATION), default=20,
+                   help=f"garages per generation, 1 to {MAX_POPULATION:,} (default 20)")
+    p.add_argument("--elites", type=int_in(1, MAX_POPULATION), default=5,
+                   help="best garages kept and mutated, fewer than --population (default 5)")
     p.add_argument("--worst", type=positive_int, default=5,
                    help="garages exported with pack, .xosc and MP4 (default 5)")
     p.add_argument("--no-videos", action="store_true", help="skip the MP4s")
@@ -42,14 +54,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "built-ins are made for continuous, learned for discrete, a module:Class without an "
                         "action_type attribute is taken as discrete); another one than the driver's own is warned about")
     p.add_argument("--occupancy", type=unit_range, default=0.5, help="share of stalls with a parked car")
-    p.add_argument("--test-timeout", type=positive_seconds, default=DEFAULT_TEST_TIMEOUT, metavar="SECONDS",
-                   help=f"wall time a test may take (default {DEFAULT_TEST_TIMEOUT:g} s); past it the test is a "
+    p.add_argument("--test-timeout", type=test_seconds, default=DEFAULT_TEST_TIMEOUT, metavar="SECONDS",
+                   help=f"wall time a test may take, at most {MAX_TEST_TIMEOUT:,.0f} s (default "
+                        f"{DEFAULT_TEST_TIMEOUT:g} s); past it the test is a "
                         "driver_timeout, as garage-mj cruise")
     p.add_argument("--pedestrians", type=int, metavar="N", help="actors per test, as garage-mj cruise")
     p.add_argument("--moving-cars", type=int, metavar="M")
     p.add_argument("--clutter", type=int, metavar="K")
     p.add_argument("--scenario", type=Path, metavar="FILE.toml", help="ScenarioConfig fields, as garage-mj cruise")
-    p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
+    p.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=1,
+                   help=f"worker processes, 1 to {MAX_WORKERS:,} (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="where the tests run: local processes (default) or Ray (a private local Ray, or the "
                         "cluster at --address); results are the same")
@@ -61,6 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from garage_mj.driving.cruise import check_task
     from garage_mj.reporting.hunt import hunt  # matplotlib and MuJoCo, for the figure and the videos
 
     if args.library is not None and not args.library.is_file():
@@ -75,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     with action_warnings("hunt"):
         settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
                                   test_timeout=args.test_timeout, task=args.task, maneuver=args.maneuver)
+        check_task(settings)  # refused before the warning below, as hunt would
         task_warning("hunt", args.driver, args.task)
         res = hunt(settings, args.out, map=args.map if args.library is None else args.library_map,
                    library=args.library, config=cfg, compute=compute(args), videos=not args.no_videos)

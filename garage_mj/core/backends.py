@@ -111,11 +111,14 @@ class Compute:
 DEFAULT_COMPUTE = Compute()
 
 
-def check_backend(compute: Compute) -> None:
+def check_backend(compute: Compute, reach: bool = False) -> None:
     """Fail fast, before any job, when the backend cannot run: Ray not installed for ``backend="ray"``
-    (the values themselves were checked when ``compute`` was made)."""
+    (the values themselves were checked when ``compute`` was made); with ``reach``, also a cluster
+    ``address`` that accepts no connection (a command checks it before it writes anything)."""
     if compute.backend == "ray":
         _ray()
+        if reach and compute.address is not None:
+            _reachable(compute.address)
 
 
 def worker_env() -> dict[str, str]:
@@ -140,7 +143,9 @@ def map_unordered(func: Callable[[Any], Any], jobs: Sequence[Any], *, compute: C
     ``timeout`` [s]: the wall time a job may take (None: no limit; a function: each job's own). A job
     that the backend loses (its worker died again after the retries, or it ran past its time) yields ``on_lost(job,`` a
     :class:`LostJob` ``)`` in place of its result; without ``on_lost`` it stops the batch with one
-    :class:`BackendError` line. A job's own exception is re-raised here as it is, never retried.
+    :class:`BackendError` line. A job's own exception is re-raised here as it is, never retried; a job that raises
+    ``SystemExit`` (``sys.exit``, which would end the process running it) is lost as a ``"crash"`` on its one try,
+    the same in this process and in a worker, and ``KeyboardInterrupt`` stops the batch.
     """
     check_backend(compute)
     jobs = list(jobs)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import numbers
 import os
 import time
 from collections.abc import Iterator, Sequence
@@ -51,7 +52,7 @@ from garage_mj.driving.results import (
     write_outputs,
 )
 from garage_mj.driving.sim.outcomes import OutcomeKind
-from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource, cruise_seed
+from garage_mj.driving.sources import MAX_TESTS, CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
 
 GARAGES_FILE = "garages.json"  # the run's garages (GarageSet.to_json), for reading its tests back later
@@ -185,12 +186,12 @@ def run_cruise(
     """
     from garage_mj.driving.drivers import choose_action_type
 
-    if tests < 1:
-        raise ValueError(f"tests must be >= 1, got {tests}")
+    if isinstance(tests, bool) or not isinstance(tests, numbers.Integral) or not 1 <= tests <= MAX_TESTS:
+        raise CruiseError(f"tests must be an integer from 1 to {MAX_TESTS:,}, got {tests!r}; give --tests N")
     settings = settings if settings is not None else CruiseSettings()
     # fails fast, in this process, with the loader's one-line message on a bad driver
     choice = choice if choice is not None else choose_action_type(settings.driver, settings.action_type)
-    check_backend(compute)
+    check_backend(compute, reach=True)  # Ray missing or its cluster unreachable: before any write
     route = choose_route_model(route_model, settings.driver, choice.action_type, settings.driver_kwargs)
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     hashes = [s.hash for s in srcs]

@@ -36,6 +36,7 @@ import dataclasses
 import io
 import json
 import math
+import numbers
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -49,7 +50,7 @@ from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir, write_js
 from garage_mj.driving.cruise import check_task, run_cruise, run_test, xosc_name
 from garage_mj.driving.episode import check_driver, close_cached_env
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests, failure_counts, read_tests
-from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, CruiseSettings, CruiseSource
+from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, MAX_TESTS, CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library, LibraryError
 from garage_mj.generation.search import mutate, replay
 from garage_mj.grid.garage import Garage
@@ -61,6 +62,11 @@ if TYPE_CHECKING:
 _COUNTS = tuple(sorted(COUNT_COLUMNS.values()))
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
                    "failure_pct", *_COUNTS, "hit", "failure_progress", "failing_tests", "failing_seeds", "parent")
+
+
+#: The most cruise tests a hunt may spend (``--budget``), and the most garages of a generation (``--population``).
+MAX_BUDGET = 100_000_000
+MAX_POPULATION = 100_000
 
 
 class HuntError(GarageMJError):
@@ -79,9 +85,12 @@ class HuntConfig:
     max_tries: int = 50  # mutation draws per child before giving up on a parent
 
     def __post_init__(self) -> None:
-        for name in ("budget", "tests", "population", "elites", "max_tries"):
-            if int(getattr(self, name)) < 1:
-                raise HuntError(f"hunt: {name} must be >= 1, got {getattr(self, name)}")
+        ranges = {"budget": (1, MAX_BUDGET), "tests": (1, MAX_TESTS), "population": (1, MAX_POPULATION),
+                  "elites": (1, MAX_POPULATION), "worst": (0, MAX_POPULATION), "max_tries": (1, MAX_BUDGET)}
+        for name, (low, high) in ranges.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not low <= value <= high:
+                raise HuntError(f"hunt: {name} must be an integer from {low} to {high:,}, got {value!r}")
         if self.elites >= self.population:
             raise HuntError(f"hunt: elites ({self.elites}) must be fewer than the population ({self.population})")
         if self.budget < self.population * self.tests:
@@ -195,7 +204,7 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
         raise HuntError(f"hunt: stall {settings.stall}: the hunt's garages change, so each test draws its stall; "
                         "leave stall out")
     check_task(settings)  # a driver made for other tasks is refused before anything is written
-    check_backend(compute)
+    check_backend(compute, reach=True)  # Ray missing or its cluster unreachable: before any write
     check_driver(settings)  # a driver that cannot be built stops the hunt before hunt.json is written
     start = _starting(map, library, cfg.population, settings.seed)  # a bad map or library: before any write
     out = ensure_dir(out_dir, "--out")

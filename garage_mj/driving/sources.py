@@ -72,6 +72,10 @@ class CruiseSource:
 #: [s] Wall time a test may take before it ends as ``driver_timeout`` (``--test-timeout``): far above any honest
 #: test (the slowest, the learned driver on a 13x13 garage, takes a few seconds), so only a driver that hangs meets it.
 DEFAULT_TEST_TIMEOUT = 120.0
+#: [s] The most ``--test-timeout`` may be (11.6 days): beyond any test, and within what the timers take.
+MAX_TEST_TIMEOUT = 1_000_000.0
+#: The most tests per garage a run may ask for (``--tests``).
+MAX_TESTS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -111,9 +115,10 @@ class CruiseSettings:
             raise CruiseError("env: occupancy is a cruise setting of its own (CruiseSettings.occupancy), not an "
                               "env keyword; give it as occupancy=")
         t = self.test_timeout
-        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t <= 0:
-            raise CruiseError(f"test_timeout must be a number of seconds > 0, got {t!r}; give --test-timeout "
-                              f"SECONDS (default {DEFAULT_TEST_TIMEOUT:g})")
+        if (isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t)
+                or not 0 < t <= MAX_TEST_TIMEOUT):
+            raise CruiseError(f"test_timeout must be a number of seconds > 0 and at most {MAX_TEST_TIMEOUT:,.0f}, got "
+                              f"{t!r}; give --test-timeout SECONDS (default {DEFAULT_TEST_TIMEOUT:g})")
 
     @classmethod
     def from_env_kwargs(cls, driver: str, env_kwargs: dict[str, Any] | None, **fields: Any) -> CruiseSettings:

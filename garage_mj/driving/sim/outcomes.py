@@ -81,10 +81,12 @@ OUTCOMES = (
                      "({goal_tolerance:g} m, {goal_heading_tolerance:g} rad)"),
     OutcomeSpec("outside_stall", "outside_stalls", "stopped near the target stall, not parked inside it "
                 "(park and AVP tests)", failure=True, paper_class="deadlock"),
-    OutcomeSpec("driver_crash", "driver_crashes", "the driver's process died (a signal or an exit) on every try",
+    OutcomeSpec("driver_crash", "driver_crashes", "the driver's process died (a signal or an exit) on every try, "
+                "or the driver called sys.exit",
                 failure=True, paper_class="deadlock", runner=True,
-                note="the process running the driver died (a segfault, the OOM killer, kill -9) on each try: "
-                     "the car stopped where it was; the reason names the signal or exit code"),
+                note="the process running the driver died (a segfault, the OOM killer, kill -9) on each try, or the "
+                     "driver raised SystemExit (sys.exit): the car stopped where it was; the reason names the signal, "
+                     "exit code or exception"),
     OutcomeSpec("driver_timeout", "driver_timeouts", "the test ran past its wall-clock limit (--test-timeout)",
                 failure=True, paper_class="timeout", runner=True,
                 note="the test ran past its wall-clock limit (a driver whose act() blocks); its process was "
