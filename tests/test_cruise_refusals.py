@@ -257,3 +257,28 @@ def test_hunt_says_a_damaged_hunt_json_in_one_line(tmp_path, capsys):
                                    "--elites", "1", "--tests", "2", "--map", "tiny_7x11", "--out", str(out)])
     assert f"{out / 'hunt.json'} is damaged" in line and "restore it" in line, line
     assert snapshot(out) == before
+
+
+BAD_MARKERS = """
+import pytest
+
+MARKED = [{"tests": "3"}, {"tests": 0}, {"per_map": 0}, {"per_map": "2"}, {"maps": []}, {"maps": 5}, {"stall": 99999}]
+
+
+@pytest.mark.parametrize("marked", [pytest.param(m, marks=pytest.mark.garage_mj(**m)) for m in MARKED])
+def test_marked(garage_cruise, marked):
+    garage_cruise("waypoint", **({"tests": 1} if "tests" not in marked else {}))
+"""
+
+
+def test_the_plugin_says_each_bad_choice_in_one_line(pytester):
+    pytester.makepyfile(test_marked=BAD_MARKERS)
+    result = pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    result.assert_outcomes(failed=7)
+    text = result.stdout.str()
+    assert "Traceback" not in text and "TypeError" not in text and "ValueError" not in text, text
+    for said in ("tests must be an integer from 1 to 1,000,000, got '3'", "tests must be an integer from 1 to "
+                 "1,000,000, got 0", "per_map must be an integer from 1 to 1,000, got 0",
+                 "per_map must be an integer from 1 to 1,000, got '2'",
+                 "garages: the list is empty", "garages: cannot test int 5", "stall 99999 does not exist"):
+        assert f"garage_cruise: {said}" in text, (said, text)

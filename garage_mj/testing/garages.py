@@ -11,16 +11,26 @@ name or map file (painted garages of it), an asset pack folder or a folder of pa
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from garage_mj.core.errors import GarageMJError
 from garage_mj.driving.garage_set import is_sqlite_file, load_garage_set
 from garage_mj.driving.sources import CruiseSource, painted_sources
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library
 from garage_mj.generation.library_format import GarageRecord
 from garage_mj.grid.garage import Garage
+
+
+class GarageChoiceError(GarageMJError, ValueError):
+    """A ``garages`` or ``per_map`` argument that names no garage to test; the message says what to give."""
+
+
+#: The most painted garages per map a call may ask for (each paints a dozen candidates).
+MAX_PER_MAP = 1000
 
 TINY_MAP = "tiny_7x11"
 TINY_SEED = 1  # the painter's seed of the tiny_7x11 fixture (the project's own tests paint the same garage)
@@ -78,8 +88,8 @@ def _sources_of(item: Any, per_map: int, seed: int) -> list[CruiseSource]:
         if path.is_dir() or is_sqlite_file(path):
             return _from_path(path)
         return painted_sources(str(item), per_map, seed)  # a map name or map file; MapError names a bad one
-    raise TypeError(f"garages: cannot test {type(item).__name__} {item!r}; give map names, map files, pack "
-                    "folders, a library file, Garage objects or library records")
+    raise GarageChoiceError(f"garages: cannot test {type(item).__name__} {item!r}; give map names, map files, pack "
+                            "folders, a library file, Garage objects or library records")
 
 
 def cruise_sources(garages: Any, per_map: int = 1, seed: int = 0) -> list[CruiseSource]:
@@ -87,10 +97,13 @@ def cruise_sources(garages: Any, per_map: int = 1, seed: int = 0) -> list[Cruise
 
     A map gives ``per_map`` painted garages of it (drawn with ``seed``, spread over difficulty).
     """
-    if per_map < 1:
-        raise ValueError(f"per_map must be >= 1, got {per_map}")
-    items: Sequence[Any] = [garages] if isinstance(garages, (str, Path, Garage, CruiseSource, GarageRecord)) \
-        else list(garages)
+    if isinstance(per_map, bool) or not isinstance(per_map, numbers.Integral) or not 1 <= per_map <= MAX_PER_MAP:
+        raise GarageChoiceError(f"per_map must be an integer from 1 to {MAX_PER_MAP:,}, got {per_map!r}")
+    single = (str, Path, Garage, CruiseSource, GarageRecord)
+    if not isinstance(garages, single) and not isinstance(garages, Iterable):
+        raise GarageChoiceError(f"garages: cannot test {type(garages).__name__} {garages!r}; give map names, map "
+                                "files, pack folders, a library file, Garage objects or library records")
+    items: Sequence[Any] = [garages] if isinstance(garages, single) else list(garages)
     if not items:
-        raise ValueError("garages: the list is empty; name at least one map, pack or garage")
+        raise GarageChoiceError("garages: the list is empty; name at least one map, pack or garage")
     return [s for item in items for s in _sources_of(item, per_map, seed)]
