@@ -298,8 +298,9 @@ def run(args: argparse.Namespace) -> int:
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)
     s = res.stats
+    unproven = f", {s['unproven']} unproven ({s['unproven_pct']}%, excluded)" if "unproven" in s else ""
     print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "
-          f"(excluded), success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
+          f"(excluded){unproven}, success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
           f"Pearson r(difficulty, success) = {r_text(s['r'], s['n'])} (paper {s['paper_r']}), {route_text(s)}; "
           f"results in {res.out_dir}")
     lost = runner_failures(s["failures"])

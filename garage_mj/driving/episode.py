@@ -18,6 +18,7 @@ from typing import Any
 
 from garage_mj.core.errors import GarageMJError
 from garage_mj.driving.results import PARK_COLUMNS
+from garage_mj.driving.sim.outcomes import NOT_DRIVEN
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
 _CACHE: dict[str, Any] = {}
@@ -85,7 +86,7 @@ def drive_test(env, obs, info, seed: int, settings: CruiseSettings, source: Crui
     """Drive the reset ``env`` to the end of its test; the CSV row."""
     driver = _driver_for(settings)
     try:
-        if info.get("outcome") != "infeasible":  # decided from the scene: never driven
+        if info.get("outcome") not in NOT_DRIVEN:  # decided before the drive: never driven
             driver.reset(env.driver_info(seed))
             while True:
                 obs, _, term, trunc, info = env.step(driver.act(obs))
@@ -99,7 +100,7 @@ def drive_test(env, obs, info, seed: int, settings: CruiseSettings, source: Crui
     return {
         "garage": source.name, "garage_hash": source.hash, "test": index, "seed": seed,
         "driver": settings.driver, "target_stall": info["target_stall"],
-        "feasible": int(info["outcome"] != "infeasible"), "outcome": info["outcome"],
+        "feasible": int(info["outcome"] not in NOT_DRIVEN), "outcome": info["outcome"],
         "hit": info["hit"] or "", "hit_geom": info["hit_geom"] or "", "reason": info["reason"],
         "time": round(info["time"], 3),
         "path_length": round(info["path_length"], 3), "route_length": round(info["route_length"], 3),

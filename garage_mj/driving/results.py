@@ -39,7 +39,7 @@ import numpy as np
 from garage_mj.core.config import refuse_other_settings
 from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.driving.difficulty.regression import PAPER_R, regression
-from garage_mj.driving.sim.outcomes import FAILURES, HIT_KINDS, OUTCOMES, PAPER_CLASS, OutcomeKind
+from garage_mj.driving.sim.outcomes import FAILURES, HIT_KINDS, NOT_DRIVEN, OUTCOMES, PAPER_CLASS, OutcomeKind
 from garage_mj.driving.sources import (
     DEFAULT_TEST_TIMEOUT,
     CruiseError,
@@ -66,13 +66,16 @@ HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving
 FAILURE_KINDS = tuple(k.value for k in FAILURES)
 #: Each failure outcome's count column in ``summary.csv`` (and the other tables of failures), in display order.
 COUNT_COLUMNS = {s.kind: s.column for s in OUTCOMES if s.failure}
-#: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart.
+#: ``success_pct`` is over feasible tests; ``infeasible`` tests (never driven) are counted apart, and so are a park
+#: run's ``unproven`` ones (:data:`PARK_SUMMARY_COLUMNS`): ``feasible`` is the tests less both.
 SUMMARY_COLUMNS = ("garage", "difficulty", "route_difficulty", "E[X]", "E[Y]", "tests", "infeasible", "feasible", "successes",
                    *COUNT_COLUMNS.values(), "success_pct", *(f"hit_{c}" for c in HIT_CLASSES))
-#: ``summary.csv``'s columns added for a park or AVP run (a cruise run's keep :data:`SUMMARY_COLUMNS` alone):
-#: collision and timeout rates over feasible tests, mean final position and heading errors over the driven
+#: ``summary.csv``'s columns added for a park or AVP run (a cruise run's keep :data:`SUMMARY_COLUMNS` alone): the
+#: tests whose verdict before the drive is ``unproven`` (no plan within the planner's escalated budget and no proof
+#: that none exists: never driven, neither feasible nor infeasible) and their share of all tests, printed beside
+#: every rate; collision and timeout rates over feasible tests, mean final position and heading errors over the driven
 #: tests, mean parking time and direction changes over the successes.
-PARK_SUMMARY_COLUMNS = ("collision_pct", "timeout_pct", "mean_position_error_m", "mean_heading_error_deg",
+PARK_SUMMARY_COLUMNS = ("unproven", "unproven_pct", "collision_pct", "timeout_pct", "mean_position_error_m", "mean_heading_error_deg",
                         "mean_park_time_s", "mean_direction_changes")
 #: The task settings ``run.json`` holds only where they differ from these (a cruise run's is as before park tests).
 TASK_DEFAULTS = {"task": "cruise", "maneuver": "reverse", "stall": None}
@@ -201,8 +204,10 @@ def row_problem(row: dict[str, str], settings: CruiseSettings) -> tuple[str, str
             return col, "is not a finite number"
     if row["feasible"] not in ("", "0", "1"):
         return "feasible", "is not 0, 1 or empty"
-    if row["feasible"] != "" and (row["feasible"] == "0") != (row["outcome"] == OutcomeKind.INFEASIBLE.value):
-        return "feasible", f"does not go with outcome {row['outcome']!r} (0 for infeasible tests alone)"
+    if row["feasible"] != "" and (row["feasible"] == "0") != (row["outcome"] in NOT_DRIVEN):
+        return "feasible", f"does not go with outcome {row['outcome']!r} (0 for {' and '.join(NOT_DRIVEN)} tests alone)"
+    if settings.task == "cruise" and row["outcome"] == OutcomeKind.UNPROVEN.value:
+        return "outcome", "is a park test's verdict; a cruise test is never unproven"
     if settings.stall is not None and row["target_stall"] not in ("", str(settings.stall)):
         return "target_stall", f"is not this run's stall ({settings.stall})"
     if settings.task == "cruise":
@@ -300,7 +305,7 @@ def summarize(rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
         if not mine:
             continue
         kinds = [r["outcome"] for r in mine]
-        feasible = len(mine) - kinds.count("infeasible")
+        feasible = len(mine) - sum(kinds.count(k) for k in NOT_DRIVEN)
         hits = _hits(mine)
         out.append({
             "garage": s.name, "difficulty": round(s.difficulty, 4),
@@ -328,13 +333,15 @@ def _mean(rows: Sequence[dict[str, Any]], column: str) -> float | None:
 def park_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """:data:`PARK_SUMMARY_COLUMNS` over the rows of park or AVP tests (docs/cruise.md, "Park and AVP tests")."""
     driven = driven_tests(rows)
+    unproven = sum(r["outcome"] == OutcomeKind.UNPROVEN.value for r in rows)
     kinds = [r["outcome"] for r in driven]
     successes = [r for r in driven if r["outcome"] == OutcomeKind.SUCCESS.value]
 
     def pct(kind: str) -> float | None:
         return round(100.0 * kinds.count(kind) / len(driven), 2) if driven else None
 
-    return {"collision_pct": pct(OutcomeKind.COLLISION.value), "timeout_pct": pct(OutcomeKind.TIMEOUT.value),
+    return {"unproven": unproven, "unproven_pct": round(100.0 * unproven / len(rows), 2) if rows else None,
+            "collision_pct": pct(OutcomeKind.COLLISION.value), "timeout_pct": pct(OutcomeKind.TIMEOUT.value),
             "mean_position_error_m": _mean(driven, "position_error_m"),
             "mean_heading_error_deg": _mean(driven, "heading_error_deg"),
             "mean_park_time_s": _mean(successes, "park_time_s"),
@@ -347,8 +354,8 @@ def rounded(value: float | None, digits: int = 4) -> float | None:
 
 
 def driven_tests(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The rows of tests that were driven (an infeasible test is decided from the scene, never driven)."""
-    return [r for r in rows if r["outcome"] != OutcomeKind.INFEASIBLE.value]
+    """The rows of tests that were driven (an infeasible or unproven test is decided before the drive, never driven)."""
+    return [r for r in rows if r["outcome"] not in NOT_DRIVEN]
 
 
 def failed_tests(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:

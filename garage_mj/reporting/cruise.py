@@ -23,13 +23,13 @@ from typing import Any
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving import cruise as driving_cruise
 from garage_mj.driving.cruise import CruiseResult
-from garage_mj.driving.sim.outcomes import FAILURES, RUNNER_KINDS
+from garage_mj.driving.sim.outcomes import FAILURES, NOT_DRIVEN, RUNNER_KINDS
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.grid.garage import Garage
 from garage_mj.reporting.analysis import regression_plot
 
 _FAILED = {k.value for k in FAILURES}
-UNWATCHABLE = {"infeasible", *(k.value for k in RUNNER_KINDS)}  # never driven, or its driver would crash or hang again
+UNWATCHABLE = {*NOT_DRIVEN, *(k.value for k in RUNNER_KINDS)}  # never driven, or its driver would crash or hang again
 
 
 #: The figure of each metric in a cruise run's folder, and the summary.csv column it reads.

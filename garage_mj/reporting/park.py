@@ -33,6 +33,7 @@ import numpy as np  # noqa: E402
 
 from garage_mj.core.fsutil import FolderLock, atomic_write  # noqa: E402
 from garage_mj.driving.results import PARK_SUMMARY_COLUMNS  # noqa: E402
+from garage_mj.driving.sim.outcomes import NOT_DRIVEN  # noqa: E402
 from garage_mj.driving.sources import CruiseSettings, CruiseSource, cruise_seed  # noqa: E402
 from garage_mj.reporting.plots import DPI  # noqa: E402
 from garage_mj.reporting.report import ParkTable, fmt_percent  # noqa: E402
@@ -52,7 +53,9 @@ SUCCESS_NOTE = (
     f"Success (docs/spec.md section 8): at rest, the footprint inside the stall's lines (the far end up to {FAR_END_OVER} m past "
     f"the aisle line), heading within {HEADING_TOLERANCE:g} deg of the stall axis, no contact; the CARLA parking "
     f"benchmark's: within {CARLA_BOX['lateral_m']} m lateral, {CARLA_BOX['longitudinal_m']} m longitudinal, "
-    f"{CARLA_BOX['heading_deg']:g} deg. Rates are over feasible tests, errors over driven tests, park time and "
+    f"{CARLA_BOX['heading_deg']:g} deg. Unproven tests (no reference plan within the planner's escalated budget, "
+    "and no proof that none exists: docs/spec.md section 9) are neither feasible nor infeasible: never driven, "
+    "counted apart, their share of all tests beside the rates. Rates are over feasible tests, errors over driven tests, park time and "
     "direction changes over successes.")
 #: A summary column's unit suffix and how its header writes it.
 UNITS = {"_pct": "%", "_m": "[m]", "_deg": "[deg]", "_s": "[s]"}
@@ -74,6 +77,8 @@ def _cell(column: str, value: Any) -> object:
     """A park summary value as the table writes it: a rate in percent, a mean with 2 decimals, n/a for none."""
     if value is None or value == "":
         return "n/a"
+    if not column.endswith(tuple(UNITS)):  # a count
+        return int(float(value))
     return fmt_percent(float(value)) if column.endswith("_pct") else f"{float(value):.2f}"
 
 
@@ -127,7 +132,7 @@ def drive_park_test(source: CruiseSource, settings: CruiseSettings, test: int) -
         obs, info = env.reset(seed=seed)
         plan = info.get("park_plan") or {"poses": np.zeros((0, 3)), "directions": np.zeros(0)}
         poses = [env.car.pose(env.data)]
-        if info.get("outcome") != "infeasible":
+        if info.get("outcome") not in NOT_DRIVEN:
             drv.reset(env.driver_info(seed))
             while True:
                 obs, _, term, trunc, info = env.step(drv.act(obs))

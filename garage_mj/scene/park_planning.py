@@ -191,6 +191,16 @@ SAMPLERS: dict[str, _Sampler] = {
 }
 
 
+#: Where an escalation stage's sampling starts: the straight exit (the car just out of the stall) or the stall pose.
+EXITS = ("out", "stall")
+#: The default escalation (:attr:`ParkConfig.escalation`): a larger BIT* budget, then RRT-Connect restarts (each
+#: stage goes on from the RNG stream the one before left: another seed) alternately from the stall pose and the exit.
+ESCALATION: tuple[tuple[str, int, str], ...] = (("bitstar", 3000, "out"), *(("rrtconnect", 2500, at) for at in
+                                                                         ("stall", "out") * 2))
+#: The verdicts of a park test before its drive (SPEC 9).
+VERDICTS = ("feasible", "infeasible", "unproven")
+
+
 @dataclass(frozen=True)
 class ParkConfig:
     """Settings of the reference park planner (units in the comments)."""
@@ -204,10 +214,23 @@ class ParkConfig:
     exit_step: float = 0.5  # [m] spacing of the straight exits the analytic path tries
     planner: str = "bitstar"  # a key of SAMPLERS
     planner_range: float = 4.0  # [m] longest motion of a ranged sampler (rrtstar, rrtconnect)
+    #: the escalation after the first attempt fails without a proof: (planner, iterations, exit) stages in order, each
+    #: a seeded sampling run from the straight exit (``"out"``) or from the stall pose itself (``"stall"``)
+    escalation: tuple[tuple[str, int, str], ...] = ESCALATION
+    proof_cell: float = 0.05  # [m] grid cell of the closed-stall proof (a finer grid proves more, never wrongly)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "escalation", tuple(tuple(stage) for stage in self.escalation))  # JSON gives lists
+        if any(len(stage) != 3 for stage in self.escalation):
+            raise ValueError("ParkConfig.escalation: each stage is (planner, iterations, exit)")
         if self.planner not in SAMPLERS:
             raise ValueError(f"unknown park planner {self.planner!r}; known: {', '.join(SAMPLERS)}")
+        for name, iterations, start in self.escalation:
+            if name not in SAMPLERS or iterations < 0 or start not in EXITS:
+                raise ValueError(f"ParkConfig.escalation: stage ({name!r}, {iterations!r}, {start!r}) is not (one of "
+                                 f"{', '.join(SAMPLERS)}, iterations >= 0, one of {', '.join(EXITS)})")
+        if not self.proof_cell > 0:
+            raise ValueError(f"ParkConfig.proof_cell must be > 0, got {self.proof_cell}")
         for name in ("step", "exit_step", "planner_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"ParkConfig.{name} must be > 0, got {getattr(self, name)}")
@@ -225,7 +248,7 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ParkPlan:
-    """The reference plan of one park test, start -> stall, or why none was found (then infeasible).
+    """The reference plan of one park test, start -> stall, or why none was found (``verdict`` infeasible or unproven).
 
     ``poses[i]`` is the car centre (the drive env's ``Car.pose``), ``rear_poses[i]`` the rear-axle
     midpoint, both ``(x, y, yaw)``; ``directions[i]`` the gear (+1 forward, -1 reverse) driving from
@@ -247,7 +270,9 @@ class ParkPlan:
     min_clearance: float = math.nan  # [m] the footprint to the nearest obstacle, over the poses
     planning_time: float = 0.0  # [s] CPU time of the plan call
     method: str = ""  # "analytic" (straight out + one Reeds-Shepp curve) or the sampling planner's name
-    iterations: int = 0  # sampling planner iterations used (0: analytic)
+    iterations: int = 0  # sampling planner iterations used (0: analytic), escalation stages included
+    verdict: str = "feasible"  # VERDICTS: found; proven impossible (the reason is the proof); or neither
+    attempt: int = 0  # 0: the first attempt (analytic or ParkConfig.planner); k: the k-th escalation stage
 
     def segments(self) -> list[tuple[int, int, int]]:
         """``(first, last, gear)`` pose index ranges (inclusive) of one gear; consecutive ones share the cusp pose."""
@@ -263,7 +288,8 @@ class ParkPlan:
             return None if not math.isfinite(v) else round(float(v), 4)
         return {"stall": self.stall, "maneuver": self.maneuver, "found": self.found, "reason": self.reason,
                 "length": r(self.length), "cusps": self.cusps, "min_clearance": r(self.min_clearance),
-                "planning_time": r(self.planning_time), "method": self.method, "iterations": self.iterations}
+                "planning_time": r(self.planning_time), "method": self.method, "iterations": self.iterations,
+                "verdict": self.verdict, "attempt": self.attempt}
 
 
 # -- collision checks ------------------------------------------------------------------------------------
@@ -484,7 +510,11 @@ def _join(*parts: np.ndarray) -> np.ndarray:
 
 # -- the planner -----------------------------------------------------------------------------------------------
 class _NoPlan(Exception):
-    """Why a park test has no plan (its message is the plan's reason)."""
+    """Why a park test has no plan (its message is the plan's reason): none found, none proven impossible."""
+
+
+class _Proof(_NoPlan):
+    """A proof that a park test has no plan (its message names it): the verdict ``infeasible``."""
 
 
 class ParkPlanner:
@@ -530,9 +560,10 @@ class ParkPlanner:
         obs = obstacles if obstacles is not None else park_obstacles(self.obstacles(), stall_id, occupied)
         base = dict(stall=int(stall_id), maneuver=m.name, start=start, goal=goal)
         try:
-            rear, method, iterations = self._search(stall, m, start, goal, obs)
+            rear, method, iterations, attempt = self._search(stall, m, start, goal, obs)
         except _NoPlan as why:
-            return ParkPlan(found=False, reason=str(why), planning_time=time.process_time() - t0, **base)
+            return ParkPlan(found=False, reason=str(why), planning_time=time.process_time() - t0,
+                            verdict="infeasible" if isinstance(why, _Proof) else "unproven", **base)
         rear = rear[::-1].copy()  # planned from the stall outward: driven from the start inward
         yaw = rear[:, 2]
         rear[:, 2] = np.where((yaw >= -math.pi) & (yaw < math.pi), yaw, _wrap(yaw))  # in range: kept to the bit
@@ -542,11 +573,13 @@ class ParkPlanner:
                         directions=_frozen(directions),
                         length=float(np.linalg.norm(np.diff(rear[:, :2], axis=0), axis=1).sum()),
                         cusps=int((directions[1:-1] != directions[:-2]).sum()), min_clearance=float(dist.min()),
-                        planning_time=time.process_time() - t0, method=method, iterations=iterations, **base)
+                        planning_time=time.process_time() - t0, method=method, iterations=iterations,
+                        attempt=attempt, **base)
 
     # -- steps of a plan ---------------------------------------------------------------------------------------
-    def _search(self, stall: Stall, m: Maneuver, start, goal, obs: Obstacles) -> tuple[np.ndarray, str, int]:
-        """Rear-axle poses from the stall pose out to the start, the method and the iterations used; or _NoPlan."""
+    def _search(self, stall: Stall, m: Maneuver, start, goal, obs: Obstacles) -> tuple[np.ndarray, str, int, int]:
+        """Rear-axle poses from the stall pose out to the start, the method, the iterations used and the attempt
+        (0: the first; k: escalation stage k); or _NoPlan (no path, no proof), or _Proof (none can exist)."""
         cfg, car = self.config, self.car
         g, s = centre_to_rear(goal, car), centre_to_rear(start, car)
         d_out = stall.length - BACK_GAP + cfg.margin  # [m] straight out this far, the car has left the stall
@@ -555,17 +588,85 @@ class ParkPlanner:
         checker = _Checker(self.near(obs, region).boxes, car, cfg.margin, region)
         for what, pose in (("stall pose", g), ("start pose", s)):
             if not checker.pose_clear(*pose):
-                raise _NoPlan(self._blocked(obs, pose, f"the {what}"))
+                raise _Proof(self._blocked(obs, pose, f"the {what}"))
         ok = checker.clear(out)
         d_ok = d_out if ok.all() else float(np.hypot(*(out[int(np.argmin(ok)) - 1, :2] - g[:2]))) if ok[0] else 0.0
         with _ompl_seeded(cfg.seed) as (ob, og):
             curves = _Curves(ob, self.radius, region, cfg.step)
             path = self._analytic(curves, checker, g, s, m, d_ok)
             if path is not None:
-                return path, "analytic", 0
+                return path, "analytic", 0, 0
             if cfg.iterations == 0:
-                raise _NoPlan("no straight exit and one Reeds-Shepp curve reach the start (sampling is off)")
-            return self._sample(ob, og, curves, checker, g, s, m, min(d_ok, d_out))
+                first = _NoPlan("no straight exit and one Reeds-Shepp curve reach the start (sampling is off)")
+            else:
+                try:
+                    return (*self._sample(ob, og, curves, checker, g, s, m, min(d_ok, d_out), cfg.planner,
+                                          cfg.iterations), 0)
+                except _NoPlan as why:
+                    first = why
+            closed = self._closed(obs, g, s)
+            if closed:
+                raise _Proof(f"{closed}; {first}")
+            used, tried = 0, []
+            for k, (name, iterations, at) in enumerate(cfg.escalation, start=1):
+                try:
+                    path, method, n = self._sample(ob, og, curves, checker, g, s, m,
+                                                   min(d_ok, d_out) if at == "out" else 0.0, name, iterations)
+                    return path, method, n + used, k
+                except _NoPlan:
+                    used += iterations
+                    tried.append(f"{name} {iterations} from the {'exit' if at == 'out' else 'stall pose'}")
+            more = f"; escalated ({', '.join(tried)}) without a path" if tried else ""
+            raise _NoPlan(f"unproven: {first}{more}, and no proof that none exists")
+
+    def _closed(self, obs: Obstacles, g: np.ndarray, s: np.ndarray) -> str:
+        """A proof that no path leads from the stall pose ``g`` to the start ``s`` (rear axles), or "".
+
+        The footprint grown by the margin holds the disc of radius (half width + margin) about its centre,
+        so along any valid path that centre stays at least that far from every obstacle. The cells of a
+        grid wholly within that distance of one obstacle box are closed to it; when the cells reachable
+        (8-neighbours) from the stall pose's centre include neither the start's nor the edge of a window
+        around the stall, the centre cannot leave: the stall is closed at the car's width. Only the
+        obstacles prove it (not the planning area), so the proof holds for every planner.
+        """
+        car, cfg = self.car, self.config
+        off = (car.front + car.rear) / 2 - car.rear_axle  # [m] rear axle to the footprint's centre
+        a, b = (p[:2] + off * np.array([math.cos(p[2]), math.sin(p[2])]) for p in (g, s))
+        r = car.half_width + cfg.margin  # [m] the disc's radius
+        cell = cfg.proof_cell
+        lo = a - (car.front - car.rear + 2 * cfg.margin + 2 * r)  # a window the car's length and more about the stall
+        n = int(math.ceil(2 * (a - lo).max() / cell)) + 1
+        boxes = obs.boxes
+        if not len(boxes):
+            return ""
+        xs, ys = lo[0] + cell * np.arange(n + 1), lo[1] + cell * np.arange(n + 1)  # grid lines
+        keep = (boxes[:, 2] >= xs[0] - r) & (boxes[:, 0] <= xs[-1] + r) & (boxes[:, 3] >= ys[0] - r) & \
+            (boxes[:, 1] <= ys[-1] + r)
+        closed = np.zeros((n, n), dtype=bool)  # [ix, iy]: the cell [xs[ix], xs[ix+1]] x [ys[iy], ys[iy+1]]
+        for x0, y0, x1, y1 in boxes[keep]:
+            # the farthest point of a cell from a box is one of its corners: every corner nearer than r closes it
+            dx = np.maximum(np.maximum(x0 - xs, xs - x1), 0.0)  # (n + 1,) per grid line
+            dy = np.maximum(np.maximum(y0 - ys, ys - y1), 0.0)
+            near = dx[:, None] ** 2 + dy[None, :] ** 2 < r * r  # (n + 1, n + 1) grid corners
+            closed |= near[:-1, :-1] & near[1:, :-1] & near[:-1, 1:] & near[1:, 1:]
+        ia, ib = (tuple(int(v) for v in (p - lo) // cell) for p in (a, b))
+        if closed[ia]:
+            return ""  # the stall pose's own cell is closed (cannot be, for a clear pose): prove nothing
+        seen = np.zeros_like(closed)
+        seen[ia] = True
+        todo = [ia]
+        while todo:
+            i, j = todo.pop()
+            if i in (0, n - 1) or j in (0, n - 1) or (i, j) == ib:
+                return ""  # out to the window's edge, or at the start: no proof
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    q = (i + di, j + dj)
+                    if not seen[q] and not closed[q]:
+                        seen[q] = True
+                        todo.append(q)
+        return (f"the stall is closed at the car's width: its centre cannot leave the stall {2 * r:.2f} m clear of "
+                f"every obstacle ({cfg.margin:.2f} m margin)")
 
     def area(self, start, stall_id: int, maneuver_name: str = "reverse") -> tuple[float, float, float, float]:
         """[m] ``(xmin, ymin, xmax, ymax)``: the planning area of a park test (a plan's rear axle stays inside)."""
@@ -616,8 +717,9 @@ class ParkPlanner:
         return None
 
     def _sample(self, ob, og, curves: _Curves, checker: _Checker, g: np.ndarray, s: np.ndarray, m: Maneuver,
-                d_exit: float) -> tuple[np.ndarray, str, int]:
-        """The seeded sampling planner from the straight exit (``d_exit`` out of the stall) to the start."""
+                d_exit: float, name: str, iterations: int) -> tuple[np.ndarray, str, int]:
+        """The seeded sampling planner ``name`` (a key of SAMPLERS) with a budget of ``iterations`` from the straight
+        exit (``d_exit`` out of the stall) to the start."""
         cfg = self.config
         si = ob.SpaceInformation(curves.space)
         si.setStateValidityChecker(checker)
@@ -629,7 +731,7 @@ class ParkPlanner:
         objective = ob.PathLengthOptimizationObjective(si)
         objective.setCostThreshold(ob.Cost(math.inf))  # any path satisfies it: stop at the first
         pdef.setOptimizationObjective(objective)
-        spec = SAMPLERS[cfg.planner]
+        spec = SAMPLERS[name]
         planner = getattr(og, spec.cls)(si)
         if spec.ranged:
             planner.setRange(cfg.planner_range)
@@ -639,12 +741,12 @@ class ParkPlanner:
 
         def spent() -> bool:
             used[0] += 1
-            return used[0] > cfg.iterations
+            return used[0] > iterations
 
         planner.solve(ob.PlannerTerminationCondition(spent))
         if not pdef.hasExactSolution():
             raise _NoPlan(f"no path found: the straight exit and one Reeds-Shepp curve hit an obstacle, and "
-                          f"{cfg.planner} found none in {cfg.iterations} iterations")
+                          f"{name} found none in {iterations} iterations")
         path = pdef.getSolutionPath()
         og.PathSimplifier(si).simplifyMax(path)
         way = [e, *([st.getX(), st.getY(), st.getYaw()] for st in path.getStates()[1:])]
@@ -655,8 +757,8 @@ class ParkPlanner:
             parts.insert(0, _straight(g, m.exit_gear, d_exit, cfg.step))
         dense = _join(*parts)
         if not checker.clear(dense).all():
-            raise _NoPlan(f"{cfg.planner}'s path grazes an obstacle between the poses it checked")
-        return dense, cfg.planner, min(used[0], cfg.iterations)
+            raise _NoPlan(f"{name}'s path grazes an obstacle between the poses it checked")
+        return dense, name, min(used[0], iterations)
 
 
 def _edge(curves: _Curves, checker: _Checker, a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -427,7 +427,7 @@ class GarageDriveEnv(gym.Env):
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward; in D, at rest
         self.path_length = 0.0  # [m] driven
         self._last_xy = (x, y)
-        self.outcome = None if test.feasible else Outcome(OutcomeKind.INFEASIBLE, 0.0, test.reason)
+        self.outcome = None if test.feasible else Outcome(OutcomeKind(test.verdict), 0.0, test.reason)
         self._info_test = None
         self._end_info: dict[str, Any] | None = None
         return self._observe(), {**self._info(), "park_plan": test.plan_info()}

@@ -33,7 +33,10 @@ it is) and a wall-clock overrun as a timeout.
 a cruise test never ends so.
 
 ``infeasible`` is not decided here: the drive env gives it before the drive, from the scene alone
-(:mod:`garage_mj.scene.drivable`), and such a test is never driven.
+(:mod:`garage_mj.scene.drivable`), and such a test is never driven. Nor is ``unproven``, a park test's verdict
+when the reference park planner (:mod:`garage_mj.scene.park_planning`) finds no path within its escalated
+budget and no proof that none exists: never driven, counted apart from both feasible and infeasible tests
+(:data:`NOT_DRIVEN`).
 """
 
 from __future__ import annotations
@@ -91,10 +94,12 @@ OUTCOMES = (
                 failure=True, paper_class="timeout", runner=True,
                 note="the test ran past its wall-clock limit (a driver whose act() blocks); its process was "
                      "stopped and the run went on"),
+    OutcomeSpec("unproven", "unproven", "the reference park planner found no path within its escalated budget "
+                "and no proof that none exists (park and AVP tests); never driven, neither feasible nor infeasible, "
+                "excluded from rates and counted apart"),
     OutcomeSpec("infeasible", "infeasible", "no driver of this car can drive it; decided from the scene, "
                 "never driven, excluded from rates"),
 )
-
 #: How a test ended: one member per entry of :data:`OUTCOMES` (``OutcomeKind.MISSED_GOAL.value == "missed_goal"``).
 OutcomeKind = enum.Enum("OutcomeKind", [(s.kind.upper(), s.kind) for s in OUTCOMES], type=str,
                         module=__name__, qualname="OutcomeKind")
@@ -110,6 +115,9 @@ PAPER_CLASSES = tuple(dict.fromkeys(PAPER_CLASS.values()))
 HIT_KINDS = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.hit)
 #: The kinds on which the drive env truncates the episode instead of terminating it.
 TRUNCATING = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.truncates)
+#: The kinds decided before the drive (the test is never driven, and left out of every rate): ``infeasible`` (proven
+#: impossible) and ``unproven`` (a park test without a plan within the planner's escalated budget, nor a proof).
+NOT_DRIVEN = ("infeasible", "unproven")
 #: The kinds the cruise runner decides when the driver's process dies or hangs (no video, no replay: it would again).
 RUNNER_KINDS = tuple(OutcomeKind(s.kind) for s in OUTCOMES if s.runner)
 

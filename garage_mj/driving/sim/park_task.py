@@ -14,9 +14,10 @@ test (``task="cruise"``, the default) never comes here.
 
 The draws come from the reset's generator in this order: target, parked cars, lateral and yaw noise (as a
 cruise test draws them: :meth:`~garage_mj.driving.sim.drive_env.GarageDriveEnv.draw_parked_and_noise`), then
-the maneuver where it is ``"any"``. A test without a cruise route to the stall, or without a park plan, is
-``infeasible`` with the planner's reason; with ``infeasible="skip"`` another stall is drawn instead (unless
-the stall is fixed), while one is left.
+the maneuver where it is ``"any"``. A test without a cruise route to the stall, or with a proof that no park plan
+exists, is ``infeasible`` with the planner's reason; one without a park plan within the planner's escalated
+budget and without a proof is ``unproven`` (docs/spec.md section 9); with ``infeasible="skip"`` another
+stall is drawn instead of either (unless the stall is fixed), while one is left.
 """
 
 from __future__ import annotations
@@ -60,6 +61,15 @@ class ParkTest:
     @property
     def feasible(self) -> bool:
         return not self.reason
+
+    @property
+    def verdict(self) -> str:
+        """The verdict before the drive (docs/spec.md section 9): ``feasible``; ``infeasible`` (no cruise route, or a
+        proof that no park plan exists: the reason names it); ``unproven`` (no plan within the escalated budget,
+        and no proof)."""
+        if self.feasible:
+            return "feasible"
+        return "unproven" if self.plan is not None and self.plan.verdict == "unproven" else "infeasible"
 
     @property
     def stall_pose(self) -> tuple[float, float, float]:
