@@ -257,3 +257,19 @@ def test_generate_names_a_file_in_the_way_of_its_model_out(files, capsys):
                                    str(files / "afile" / "g.zip")])
     assert f"--model-out {files / 'afile' / 'g.zip'}" in line and "is a file, not a folder" in line, line
     assert snapshot(files) == before
+
+
+@pytest.mark.parametrize("argv", [
+    ["library", "export-json", "{lib}", "--out", "{lib}"],
+    ["check", "--library", "{lib}", "--limit", "1", "--json", "{lib}"],
+    ["check", "--library", "{lib}", "--limit", "1", "--store", "--json", "{lib}"],
+    ["difficulty", "fit", "{tmp}/adir", "--library", "{lib}", "--out", "{lib}"],
+    ["difficulty", "score", "{tmp}/adir", "--library", "{lib}", "--json", "{lib}"],
+    ["difficulty", "score", "{tmp}/adir", "--json", "{tmp}/adir/tests.csv"],
+])
+def test_an_output_never_overwrites_an_input(files, capsys, argv):
+    (files / "adir" / "tests.csv").write_text("garage_hash,test\n")
+    before = snapshot(files)
+    line = one_error_line(capsys, [a.format(lib=files / "lib.sqlite", tmp=files) for a in argv])
+    assert "is an input of this command" in line, line
+    assert snapshot(files) == before

@@ -6,7 +6,7 @@ import argparse
 import functools
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -163,9 +163,26 @@ def add_ids(p: argparse.ArgumentParser) -> None:
                         "ls'), in the order given; instead of the filters")
 
 
-def check_output_file(path: Path, flag: str) -> None:
-    """Refuse, before any work, an output file ``flag`` names that cannot be written: a folder, a folder
-    that does not exist, a file where a folder should be, a folder this process may not write."""
+def refuse_overwriting(path: Path, flag: str, inputs: Iterable[Path | None]) -> None:
+    """Refuse an output file ``flag`` names that is one of the command's ``inputs`` (the library it reads,
+    a results file): writing it would destroy what the command reads."""
+    if not path.exists():
+        return
+    for src in inputs:
+        try:
+            same = src is not None and src.exists() and os.path.samefile(path, src)
+        except OSError:
+            same = False
+        if same:
+            raise UserError(f"{flag} {path} is an input of this command ({src}); writing it would destroy it: "
+                            "name another file")
+
+
+def check_output_file(path: Path, flag: str, inputs: Iterable[Path | None] = ()) -> None:
+    """Refuse, before any work, an output file ``flag`` names that cannot be written: one of ``inputs``
+    (:func:`refuse_overwriting`), a folder, a folder that does not exist, a file where a folder should be,
+    a folder this process may not write."""
+    refuse_overwriting(path, flag, inputs)
     folder = path.parent if str(path.parent) else Path(".")
     if path.is_dir():
         raise UserError(f"{flag} {path} is a folder; name a file")

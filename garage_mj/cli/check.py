@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     if args.store and args.library is None:
         raise UserError("--store writes into a library: give --library FILE")
     if args.json is not None:
-        check_output_file(args.json, "--json")  # before any figure is stored (--store) or computed
+        check_output_file(args.json, "--json", [args.library])  # before any figure is stored (--store) or computed
     found = _garages(args)
     store = None
     if args.store:

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, int_in, seed, user_errors
+from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, int_in, refuse_overwriting, seed, user_errors
 from garage_mj.core.fsutil import write_json
 from garage_mj.driving.difficulty.fit import driver_agreement, fit_runs, load_runs, score
 from garage_mj.driving.difficulty.regression import r_text, too_few
@@ -104,6 +104,12 @@ def _print_score(score: dict) -> None:
                   "tests leaves to explain)")
 
 
+def _inputs(args: argparse.Namespace) -> list[Path | None]:
+    """The files 'difficulty fit' and 'score' read: the library, each run's tests.csv, garages.json and run.json."""
+    return [args.library, getattr(args, "model", None),
+            *(r / name for r in args.results for name in ("tests.csv", "garages.json", "run.json"))]
+
+
 @user_errors
 def run_fit(args: argparse.Namespace) -> int:
     feats = FEATURES
@@ -112,6 +118,8 @@ def run_fit(args: argparse.Namespace) -> int:
         bad = [x for x in feats if x not in FEATURES]
         if bad:
             raise UserError(f"unknown route features {bad}; choose among {', '.join(FEATURES)}")
+    refuse_overwriting(args.out, "--out", _inputs(args))
+    refuse_overwriting(args.out.with_suffix(".fit.csv"), "--out (its .fit.csv)", _inputs(args))
     model, records = fit_runs(args.results, args.out, args.library, feats)
     print(model.describe())
     print(f"fitted on {model.fit['tests']} tests ({model.fit['failures']} failures) of {model.fit['garages']} garages, "
@@ -123,6 +131,8 @@ def run_fit(args: argparse.Namespace) -> int:
 
 @user_errors
 def run_score(args: argparse.Namespace) -> int:
+    if args.json is not None:
+        refuse_overwriting(args.json, "--json", _inputs(args))
     model = load_route_model(args.model)
     records, per_garage = load_runs(args.results, args.library, model, progress=True)
     result: dict = score(model, records, garage_route=per_garage)

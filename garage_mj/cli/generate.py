@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         shipped = "/" not in args.map and garage.name in {m.name for m in list_maps()}
         if not (shipped and shipped_generator(garage.name) is not None):  # a map of your own: train a generator
             out = args.model_out or default_model_out(args.library, garage.name)
-            above = next((p for p in out.absolute().parents if p.exists()), None)
+            above = next((p for p in out.parents if p.exists()), None)  # "." or "/" at the end
             if above is not None and not above.is_dir():
                 raise UserError(f"--model-out {out}: {above} is a file, not a folder; name a path in a folder")
             if not out.is_file():

@@ -17,6 +17,7 @@ from garage_mj.cli._common import (
     compute,
     filters,
     int_in,
+    refuse_overwriting,
     route_key,
     seed,
     user_errors,
@@ -170,6 +171,8 @@ def _sample(args: argparse.Namespace) -> int:
 @user_errors
 def _export(args: argparse.Namespace) -> int:
     key = route_key(args)
+    if args.out is not None:
+        refuse_overwriting(args.out, "--out", [args.library])
     with _open(args.library) as lib:
         records = lib.query(**filters(args), limit=args.limit)
         route = lib.route_difficulties([r.id for r in records], key)

@@ -60,16 +60,6 @@ BUSY_TIMEOUT_S = 60.0  # [s] a writer waits this long for another writer's lock
 DIFFICULTY_BIN = 0.1  # width of the difficulty strata of :meth:`Library.sample`
 
 
-def _shown(path: Path, ancestor: Path) -> Path:
-    """``ancestor`` (an absolute folder above ``path``) as the user wrote it: relative when ``path`` was."""
-    if path.is_absolute():
-        return ancestor
-    try:
-        return ancestor.relative_to(Path.cwd())
-    except ValueError:
-        return ancestor
-
-
 def on_read_only_mount(path: Path) -> bool:
     """Whether ``path`` (or, for a path not made yet, its nearest existing folder) lies on a file system
     mounted read-only, where no ``chmod`` helps (``EROFS``)."""
@@ -101,9 +91,9 @@ def check_writable(path: str | Path, *, contents: bool = True) -> None:
     path = Path(path)
     if path.is_dir():
         raise LibraryError(f"{path} is a folder; pass the library file (library.sqlite)")
-    above = next((p for p in path.absolute().parents if p.exists()), None)
+    above = next((p for p in path.parents if p.exists()), None)  # "." or "/" at the end
     if above is not None and not above.is_dir():
-        raise LibraryError(f"{path}: {_shown(path, above)} is a file, not a folder; pass a library path in a folder")
+        raise LibraryError(f"{path}: {above} is a file, not a folder; pass a library path in a folder")
     if contents and path.exists() and check_header(path):
         check_body(path)
     if on_read_only_mount(path):
