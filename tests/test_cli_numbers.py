@@ -273,3 +273,11 @@ def test_an_output_never_overwrites_an_input(files, capsys, argv):
     line = one_error_line(capsys, [a.format(lib=files / "lib.sqlite", tmp=files) for a in argv])
     assert "is an input of this command" in line, line
     assert snapshot(files) == before
+
+
+@pytest.mark.parametrize("extra", [[], ["--model", "tiny_7x11"]])
+def test_generate_refuses_a_model_out_it_would_not_use(tmp_path, capsys, extra):
+    line = one_error_line(capsys, [*GENERATE, "--count", "1", "--library", str(tmp_path / "l.sqlite"),
+                                   "--model-out", str(tmp_path / "g.zip"), *extra])
+    assert "drop --model-out" in line, line
+    assert list(tmp_path.iterdir()) == []

@@ -108,9 +108,15 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--{name} {band[0]} {band[1]}: LO is above HI")
     check_writable(args.library)  # before training a generator or rolling out: both end in the library
     model = args.model
+    if model is not None and args.model_out is not None:
+        raise UserError("--model-out is where a generator trained for a map file goes; with --model nothing is "
+                        "trained: drop --model-out")
     if model is None:
         garage = load_map(args.map)
         shipped = "/" not in args.map and garage.name in {m.name for m in list_maps()}
+        if shipped and shipped_generator(garage.name) is not None and args.model_out is not None:
+            raise UserError(f"--model-out is where a generator trained for a map file goes; {garage.name} has a "
+                            "shipped generator and nothing is trained: drop --model-out")
         if not (shipped and shipped_generator(garage.name) is not None):  # a map of your own: train a generator
             out = args.model_out or default_model_out(args.library, garage.name)
             above = next((p for p in out.parents if p.exists()), None)  # "." or "/" at the end
