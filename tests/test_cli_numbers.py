@@ -6,35 +6,14 @@ output path that is a file or a folder, for the light commands' options (no trai
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import pytest
 
 from garage_mj.cli import build_parser, main
+from tests._cli import one_line_error, snapshot
 
 GENERATE = ["generate", "--map", "tiny_7x11", "--difficulty", "0.3", "0.4"]
-
-
-def one_error_line(capsys, argv: list[str]) -> str:
-    """Run the CLI in-process: exit status 2, one error line (after argparse's usage, for a bad option), no
-    traceback."""
-    try:
-        rc = main(argv)
-    except SystemExit as exc:  # argparse: its usage, then one error line
-        rc = exc.code
-    out, err = capsys.readouterr()
-    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("usage:") and not ln.startswith(" ")]
-    assert rc == 2, (rc, out, err)
-    assert "Traceback" not in err + out, err
-    assert len(lines) == 1 and "error: " in lines[0], err
-    return lines[0]
-
-
-def snapshot(folder: Path) -> dict[str, str]:
-    """Every file under ``folder`` (its path and content digest): what "nothing written" compares."""
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir"
-            for p in sorted(folder.rglob("*"))}
 
 
 @pytest.mark.parametrize("option, value, said", [
@@ -63,7 +42,7 @@ def test_generate_refuses_a_bad_number_before_it_writes(tmp_path, capsys, option
         argv[argv.index("--count") + 1] = value
     else:
         argv += [option, value]
-    line = one_error_line(capsys, argv)
+    line = one_line_error(capsys, argv)
     assert line.startswith("garage-mj generate: error: argument ") and option in line and said in line, line
     assert list(tmp_path.iterdir()) == []
 
@@ -144,7 +123,7 @@ def test_a_library_on_a_read_only_file_system_says_so(read_only_mount, capsys, n
         check_writable(lib)
     said = str(info.value)
     assert "read-only file system" in said and "chmod" not in said and "a writable place" in said, said
-    line = one_error_line(capsys, [*GENERATE, "--count", "1", "--library", str(lib)])
+    line = one_line_error(capsys, [*GENERATE, "--count", "1", "--library", str(lib)])
     assert "read-only file system" in line and str(lib) in line and "chmod" not in line, line
     assert snapshot(read_only_mount) == before
 
@@ -162,7 +141,7 @@ def test_an_oserror_of_a_read_only_file_system_says_so(monkeypatch, capsys):
         raise OSError(errno.EROFS, os.strerror(errno.EROFS), "/mnt/ro/picture.png")
 
     monkeypatch.setattr("garage_mj.cli.show.run", refuse)
-    line = one_error_line(capsys, ["show", "1"])
+    line = one_line_error(capsys, ["show", "1"])
     assert line.startswith("garage-mj show: error: /mnt/ro/picture.png: Read-only file system; ") and \
         "mounted read-only" in line and "permissions" not in line, line
 
@@ -195,7 +174,7 @@ def files(tmp_path):
 ])
 def test_generate_refuses_a_bad_library_before_it_rolls_out(files, capsys, library, said):
     before = snapshot(files)
-    line = one_error_line(capsys, [*GENERATE, "--count", "1", "--library", str(files / library)])
+    line = one_line_error(capsys, [*GENERATE, "--count", "1", "--library", str(files / library)])
     assert said in line, line
     assert snapshot(files) == before
 
@@ -215,13 +194,13 @@ def test_generate_refuses_a_bad_library_before_it_rolls_out(files, capsys, libra
 ])
 def test_huge_and_nan_numbers_are_one_line(files, capsys, argv, said):
     before = snapshot(files)
-    line = one_error_line(capsys, [a.format(lib=files / "lib.sqlite", tmp=files) for a in argv])
+    line = one_line_error(capsys, [a.format(lib=files / "lib.sqlite", tmp=files) for a in argv])
     assert said in line and any(s in line for s in ("from 0 to 1,000,000,000", "from 1 to", "outside [0, 1]")), line
     assert snapshot(files) == before
 
 
 def test_a_file_where_a_folder_should_be_is_named(files, capsys):
-    line = one_error_line(capsys, ["show", "1", "--library", str(files / "lib.sqlite"), "--png",
+    line = one_line_error(capsys, ["show", "1", "--library", str(files / "lib.sqlite"), "--png",
                                    str(files / "afile" / "x.png")])
     assert str(files / "afile") in line and "it is a file, not a folder" in line, line
 
@@ -229,7 +208,7 @@ def test_a_file_where_a_folder_should_be_is_named(files, capsys):
 def test_check_store_with_a_bad_json_path_changes_no_library(files, capsys):
     before = snapshot(files)
     for target in ("adir", "afile/x.json", "missing/x.json"):
-        line = one_error_line(capsys, ["check", "--library", str(files / "lib.sqlite"), "--limit", "1", "--store",
+        line = one_line_error(capsys, ["check", "--library", str(files / "lib.sqlite"), "--limit", "1", "--store",
                                        "--json", str(files / target)])
         assert "--json" in line and str(files / target) in line, line
         assert snapshot(files) == before  # no drivability stored before the refusal
@@ -243,7 +222,7 @@ def test_check_store_with_a_bad_json_path_changes_no_library(files, capsys):
 ])
 def test_a_huge_count_of_work_is_refused(files, capsys, argv, said):
     before = snapshot(files)
-    line = one_error_line(capsys, [a.format(tmp=files) for a in argv])
+    line = one_line_error(capsys, [a.format(tmp=files) for a in argv])
     assert said in line and "from 1 to" in line, line
     assert snapshot(files) == before
 
@@ -252,7 +231,7 @@ def test_generate_names_a_file_in_the_way_of_its_model_out(files, capsys):
     mine = files / "mine.txt"
     mine.write_text("2 2 7 2 2\n2 0 0 0 2\n2 0 0 0 2\n2 0 0 0 2\n2 2 8 2 2\n")
     before = snapshot(files)
-    line = one_error_line(capsys, ["generate", "--map", str(mine), "--difficulty", "0.1", "0.9", "--count", "1",
+    line = one_line_error(capsys, ["generate", "--map", str(mine), "--difficulty", "0.1", "0.9", "--count", "1",
                                    "--library", str(files / "new.sqlite"), "--model-out",
                                    str(files / "afile" / "g.zip")])
     assert f"--model-out {files / 'afile' / 'g.zip'}" in line and "is a file, not a folder" in line, line
@@ -270,14 +249,14 @@ def test_generate_names_a_file_in_the_way_of_its_model_out(files, capsys):
 def test_an_output_never_overwrites_an_input(files, capsys, argv):
     (files / "adir" / "tests.csv").write_text("garage_hash,test\n")
     before = snapshot(files)
-    line = one_error_line(capsys, [a.format(lib=files / "lib.sqlite", tmp=files) for a in argv])
+    line = one_line_error(capsys, [a.format(lib=files / "lib.sqlite", tmp=files) for a in argv])
     assert "is an input of this command" in line, line
     assert snapshot(files) == before
 
 
 @pytest.mark.parametrize("extra", [[], ["--model", "tiny_7x11"]])
 def test_generate_refuses_a_model_out_it_would_not_use(tmp_path, capsys, extra):
-    line = one_error_line(capsys, [*GENERATE, "--count", "1", "--library", str(tmp_path / "l.sqlite"),
+    line = one_line_error(capsys, [*GENERATE, "--count", "1", "--library", str(tmp_path / "l.sqlite"),
                                    "--model-out", str(tmp_path / "g.zip"), *extra])
     assert "drop --model-out" in line, line
     assert list(tmp_path.iterdir()) == []

@@ -11,15 +11,15 @@ cover fails :func:`test_every_command_has_rows`, so a new command cannot skip it
 from __future__ import annotations
 
 import argparse
-import hashlib
 from pathlib import Path
 
 import pytest
 
-from garage_mj.cli import build_parser, main
+from garage_mj.cli import build_parser
 from garage_mj.export.pack import export_pack
 from garage_mj.generation.library import Library
 from garage_mj.grid.painters import paint_garage
+from tests._cli import one_line_error, snapshot
 
 LIB, PACKS, GARAGE, TEXT, FOLDER, FILE, MISSING, OUT = ("lib.sqlite", "packs", "garage.json", "notes.txt", "folder",
                                                        "a_file", "missing.json", "out")
@@ -145,11 +145,6 @@ def test_every_command_has_rows():
     assert set(_commands(build_parser())) <= covered, sorted(set(_commands(build_parser())) - covered)
 
 
-def _digest(folder: Path) -> dict[str, str]:
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir"
-            for p in sorted(folder.rglob("*"))}
-
-
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory) -> Path:
     """A folder of good inputs (a library of 3 tiny garages, a pack, a garage JSON) and a few wrong ones."""
@@ -170,14 +165,7 @@ def inputs(tmp_path_factory) -> Path:
 @pytest.mark.parametrize(("command", "argv", "said"), BAD, ids=[" ".join(argv) for _, argv, _ in BAD])
 def test_a_bad_argument_is_one_line_and_writes_nothing(command, argv, said, inputs, monkeypatch, capsys):
     monkeypatch.chdir(inputs)
-    before = _digest(inputs)
-    try:
-        rc = main(argv)
-    except SystemExit as exc:  # argparse: its usage, then one error line
-        rc = exc.code
-    out, err = capsys.readouterr()
-    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("usage:") and not ln.startswith(" ")]
-    assert rc == 2, (rc, out[-400:], err[-2000:])
-    assert "Traceback" not in out + err and len(lines) == 1 and "error: " in lines[0], err[-2000:]
-    assert said in lines[0], lines[0]
-    assert _digest(inputs) == before, "the refused command wrote into the folder"
+    before = snapshot(inputs)
+    line = one_line_error(capsys, argv)
+    assert said in line, line
+    assert snapshot(inputs) == before, "the refused command wrote into the folder"

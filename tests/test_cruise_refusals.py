@@ -21,35 +21,12 @@ from garage_mj.export.pack import export_pack
 from garage_mj.grid.painters import paint_garage
 from garage_mj.scene.stalls import stall_layout
 from tests import _crashing
+from tests._cli import one_line_error, snapshot
 
 pytest_plugins = ["pytester"]
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}
 QUIET = Compute(progress=False)
-
-
-def snapshot(*roots: Path) -> dict[str, bytes]:
-    """Every file under ``roots`` with its bytes (folders too, as empty entries); missing roots are empty."""
-    out: dict[str, bytes] = {}
-    for root in roots:
-        if root.exists():
-            for p in sorted(root.rglob("*")):
-                out[str(p)] = p.read_bytes() if p.is_file() else b"<dir>"
-    return out
-
-
-def one_line_error(capsys, argv: list[str]) -> str:
-    """Run the CLI in-process: exit status 2 and exactly one error line, no traceback."""
-    try:
-        rc = main(argv)
-    except SystemExit as exc:  # argparse: usage line + one error line
-        rc = exc.code
-    out, err = capsys.readouterr()
-    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("usage:") and not ln.startswith(" ")]
-    assert rc == 2, (rc, out, err)
-    assert "Traceback" not in err + out, err
-    assert len(lines) == 1 and "error" in lines[0], err
-    return lines[0]
 
 
 @pytest.fixture(scope="module")

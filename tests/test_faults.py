@@ -37,37 +37,13 @@ from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.grid.map_io import load_map, parse_map_text
 from garage_mj.grid.painters import paint_garage
 from garage_mj.grid.rules import apply_stall_rule
+from tests._cli import one_line_error, snapshot
 
 CLI = str(Path(sys.executable).with_name("garage-mj"))
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 
 # -- helpers ----------------------------------------------------------------------------------------
-def snapshot(*roots: Path) -> dict[str, bytes]:
-    """Every file under ``roots`` (or the file itself) with its bytes; missing roots are empty."""
-    out = {}
-    for root in roots:
-        paths = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file()) if root.exists() else []
-        for p in paths:
-            out[str(p)] = p.read_bytes()
-    return out
-
-
-def one_line_error(capsys, argv: list[str]) -> str:
-    """Run the CLI in-process; assert a non-zero exit and exactly one error line, no traceback."""
-    try:
-        rc = main(argv)
-    except SystemExit as exc:  # argparse: usage line + one error line
-        rc = exc.code
-    out, err = capsys.readouterr()
-    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("usage:") and not ln.startswith(" ")]
-    assert rc not in (0, None), (out, err)
-    assert "Traceback" not in err + out, err
-    assert "\x1b" not in err + out, err  # no terminal escape printed raw
-    assert len(lines) == 1 and "error" in lines[0], err
-    return lines[0]
-
-
 @pytest.fixture(scope="module")
 def tiny() -> Garage:
     return paint_garage("tiny_7x11", seed=1)

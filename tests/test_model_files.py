@@ -24,7 +24,7 @@ import torch
 from garage_mj.generation.conditioned import default_model_out, load_policy, shipped_generator
 from garage_mj.generation.runs import latest_checkpoint
 from garage_mj.generation.training import load_dqn_config, train
-from tests.test_faults import one_line_error, snapshot
+from tests._cli import one_line_error, snapshot
 
 ROOT = Path(__file__).resolve().parents[1]
 DOOR = ROOT / "garage_mj" / "core" / "model_file.py"

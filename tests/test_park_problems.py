@@ -24,7 +24,8 @@ from garage_mj.scene.car import car_geometry
 from garage_mj.scene.drivable import drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.park_planning import centre_to_rear, park_pose
-from tests.test_faults import _unprivileged, one_line_error, shared_tmp, snapshot  # noqa: F401 (a fixture)
+from tests._cli import one_line_error, snapshot
+from tests.test_faults import _unprivileged, shared_tmp  # noqa: F401 (a fixture)
 
 
 @pytest.fixture(scope="module")

@@ -183,7 +183,7 @@ def test_every_dqn_setting_declares_its_bounds():
      "target_update_interval = 0 is not allowed: target_update_interval must be an integer in [1, 1_000_000_000]"),
 ])
 def test_train_refuses_a_setting_out_of_bounds_before_writing(line, says, tmp_path, capsys):
-    from tests.test_faults import one_line_error
+    from tests._cli import one_line_error
 
     config = tmp_path / "dqn.toml"
     config.write_text(line + "\n")
