@@ -1,7 +1,7 @@
 """What the park benchmarks share: their common options and the painted garages they run on.
 
-``bench_park.py`` and ``bench_park_plan.py`` take ``--maps`` (default every shipped map), ``--garages``
-painted garages per map, ``--occupancy``, ``--seed`` and ``--out``; each paints a map's garages with
+``bench_park.py``, ``bench_park_plan.py`` and ``bench_park_verdicts.py`` take ``--maps`` (default every shipped
+map), ``--garages`` painted garages per map, ``--occupancy``, ``--seed`` and ``--out``; each paints a map's garages with
 ``painted_sources(map, garages, seed=seed)`` and seeds the tests of its garage ``k`` with ``seed * 1000 + k``.
 """
 

@@ -73,8 +73,10 @@ def test_escalation_finds_what_the_first_budget_cannot(tiny):
     config = ParkConfig(**NO_FIRST, escalation=(("rrtconnect", 2500, "stall"),))
     plan = ParkPlanner(scene, CAR, config).plan(start, 0, "reverse")
     assert plan.verdict == "feasible" and plan.found and plan.attempt == 1 and plan.method == "rrtconnect"
-    again = ParkPlanner(scene, CAR, config).plan(start, 0, "reverse")  # seeded: the same plan again
-    assert again.verdict == "feasible" and np.array_equal(plan.poses, again.poses)
+    worker = ParkPlanner(scene, CAR, config)  # another process, which planned other tests before
+    worker.plan(drive_planner(scene, CAR).plan(3).goal, 3, "forward")
+    again = worker.plan(start, 0, "reverse")  # seeded per plan and per stage: the same verdict and plan
+    assert again.verdict == "feasible" and again.attempt == 1 and np.array_equal(plan.poses, again.poses)
 
 
 def test_the_default_first_attempt_is_unchanged_by_escalation(tiny):

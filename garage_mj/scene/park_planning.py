@@ -193,10 +193,10 @@ SAMPLERS: dict[str, _Sampler] = {
 
 #: Where an escalation stage's sampling starts: the straight exit (the car just out of the stall) or the stall pose.
 EXITS = ("out", "stall")
-#: The default escalation (:attr:`ParkConfig.escalation`): a larger BIT* budget, then RRT-Connect restarts (each
-#: stage goes on from the RNG stream the one before left: another seed) alternately from the stall pose and the exit.
-ESCALATION: tuple[tuple[str, int, str], ...] = (("bitstar", 3000, "out"), *(("rrtconnect", 2500, at) for at in
-                                                                         ("stall", "out") * 2))
+#: The default escalation (:attr:`ParkConfig.escalation`): ten seeded RRT-Connect restarts of 800 iterations, alternately
+#: from the stall pose and the straight exit (eval/bench_park_verdicts.py measured restarts of a short RRT-Connect to
+#: find the multi-point turns of a narrow aisle where a larger BIT* budget found none).
+ESCALATION: tuple[tuple[str, int, str], ...] = tuple(("rrtconnect", 800, at) for at in ("stall", "out") * 5)
 #: The verdicts of a park test before its drive (SPEC 9).
 VERDICTS = ("feasible", "infeasible", "unproven")
 
@@ -217,6 +217,7 @@ class ParkConfig:
     #: the escalation after the first attempt fails without a proof: (planner, iterations, exit) stages in order, each
     #: a seeded sampling run from the straight exit (``"out"``) or from the stall pose itself (``"stall"``)
     escalation: tuple[tuple[str, int, str], ...] = ESCALATION
+    escalation_range: float = 2.0  # [m] longest motion of a ranged sampler (rrtstar, rrtconnect) in the escalation
     proof_cell: float = 0.05  # [m] grid cell of the closed-stall proof (a finer grid proves more, never wrongly)
 
     def __post_init__(self) -> None:
@@ -231,7 +232,7 @@ class ParkConfig:
                                  f"{', '.join(SAMPLERS)}, iterations >= 0, one of {', '.join(EXITS)})")
         if not self.proof_cell > 0:
             raise ValueError(f"ParkConfig.proof_cell must be > 0, got {self.proof_cell}")
-        for name in ("step", "exit_step", "planner_range"):
+        for name in ("step", "exit_step", "planner_range", "escalation_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"ParkConfig.{name} must be > 0, got {getattr(self, name)}")
         if self.margin < 0 or not 0 <= self.curvature_margin < 1 or self.iterations < 0:
@@ -402,6 +403,11 @@ def _ompl_seeded(seed: int):
         yield ob, og
     finally:
         ou.setLogLevel(level)
+
+
+def _stage_seed(seed: int, stage: int) -> int:
+    """OMPL's seed for escalation stage ``stage`` (1, 2, ...) of a plan seeded ``seed`` (never 0: OMPL's "random")."""
+    return int(seed) + 1 + 7919 * stage
 
 
 class _Curves:
@@ -609,9 +615,11 @@ class ParkPlanner:
                 raise _Proof(f"{closed}; {first}")
             used, tried = 0, []
             for k, (name, iterations, at) in enumerate(cfg.escalation, start=1):
+                _ompl()[2].RNG.setSeed(_stage_seed(cfg.seed, k))  # each stage its own seed: a restart
                 try:
                     path, method, n = self._sample(ob, og, curves, checker, g, s, m,
-                                                   min(d_ok, d_out) if at == "out" else 0.0, name, iterations)
+                                                   min(d_ok, d_out) if at == "out" else 0.0, name, iterations,
+                                                   cfg.escalation_range)
                     return path, method, n + used, k
                 except _NoPlan:
                     used += iterations
@@ -717,9 +725,9 @@ class ParkPlanner:
         return None
 
     def _sample(self, ob, og, curves: _Curves, checker: _Checker, g: np.ndarray, s: np.ndarray, m: Maneuver,
-                d_exit: float, name: str, iterations: int) -> tuple[np.ndarray, str, int]:
+                d_exit: float, name: str, iterations: int, reach: float | None = None) -> tuple[np.ndarray, str, int]:
         """The seeded sampling planner ``name`` (a key of SAMPLERS) with a budget of ``iterations`` from the straight
-        exit (``d_exit`` out of the stall) to the start."""
+        exit (``d_exit`` out of the stall) to the start; a ranged one's range ``reach`` (None: ``planner_range``)."""
         cfg = self.config
         si = ob.SpaceInformation(curves.space)
         si.setStateValidityChecker(checker)
@@ -734,7 +742,7 @@ class ParkPlanner:
         spec = SAMPLERS[name]
         planner = getattr(og, spec.cls)(si)
         if spec.ranged:
-            planner.setRange(cfg.planner_range)
+            planner.setRange(cfg.planner_range if reach is None else reach)
         planner.setProblemDefinition(pdef)
         planner.setup()
         used = [0]
