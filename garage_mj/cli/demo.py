@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from garage_mj.cli._common import non_negative_int, positive_int, seed
+from garage_mj.cli._common import MAX_WORKERS, int_in, non_negative_int, positive_int, seed
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.reporting.demo import DemoConfig, demo_config, run_demo
 
@@ -34,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--videos", type=non_negative_int, default=_D.failure_videos,
                    help="failures shown per driver run, each with an MP4 and its .xosc "
                         f"(default: {_D.failure_videos}; 0: none)")
-    p.add_argument("--workers", type=positive_int, default=_D.workers, help=f"cruise worker processes (default: {_D.workers})")
+    p.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=_D.workers,
+                   help=f"cruise worker processes, 1 to {MAX_WORKERS:,} (default: {_D.workers})")
     p.add_argument("--seed", type=seed, default=_D.seed, help=f"seed of sampling and tests (default: {_D.seed})")
     p.add_argument("--out", default=_D.out, help=f"output folder (default: {_D.out})")
     p.set_defaults(func=run)

@@ -9,7 +9,9 @@ from pathlib import Path
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import (
+    MAX_WORKERS,
     checked_range,
+    int_in,
     non_negative_int,
     positive_int,
     seed,
@@ -62,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=positive_int, help="env steps driven per iteration (default 6000)")
     p.add_argument("--curriculum", choices=CURRICULA, help="how garages are drawn: uniform (default), difficulty (easy to hard), adversarial (failure-prioritised replay), hunt (garages hunt finds the model failing on)")
     p.add_argument("--rl-timesteps", type=non_negative_int, help="DQN fine-tuning timesteps after imitation (default 0)")
-    p.add_argument("--workers", type=positive_int, help="worker processes driving (default 2)")
+    p.add_argument("--workers", type=int_in(1, MAX_WORKERS), help=f"worker processes driving, 1 to {MAX_WORKERS:,} (default 2)")
     act = p.add_argument_group("adverse events while training (the oracle yields to them, the model sees them "
                                "only in its camera)")
     act.add_argument("--pedestrians", type=non_negative_int, metavar="N", help="pedestrians per episode, as cruise")
