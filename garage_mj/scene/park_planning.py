@@ -194,9 +194,11 @@ SAMPLERS: dict[str, _Sampler] = {
 #: Where an escalation stage's sampling starts: the straight exit (the car just out of the stall) or the stall pose.
 EXITS = ("out", "stall")
 #: The default escalation (:attr:`ParkConfig.escalation`): ten seeded RRT-Connect restarts of 800 iterations, alternately
-#: from the stall pose and the straight exit (eval/bench_park_verdicts.py measured restarts of a short RRT-Connect to
-#: find the multi-point turns of a narrow aisle where a larger BIT* budget found none).
-ESCALATION: tuple[tuple[str, int, str], ...] = tuple(("rrtconnect", 800, at) for at in ("stall", "out") * 5)
+#: from the stall pose and the straight exit, then four more in a planning area grown by 12 m instead of ``region``
+#: (eval/bench_park_verdicts.py measured restarts of a short RRT-Connect to find the multi-point turns of a narrow
+#: aisle where a larger BIT* budget found none; the wider area lets a car pinned beside a wall leave it on gentle arcs).
+ESCALATION: tuple[tuple, ...] = (*(("rrtconnect", 800, at) for at in ("stall", "out") * 5),
+                                 *(("rrtconnect", 800, at, 12.0) for at in ("stall", "out") * 2))
 #: The verdicts of a park test before its drive (SPEC 9).
 VERDICTS = ("feasible", "infeasible", "unproven")
 
@@ -214,22 +216,23 @@ class ParkConfig:
     exit_step: float = 0.5  # [m] spacing of the straight exits the analytic path tries
     planner: str = "bitstar"  # a key of SAMPLERS
     planner_range: float = 4.0  # [m] longest motion of a ranged sampler (rrtstar, rrtconnect)
-    #: the escalation after the first attempt fails without a proof: (planner, iterations, exit) stages in order, each
-    #: a seeded sampling run from the straight exit (``"out"``) or from the stall pose itself (``"stall"``)
-    escalation: tuple[tuple[str, int, str], ...] = ESCALATION
+    #: the escalation after the first attempt fails without a proof: (planner, iterations, exit[, region]) stages in
+    #: order, each a seeded sampling run from the straight exit (``"out"``) or from the stall pose itself
+    #: (``"stall"``), in the planning area grown by ``region`` metres (left out: this config's ``region``)
+    escalation: tuple[tuple, ...] = ESCALATION
     escalation_range: float = 2.0  # [m] longest motion of a ranged sampler (rrtstar, rrtconnect) in the escalation
     proof_cell: float = 0.05  # [m] grid cell of the closed-stall proof (a finer grid proves more, never wrongly)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "escalation", tuple(tuple(stage) for stage in self.escalation))  # JSON gives lists
-        if any(len(stage) != 3 for stage in self.escalation):
-            raise ValueError("ParkConfig.escalation: each stage is (planner, iterations, exit)")
+        if any(len(stage) not in (3, 4) for stage in self.escalation):
+            raise ValueError("ParkConfig.escalation: each stage is (planner, iterations, exit) or (..., region)")
         if self.planner not in SAMPLERS:
             raise ValueError(f"unknown park planner {self.planner!r}; known: {', '.join(SAMPLERS)}")
-        for name, iterations, start in self.escalation:
-            if name not in SAMPLERS or iterations < 0 or start not in EXITS:
+        for name, iterations, start, *grow in self.escalation:
+            if name not in SAMPLERS or iterations < 0 or start not in EXITS or not all(r > 0 for r in grow):
                 raise ValueError(f"ParkConfig.escalation: stage ({name!r}, {iterations!r}, {start!r}) is not (one of "
-                                 f"{', '.join(SAMPLERS)}, iterations >= 0, one of {', '.join(EXITS)})")
+                                 f"{', '.join(SAMPLERS)}, iterations >= 0, one of {', '.join(EXITS)}[, region > 0])")
         if not self.proof_cell > 0:
             raise ValueError(f"ParkConfig.proof_cell must be > 0, got {self.proof_cell}")
         for name in ("step", "exit_step", "planner_range", "escalation_range"):
@@ -613,18 +616,26 @@ class ParkPlanner:
             closed = self._closed(obs, g, s)
             if closed:
                 raise _Proof(f"{closed}; {first}")
-            used, tried = 0, []
-            for k, (name, iterations, at) in enumerate(cfg.escalation, start=1):
+            used, tried, areas = 0, [], {cfg.region: (curves, checker)}
+            for k, (name, iterations, at, *grow) in enumerate(cfg.escalation, start=1):
+                wide = float(grow[0]) if grow else cfg.region
+                if wide not in areas:  # the planning area grown by this stage's region instead
+                    area = self._region(np.array([g, s, out[-1]]), wide)
+                    areas[wide] = (_Curves(ob, self.radius, area, cfg.step),
+                                   _Checker(self.near(obs, area).boxes, car, cfg.margin, area))
                 _ompl()[2].RNG.setSeed(_stage_seed(cfg.seed, k))  # each stage its own seed: a restart
                 try:
-                    path, method, n = self._sample(ob, og, curves, checker, g, s, m,
+                    path, method, n = self._sample(ob, og, *areas[wide], g, s, m,
                                                    min(d_ok, d_out) if at == "out" else 0.0, name, iterations,
                                                    cfg.escalation_range)
                     return path, method, n + used, k
                 except _NoPlan:
                     used += iterations
-                    tried.append(f"{name} {iterations} from the {'exit' if at == 'out' else 'stall pose'}")
-            more = f"; escalated ({', '.join(tried)}) without a path" if tried else ""
+                    tried.append(f"{name} {iterations} from the {'exit' if at == 'out' else 'stall pose'}"
+                                 + (f" ({wide:g} m area)" if grow else ""))
+            runs = {t: tried.count(t) for t in tried}  # in order, repeats counted
+            more = "; escalated ({}) without a path".format(
+                ", ".join(t if n == 1 else f"{t} x{n}" for t, n in runs.items())) if tried else ""
             raise _NoPlan(f"unproven: {first}{more}, and no proof that none exists")
 
     def _closed(self, obs: Obstacles, g: np.ndarray, s: np.ndarray) -> str:
@@ -683,9 +694,9 @@ class ParkPlanner:
         out = _straight(g, m.exit_gear, stall.length - BACK_GAP + self.config.margin, 1.0)[-1]
         return self._region(np.array([g, centre_to_rear(start, self.car), out]))
 
-    def _region(self, poses: np.ndarray) -> tuple[float, float, float, float]:
-        """[m] the planning area: the box around ``poses`` grown by ``region``, within the garage."""
-        r, (x0, y0, x1, y1) = self.config.region, self.extent
+    def _region(self, poses: np.ndarray, grow: float | None = None) -> tuple[float, float, float, float]:
+        """[m] the planning area: the box around ``poses`` grown by ``grow`` (None: ``region``), within the garage."""
+        r, (x0, y0, x1, y1) = self.config.region if grow is None else grow, self.extent
         lo, hi = poses[:, :2].min(axis=0) - r, poses[:, :2].max(axis=0) + r
         return max(lo[0], x0), max(lo[1], y0), min(hi[0], x1), min(hi[1], y1)
 
