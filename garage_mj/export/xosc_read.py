@@ -65,7 +65,7 @@ class XoscTest:
     def park_plan(self) -> dict[str, Any] | None:
         """A park or AVP test's reference park plan as the env's reset info gives it (``poses`` (N, 3), ``directions``
         (N,) +1 forward / -1 reverse, driving from pose i to i + 1, the last as the one before); None for a cruise
-        test, or a test without a plan (``plan_start`` -1: infeasible)."""
+        test, or a test without a plan (``plan_start`` -1: infeasible or unproven)."""
         start = int(self.meta.get("plan_start", -1))
         if self.task == "cruise" or start < 0 or self.route_heading is None:
             return None

@@ -34,13 +34,16 @@ def cruise_report(out_dir: str | Path, sources: Sequence[CruiseSource | Garage],
     pictures = record_park_pictures(out, rows, srcs, shown)
     park = park_table(out)
     figures = {m: out / name for m, (name, _) in FIGURES.items()}
-    success = (f"{fmt_percent(stats['success_pct'])} of {stats['feasible']} feasible"
-               if stats["success_pct"] is not None else "no feasible test")
+    unproven = f", {fmt_percent(stats['unproven_pct'])} unproven" if stats.get("unproven") else ""
+    success = (f"{fmt_percent(stats['success_pct'])} of {stats['feasible']} feasible{unproven}"
+               if stats["success_pct"] is not None else f"no feasible test{unproven}")
     data = ReportData(
         title=f"garage-mj cruise: {stats['driver']}",
         subtitle=f"{count_noun(stats['tests'], 'test')} on {count_noun(stats['garages'], 'garage')}, "
                  f"{stats['action_type']} actions",
-        kpis={"success": success, "infeasible tests": str(stats["infeasible"])},
+        kpis={"success": success, "infeasible tests": str(stats["infeasible"]),
+              **({"unproven tests": f"{stats['unproven']} ({fmt_percent(stats['unproven_pct'])})"}
+                 if "unproven" in stats else {})},
         park_tables=[park] if park is not None else [],
         failures=[run_failures(stats["driver"], out, rows, srcs, shown=shown, pictures=pictures)],
         regression_png=figures["paper"] if figures["paper"].is_file() else None,
