@@ -1,13 +1,21 @@
-"""Verdicts before a park test's drive (docs/spec.md section 9): feasible, infeasible with its proof, unproven."""
+"""Verdicts before a park test's drive (docs/spec.md section 8): feasible, infeasible with its proof, unproven."""
 
 from __future__ import annotations
 
+import csv
+import json
 import math
 
 import numpy as np
 import pytest
 
-from garage_mj.driving.results import PARK_SUMMARY_COLUMNS, park_summary, row_problem, summarize
+from garage_mj.driving.results import (
+    PARK_SUMMARY_COLUMNS,
+    park_summary,
+    row_problem,
+    summarize,
+    write_outputs,
+)
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.driving.sources import CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.scene.car import car_geometry
@@ -97,7 +105,7 @@ def test_an_exhausted_escalation_without_proof_is_unproven(tiny):
     assert ParkConfig(escalation=[["rrtconnect", 5, "stall"]]).escalation == (("rrtconnect", 5, "stall"),)
 
 
-def test_an_unproven_park_test_is_never_driven_and_counted_apart(painted_tiny):
+def test_an_unproven_park_test_is_never_driven_and_counted_apart(painted_tiny, tmp_path):
     tight = {**NO_FIRST, "escalation": [["rrtconnect", 1, "stall"]]}
     env = GarageDriveEnv(painted_tiny, task="park", infeasible="report", park_config=tight)
     try:
@@ -133,3 +141,9 @@ def test_an_unproven_park_test_is_never_driven_and_counted_apart(painted_tiny):
     parking = park_summary(rows)
     assert {"unproven", "unproven_pct"} <= set(PARK_SUMMARY_COLUMNS)
     assert parking["unproven"] == 1 and parking["unproven_pct"] == 25.0 and parking["collision_pct"] == 50.0
+    write_outputs(tmp_path, rows, [source], settings)
+    stats = json.loads((tmp_path / "summary.json").read_text())
+    assert (stats["infeasible"], stats["unproven"], stats["feasible"], stats["success_pct"]) == (1, 1, 2, 50.0)
+    with open(tmp_path / "summary.csv", newline="") as f:
+        (line,) = list(csv.DictReader(f))
+    assert (line["infeasible"], line["unproven"], line["unproven_pct"], line["feasible"]) == ("1", "1", "25.0", "2")
