@@ -163,7 +163,7 @@ class DriverTests:
 
     @property
     def feasible(self) -> list[dict[str, str]]:
-        """The tests that were driven (an infeasible test is decided from the scene, never driven)."""
+        """The tests that were driven (an infeasible or unproven test is decided before the drive, never driven)."""
         return driven_tests(self.rows)
 
     @property
@@ -209,20 +209,22 @@ class DriverTests:
         if not 0.0 <= min_success <= 1.0:
             raise ValueError(f"min_success must be in [0, 1] (a share of feasible tests), got {min_success}")
         rate, n, failed = self.success_rate, len(self.feasible), self.failures
-        infeasible = len(self.rows) - n
+        unproven = sum(r["outcome"] == "unproven" for r in self.rows)  # park tests: no plan and no proof, never driven
+        infeasible = len(self.rows) - n - unproven
+        apart = f"{infeasible} infeasible" + (f", {unproven} unproven ({unproven / len(self.rows):.1%})" if unproven else "")
         garages = len({r["garage_hash"] for r in self.rows})
         head = f"{self.task} tests of {self.driver} on {garages} garage(s), {len(self.rows)} test(s)"
         if rate is None:
             why = "no forward route to the target stall clears the car" if self.task == "cruise" else \
                 "no park plan into the target stall clears the car"
-            return (f"{head}: none was feasible ({infeasible} infeasible: {why}), so nothing was driven; test more garages or more tests per garage "
+            return (f"{head}: none was feasible ({apart}: {why}), so nothing was driven; test more garages or more tests per garage "
                     f"(rows in {self.out_dir / 'tests.csv'})")
         if rate >= min_success - 1e-12:
             return None
         self._record_failures(videos)
         report = run_failures(self.driver, self.out_dir, self.rows, self.sources, shown=min(len(failed), LISTED))
         lines = [f"{head}: {len(failed)} of {n} feasible test(s) failed, success {rate:.1%} "
-                 f"(required {min_success:.0%}; {infeasible} infeasible, excluded)"]
+                 f"(required {min_success:.0%}; {apart}, excluded)"]
         for kind, count in report.counts.items():
             lines.append(f"  {kind} {count}: " + "; ".join(f"{g.text} (x{g.count})" for g in report.reasons[kind]))
         hits = {(r["garage"], int(r["test"])): r["hit"] for r in failed}
