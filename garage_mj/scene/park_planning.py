@@ -21,7 +21,16 @@ then one Reeds-Shepp curve to the start pose, the whole curve checked; the short
 Else a seeded sampling planner (BIT* by default) over the Reeds-Shepp space from the straight exit
 (the car just out of the stall), with a budget of loop iterations (not wall time: the same seed gives
 the same plan on a loaded machine), then OMPL's path simplification. The path is then reversed (its
-gears flip) so it runs start -> stall. A plan not found within the budget makes the test **infeasible**.
+gears flip) so it runs start -> stall.
+
+**Verdicts** (``ParkPlan.verdict``, docs/spec.md section 8): ``feasible`` with a plan; ``infeasible`` only with a
+proof, named in the reason: the stall pose or the start pose is not clear, or (checked once the first attempt
+found nothing) the stall is closed at the car's width (:meth:`ParkPlanner._closed`: the footprint's inscribed
+disc cannot leave the stall among the obstacles alone). Without a proof the planner escalates
+(``ParkConfig.escalation``: seeded sampling stages, each with its own seed, by default RRT-Connect restarts
+from the stall pose and from the exit, the last ones in a wider planning area); a plan found there is
+feasible like any other (``attempt`` says which stage). None found and nothing proven: ``unproven``, the
+budget ran out, never read as infeasible. The first attempt is the same with or without escalation.
 Every pose of a plan (``step`` apart, each cusp on a pose) is checked; OMPL checks its motions at the
 same poses. Sampled paths may hold a few more cusps than a driver would make: they certify
 feasibility, and a reference driver tracks them.
