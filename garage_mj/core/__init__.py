@@ -6,6 +6,8 @@
 - ``backends``: the local process pool and Ray, behind one ``map_unordered``.
 - ``geometry``: grid directions and small geometric helpers.
 - ``lazy``: ``lazy_exports``, the lazy re-exports of a stage's public names (``scene``, ``export``).
+- ``model_file``: the one door through which every model, checkpoint, replay buffer and generator file is
+  read, as weights and plain fields (nothing in a file is run).
 """
 
 __version__ = "0.2.0"

@@ -54,6 +54,7 @@ from garage_mj.driving.results import (
 from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sources import MAX_TESTS, CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
+from garage_mj.scene.stalls import stall_layout
 
 GARAGES_FILE = "garages.json"  # the run's garages (GarageSet.to_json), for reading its tests back later
 
@@ -226,8 +227,6 @@ def check_stall(sources: Sequence[CruiseSource], stall: int | None) -> None:
     ids every garage has), before anything is written or any test runs."""
     if stall is None:
         return
-    from garage_mj.scene.stalls import stall_layout
-
     counts = [(s, len(stall_layout(s.garage).stalls)) for s in sources]
     lacking = [(s, n) for s, n in counts if not 0 <= stall < n]
     if not lacking:
