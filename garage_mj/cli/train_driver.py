@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 from pathlib import Path
 
 from garage_mj.cli import UserError
@@ -21,7 +20,7 @@ from garage_mj.cli._common import (
 )
 from garage_mj.cli.cruise import scenario
 from garage_mj.core.config import load_config
-from garage_mj.core.fsutil import LOCK_NAME, FolderLock
+from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.learning.train import CURRICULA, DriverTrainConfig, train_driver
 
@@ -103,16 +102,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {len(overlap)} validation garage(s) are also training garages")
     print(f"training on {len(garages)} garages ({garages.origin}); validating on "
           f"{len(validation) if validation is not None else len(garages)}")
-    made = not args.out.exists()
-    try:
-        with FolderLock(args.out, "garage-mj train-driver", remove=True):
-            model = train_driver(garages, args.out, validation=validation, config=config, seed=args.seed,
-                                 resume=args.resume, progress=not args.no_progress,
-                                 env_kwargs=None if scen is None else {"scenario": scen})
-    except BaseException:
-        if made and args.out.is_dir() and {p.name for p in args.out.iterdir()} <= {LOCK_NAME}:  # a failed start leaves no folder
-            shutil.rmtree(args.out, ignore_errors=True)
-        raise
+    # a failed start leaves no folder: train_driver undoes what it wrote, the lock the folder it made
+    with FolderLock(args.out, "garage-mj train-driver", remove=True):
+        model = train_driver(garages, args.out, validation=validation, config=config, seed=args.seed,
+                             resume=args.resume, progress=not args.no_progress,
+                             env_kwargs=None if scen is None else {"scenario": scen})
     state = json.loads((args.out / "run.json").read_text())["state"]
     chosen = state.get("selected_iteration")
     row = next((r for r in state["curve"] if r["iteration"] == chosen), {})

@@ -51,7 +51,7 @@ import os
 import re
 import shutil
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager, suppress
+from contextlib import contextmanager
 from pathlib import Path
 
 from garage_mj.core.errors import GarageMJError
@@ -163,16 +163,10 @@ def package_lock(out_dir: str | Path) -> Iterator[Path]:
     """
     out_dir = Path(out_dir)
     _check_name(out_dir)
-    made = not out_dir.exists()
-    try:
-        with FolderLock(out_dir, "garage-mj export", remove=True):
-            _check_contents(out_dir)  # under the lock: no other export is changing it
-            clean_temp(out_dir)
-            yield out_dir
-    finally:
-        if made:
-            with suppress(OSError):
-                out_dir.rmdir()  # only if empty: the export failed before writing anything
+    with FolderLock(out_dir, "garage-mj export", remove=True):
+        _check_contents(out_dir)  # under the lock: no other export is changing it
+        clean_temp(out_dir)
+        yield out_dir
 
 
 def _complete(folder: Path) -> bool:

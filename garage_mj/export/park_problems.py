@@ -58,7 +58,7 @@ import os
 import re
 import stat
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager, suppress
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -264,15 +264,9 @@ def park_problems_lock(out_dir: str | Path) -> Iterator[Path]:
         raise ParkProblemError(f"--park-problems {out_dir} is not a folder; give a new folder or one of park "
                                "problems")
     _check_writable(out_dir, out_dir)
-    made = not out_dir.exists()
-    try:
-        with FolderLock(out_dir, "garage-mj export", remove=True):
-            clean_temp(out_dir)
-            yield out_dir
-    finally:
-        if made:
-            with suppress(OSError):
-                out_dir.rmdir()  # only if empty: the export failed before writing anything
+    with FolderLock(out_dir, "garage-mj export", remove=True):
+        clean_temp(out_dir)
+        yield out_dir
 
 
 def _check_writable(out_dir: Path, folder: Path) -> None:
