@@ -213,6 +213,16 @@ BAD_PROBLEMS = [
 ]
 
 
+def _refused(read, bad: Path, data: str | bytes, says: str) -> str:
+    """Write ``data`` to ``bad``, read it with ``read``: one ParkProblemError line naming the file and ``says``."""
+    bad.write_bytes(data if isinstance(data, bytes) else data.encode())
+    with pytest.raises(ParkProblemError) as err:
+        read(bad)
+    message = str(err.value)
+    assert says in message and str(bad) in message and "\n" not in message, message
+    return message
+
+
 @pytest.mark.parametrize(("edit", "says"), [b[1:] for b in BAD_PROBLEMS], ids=[b[0] for b in BAD_PROBLEMS])
 def test_every_bad_problem_file_is_one_line(written, tmp_path, edit, says):
     path, good = _good(written)
@@ -223,12 +233,7 @@ def test_every_bad_problem_file_is_one_line(written, tmp_path, edit, says):
         edited = json.loads(json.dumps(good))
         edit(edited)
         data = json.dumps(edited, indent=2)
-    bad = tmp_path / "bad.json"
-    bad.write_bytes(data if isinstance(data, bytes) else data.encode())
-    with pytest.raises(ParkProblemError) as err:
-        read_park_problem(bad)
-    message = str(err.value)
-    assert says in message and str(bad) in message and "\n" not in message, message
+    message = _refused(read_park_problem, tmp_path / "bad.json", data, says)
     assert "garage-mj export --park-problems" in message, message  # the fix
 
 
@@ -293,12 +298,7 @@ def test_every_bad_tpcap_case_is_one_line(written, tmp_path, edit, says, layout)
     good = out / index["problems"][0]["csv"]
     read_tpcap_case(good)
     data = edit(_fields(good), layout)
-    bad = tmp_path / "Case1.csv"
-    bad.write_bytes(data if isinstance(data, bytes) else data.encode())
-    with pytest.raises(ParkProblemError) as err:
-        read_tpcap_case(bad)
-    message = str(err.value)
-    assert says in message and str(bad) in message and "\n" not in message, message
+    _refused(read_tpcap_case, tmp_path / "Case1.csv", data, says)
 
 
 #: (what, a function of the good case's numbers giving a file in a layout TPCAP's readers do not read as V, what
