@@ -85,6 +85,12 @@ def latest_checkpoint(out_dir: Path) -> tuple[Path, dict[str, Any]] | None:
     return best
 
 
+def unresumable(model: Path, exc: ModelFileError) -> ModelFileError:
+    """The one line for a checkpoint model file that is not read as data: what is wrong and the fix."""
+    return ModelFileError(f"checkpoint {model} cannot be resumed: {exc}; remove it to resume from the one before, "
+                          "or start a new run in another folder")
+
+
 def check_counters(model: Path, state: dict[str, Any]) -> None:
     """Refuse a checkpoint whose counters (``step_N.json``) are not the model's own: ``timesteps`` must be the
     model zip's ``num_timesteps`` and ``episodes`` a count no larger (each episode takes a timestep)."""
@@ -92,8 +98,7 @@ def check_counters(model: Path, state: dict[str, Any]) -> None:
     try:
         saved = sb3_settings(model).get("num_timesteps")
     except ModelFileError as exc:
-        raise ModelFileError(f"checkpoint {model} cannot be resumed: {exc}; remove it to resume from the one "
-                             "before, or start a new run in another folder") from None
+        raise unresumable(model, exc) from None
     ints = all(isinstance(v, int) and not isinstance(v, bool) for v in (steps, episodes, saved))
     if not ints or steps != saved or not 0 <= episodes <= steps:
         raise ModelFileError(f"checkpoint {model.with_suffix('.json')} says {steps!r} timesteps and {episodes!r} "
@@ -284,8 +289,7 @@ class DQNRun:
                 if buffer.exists():
                     load_replay_buffer(model.replay_buffer, buffer)
             except ModelFileError as exc:
-                raise ModelFileError(f"checkpoint {path} cannot be resumed: {exc}; remove it to resume from the "
-                                     "one before, or start a new run in another folder") from None
+                raise unresumable(path, exc) from None
             model.set_random_seed(seed + self.done_steps)  # a fresh, reproducible stream after the checkpoint
         else:
             kwargs = config.dqn_kwargs()
