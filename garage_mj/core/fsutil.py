@@ -199,6 +199,16 @@ def _alive(pid: Any) -> bool:
     return True
 
 
+def _named_holder(fd: int) -> dict:
+    """What a lock file open at ``fd`` says of its holder (``pid``, ``what``, ``argv``); {} when it says nothing
+    readable (empty, torn or foreign)."""
+    try:
+        holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
+    except (ValueError, UnicodeDecodeError):
+        return {}
+    return holder if isinstance(holder, dict) else {}
+
+
 def lock_holder(folder: str | Path) -> dict | None:
     """Who holds ``folder``'s :class:`FolderLock` now (the lock file's ``pid``, ``what``, ``argv``), or None.
 
@@ -213,11 +223,7 @@ def lock_holder(folder: str | Path) -> dict | None:
         try:
             fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except BlockingIOError:
-            try:
-                holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
-            except (ValueError, UnicodeDecodeError):
-                holder = {}
-            return holder if isinstance(holder, dict) else {}
+            return _named_holder(fd)
         except OSError:
             return None
         fcntl.flock(fd, fcntl.LOCK_UN)
@@ -274,17 +280,13 @@ class FolderLock:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 return
             except BlockingIOError:
-                try:
-                    holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
-                except (ValueError, UnicodeDecodeError):
-                    holder = {}
+                holder = _named_holder(fd)
             # An empty file: the holder has just taken the lock and not yet said who it is, or is
             # just letting go. A file naming a process that is gone: a killed job's, and the one
             # holding it now only looks (lock_holder) or has not yet written its name. Look again
             # shortly, so the message names the holder (or the lock is ours).
-            named = isinstance(holder, dict) and _alive(holder.get("pid"))
+            named = _alive(holder.get("pid"))
             if named or time.monotonic() >= deadline:
-                holder = holder if isinstance(holder, dict) else {}
                 os.close(fd)
                 who = f"{holder.get('what', 'another garage-mj process')} (pid {holder.get('pid', '?')})"
                 raise FolderBusy(f"{self.folder} is in use by {who}; wait for it to finish or use "
