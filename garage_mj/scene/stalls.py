@@ -41,6 +41,7 @@ class Stall:
     obstructed: bool  # in an OBST_STALL3/OBST_STALL4 block
     length: float = DEFAULT_WORLD.stall_length  # [m] along yaw, from the world the stall was laid out in
     width: float = DEFAULT_WORLD.stall_width  # [m]
+    angle: float = DEFAULT_WORLD.stall_angle  # [deg] to its aisle: 90 perpendicular, 60 or 45 angled, 0 parallel
 
     @property
     def corners(self) -> list[tuple[float, float]]:

@@ -22,6 +22,10 @@ class WorldConfig:
     ceiling_height: float = 3.0  # [m]
     wall_thickness: float = 0.3  # [m] outer walls
     marking_width: float = 0.15  # [m] painted lines
+    # park geometry (docs/spec.md section 9): the drivable width of a road block serving stalls, and the stalls'
+    # angle to their aisle [deg] (90 perpendicular; 60, 45 angled; 0 parallel slots along the aisle)
+    aisle_width: float = 9.0  # [m]
+    stall_angle: float = 90.0  # [deg]
 
     @property
     def road_width(self) -> float:
