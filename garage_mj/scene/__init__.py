@@ -19,6 +19,7 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 - ``route_features``: what a test asks of a driver, from its planned route (turns, curvature, clearance, ...).
 - ``route_difficulty``: the route-aware difficulty, a monotone logistic model of failure on route features.
 - ``car``: the ego car's model file and geometry (outline, axles, steering limit, camera poses).
+- ``vehicles``: the fleet table of vehicle classes (compact, sedan, SUV, van; TPCAP's car): outline, axles, steering.
 - ``layout``: the garage as named, classified boxes and model placements (pure, no MuJoCo).
 - ``templates``: the models of ``models/`` as stamps for scene builders.
 - ``mjcf_scene``: the MuJoCo scene (``build_scene``) and parked-car occupancy on a compiled model.
