@@ -790,6 +790,32 @@ def test_a_driver_whose_act_never_returns_is_a_driver_timeout(tiny, tmp_path, wo
     assert res.stats["failures"]["driver_timeout"] == 2 and res.stats["paper_failures"]["timeout"] == 2
 
 
+class _SlowFinalizer:
+    def __del__(self):
+        end = time.monotonic() + 0.6
+        while time.monotonic() < end:  # the time limit's alarm lands in here
+            pass
+
+
+def _finalizes_then_sleeps(_job):
+    obj = _SlowFinalizer()
+    del obj
+    time.sleep(10)
+
+
+def test_a_time_limit_running_out_in_a_finalizer_is_not_lost(monkeypatch):
+    """An alarm landing in a ``__del__`` would be swallowed there and reported as unraisable (pytest's warning); the
+    limit waits for its next alarm and still stops the job, with nothing reported."""
+    from garage_mj.core import backends
+
+    lost = []
+    monkeypatch.setattr(sys, "unraisablehook", lost.append)
+    start = time.monotonic()
+    res = backends._limited(_finalizes_then_sleeps, None, 0.3)
+    assert isinstance(res, backends.LostJob) and res.kind == "timeout"
+    assert time.monotonic() - start < 3 and lost == []
+
+
 def test_the_test_timeout_is_a_stored_setting_and_old_runs_resume(pack_dir, tmp_path, capsys):
     out = tmp_path / "c"
     args = ["cruise", "--packs", str(pack_dir), "--tests", "1", "--quiet", "--out", str(out), "--driver",

@@ -181,6 +181,17 @@ def timeout_reason(seconds: float) -> str:
     return f"ran past the time limit of {seconds:g} s of wall time"
 
 
+def _in_finalizer(frame) -> bool:
+    """Whether ``frame`` runs inside a finalizer (``__del__``, a ``weakref.finalize`` callback): Python swallows what
+    is raised there and reports it as unraisable, so a time limit must wait for its next alarm."""
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "__del__" or code.co_filename.endswith("weakref.py"):
+            return True
+        frame = frame.f_back
+    return False
+
+
 @contextlib.contextmanager
 def _time_limit(seconds: float | None) -> Iterator[None]:
     """Raise :class:`_JobTimeout` in this block after ``seconds`` of wall time (an interval timer, SIGALRM:
@@ -196,7 +207,7 @@ def _time_limit(seconds: float | None) -> Iterator[None]:
     armed = [True]
 
     def expire(signum, frame):  # noqa: ARG001
-        if armed[0]:
+        if armed[0] and not _in_finalizer(frame):  # in a finalizer the raise is lost: the next alarm raises
             raise _JobTimeout
 
     old = signal.signal(signal.SIGALRM, expire)
