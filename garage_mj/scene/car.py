@@ -2,8 +2,9 @@
 
 One source for the car's physical quantities: :class:`CarConfig` holds its limits,
 :func:`car_geometry` reads its outline and axles from ``models/car/car.xml`` and
-:func:`car_camera` the pose and field of view of its cameras. The MuJoCo actuation of the car
-lives in :mod:`garage_mj.driving.sim.vehicle`.
+:func:`car_camera` the pose and field of view of its cameras. :func:`car_model` is the MuJoCo model of
+any vehicle class of the fleet (:mod:`garage_mj.scene.vehicles`): ``models/car`` resized to the class's
+outline, axles and full lock. The MuJoCo actuation of the car lives in :mod:`garage_mj.driving.sim.vehicle`.
 """
 
 from __future__ import annotations
@@ -13,8 +14,14 @@ import importlib.resources
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import mujoco
+
+if TYPE_CHECKING:
+    from dm_control import mjcf
+
+    from garage_mj.scene.vehicles import VehicleClass
 
 CAR_MODEL = "car"  # folder under garage_mj.models
 FRONT_CAMERA = "front"  # the car model's forward camera (``ego/front`` once attached to a scene)
@@ -81,10 +88,17 @@ def car_geometry(config: CarConfig | None = None) -> CarGeometry:
 def _car_body() -> dict[str, float]:
     """Outline and axles of ``models/car`` from its compiled model (the collision box ``body_col``)."""
     with importlib.resources.as_file(car_xml_path()) as path:
-        model = mujoco.MjModel.from_xml_path(str(path))
+        return car_body(mujoco.MjModel.from_xml_path(str(path)))
 
+
+def car_body(model: mujoco.MjModel, prefix: str = "") -> dict[str, float]:
+    """Outline and axles (the :class:`CarGeometry` fields ``wheelbase``, ``rear_axle``, ``half_width``, ``front``,
+    ``rear``) of the car in a compiled ``model`` whose names start with ``prefix`` (``"ego/"`` once attached)."""
     def ident(kind, name):
-        return mujoco.mj_name2id(model, kind, name)
+        i = mujoco.mj_name2id(model, kind, prefix + name)
+        if i < 0:
+            raise ValueError(f"the model has no car {kind.name[6:].lower()} named {prefix + name!r}")
+        return i
 
     B, G = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_GEOM
     box = ident(G, "body_col")
@@ -128,6 +142,91 @@ def _car_camera(camera: str, path: str | None) -> tuple[tuple[str, float], ...]:
     pitch = math.atan2(-float(axis[2]), math.hypot(float(axis[0]), float(axis[1])))
     pitch = math.radians(round(math.degrees(pitch), PITCH_DECIMALS))
     return ("x", x), ("z", z), ("pitch", pitch), ("fovy", float(model.cam_fovy[cam]))
+
+
+#: Dimensions of ``models/car`` that :func:`car_model` keeps for every class (the chassis frame: origin at the
+#: outline's centre at axle height, x forward, z up).
+WHEEL_RADIUS = 0.33  # [m] every class rolls on the same wheels
+WHEEL_INSET = 0.15  # [m] body side to the wheel's centre plane: track = width - 2 x this
+BODY_TOP = 0.63  # [m] top of the lower body box above the chassis origin (the cabin stands on it)
+CABIN_SHARE = 1.05 / 2.3  # cabin length / body length
+CABIN_SHIFT = -0.15 / 4.6  # cabin centre behind the body centre / body length
+CABIN_INSET = 0.1  # [m] body side to the cabin side
+GLASS_INSET = 0.05  # [m] cabin edge to the window edge
+LIGHT_INSET = 0.35  # [m] body side to a headlight's centre
+CAMERA_SETBACK = 0.05  # [m] front bumper to the front camera
+STEER_RANGE = 0.9  # [rad] the steering joints' range in models/car; widened for a class whose inner wheel needs more
+STEER_HEADROOM = 0.05  # [rad] beyond the inner wheel's angle at full lock, where a class needs a wider range
+
+
+def _r(v: float) -> float:
+    """A derived dimension to the nanometre: what the model file would write (so sedan's equal models/car's)."""
+    return round(float(v), 9)
+
+
+def inner_wheel_angle(wheelbase: float, track: float, max_steer: float) -> float:
+    """[rad] the inner front wheel's angle when the bicycle-model angle is ``max_steer`` (Ackermann)."""
+    t = math.tan(max_steer)
+    return math.atan(wheelbase * t / (wheelbase - track / 2 * t))
+
+
+def car_model(vehicle: VehicleClass | None = None, name: str = CAR_MODEL) -> mjcf.RootElement:
+    """The MuJoCo car of ``vehicle`` (a :class:`~garage_mj.scene.vehicles.VehicleClass`; None: ``models/car`` as
+    it is) as a ``dm_control.mjcf`` model named ``name``, with its free joint ``root``.
+
+    ``models/car`` resized to the class: the collision and visual boxes to its length, width and height (the
+    cabin on the lower body, up to the roof), the axles to its wheelbase and overhangs, the track to its
+    width less :data:`WHEEL_INSET` on each side, the front camera :data:`CAMERA_SETBACK` behind the bumper, the
+    steering joints' range wide enough for the inner wheel at the class's full lock. Wheels, masses,
+    actuators and sensors stay the model's. The car frame's origin stays at the outline's centre (as
+    :meth:`~garage_mj.scene.vehicles.VehicleClass.geometry` has it). Sedan gives ``models/car`` exactly.
+    """
+    from dm_control import mjcf
+
+    with importlib.resources.as_file(car_xml_path()) as path:
+        root = mjcf.from_path(str(path))
+    root.model = name
+    if vehicle is None:
+        return root
+    half, hw = vehicle.length / 2, vehicle.width / 2
+    rear_axle = _r(-half + vehicle.rear_overhang)
+    front_axle = _r(rear_axle + vehicle.wheelbase)
+    track = _r(vehicle.width - 2 * WHEEL_INSET)
+    cabin_hz = _r((vehicle.height - WHEEL_RADIUS - BODY_TOP) / 2)
+    if cabin_hz <= GLASS_INSET:
+        raise ValueError(f"vehicle {vehicle.name!r}: {vehicle.height:g} m is too low for the car model's cabin")
+    cabin_z = _r(BODY_TOP + cabin_hz)
+    cabin_hx, cabin_x, cabin_hy = _r(half * CABIN_SHARE), _r(vehicle.length * CABIN_SHIFT), _r(hw - CABIN_INSET)
+
+    def geom(n: str):
+        return root.find("geom", n)
+
+    body_col = geom("body_col")
+    body_col.size = [_r(half), _r(hw), body_col.size[2]]
+    body_vis = geom("body_vis")
+    body_vis.size = [_r(half), _r(hw), body_vis.size[2]]
+    for n in ("cabin_col", "cabin_vis"):
+        geom(n).size = [cabin_hx, cabin_hy, cabin_hz]
+        geom(n).pos = [cabin_x, 0.0, cabin_z]
+    glass = [geom("windshield").size[0], _r(cabin_hy - GLASS_INSET), _r(cabin_hz - GLASS_INSET)]
+    for n, x in (("windshield", cabin_x + cabin_hx + 0.01), ("rear_window", cabin_x - cabin_hx - 0.01)):
+        geom(n).size = glass
+        geom(n).pos = [_r(x), 0.0, cabin_z]
+    for n, side in (("headlight_l", 1), ("headlight_r", -1)):
+        geom(n).pos = [_r(half), _r(side * (hw - LIGHT_INSET)), geom(n).pos[2]]
+    cam = root.find("camera", "front")
+    cam.pos = [_r(half - CAMERA_SETBACK), 0.0, cam.pos[2]]
+    for n, x, side in (("steer_fl", front_axle, 1), ("steer_fr", front_axle, -1), ("wheel_rl", rear_axle, 1),
+                       ("wheel_rr", rear_axle, -1)):
+        root.find("body", n).pos = [x, _r(side * track / 2), 0.0]
+    need = inner_wheel_angle(vehicle.wheelbase, track, vehicle.max_steer) + STEER_HEADROOM
+    if need > STEER_RANGE:
+        limit = _r(math.ceil(need * 100) / 100)
+        for n in ("steer_fl", "steer_fr"):
+            root.find("joint", n).range = [-limit, limit]
+        for n in ("steer_left", "steer_right"):
+            root.find("actuator", n).ctrlrange = [-limit, limit]
+    return root
 
 
 def car_xml_path():

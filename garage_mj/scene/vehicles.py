@@ -12,10 +12,11 @@ project's own car, a BMW X5, a Mercedes-Benz Vito), rounded to the centimetre.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
-from garage_mj.scene.car import CarGeometry, car_geometry
+from garage_mj.scene.car import CarConfig, CarGeometry, car_geometry
 
 
 @dataclass(frozen=True)
@@ -51,14 +52,25 @@ class VehicleClass:
         """[m] smallest turning radius of the rear-axle midpoint (bicycle model)."""
         return self.wheelbase / math.tan(self.max_steer)
 
-    def geometry(self) -> CarGeometry:
+    def geometry(self, config: CarConfig | None = None) -> CarGeometry:
         """This class as the planners and monitors see a car: the :class:`CarGeometry` of the project's car
-        (its speed and actuation limits) with this class's outline, axles and steering."""
-        base = car_geometry()
+        (its speed and actuation limits, those of ``config``) with this class's outline, axles and steering."""
+        base = car_geometry(config)
         half = self.length / 2
         return CarGeometry(wheelbase=self.wheelbase, rear_axle=round(-half + self.rear_overhang, 9), half_width=self.width / 2,
                            front=half, rear=-half, max_steer=self.max_steer, steer_rate=base.steer_rate,
                            max_speed=base.max_speed, max_accel=base.max_accel, max_decel=base.max_decel)
+
+    def car_config(self, config: CarConfig | None = None) -> CarConfig:
+        """``config`` (default: :class:`CarConfig`'s) with this class's full lock: what drives this class in MuJoCo.
+
+        A ``config`` that sets another full lock than the class's is refused: the class is the one source of
+        it (give a :class:`VehicleClass` of its own for another one)."""
+        cfg = config or CarConfig()
+        if cfg.max_steer not in (CarConfig.max_steer, self.max_steer):
+            raise ValueError(f"vehicle {self.name!r} steers to {self.max_steer:g} rad at full lock, and the car config "
+                             f"asks for {cfg.max_steer:g}; leave car max_steer out (or use a vehicle class with it)")
+        return dataclasses.replace(cfg, max_steer=self.max_steer)
 
 
 #: The fleet table: the classes a park test's cars are drawn from, smallest first.
@@ -82,8 +94,10 @@ TPCAP_VEHICLE = VehicleClass("tpcap", length=0.96 + 2.8 + 0.929, width=1.942, he
                              front_overhang=0.96, max_steer=0.75)
 
 
-def vehicle_class(name: str) -> VehicleClass:
-    """The fleet's class ``name`` (one line naming the choices when there is none)."""
+def vehicle_class(name: str | VehicleClass) -> VehicleClass:
+    """The fleet's class ``name`` (one line naming the choices when there is none); a :class:`VehicleClass` as it is."""
+    if isinstance(name, VehicleClass):
+        return name
     try:
         return FLEET[name]
     except KeyError:

@@ -33,13 +33,16 @@ so a cruise test always drives in D, exactly as before reverse existed. Park and
 from __future__ import annotations
 
 import enum
-import importlib.resources
 import math
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
-from garage_mj.scene.car import CarConfig, car_xml_path
+from garage_mj.scene.car import CarConfig, car_model
+
+if TYPE_CHECKING:
+    from garage_mj.scene.vehicles import VehicleClass
 
 EGO_NAME = "ego"  # attachment name: every ego geom becomes "ego/..." (semantics: EGO_CAR)
 
@@ -172,26 +175,24 @@ def park_action_space(action_type: str):
     raise ValueError(f"park action type {action_type!r} is not 'discrete' or 'continuous'")
 
 
-def car_mjcf(name: str = EGO_NAME):
-    """The car as a ``dm_control.mjcf`` model named ``name``, without its free joint (for attaching)."""
-    from dm_control import mjcf
+def car_mjcf(name: str = EGO_NAME, vehicle: VehicleClass | None = None):
+    """The car as a ``dm_control.mjcf`` model named ``name``, without its free joint (for attaching).
 
-    with importlib.resources.as_file(car_xml_path()) as path:
-        model = mjcf.from_path(str(path))
-    model.model = name
+    ``vehicle``: a class of the fleet (:func:`garage_mj.scene.car.car_model`); None: ``models/car`` as it is."""
+    model = car_model(vehicle, name)
     model.find("joint", "root").remove()
     return model
 
 
-def attach_car(arena, x: float, y: float, yaw: float, name: str = EGO_NAME):
+def attach_car(arena, x: float, y: float, yaw: float, name: str = EGO_NAME, vehicle: VehicleClass | None = None):
     """Attach a free car to ``arena`` (an ``mjcf.RootElement``) at ground pose (x [m], y [m], yaw [rad]).
 
     Returns the attachment frame. The arena must use radians (``<compiler angle="radian"/>``), as
-    the car model does.
+    the car model does. ``vehicle``: the class of car (:func:`car_mjcf`).
     """
     if arena.compiler.angle == "degree":
         raise ValueError("the arena uses angle=\"degree\"; the car needs <compiler angle=\"radian\"/>")
-    frame = arena.attach(car_mjcf(name))
+    frame = arena.attach(car_mjcf(name, vehicle))
     frame.pos = [x, y, 0.0]
     frame.quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
     frame.add("freejoint", name=f"{name}_root")
