@@ -93,6 +93,7 @@ from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
 from garage_mj.scene.park_planning import ParkConfig, ParkPlanner
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, geom_classes
+from garage_mj.scene.vehicles import VehicleClass, vehicle_class
 
 SUCCESS_REWARD = 10.0
 COLLISION_PENALTY = -10.0
@@ -216,6 +217,11 @@ class GarageDriveEnv(gym.Env):
         maneuver: ``"reverse"`` (reverse-in, the default), ``"forward"`` (nose-in) or ``"any"`` (drawn per test).
         stall: a stall id every reset tests (default: drawn per test).
         park_config: :class:`~garage_mj.scene.park_planning.ParkConfig` of the reference park planner.
+        vehicle: the car under test, a class of the fleet (:data:`~garage_mj.scene.vehicles.FLEET`: ``compact``,
+            ``sedan``, ``suv``, ``van``) or a :class:`~garage_mj.scene.vehicles.VehicleClass`; None (the default):
+            ``models/car``, the sedan, with ``car``'s full lock. A class brings its MuJoCo model
+            (:func:`~garage_mj.scene.car.car_model`), its outline and axles, and its full lock, which every planner,
+            monitor and observation of the env then uses (``car`` may not set another ``max_steer``).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -241,6 +247,7 @@ class GarageDriveEnv(gym.Env):
         stall: int | None = None,
         park_config: ParkConfig | dict[str, Any] | None = None,
         park_outcome: ParkOutcomeConfig | dict[str, Any] | None = None,
+        vehicle: str | VehicleClass | None = None,
     ) -> None:
         if not isinstance(garage, Garage):
             raise ValueError("GarageDriveEnv needs garage= (a garage_mj.Garage; for a pack: load_pack(folder).garage)")
@@ -269,8 +276,13 @@ class GarageDriveEnv(gym.Env):
         if rgb and not cam.rgb:
             cam = CameraConfig(**{**cam.__dict__, "rgb": True})
         self.camera_config = cam
+        self.vehicle = None if vehicle is None else vehicle_class(vehicle)
         self.car_config = _as(CarConfig, car)
-        self.car_geometry = car_geometry(self.car_config)
+        if self.vehicle is None:  # models/car as it is: the sedan, steered to the car config's full lock
+            self.car_geometry = car_geometry(self.car_config)
+        else:
+            self.car_config = self.vehicle.car_config(self.car_config)
+            self.car_geometry = self.vehicle.geometry(self.car_config)
         self.drive_config = _as(DriveConfig, drive)
         self.outcome_config = _as(OutcomeConfig, outcome)
         self.scenario_config = scenario if isinstance(scenario, ScenarioConfig) else load_scenario_config(scenario)
@@ -313,7 +325,7 @@ class GarageDriveEnv(gym.Env):
         root = build_scene(self.scene, fuse_static=True)  # parked cars and pillars: geoms of the world body
         _plane_floor(root)
         self._entrance = self.scene.entrance_pose
-        _add_hit_sensors(root, attach_car(root, *self._entrance))
+        _add_hit_sensors(root, attach_car(root, *self._entrance, vehicle=self.vehicle))
         if self.scenario_config.count:
             add_actor_bodies(root, self.scenario_config)
         self.model = compile_mjcf(root)
