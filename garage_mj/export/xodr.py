@@ -63,7 +63,7 @@ def _lane(parent: etree._Element, road: Road, lane_id: int, world: WorldConfig) 
             _sub(link, "predecessor", id=pred)
         if succ is not None:
             _sub(link, "successor", id=succ)
-    _sub(lane, "width", sOffset=0.0, a=world.lane_width, b=0.0, c=0.0, d=0.0)
+    _sub(lane, "width", sOffset=0.0, a=world.drive_lane_width, b=0.0, c=0.0, d=0.0)
     outer = "none" if road.kind == "connecting" else "solid"
     _sub(lane, "roadMark", sOffset=0.0, type=outer, weight="standard", color="white", width=MARK_WIDTH)
 

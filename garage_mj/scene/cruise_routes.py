@@ -104,7 +104,7 @@ class LaneRoutes:
         u = np.array(WORLD_DIR[d], dtype=float)
         right = np.array([u[1], -u[0]])
         c = np.array(cell_center(*p, self.rows, self.world))
-        return c + right * self.world.lane_width / 2, u
+        return c + right * self.world.drive_lane_width / 2, u
 
     def polyline(self, path: list[Node], final: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Vertices (start, turn corners, end) and the unit direction of each leg, for the rear axle."""
@@ -137,7 +137,7 @@ class LaneRoutes:
     def fillets(self, verts: list[np.ndarray], dirs: list[np.ndarray]) -> tuple[list[float], str]:
         """Radius [m] of every turn (left turns keep their lane; right turns the car's smallest), or a reason."""
         n_turns = len(verts) - 2
-        lane = self.world.lane_width / 2
+        lane = self.world.drive_lane_width / 2
         half = self.world.block / 2
         want, turn_sign = [], []
         for k in range(n_turns):

@@ -12,7 +12,10 @@ What it holds (z up, floor top at z = 0):
 - pillars: structural ones at grid corners whose four blocks are all non-road (never next to a
   lane) and include a stall block, plus the obstruction pillars of codes 3 and 9 from ``stall_layout``;
 - lane centre lines and stall outlines as thin boxes, collinear pieces merged;
-- entrance and exit floor patches; an optional ceiling; one parked-car placement per stall.
+- entrance and exit floor patches; an optional ceiling; one parked-car placement per stall;
+- kerb walls where the aisle is narrower than its road block (``WorldConfig.aisle_width`` < block): on
+  each side of a straight road block (:func:`~garage_mj.scene.stalls.narrowed`) that is no opening, a wall ``aisle_setback`` deep along the block edge, except
+  where stalls stand in that strip (their rows moved onto the aisle's edge, :mod:`garage_mj.scene.stalls`).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from garage_mj.grid.blocks import ROAD_LIKE_TABLE, STALL_TABLE, Block
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.road_matrix import RoadNetwork, RoadTile, road_network
 from garage_mj.scene.semantics import Semantic, geom_name
-from garage_mj.scene.stalls import StallLayout, stall_layout
+from garage_mj.scene.stalls import StallLayout, narrowed, stall_layout
 from garage_mj.scene.world import DEFAULT_WORLD, WORLD_DIR, WorldConfig
 
 FLOOR_THICKNESS = 0.1  # [m] floor slab, top face at z = 0
@@ -169,6 +172,8 @@ def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bo
     boxes += _lane_marking_boxes(net, world)
     boxes += _stall_marking_boxes(stalls, world)
     boxes += _gate_patch_boxes(garage, net, world)
+    if world.aisle_setback > 0:
+        boxes += _kerb_boxes(garage.grid, net, stalls, world)
     parked = [Placement(f"parkedcar_{s.id}", s.x, s.y, s.yaw, s.id) for s in stalls.stalls]
     return SceneLayout(rows, cols, world, tuple(boxes), tuple(_pillar_placements(garage.grid, stalls, world)),
                        tuple(parked))
@@ -292,6 +297,60 @@ def _gate_patch_boxes(garage: Garage, net: RoadNetwork, world: WorldConfig) -> l
         half = (b / 2, half_road, GATE_PATCH_HEIGHT / 2) if along_x else (half_road, b / 2, GATE_PATCH_HEIGHT / 2)
         boxes.append(Box(geom_name(cls, "floor"), cls, (cell.x, cell.y, GATE_PATCH_HEIGHT / 2), half, False))
     return boxes
+
+
+def _kerb_boxes(grid: np.ndarray, net: RoadNetwork, stalls: StallLayout, world: WorldConfig) -> list[Box]:
+    """Kerb walls: the strip of ``aisle_setback`` along each side of a road block that is no opening (for a
+    gate, no side it is entered or left by), less the spans of the stalls that stand in it."""
+    k, b, h = world.aisle_setback, world.block, world.ceiling_height
+    facing: dict[tuple[int, int], list[tuple[float, float, float, float]]] = {}
+    for st in stalls.stalls:
+        xs, ys = zip(*st.corners)
+        facing.setdefault(st.road_cell, []).append((min(xs), min(ys), max(xs), max(ys)))
+    boxes: list[Box] = []
+    for pos in sorted(net.cells):
+        cell = net.cells[pos]
+        if not narrowed(grid, *pos):
+            continue  # junctions and turns keep the whole block
+        through = set(cell.openings)
+        if cell.tile in (RoadTile.ENTRANCE, RoadTile.EXIT):
+            through |= {OPPOSITE[d] for d in cell.openings}
+        for d in sorted(set(WORLD_DIR) - through):
+            ux, uy = WORLD_DIR[d]
+            if ux:  # a strip along y at the east or west edge
+                x0 = cell.x + ux * (b / 2 - k / 2) - k / 2
+                rect = (x0, cell.y - b / 2, x0 + k, cell.y + b / 2)
+            else:
+                y0 = cell.y + uy * (b / 2 - k / 2) - k / 2
+                rect = (cell.x - b / 2, y0, cell.x + b / 2, y0 + k)
+            axis = 1 if ux else 0  # the strip's long axis: y for east/west, x for north/south
+            spans = [(lo, hi) for lo, hi in _free_spans(rect, axis, facing.get(pos, [])) if hi - lo > 1e-6]
+            for lo, hi in spans:
+                x0, y0, x1, y1 = rect
+                if axis == 0:
+                    x0, x1 = lo, hi
+                else:
+                    y0, y1 = lo, hi
+                boxes.append(Box(geom_name(Semantic.WALL, "kerb", len(boxes)), Semantic.WALL,
+                                 ((x0 + x1) / 2, (y0 + y1) / 2, h / 2), ((x1 - x0) / 2, (y1 - y0) / 2, h / 2), True))
+    return boxes
+
+
+def _free_spans(rect: tuple[float, float, float, float], axis: int,
+                stalls: list[tuple[float, float, float, float]]) -> list[tuple[float, float]]:
+    """The spans of ``rect`` along ``axis`` (0 x, 1 y) that no stall rectangle (x0, y0, x1, y1) overlaps."""
+    eps = 1e-9
+    lo, hi = rect[axis], rect[axis + 2]
+    cuts = sorted((s[axis], s[axis + 2]) for s in stalls
+                  if s[0] < rect[2] - eps and s[2] > rect[0] + eps and s[1] < rect[3] - eps and s[3] > rect[1] + eps)
+    out, at = [], lo
+    for a, z in cuts:
+        if a > at:
+            out.append((at, min(a, hi)))
+        at = max(at, z)
+    if at < hi:
+        out.append((at, hi))
+    return out
 
 
 def _pillar_placements(grid: np.ndarray, stalls: StallLayout, world: WorldConfig) -> list[Placement]:

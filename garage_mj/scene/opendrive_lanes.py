@@ -30,7 +30,7 @@ Node = tuple[int, int, int]  # (road id, lane id, index along the driving direct
 
 def _lane_nodes(road: Road, lane: int, world: WorldConfig) -> list[tuple[float, float, float]]:
     """Waypoints (x, y, heading) of ``lane`` of ``road`` in its driving direction."""
-    t = math.copysign(world.lane_width / 2, lane)
+    t = math.copysign(world.drive_lane_width / 2, lane)
     poses = sample(road.segments, t, WAYPOINT_STEP)
     if lane > 0:  # left lanes drive towards s = 0
         poses = [(x, y, h + math.pi) for x, y, h in reversed(poses)]
@@ -79,7 +79,7 @@ def lane_graph_of(model: RoadModel) -> nx.DiGraph:
                 g.add_edge(last, (end_link.id, nxt, 0), length=0.0, kind="link")
             elif end_link is None:
                 other = (road.id, -lane, 0)
-                length = math.pi * world.lane_width / 2 + UTURN_PENALTY
+                length = math.pi * world.drive_lane_width / 2 + UTURN_PENALTY
                 g.add_edge(last, other, length=length, kind="uturn")
     return g
 

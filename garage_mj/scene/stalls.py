@@ -11,6 +11,13 @@ against the block edge that touches a ROAD cell, centred along it, each stall fa
   the road: what makes parking there harder.
 
 Sides are chosen in the fixed order north, south, west, east, so the layout is deterministic.
+
+The park geometry of the world (docs/spec.md section 9) shapes the rows: ``stall_width`` x ``stall_length``
+(the depth) per stall; an aisle narrower than the block (``aisle_width``) leaves a strip of
+``aisle_setback`` on each side of it, into which the rows move, so that a stall still opens onto the
+aisle's edge (where no stall stands, the layout puts a kerb wall in the strip). Only straight stretches
+of aisle are narrowed (:func:`narrowed`): junctions and turns keep the whole block. A geometry a block
+cannot hold is one :class:`~garage_mj.scene.world.GeometryError` naming the block and the fix.
 """
 
 from __future__ import annotations
@@ -19,11 +26,12 @@ import math
 from dataclasses import dataclass
 
 from garage_mj.core.geometry import DELTAS, EAST, NORTH, OPPOSITE, SOUTH, WEST
-from garage_mj.grid.blocks import STALLS_PER_BLOCK, Block
+from garage_mj.grid.blocks import ROAD_LIKE_TABLE, STALLS_PER_BLOCK, Block
 from garage_mj.grid.garage import Garage
-from garage_mj.scene.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, WorldConfig, cell_center
+from garage_mj.scene.world import DEFAULT_WORLD, DIR_YAW, WORLD_DIR, GeometryError, WorldConfig, cell_center
 
 SIDE_ORDER = (NORTH, SOUTH, WEST, EAST)
+LONE_GAP = 0.25  # [m] at least this between a four-stall block's lone stall and its row
 _AXIS_PAIR = {"NS": (NORTH, SOUTH), "EW": (WEST, EAST)}
 
 
@@ -128,20 +136,24 @@ def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLay
             cx, cy = cell_center(r, c, rows, world)
             obstructed = code in (Block.OBST_STALL3, Block.OBST_STALL4)
             row_side = plan[0][0]
-            for side, n in plan:
+            # [m] each row moves this far into its road block, onto the edge of a narrowed aisle
+            setbacks = [world.aisle_setback if narrowed(grid, r + DELTAS[d][0], c + DELTAS[d][1]) else 0.0
+                        for d, _ in plan]
+            _check_fit(garage, world, (r, c), code, setbacks)
+            for (side, n), setback in zip(plan, setbacks, strict=True):
                 ux, uy = WORLD_DIR[side]
                 tx, ty = -uy, ux
-                depth = half - world.stall_length / 2
+                depth = half - world.stall_length / 2 + setback
                 if n == 3:
                     offsets = [(k - 1) * world.stall_width for k in range(3)]
                 else:  # lone stall: on the far side of the block from the row, clear of it
                     ax, ay = WORLD_DIR[row_side]
-                    s = -(world.stall_width / 2 + 0.25)
+                    s = -(world.stall_width / 2 + _lone_gap(world, setbacks[0]))
                     offsets = [s * (ax * tx + ay * ty)]
                 for off in offsets:
                     x = cx + ux * depth + tx * off
                     y = cy + uy * depth + ty * off
-                    reach = world.stall_length / 2 + margin + world.lane_width / 2
+                    reach = world.stall_length / 2 + margin + world.drive_lane_width / 2 - setback
                     stalls.append(
                         Stall(
                             id=len(stalls),
@@ -161,10 +173,48 @@ def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLay
             if obstructed:
                 ux, uy = WORLD_DIR[row_side]
                 tx, ty = -uy, ux
-                front = half - world.pillar_size / 2
+                front = half - world.pillar_size / 2 + setbacks[0]
                 along = 1.5 * world.stall_width + world.pillar_size / 2
                 for sgn in (-1, 1):
                     pillars.append(
                         Pillar((r, c), cx + ux * front + sgn * tx * along, cy + uy * front + sgn * ty * along)
                     )
     return StallLayout(tuple(stalls), tuple(pillars))
+
+
+def narrowed(grid, r: int, c: int) -> bool:
+    """Whether road cell (r, c) is a stretch of aisle that ``WorldConfig.aisle_width`` narrows: its road-like
+    neighbours lie on one axis (a straight road, a gate, a dead end). Junctions and turns keep the whole block,
+    so that a car can turn there."""
+    h, w = grid.shape
+    dirs = {d for d in SIDE_ORDER if 0 <= r + DELTAS[d][0] < h and 0 <= c + DELTAS[d][1] < w
+            and ROAD_LIKE_TABLE[grid[r + DELTAS[d][0], c + DELTAS[d][1]]]}
+    return dirs <= {NORTH, SOUTH} or dirs <= {WEST, EAST}
+
+
+def _lone_gap(world: WorldConfig, row_setback: float) -> float:
+    """[m] from a four-stall block's centre line to its lone stall: :data:`LONE_GAP` past the inner end of
+    the row (which a deep stall or a narrowed aisle moves), at least :data:`LONE_GAP`."""
+    return max(LONE_GAP, world.stall_length - world.block / 2 - row_setback + LONE_GAP)
+
+
+def _check_fit(garage: Garage, world: WorldConfig, where: tuple[int, int], code: Block,
+               setbacks: list[float]) -> None:
+    """Refuse a geometry stall block ``where`` cannot hold with its rows moved by ``setbacks``, naming the fix."""
+    half, pillar, L, W = world.block / 2, world.pillar_size, world.stall_length, world.stall_width
+    at = f"garage {garage.name or 'garage'!r}, row {where[0]}, column {where[1]}"
+    if code == Block.STALL6 and 2 * L > world.block + sum(setbacks) + 1e-9:
+        deepest = half + min(setbacks)
+        raise GeometryError(
+            f"{at}: stall depth {L:g} m does not fit the back-to-back rows of a six-stall block (at most "
+            f"{deepest:g} m beside {'a junction or turn' if min(setbacks) == 0 else f'{world.aisle_width:g} m aisles'})"
+            f"; give --stall-depth {math.floor(deepest * 100) / 100:g} or less")
+    if code in (Block.STALL4, Block.OBST_STALL4) and W + _lone_gap(world, setbacks[0]) > half + 1e-9:
+        raise GeometryError(
+            f"{at}: a four-stall block's lone stall does not fit beside its row at stall width {W:g} m and depth "
+            f"{L:g} m; give a smaller --stall-depth or --stall-width")
+    if code in (Block.OBST_STALL3, Block.OBST_STALL4) and 3 * W + 2 * pillar > world.block + 1e-9:
+        widest = (world.block - 2 * pillar) / 3
+        raise GeometryError(
+            f"{at}: an obstructed stall block (codes 3 and 9) holds three stalls and two {pillar:g} m pillars in "
+            f"{world.block:g} m; give --stall-width {math.floor(widest * 100) / 100:g} or less")

@@ -50,7 +50,7 @@ class _Placer:
         self.rng = rng
         self.margin = margin
         self.world = planner.world
-        self.lane = self.world.lane_width
+        self.lane = self.world.drive_lane_width
         self.v_max = planner.car.max_speed
         self.d_stop = config.stopping_distance(self.v_max)
         obs = planner.obstacles()
