@@ -1,7 +1,10 @@
 """How far the ego car's body stays from what it may not touch, along a path (docs/spec.md section 7).
 
 The obstacles of a scene are axis-aligned rectangles: walls, obstacle blocks, pillars and every
-stall's outline (parked cars lie wholly inside stall outlines, so any occupancy is covered).
+stall's outline (parked cars lie wholly inside stall outlines, so any occupancy is covered). An obstacle may
+also be a convex polygon of any orientation (an angled stall, a parked car standing askew, a case's obstacle
+from elsewhere: :meth:`Obstacles.from_polygons`); ``boxes`` then holds its bounding box, for look-ups and bounds,
+and ``polygons`` its outline, which every exact test uses.
 The car's body is a rectangle around its rear-axle midpoint (:func:`footprint`); the swept
 clearance (:func:`clearance`) is, per pose, the distance of that rectangle to the nearest
 obstacle: a bounding-circle lower bound first, exact polygon distances only where the bound
@@ -27,11 +30,105 @@ EXACT_BELOW = 2.0  # [m] clearances above this are reported as the bounding-circ
 
 @dataclass
 class Obstacles:
-    """Axis-aligned obstacle rectangles [xmin, ymin, xmax, ymax] with their class and stall id (or -1)."""
+    """Obstacles with their class and stall id (or -1): ``boxes`` (M, 4) ``[xmin, ymin, xmax, ymax]``, and where some
+    are not axis-aligned rectangles, ``polygons`` (M, K, 2): every obstacle's convex outline (K >= 3 corners, in
+    order; a shorter outline repeats its last corner), ``boxes`` then their bounding boxes."""
 
     boxes: np.ndarray
     classes: list[str]
     stall: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    polygons: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.polygons is not None:
+            self.polygons = np.asarray(self.polygons, dtype=float)
+            if self.polygons.ndim != 3 or self.polygons.shape[1] < 3 or self.polygons.shape[2] != 2 \
+                    or len(self.polygons) != len(self.boxes):
+                raise ValueError(f"Obstacles.polygons must be (M, K >= 3, 2) for M = {len(self.boxes)} boxes, "
+                                 f"got {self.polygons.shape}")
+
+    @classmethod
+    def from_polygons(cls, polygons, classes: list[str], stall=None) -> Obstacles:
+        """Obstacles from convex outlines ``polygons`` (M, K, 2) (or a list of (K_i, 2) outlines, padded here)."""
+        polys = list(polygons)
+        k = max((len(p) for p in polys), default=4)
+        out = np.zeros((len(polys), max(k, 3), 2))
+        for i, p in enumerate(polys):
+            p = np.asarray(p, dtype=float).reshape(-1, 2)
+            out[i, :len(p)] = p
+            out[i, len(p):] = p[-1]
+        boxes = np.concatenate([out.min(axis=1), out.max(axis=1)], axis=1) if len(out) else np.zeros((0, 4))
+        ids = np.full(len(out), -1, dtype=int) if stall is None else np.asarray(stall, dtype=int)
+        return cls(boxes, list(classes), ids, out)
+
+    @property
+    def outlines(self) -> np.ndarray:
+        """(M, K, 2) every obstacle's outline: its polygon, or its box's four corners (counter-clockwise)."""
+        return _box_corners(self.boxes) if self.polygons is None else self.polygons
+
+    @property
+    def rotated(self) -> np.ndarray:
+        """(M,) whether each obstacle is something other than its box (its polygon differs from the box's corners)."""
+        if self.polygons is None:
+            return np.zeros(len(self.boxes), dtype=bool)
+        if self.polygons.shape[1] != 4:
+            return np.ones(len(self.boxes), dtype=bool)
+        corners = _box_corners(self.boxes)
+        same = np.zeros(len(self.boxes), dtype=bool)
+        for shift in range(4):  # the same four corners from any first corner, either way round
+            for poly in (self.polygons, self.polygons[:, ::-1]):
+                same |= np.all(np.abs(np.roll(poly, shift, axis=1) - corners) < 1e-12, axis=(1, 2))
+        return ~same
+
+    def take(self, idx) -> Obstacles:
+        """The obstacles at indices ``idx``, in that order."""
+        idx = np.asarray(idx, dtype=int)
+        return Obstacles(self.boxes[idx], [self.classes[i] for i in idx], self.stall[idx],
+                         None if self.polygons is None else self.polygons[idx])
+
+    def plus(self, other: Obstacles) -> Obstacles:
+        """These obstacles followed by ``other``'s."""
+        polys = None
+        if self.polygons is not None or other.polygons is not None:
+            a, b = self.outlines, other.outlines
+            k = max(a.shape[1], b.shape[1])
+            polys = np.concatenate([_pad(a, k), _pad(b, k)])
+        return Obstacles(np.vstack([self.boxes.reshape(-1, 4), other.boxes.reshape(-1, 4)]),
+                         [*self.classes, *other.classes], np.concatenate([self.stall, other.stall]).astype(int), polys)
+
+
+def _pad(polys: np.ndarray, k: int) -> np.ndarray:
+    """``polys`` (M, K', 2) with the last corner repeated up to ``k`` corners."""
+    if polys.shape[1] >= k:
+        return polys
+    return np.concatenate([polys, np.repeat(polys[:, -1:], k - polys.shape[1], axis=1)], axis=1)
+
+
+def polygon_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """(N,) distance [m] of each point (N, 2) to the convex polygon ``poly`` (K, 2): 0 inside or on it."""
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    ab = b - a  # (K, 2)
+    ap = points[:, None, :] - a[None]  # (N, K, 2)
+    denom = np.maximum((ab * ab).sum(-1), 1e-12)
+    t = np.clip((ap * ab[None]).sum(-1) / denom, 0.0, 1.0)
+    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1).min(axis=1)
+    cross = ab[None, :, 0] * ap[..., 1] - ab[None, :, 1] * ap[..., 0]  # (N, K), 0 on degenerate edges
+    real = (ab * ab).sum(-1) > 1e-18
+    cross = cross[:, real]
+    inside = np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
+    return np.where(inside, 0.0, d)
+
+
+def polygon_axes(poly: np.ndarray) -> np.ndarray:
+    """(K', 4) the separating axes of a convex polygon (K, 2): per edge of non-zero length its unit normal
+    (nx, ny) and the polygon's projection on it (lo, hi)."""
+    e = np.roll(poly, -1, axis=0) - poly
+    n = np.linalg.norm(e, axis=1)
+    e, n = e[n > 1e-9], n[n > 1e-9]
+    normal = np.stack([-e[:, 1], e[:, 0]], axis=1) / n[:, None]
+    proj = poly @ normal.T  # (K, K')
+    return np.column_stack([normal, proj.min(axis=0), proj.max(axis=0)])
 
 
 def scene_obstacles(scene: GarageScene) -> Obstacles:
@@ -123,6 +220,8 @@ def _distances(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.n
     if not len(idx):
         return np.zeros((len(rear), 0)), idx
     boxes = boxes[idx]
+    outlines = None if obs.polygons is None else obs.polygons[idx]
+    rotated = obs.rotated[idx]
     body = footprint(car, rear, heading)  # (N, 4, 2)
     # a cheap lower bound from the body's bounding circle; exact distances only where it is small
     mid = body.mean(axis=1)  # (N, 2) body centre
@@ -134,9 +233,13 @@ def _distances(obs: Obstacles, car: CarGeometry, rear: np.ndarray, heading: np.n
     n_i, m_i = np.nonzero(bound < EXACT_BELOW)
     if len(n_i):
         cars, bx = body[n_i], boxes[m_i]  # (K, 4, 2), (K, 4)
-        bc = _box_corners(bx)
+        bc = _box_corners(bx) if outlines is None else outlines[m_i]
         exact = np.minimum(_points_to_edges(cars, bc), _points_to_edges(bc, cars))
-        exact[_overlap_pairs(cars, bx, bc)] = 0.0
+        overlap = _overlap_pairs(cars, bx, bc)
+        turned = rotated[m_i]
+        if turned.any():  # a polygon's own edges may separate it from the car where its box does not
+            overlap[turned] &= ~_separated_by_edges(cars[turned], bc[turned])
+        exact[overlap] = 0.0
         dist[n_i, m_i] = exact
     return dist, idx
 
@@ -153,6 +256,16 @@ def _points_to_edges(points: np.ndarray, polys: np.ndarray) -> np.ndarray:
     closest = a[..., None, :, :] + t[..., None] * ab[..., None, :, :]
     d = np.linalg.norm(p - closest, axis=-1)
     return d.min(axis=(-1, -2))
+
+
+def _separated_by_edges(car: np.ndarray, polys: np.ndarray) -> np.ndarray:
+    """(K,) whether an edge normal of each convex polygon (K, V, 2) separates it from its car rectangle (K, 4, 2)."""
+    e = np.roll(polys, -1, axis=1) - polys  # (K, V, 2)
+    normal = np.stack([-e[..., 1], e[..., 0]], axis=-1)  # (K, V, 2); zero on a repeated corner: never separates
+    pc = np.einsum("kcd,kvd->kvc", car, normal)  # (K, V, 4)
+    pp = np.einsum("kcd,kvd->kvc", polys, normal)  # (K, V, V)
+    sep = (pc.max(-1) < pp.min(-1)) | (pc.min(-1) > pp.max(-1))
+    return sep.any(axis=1)
 
 
 def _box_corners(boxes: np.ndarray) -> np.ndarray:

@@ -55,7 +55,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from garage_mj.scene.clearance import Obstacles, footprint, nearest_obstacle, scene_obstacles
+from garage_mj.scene.clearance import (Obstacles, footprint, nearest_obstacle, polygon_axes, polygon_distance,
+                                       scene_obstacles)
 from garage_mj.scene.garage_scene import GarageScene
 
 if TYPE_CHECKING:
@@ -179,8 +180,7 @@ def park_obstacles(obstacles: Obstacles, target: int, occupied: Iterable[int] | 
     else:
         occ = np.array(sorted({int(s) for s in occupied} - {int(target)}), dtype=int)
         keep |= np.isin(obstacles.stall, occ)
-    idx = np.flatnonzero(keep)
-    return Obstacles(obstacles.boxes[idx], [obstacles.classes[i] for i in idx], obstacles.stall[idx])
+    return obstacles.take(np.flatnonzero(keep))
 
 
 # -- configuration and result ---------------------------------------------------------------------------
@@ -319,14 +319,24 @@ class _Checker:
 
     CELL = 1.0  # [m] grid cell of the per-pose look-up
 
-    def __init__(self, boxes: np.ndarray, car: CarGeometry, margin: float,
+    def __init__(self, obstacles: Obstacles | np.ndarray, car: CarGeometry, margin: float,
                  region: tuple[float, float, float, float]) -> None:
+        if not isinstance(obstacles, Obstacles):  # bare boxes
+            obstacles = Obstacles(np.asarray(obstacles, dtype=float).reshape(-1, 4), [], np.zeros(0, dtype=int))
+        boxes = obstacles.boxes
         self.region = region  # [m] xmin, ymin, xmax, ymax: a rear axle outside is not valid
         self.hl = (car.front - car.rear) / 2 + margin  # [m] half length of the grown rectangle
         self.hw = car.half_width + margin  # [m] half width
         self.off = (car.front + car.rear) / 2 - car.rear_axle  # [m] rear axle to the rectangle's centre
         self.centre = (boxes[:, :2] + boxes[:, 2:]) / 2  # (M, 2)
         self.half = (boxes[:, 2:] - boxes[:, :2]) / 2
+        # an obstacle that is not its box (a turned polygon): its edges' normals and its extent along each,
+        # tested after its box fails to separate it from the car
+        turned = obstacles.rotated
+        self.axes: list[tuple[np.ndarray, np.ndarray] | None] = [
+            (obstacles.polygons[j], polygon_axes(obstacles.polygons[j])) if turned[j] else None
+            for j in range(len(boxes))]
+        self.turned = np.flatnonzero(turned)
         self.calls = 0
         reach = math.hypot(self.hl, self.hw) + self.CELL * math.sqrt(0.5)
         self.grid: dict[tuple[int, int], list[tuple[float, float, float, float]]] = {}
@@ -340,7 +350,7 @@ class _Checker:
             near = np.hypot(gap[..., 0], gap[..., 1]) <= reach  # (cells, M)
             for k in np.flatnonzero(near.any(axis=1)):
                 self.grid[(int(ix.ravel()[k]), int(iy.ravel()[k]))] = [
-                    (*self.centre[j], *self.half[j]) for j in np.flatnonzero(near[k])]
+                    (*self.centre[j], *self.half[j], self.axes[j]) for j in np.flatnonzero(near[k])]
 
     def __call__(self, state) -> bool:
         self.calls += 1
@@ -357,11 +367,14 @@ class _Checker:
         cx, cy = x + self.off * c, y + self.off * s
         boxes = self.grid.get((int((cx - self.lo[0]) // self.CELL), int((cy - self.lo[1]) // self.CELL)), ())
         hl, hw, ac, as_ = self.hl, self.hw, abs(c), abs(s)
-        for bx, by, hx, hy in boxes:
+        for bx, by, hx, hy, axes in boxes:
             dx, dy = cx - bx, cy - by
             if abs(dx) > hx + hl * ac + hw * as_ or abs(dy) > hy + hl * as_ + hw * ac:
                 continue
-            if abs(dx * c + dy * s) > hl + hx * ac + hy * as_ or abs(-dx * s + dy * c) > hw + hx * as_ + hy * ac:
+            if axes is not None:  # a turned polygon: the car's axes against its corners, then its own edges
+                if _polygon_separates(axes, cx, cy, c, s, hl, hw):
+                    continue
+            elif abs(dx * c + dy * s) > hl + hx * ac + hy * as_ or abs(-dx * s + dy * c) > hw + hx * as_ + hy * ac:
                 continue
             return False
         return True
@@ -380,7 +393,39 @@ class _Checker:
         sep = (np.abs(dx) > hx + self.hl * ac + self.hw * as_) | (np.abs(dy) > hy + self.hl * as_ + self.hw * ac)
         sep |= np.abs(dx * c + dy * s) > self.hl + hx * ac + hy * as_
         sep |= np.abs(-dx * s + dy * c) > self.hw + hx * as_ + hy * ac
+        if len(self.turned):  # a turned polygon: the car's axes against its corners, then its own edges
+            cx = rear[:, 0:1] + self.off * c  # (N, 1)
+            cy = rear[:, 1:2] + self.off * s
+            for j in self.turned:
+                poly, axes = self.axes[j]
+                px, py = poly[None, :, 0] - cx, poly[None, :, 1] - cy  # (N, K) corners from the car's centre
+                along, across = px * c + py * s, -px * s + py * c
+                sep_j = (along.min(1) > self.hl) | (along.max(1) < -self.hl)
+                sep_j |= (across.min(1) > self.hw) | (across.max(1) < -self.hw)
+                nx, ny, lo, hi = axes.T  # (E,) each
+                mid = cx * nx + cy * ny  # (N, E) the car centre along each normal
+                half = self.hl * np.abs(c * nx + s * ny) + self.hw * np.abs(-s * nx + c * ny)
+                sep_j |= ((mid + half < lo) | (mid - half > hi)).any(axis=1)
+                sep[:, j] |= sep_j  # its box separates it too where it does (the box holds the polygon)
         return inside & sep.all(axis=1)
+
+
+def _polygon_separates(axes: tuple[np.ndarray, np.ndarray], cx: float, cy: float, c: float, s: float, hl: float,
+                       hw: float) -> bool:
+    """Whether the car rectangle centred at (cx, cy), heading (c, s), half sizes ``hl`` x ``hw`` and a convex polygon
+    (its corners and :func:`~garage_mj.scene.clearance.polygon_axes`) are apart: an axis of the car or an edge
+    normal of the polygon separates them."""
+    poly, normals = axes
+    px, py = poly[:, 0] - cx, poly[:, 1] - cy
+    along, across = px * c + py * s, -px * s + py * c
+    if along.min() > hl or along.max() < -hl or across.min() > hw or across.max() < -hw:
+        return True
+    for nx, ny, lo, hi in normals:
+        mid = cx * nx + cy * ny
+        half = hl * abs(c * nx + s * ny) + hw * abs(-s * nx + c * ny)
+        if mid + half < lo or mid - half > hi:
+            return True
+    return False
 
 
 # -- OMPL ---------------------------------------------------------------------------------------------------
@@ -603,7 +648,7 @@ class ParkPlanner:
         d_out = stall.length - BACK_GAP + cfg.margin  # [m] straight out this far, the car has left the stall
         out = _straight(g, m.exit_gear, d_out, cfg.step)
         region = self._region(np.array([g, s, out[-1]]))
-        checker = _Checker(self.near(obs, region).boxes, car, cfg.margin, region)
+        checker = _Checker(self.near(obs, region), car, cfg.margin, region)
         for what, pose in (("stall pose", g), ("start pose", s)):
             if not checker.pose_clear(*pose):
                 raise _Proof(self._blocked(obs, pose, f"the {what}"))
@@ -631,7 +676,7 @@ class ParkPlanner:
                 if wide not in areas:  # the planning area grown by this stage's region instead
                     area = self._region(np.array([g, s, out[-1]]), wide)
                     areas[wide] = (_Curves(ob, self.radius, area, cfg.step),
-                                   _Checker(self.near(obs, area).boxes, car, cfg.margin, area))
+                                   _Checker(self.near(obs, area), car, cfg.margin, area))
                 _ompl()[2].RNG.setSeed(_stage_seed(cfg.seed, k))  # each stage its own seed: a restart
                 try:
                     path, method, n = self._sample(ob, og, *areas[wide], g, s, m,
@@ -671,11 +716,19 @@ class ParkPlanner:
         keep = (boxes[:, 2] >= xs[0] - r) & (boxes[:, 0] <= xs[-1] + r) & (boxes[:, 3] >= ys[0] - r) & \
             (boxes[:, 1] <= ys[-1] + r)
         closed = np.zeros((n, n), dtype=bool)  # [ix, iy]: the cell [xs[ix], xs[ix+1]] x [ys[iy], ys[iy+1]]
-        for x0, y0, x1, y1 in boxes[keep]:
-            # the farthest point of a cell from a box is one of its corners: every corner nearer than r closes it
-            dx = np.maximum(np.maximum(x0 - xs, xs - x1), 0.0)  # (n + 1,) per grid line
-            dy = np.maximum(np.maximum(y0 - ys, ys - y1), 0.0)
-            near = dx[:, None] ** 2 + dy[None, :] ** 2 < r * r  # (n + 1, n + 1) grid corners
+        turned = obs.rotated
+        for j in np.flatnonzero(keep):
+            # the farthest point of a cell from a convex obstacle is one of its corners: every corner nearer than r
+            # closes it
+            if turned[j]:  # the polygon itself, not its box
+                gx, gy = np.meshgrid(xs, ys, indexing="ij")
+                d = polygon_distance(np.column_stack([gx.ravel(), gy.ravel()]), obs.polygons[j])
+                near = (d < r).reshape(n + 1, n + 1)
+            else:
+                x0, y0, x1, y1 = boxes[j]
+                dx = np.maximum(np.maximum(x0 - xs, xs - x1), 0.0)  # (n + 1,) per grid line
+                dy = np.maximum(np.maximum(y0 - ys, ys - y1), 0.0)
+                near = dx[:, None] ** 2 + dy[None, :] ** 2 < r * r  # (n + 1, n + 1) grid corners
             closed |= near[:-1, :-1] & near[1:, :-1] & near[:-1, 1:] & near[1:, 1:]
         ia, ib = (tuple(int(v) for v in (p - lo) // cell) for p in (a, b))
         if closed[ia]:
@@ -714,8 +767,7 @@ class ParkPlanner:
         b, r = obs.boxes, self.reach
         keep = (b[:, 2] >= region[0] - r) & (b[:, 0] <= region[2] + r) & (b[:, 3] >= region[1] - r) & \
             (b[:, 1] <= region[3] + r)
-        idx = np.flatnonzero(keep)
-        return Obstacles(b[idx], [obs.classes[i] for i in idx], obs.stall[idx])
+        return obs.take(np.flatnonzero(keep))
 
     def _blocked(self, obs: Obstacles, rear: np.ndarray, what: str) -> str:
         """Why the pose ``rear`` (rear axle) is not valid: the nearest obstacle and the margin, or the area."""
