@@ -23,6 +23,7 @@ from tests._cli import one_line_error, snapshot
 
 LIB, PACKS, GARAGE, TEXT, FOLDER, FILE, MISSING, OUT = ("lib.sqlite", "packs", "garage.json", "notes.txt", "folder",
                                                        "a_file", "missing.json", "out")
+BAD_LAYOUT = "bad_layout.toml"  # a park geometry file with an unknown key
 TINY = ["--map", "tiny_7x11"]
 GEN = ["generate", *TINY, "--difficulty", "0.2", "0.8", "--count", "1", "--library", "new.sqlite", "--no-progress"]
 TRAIN = ["train", *TINY, "--timesteps", "200", "--out", OUT, "--no-progress"]
@@ -53,6 +54,16 @@ BAD: list[tuple[str, list[str], str]] = [
     ("export", ["export", "--library", LIB, "--out", OUT, "--park-problems", FILE], FILE),
     ("export", ["export", "--library", LIB, "--out", OUT, "--carla-package", FILE], FILE),
     ("export", ["export", "--library", TEXT, "--out", OUT], TEXT),
+    # park geometry (docs/spec.md section 9): a bay narrower than the car, an angle no block holds, a geometry the
+    # garage's blocks cannot hold, bad layout files
+    ("export", ["export", "--garage", GARAGE, "--out", OUT, "--stall-width", "1.8"], "stall_width (--stall-width)"),
+    ("export", ["export", "--garage", GARAGE, "--out", OUT, "--stall-angle", "30"], "stall angle 30"),
+    ("export", ["export", "--garage", GARAGE, "--out", OUT, "--aisle-width", "4"], "aisle_width (--aisle-width)"),
+    ("export", ["export", "--garage", GARAGE, "--out", OUT, "--stall-depth", "nan"], "stall_depth"),
+    ("export", ["export", "--garage", GARAGE, "--out", OUT, "--stall-width", "2.9"], "--stall-width 2.6 or less"),
+    ("export", ["export", "--garage", GARAGE, "--out", OUT, "--layout", TEXT], TEXT),
+    ("export", ["export", "--garage", GARAGE, "--out", OUT, "--layout", MISSING], MISSING),
+    ("export", ["export", "--garage", GARAGE, "--out", OUT, "--layout", BAD_LAYOUT], "unknown key(s) bogus"),
     ("check", ["check", "--library", MISSING], MISSING),
     ("check", ["check", "--library", LIB, "--max-steer", "nan"], "nan"),
     ("check", ["check", "--library", LIB, "--limit", "-1"], "-1"),
@@ -108,6 +119,10 @@ BAD: list[tuple[str, list[str], str]] = [
     ("cruise", [*CRUISE[:5], "--out", FILE], FILE),
     ("cruise", ["cruise", "--library", LIB, "--ids", "999", "--tests", "1", "--out", OUT], "999"),
     ("cruise", [*CRUISE, "--driver", f"learned:{TEXT}"], TEXT),
+    ("cruise", [*CRUISE, "--stall-width", "1.8"], "stall_width (--stall-width)"),
+    ("cruise", [*CRUISE, "--aisle-width", "6.5"], "another park geometry"),  # the pack was built in the default
+    ("cruise", [*CRUISE, "--layout", BAD_LAYOUT], "unknown key(s) bogus"),
+    ("cruise", ["cruise", "--library", LIB, "--tests", "1", "--out", OUT, "--stall-width", "2.9"], "2.6 or less"),
     ("hunt", ["hunt", "--map", "no_such_map", "--out", OUT], "no_such_map"),
     ("hunt", ["hunt", "--library", MISSING, "--out", OUT], MISSING),
     ("hunt", [*HUNT, "--budget", "0"], "0"),
@@ -159,6 +174,7 @@ def inputs(tmp_path_factory) -> Path:
     export_pack(garage, root / PACKS)
     (root / GARAGE).write_text(garage.to_json())
     (root / TEXT).write_text("not a garage\n")
+    (root / BAD_LAYOUT).write_text("stall_width = 2.3\nbogus = 1\n")
     (root / FILE).write_text("a file where a folder belongs\n")
     (root / FOLDER).mkdir()
     return root

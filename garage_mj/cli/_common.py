@@ -14,6 +14,7 @@ from garage_mj.cli import UserError
 from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.scene.route_difficulty import load_route_model
+from garage_mj.scene.world import DEFAULT_WORLD, GEOMETRY_KEYS, GeometryError, WorldConfig, geometry, load_layout, world_with
 
 
 def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -225,3 +226,46 @@ def checked_range(rng: list[float] | None, flag: str) -> tuple[float, float] | N
     if rng[0] > rng[1]:
         raise UserError(f"--{flag} {rng[0]} {rng[1]}: LO is above HI")
     return tuple(rng)
+
+
+def add_geometry_args(p: argparse.ArgumentParser) -> None:
+    """The park geometry options (docs/spec.md section 9): ``--stall-width``, ``--stall-depth``, ``--aisle-width``,
+    ``--stall-angle``, ``--slot-length`` and ``--layout FILE.toml`` (the flags override the file's keys)."""
+    default = geometry(DEFAULT_WORLD)
+    g = p.add_argument_group("park geometry (docs/spec.md section 9; the paper's grid and metrics do not change)")
+    helps = {
+        "stall_width": ("M", f"stall (bay) width, 2.2 to 3.0 m (default {default['stall_width']:g})"),
+        "stall_depth": ("M", f"stall depth, 4.0 to 6.0 m (default {default['stall_depth']:g}; deeper than 4.5 m "
+                             "needs a narrower aisle beside six-stall blocks)"),
+        "aisle_width": ("M", f"drivable width of a straight road block, 5.5 to 9.0 m (default "
+                             f"{default['aisle_width']:g}: the whole block); the rest is kerb or stalls moved "
+                             "toward the aisle"),
+        "stall_angle": ("DEG", "stall angle to the aisle: 90 (default, perpendicular); 60, 45 (angled) and 0 "
+                               "(parallel) are refused until they are built"),
+        "slot_length": ("M", f"parallel slot length, 4.5 to 8.0 m (default {default['slot_length']:g}: the "
+                             "sedan's length + 1 m)"),
+    }
+    for key in GEOMETRY_KEYS:
+        metavar, text = helps[key]
+        g.add_argument(f"--{key.replace('_', '-')}", dest=key, metavar=metavar, help=text)
+    g.add_argument("--layout", type=Path, metavar="FILE.toml",
+                   help=f"a park geometry file: keys {', '.join(GEOMETRY_KEYS)} (the options above override it)")
+
+
+def geometry_world(args: argparse.Namespace) -> WorldConfig:
+    """The :class:`~garage_mj.scene.world.WorldConfig` of the park geometry options (``--layout`` first, the flags
+    over it); a bad value, an unknown key or a broken file is one :class:`GeometryError` line."""
+    values: dict[str, Any] = {}
+    if getattr(args, "layout", None) is not None:
+        values.update(load_layout(str(args.layout)))
+    for key in GEOMETRY_KEYS:
+        text = getattr(args, key, None)
+        if text is None:
+            continue
+        flag = f"--{key.replace('_', '-')}"
+        try:
+            value = float(text)
+        except ValueError:
+            raise GeometryError(f"{flag} {text!r} is not a number; give metres (degrees for --stall-angle)") from None
+        values[key] = value
+    return world_with(values, where="park geometry")

@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import csv
 import io
+import json
 import sys
 import warnings
 from collections.abc import Iterator
@@ -15,9 +16,11 @@ from pathlib import Path
 from garage_mj.cli import UserError
 from garage_mj.cli._common import (
     add_filters,
+    add_geometry_args,
     add_ids,
     compute,
     filters,
+    geometry_world,
     int_in,
     non_negative_int,
     positive_int,
@@ -113,6 +116,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also write every test as OpenSCENARIO 1.2 into OUT/xosc/ (garages without an asset "
                         "pack get one in OUT/packs/); replay one with --scenario-file")
     add_task_args(p, stall=True)
+    add_geometry_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=user_errors(run))
 
@@ -217,6 +221,35 @@ def sources(args: argparse.Namespace) -> list:
     return found
 
 
+def geometry_env(args: argparse.Namespace, srcs: list) -> dict:
+    """``{"world": the park geometry}`` for the drive env (docs/spec.md section 9), only when it is not the default
+    (so a default run's ``run.json`` stays as it was). Packs bring the geometry they were built in: the options, when
+    given, must name it; every garage must hold it (else one line names the block and the fix)."""
+    from garage_mj.export.pack import check_geometry, manifest_world
+    from garage_mj.scene.world import geometry
+
+    world = geometry_world(args)
+    asked = args.layout is not None or any(getattr(args, k) is not None for k in geometry(world))
+    packs = {}
+    for src in srcs:
+        if src.pack:
+            packs[src.name] = manifest_world(json.loads((Path(src.pack) / MANIFEST).read_text()), src.pack)
+    built = {tuple(sorted(geometry(w).items())): (name, w) for name, w in packs.items()}
+    if len(built) > 1:
+        raise UserError(f"--packs {args.packs}: its packs were built in {len(built)} park geometries; cruise one "
+                        "geometry per run (a folder of packs of one geometry)")
+    if built:
+        name, pack_world = next(iter(built.values()))
+        if asked and geometry(pack_world) != geometry(world):
+            raise UserError(f"pack {name} was built in another park geometry ({pack_world.stall_width:g} m x "
+                            f"{pack_world.stall_length:g} m stalls at {pack_world.stall_angle:g} degrees, "
+                            f"{pack_world.aisle_width:g} m aisles); leave the geometry options out to cruise in its "
+                            "own, or export the packs in the geometry asked for")
+        world = pack_world
+    check_geometry([src.garage for src in srcs], world)
+    return {} if world.is_default_geometry else {"world": geometry(world)}
+
+
 def scenario(args: argparse.Namespace) -> dict | None:
     """The ScenarioConfig fields of --scenario and the count flags (None: no actors asked for)."""
     counts = {"pedestrians": args.pedestrians, "moving_cars": args.moving_cars, "clutter": args.clutter}
@@ -284,7 +317,7 @@ def run(args: argparse.Namespace) -> int:
         return replay(args)
     args.driver = args.driver or "vision"
     srcs = sources(args)
-    env = {}
+    env = geometry_env(args, srcs)
     scen = scenario(args)
     if scen is not None:
         env["scenario"] = scen

@@ -8,7 +8,9 @@ complete packs are skipped, partial ones repaired. ``--carla-package DIR`` (with
 already in the package stay, complete ones are not rebuilt. ``--park-problems DIR`` writes every park test
 of the garages as a planning problem, JSON and a TPCAP case each (:mod:`garage_mj.export.park_problems`).
 Without Assimp (no wheel for the platform) packs are written without ``garage.fbx`` and one line says so; a
-CARLA package is refused.
+CARLA package is refused. The park geometry options (``--stall-width``, ``--stall-depth``, ``--aisle-width``,
+``--stall-angle``, ``--slot-length``, ``--layout FILE.toml``; docs/spec.md section 9) build every pack and park
+problem in that geometry; a geometry a garage cannot hold is refused before anything is written.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import add_ids, records_by_id
+from garage_mj.cli._common import add_geometry_args, add_ids, geometry_world, records_by_id
 from garage_mj.export.artefacts import INDEX, contents, formats, left_out_here
 from garage_mj.generation.library import Library, LibraryError, garages_from_json
 from garage_mj.grid.garage import Garage
@@ -59,6 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also (or only) write every park test (each stall with a feasible cruise test, reverse-in "
                    "and nose-in) as a planning problem: start pose, stall pose and obstacle polygons, as JSON and "
                    "as a TPCAP benchmark case (CSV), one folder per garage, index DIR/park_problems.json")
+    add_geometry_args(p)
     p.add_argument("--force", action="store_true", help="rebuild packs and CARLA maps that are already complete")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -89,6 +92,7 @@ def _from_library(args: argparse.Namespace) -> list:
 
 
 def run(args: argparse.Namespace) -> int:
+    world = geometry_world(args)  # a bad geometry is refused before anything else
     if args.out is None and args.carla_package is None and args.park_problems is None:
         raise UserError("give --out DIR (asset packs), --carla-package DIR (a CARLA import package), or both"
                         " (or --park-problems DIR)")
@@ -111,8 +115,19 @@ def run(args: argparse.Namespace) -> int:
 
             stack.enter_context(park_problems_lock(args.park_problems))  # the same, for the park problems' folder
         garages = _garages(args)
+        if not world.is_default_geometry:
+            from garage_mj.export.pack import check_geometry
+
+            if args.carla_package is not None:
+                raise UserError("--carla-package writes the default park geometry only; leave out the geometry "
+                                "options, or export packs with --out")
+            check_geometry(garages, world)  # every garage holds it, or one line names the block and the fix
+        args.world = world
         if args.park_problems is not None:
-            check_park_problems_targets(garages, args.park_problems)  # a read-only one: refused before any pack
+            from garage_mj.scene.garage_scene import GarageScene
+
+            # a read-only one: refused before any pack
+            check_park_problems_targets([GarageScene(g, world) for g in garages], args.park_problems)
         _export(args, garages)
     return 0
 
@@ -139,7 +154,8 @@ def _export(args: argparse.Namespace, garages: list[Garage]) -> None:
 
         for name, problem in left_out_here().items():
             print(f"{name} left out of the packs: {problem}", file=sys.stderr)
-        paths = export_packs(garages, args.out, force=args.force, progress=not args.quiet, total=len(garages))
+        paths = export_packs(garages, args.out, force=args.force, progress=not args.quiet, total=len(garages),
+                             world=args.world)
         for path in paths:
             print(path)
         print(f"{len(paths)} pack(s) in {args.out} (index: {args.out / INDEX})")
@@ -153,6 +169,8 @@ def _export(args: argparse.Namespace, garages: list[Garage]) -> None:
     if args.park_problems is not None:
         from garage_mj.export.park_problems import write_park_problems
 
-        index = write_park_problems(garages, args.park_problems, locked=True)
+        from garage_mj.scene.garage_scene import GarageScene
+
+        index = write_park_problems([GarageScene(g, args.world) for g in garages], args.park_problems, locked=True)
         count = len(json.loads(index.read_text())["problems"])
         print(f"{count} park problem(s) of {len(garages)} garage(s) in {args.park_problems} (index: {index})")

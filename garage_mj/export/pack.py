@@ -4,7 +4,14 @@ A pack folder ``<name>_<hash12>/`` holds the files of :data:`garage_mj.export.ar
 (``garage.json``, ``garage.xodr`` (OpenDRIVE 1.8), ``scene.xml`` (MJCF, + assets), ``garage.glb``,
 ``garage.obj`` + ``garage.mtl``, ``garage.fbx``, ``preview.png``), written in that table's order
 from one :class:`~garage_mj.scene.garage_scene.GarageScene`, and ``manifest.json`` (sha256 of every
-file, metrics, garage hash, tool versions, creation time).
+file, metrics, garage hash, park geometry, tool versions, creation time).
+
+The park geometry (docs/spec.md section 9: stall width, depth and angle, aisle width, parallel slot
+length) is the pack's parameter: the manifest's ``geometry`` records it, every file is built in it, and
+:attr:`Pack.world` reads it back (a pack without it, written before geometry was a parameter, reads as
+today's defaults). A pack of another than the default geometry has it in its folder name
+(``<name>-bay2.3x4.5-aisle6.5-angle90_<hash12>``), so that packs of one garage in two geometries
+live side by side.
 
 A file whose dependency is missing and whose record says to skip it (``garage.fbx`` needs Assimp,
 PyPI ``cmeel-assimp``, a dependency on Linux and macOS) is left out and the pack says so: the
@@ -43,6 +50,7 @@ from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.drivable import drivability
 from garage_mj.scene.garage_scene import GarageScene
+from garage_mj.scene.world import DEFAULT_WORLD, GeometryError, WorldConfig, geometry, world_with
 
 PACK_FORMAT = 1
 #: Files every pack holds besides the manifest (scene assets, if any, are listed in the manifest).
@@ -74,10 +82,31 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def pack_name(garage: Garage) -> str:
-    """Folder name of ``garage``'s pack: a filesystem-safe name plus 12 hex digits of its hash."""
+def pack_name(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> str:
+    """Folder name of ``garage``'s pack: a filesystem-safe name, the park geometry when it is not the
+    default (:func:`geometry_tag`), and 12 hex digits of the garage's hash."""
     safe = re.sub(r"[^A-Za-z0-9._-]+", "-", garage.name or "garage")[:64].strip("-.") or "garage"
-    return f"{safe}_{garage.canonical_hash()[:12]}"
+    return f"{safe}{geometry_tag(world)}_{garage.canonical_hash()[:12]}"
+
+
+def geometry_tag(world: WorldConfig) -> str:
+    """``-bay2.3x4.5-aisle6.5-angle90`` (``-slot6`` added for parallel slots): what a pack folder's name says
+    of a park geometry other than the default ("" for the default)."""
+    if world.is_default_geometry:
+        return ""
+    g = geometry(world)
+    tag = f"-bay{g['stall_width']:g}x{g['stall_depth']:g}-aisle{g['aisle_width']:g}-angle{g['stall_angle']:g}"
+    return tag + (f"-slot{g['slot_length']:g}" if g["stall_angle"] == 0 else "")
+
+
+def manifest_world(manifest: dict, where: str = "manifest") -> WorldConfig:
+    """The world a pack was built in: its manifest's ``geometry`` (none: the defaults)."""
+    geo = manifest.get("geometry")
+    if geo is None:
+        return DEFAULT_WORLD
+    if not isinstance(geo, dict):
+        raise GeometryError(f"{where}: geometry is not a table of {', '.join(geometry(DEFAULT_WORLD))}")
+    return world_with(geo, where=where)
 
 
 @dataclass(frozen=True)
@@ -90,6 +119,11 @@ class Pack:
     @property
     def garage(self) -> Garage:
         return Garage.from_json((self.path / GARAGE_JSON).read_text(), source=str(self.path / GARAGE_JSON))
+
+    @property
+    def world(self) -> WorldConfig:
+        """The world the pack was built in (its park geometry; a pack without one: the defaults)."""
+        return manifest_world(self.manifest, f"pack {self.path}")
 
     def file(self, name: str) -> Path:
         """Path of one of the pack's files (``"scene.xml"``, ``"garage.glb"``, ...)."""
@@ -151,6 +185,10 @@ def _check(path: Path) -> tuple[str | None, dict]:
         return f"{GARAGE_JSON} is not the garage of the manifest's garage_hash", {}
     if not path.name.endswith(f"_{digest[:12]}"):
         return f"its folder name does not end in _{digest[:12]}, the hash of its {GARAGE_JSON}", {}
+    try:
+        manifest_world(manifest)
+    except GeometryError as exc:
+        return f"its park geometry cannot be read ({exc})", {}
     return None, manifest
 
 
@@ -203,6 +241,7 @@ def _manifest(scene: GarageScene, tmp: Path, skipped: dict[str, str]) -> dict:
         "garage_hash": garage.canonical_hash(),
         "shape": list(garage.shape),
         "metrics": evaluate(garage).to_dict(),
+        "geometry": geometry(scene.world),  # the park geometry every file was built in (docs/spec.md section 9)
         "drivability": drivability(scene),  # for models/car: feasible stalls, clearance, curvature
         "files": files,
         "skipped": skipped,
@@ -211,8 +250,8 @@ def _manifest(scene: GarageScene, tmp: Path, skipped: dict[str, str]) -> dict:
     }
 
 
-def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False) -> Path:
-    """Write ``garage``'s pack under ``out_dir``; returns the pack folder.
+def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False, world: WorldConfig = DEFAULT_WORLD) -> Path:
+    """Write ``garage``'s pack under ``out_dir``, built in ``world`` (its park geometry); returns the pack folder.
 
     Skips a complete pack unless ``force``; a partial or broken one is rebuilt, and so is one
     written without a file whose dependency is now there (``garage.fbx`` once Assimp is).
@@ -220,14 +259,15 @@ def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False) -> 
     """
     validate_garage(garage)
     out_dir = ensure_dir(out_dir, "--out")
-    final = out_dir / pack_name(garage)
+    final = out_dir / pack_name(garage, world)
     if not force:
         problem, manifest = _check(final)
-        if problem is None and not (manifest.get("skipped") and _writable_now(manifest["skipped"])):
-            return final  # complete, and nothing it skipped could be written now
+        if problem is None and not (manifest.get("skipped") and _writable_now(manifest["skipped"])) \
+                and geometry(manifest_world(manifest)) == geometry(world):
+            return final  # complete, in this geometry, and nothing it skipped could be written now
     tmp = make_temp_dir(out_dir, f".{final.name}.", ".tmp")
     try:
-        scene = GarageScene(garage)
+        scene = GarageScene(garage, world)
         skipped = _write_files(scene, tmp)
         manifest = _manifest(scene, tmp, skipped)
         atomic_write(tmp / MANIFEST, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
@@ -242,23 +282,36 @@ def export_pack(garage: Garage, out_dir: str | Path, *, force: bool = False) -> 
 
 def export_packs(
     garages: Iterable[Garage], out_dir: str | Path, *, force: bool = False, progress: bool = True,
-    total: int | None = None,
+    total: int | None = None, world: WorldConfig = DEFAULT_WORLD,
 ) -> list[Path]:
-    """Export many packs under ``out_dir`` and write the set's ``index.json``; returns the folders.
+    """Export many packs under ``out_dir``, built in ``world``, and write the set's ``index.json``; returns the folders.
 
     Holds the lock of ``out_dir`` (a second export into it is refused, naming this one) and first
     removes the hidden temp folders a killed export left behind. Every garage is validated
-    (:func:`garage_mj.grid.garage.validate_garage`) before any file is written.
+    (:func:`garage_mj.grid.garage.validate_garage`), and its stalls laid out in ``world``
+    (:func:`check_geometry`), before any file is written.
     """
     garages = [validate_garage(g) for g in garages]
+    check_geometry(garages, world)
     out_dir = ensure_dir(out_dir, "--out")
     with FolderLock(out_dir, "garage-mj export", remove=True):
         clean_temp(out_dir)
         paths = []
         for garage in tqdm(garages, total=total, desc="export", unit="pack", disable=not progress):
-            paths.append(export_pack(garage, out_dir, force=force))
+            paths.append(export_pack(garage, out_dir, force=force, world=world))
         write_index(out_dir)
     return paths
+
+
+def check_geometry(garages: Iterable[Garage], world: WorldConfig) -> None:
+    """Refuse a park geometry one of ``garages`` cannot be built in (a :class:`GeometryError` naming the garage,
+    the block and the fix), before anything is written."""
+    if world.is_default_geometry:
+        return  # every garage holds the default geometry
+    from garage_mj.scene.stalls import stall_layout
+
+    for garage in garages:
+        stall_layout(garage, world)
 
 
 def write_index(out_dir: str | Path) -> Path:
@@ -283,6 +336,7 @@ def write_index(out_dir: str | Path) -> Path:
                 "coverage": m["metrics"]["coverage"],
                 "stalls": m["metrics"]["stalls"],
                 "usable": m["metrics"]["usable"],
+                "geometry": geometry(manifest_world(m)),
                 "created": m["created"],
             }
         except (KeyError, TypeError):

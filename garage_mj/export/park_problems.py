@@ -47,6 +47,9 @@ JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 2; lengths in 
     planner                    the reference planner's margin and turning radius (with its margin)
     obstacles                  [{"class": "wall" | "obstacle" | "pillar" | "parked_car",
                                  "vertices": [[x, y], ...]}, ...]
+    geometry                   the park geometry the garage was built in (docs/spec.md section 9):
+                               stall_width, stall_depth, aisle_width [m], stall_angle [deg], slot_length
+                               [m]; optional, a file without it was built in the defaults
 """
 
 from __future__ import annotations
@@ -59,7 +62,7 @@ import re
 import stat
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -73,6 +76,7 @@ from garage_mj.grid.garage import MAX_NAME, MAX_SIDE, Garage, grid_hash
 from garage_mj.scene.car import CarGeometry, car_geometry
 from garage_mj.scene.drivable import drive_planner
 from garage_mj.scene.garage_scene import GarageScene
+from garage_mj.scene.world import DEFAULT_WORLD, GeometryError, geometry, world_with
 from garage_mj.scene.park_planning import (
     DEFAULT_PARK,
     MANEUVERS,
@@ -90,6 +94,9 @@ _POSE = ("x", "y", "yaw")
 #: The keys of a problem file, each required; any other key is refused.
 KEYS = ("format", "version", "garage", "garage_hash", "garage_grid", "six_stall_axis", "stall", "maneuver", "start",
         "goal", "start_centre", "goal_centre", "stall_outline", "region", "car", "planner", "obstacles")
+#: Keys a problem file may hold: ``geometry``, the park geometry it was built in (docs/spec.md section 9; a file
+#: without it was built in the defaults).
+OPTIONAL_KEYS = ("geometry",)
 CAR_KEYS = ("wheelbase", "length", "width", "front_overhang", "rear_overhang", "max_steer", "min_turning_radius")
 PLANNER_KEYS = ("margin", "turning_radius")
 CLASSES = ("wall", "obstacle", "pillar", "parked_car")
@@ -129,6 +136,7 @@ class ParkProblem:
     car: dict[str, float]
     planner: dict[str, float]
     obstacles: tuple[tuple[str, tuple[tuple[float, float], ...]], ...]  # (class, vertices)
+    geometry: dict[str, float] = field(default_factory=lambda: geometry(DEFAULT_WORLD))  # the park geometry
 
     @property
     def name(self) -> str:
@@ -141,7 +149,8 @@ class ParkProblem:
                 "start_centre": list(self.start_centre), "goal_centre": list(self.goal_centre),
                 "stall_outline": [list(p) for p in self.stall_outline], "region": list(self.region),
                 "car": dict(self.car), "planner": dict(self.planner),
-                "obstacles": [{"class": c, "vertices": [list(v) for v in vs]} for c, vs in self.obstacles]}
+                "obstacles": [{"class": c, "vertices": [list(v) for v in vs]} for c, vs in self.obstacles],
+                "geometry": dict(self.geometry)}
 
     def tpcap(self) -> str:
         """The problem as a TPCAP case file: one line of comma-separated numbers ended by CRLF, as TPCAP's
@@ -189,7 +198,8 @@ def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: Pa
                 stall_outline=tuple((float(x), float(y)) for x, y in stall.corners),
                 region=tuple(float(v) for v in region), car=_car(car),
                 planner={"margin": config.margin, "turning_radius": planner.radius},
-                obstacles=tuple((c, _corners(b)) for c, b in zip(near.classes, near.boxes.tolist(), strict=True))))
+                obstacles=tuple((c, _corners(b)) for c, b in zip(near.classes, near.boxes.tolist(), strict=True)),
+                geometry=geometry(scene.world)))
     return problems, skipped
 
 
@@ -243,7 +253,8 @@ def check_park_problems_targets(garages: Iterable[Garage | GarageScene], out_dir
     """The folder of each garage's problems in ``out_dir``; ParkProblemError naming one that is there already and
     cannot be written (read-only, or a file), so that nothing is written (the CLI checks before any pack)."""
     out_dir = Path(out_dir)
-    folders = [out_dir / pack_name(item.garage if isinstance(item, GarageScene) else item) for item in garages]
+    folders = [out_dir / (pack_name(item.garage, item.world) if isinstance(item, GarageScene) else pack_name(item))
+               for item in garages]
     for folder in folders:
         if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
             raise ParkProblemError(f"--park-problems {out_dir}: {folder} is not a folder; remove it or choose "
@@ -367,9 +378,10 @@ def _problem(data: Any) -> ParkProblem:
     for key in KEYS:
         if key not in data:
             raise KeyError(key)
-    extra = [k for k in data if k not in KEYS]
+    extra = [k for k in data if k not in KEYS + OPTIONAL_KEYS]
     if extra:
-        raise ValueError(f"unknown key {extra[0][:40]!r} (a park problem holds {', '.join(KEYS)}); remove it")
+        raise ValueError(f"unknown key {extra[0][:40]!r} (a park problem holds {', '.join(KEYS + OPTIONAL_KEYS)}); "
+                         "remove it")
     if not isinstance(data["maneuver"], str) or data["maneuver"] not in MANEUVERS:
         raise ValueError(f"maneuver {str(data['maneuver'])[:40]!r} is not one of {', '.join(MANEUVERS)}")
     grid, stalls = _grid(data)
@@ -393,7 +405,18 @@ def _problem(data: Any) -> ParkProblem:
         start_centre=_read_pose(data, "start_centre"), goal_centre=_read_pose(data, "goal_centre"),
         stall_outline=_polygon(data["stall_outline"], "stall_outline"), region=region,
         car=_car_table(data["car"]), planner=_planner_table(data["planner"]),
-        obstacles=tuple(_obstacle(o, k) for k, o in enumerate(obstacles)))
+        obstacles=tuple(_obstacle(o, k) for k, o in enumerate(obstacles)),
+        geometry=_geometry(data.get("geometry")))
+
+
+def _geometry(v: Any) -> dict[str, float]:
+    """The park geometry of a problem file (none: the defaults); a bad one is a ValueError naming the key."""
+    if v is not None and not isinstance(v, dict):
+        raise TypeError("geometry is not an object")
+    try:
+        return geometry(world_with(v, where="geometry"))
+    except GeometryError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def _garage_name(v: Any) -> str:

@@ -115,6 +115,9 @@ def _plan(code: Block, sides: list[int], axis: str) -> list[tuple[int, int]]:
 
 def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLayout:
     """Every stall of ``garage`` with its pose and the road point beside it."""
+    if world.stall_angle != 90.0:
+        raise GeometryError(f"stall angle {world.stall_angle:g} degrees: angled and parallel stalls are not built yet; "
+                            "give --stall-angle 90 (perpendicular)")
     grid = garage.grid
     rows = grid.shape[0]
     half = world.block / 2

@@ -94,6 +94,7 @@ from garage_mj.scene.park_planning import ParkConfig, ParkPlanner
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, geom_classes
 from garage_mj.scene.vehicles import VehicleClass, vehicle_class
+from garage_mj.scene.world import WorldConfig, world_with
 
 SUCCESS_REWARD = 10.0
 COLLISION_PENALTY = -10.0
@@ -217,6 +218,10 @@ class GarageDriveEnv(gym.Env):
         maneuver: ``"reverse"`` (reverse-in, the default), ``"forward"`` (nose-in) or ``"any"`` (drawn per test).
         stall: a stall id every reset tests (default: drawn per test).
         park_config: :class:`~garage_mj.scene.park_planning.ParkConfig` of the reference park planner.
+        world: the park geometry the garage is built in (docs/spec.md section 9): a
+            :class:`~garage_mj.scene.world.WorldConfig`, or a dict of its geometry keys (``stall_width``,
+            ``stall_depth``, ``aisle_width``, ``stall_angle``, ``slot_length``; a pack's manifest ``geometry``);
+            None (the default): today's 2.5 m x 4.5 m perpendicular stalls on 9 m aisles.
         vehicle: the car under test, a class of the fleet (:data:`~garage_mj.scene.vehicles.FLEET`: ``compact``,
             ``sedan``, ``suv``, ``van``) or a :class:`~garage_mj.scene.vehicles.VehicleClass`; None (the default):
             ``models/car``, the sedan, with ``car``'s full lock. A class brings its MuJoCo model
@@ -248,6 +253,7 @@ class GarageDriveEnv(gym.Env):
         park_config: ParkConfig | dict[str, Any] | None = None,
         park_outcome: ParkOutcomeConfig | dict[str, Any] | None = None,
         vehicle: str | VehicleClass | None = None,
+        world: WorldConfig | dict[str, Any] | None = None,
     ) -> None:
         if not isinstance(garage, Garage):
             raise ValueError("GarageDriveEnv needs garage= (a garage_mj.Garage; for a pack: load_pack(folder).garage)")
@@ -267,6 +273,7 @@ class GarageDriveEnv(gym.Env):
         self.maneuver = maneuver
         self.stall = None if stall is None else int(stall)
         self.garage = garage
+        self.world = world if isinstance(world, WorldConfig) else world_with(world)  # its park geometry
         self.infeasible = infeasible
         self.image_obs = bool(image_obs)
         self.action_type = action_type
@@ -321,7 +328,7 @@ class GarageDriveEnv(gym.Env):
 
     # -- scene -------------------------------------------------------------------------------------
     def _build(self) -> None:
-        self.scene = GarageScene(self.garage)
+        self.scene = GarageScene(self.garage, self.world)
         root = build_scene(self.scene, fuse_static=True)  # parked cars and pillars: geoms of the world body
         _plane_floor(root)
         self._entrance = self.scene.entrance_pose
