@@ -9,7 +9,7 @@
 - ``library``: browse, sample and export the scenario library; rate its garages' route difficulty.
 - ``plot``: convergence and heatmap figures.
 - ``show``: draw one garage as text or PNG.
-- ``cruise``: batch cruise tests of a driver.
+- ``cruise``: batch cruise tests of a driver; ``cruise_cases``: its park tests from problem files (``--cases``).
 - ``hunt``: search for garages that break a driver.
 - ``train-driver``: train a learned cruise driver over many garages (``train_driver``).
 - ``difficulty``: fit, score and compute the route-aware difficulty.

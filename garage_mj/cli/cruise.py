@@ -64,6 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--scenario-file", type=Path, nargs="+", metavar="FILE.xosc",
                      help="replay tests written with --xosc (OpenSCENARIO): same garage, parked cars, start, "
                           "actors; prints each outcome and writes replay.csv into --out")
+    src.add_argument("--cases", type=Path, nargs="+", metavar="PATH",
+                     help="park tests from problem files, one each: TPCAP case files (CaseN.csv) or park problems "
+                          "of garage-mj export --park-problems, or folders of them (docs/cruise.md, Cases from elsewhere)")
     add_filters(p)
     add_ids(p)
     p.add_argument("--sample", type=positive_int, metavar="N",
@@ -315,6 +318,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.scenario_file is not None:
         return replay(args)
+    if args.cases is not None:
+        from garage_mj.cli.cruise_cases import run_cases_cli
+
+        return run_cases_cli(args, action_warnings, task_warning)
     args.driver = args.driver or "vision"
     srcs = sources(args)
     env = geometry_env(args, srcs)

@@ -6,6 +6,7 @@
   - ``sim.observations``: the observation table (``OBSERVATIONS``): each key's space, privilege, meaning and fill.
   - ``sim.outcomes``: how a test ends and why; every outcome kind declared once, in ``OUTCOMES``.
   - ``sim.drive_env``: ``GarageDrive-v0``, one garage, one test per episode.
+  - ``sim.case_env``: ``CaseDriveEnv``, the park test of one case from elsewhere (a problem file).
 - ``actors``: the adverse events of a test.
   - ``actors.config``: ``ScenarioConfig``, how many adverse events (pedestrians, moving cars, clutter) a test gets.
   - ``actors.scenario``: a test's drawn ``Scenario`` and the car's swept path (``Corridor``) actors are checked on.
@@ -28,5 +29,6 @@
   - ``results``: a cruise run's folder: ``run.json``, ``tests.csv`` read back and repaired, the summaries.
   - ``cruise``: batch cruise tests over packs or library garages, resumable.
   - ``replay``: a cruise test driven again from its OpenSCENARIO file (``replay_xosc``).
+  - ``cases``: park tests from problem files (TPCAP's cases, exported park problems), resumable.
   - ``hunt``: the search for garages that break a given driver.
 """

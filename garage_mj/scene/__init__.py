@@ -20,6 +20,8 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 - ``route_difficulty``: the route-aware difficulty, a monotone logistic model of failure on route features.
 - ``car``: the ego car's model file and geometry (outline, axles, steering limit, camera poses).
 - ``vehicles``: the fleet table of vehicle classes (compact, sedan, SUV, van; TPCAP's car): outline, axles, steering.
+- ``case_scene``: a park case from elsewhere (a problem file's obstacle polygons, start and goal): its convex pieces,
+  stall, reference planner and MuJoCo scene.
 - ``layout``: the garage as named, classified boxes and model placements (pure, no MuJoCo).
 - ``templates``: the models of ``models/`` as stamps for scene builders.
 - ``mjcf_scene``: the MuJoCo scene (``build_scene``) and parked-car occupancy on a compiled model.

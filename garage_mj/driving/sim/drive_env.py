@@ -434,7 +434,7 @@ class GarageDriveEnv(gym.Env):
 
     def _reset_park(self, rng, options: dict[str, Any]):
         """:meth:`reset` of a park or AVP test (:mod:`~garage_mj.driving.sim.park_task`)."""
-        self._park = test = draw_park_test(self, rng, options)
+        self._park = test = self._draw_park_test(rng, options)
         self.target, self.occupied, self.test_plan = test.stall, test.occupied, test.cruise
         self.scenario = Scenario()
         self.route = test.reference
@@ -450,6 +450,11 @@ class GarageDriveEnv(gym.Env):
         self._info_test = None
         self._end_info: dict[str, Any] | None = None
         return self._observe(), {**self._info(), "park_plan": test.plan_info()}
+
+    def _draw_park_test(self, rng, options: dict[str, Any]) -> ParkTest:
+        """The park or AVP test of this reset (:func:`~garage_mj.driving.sim.park_task.draw_park_test`); an env whose
+        tests come from elsewhere (:class:`~garage_mj.driving.sim.case_env.CaseDriveEnv`) gives its own here."""
+        return draw_park_test(self, rng, options)
 
     def _park_command(self, action) -> tuple[float, float, Gear | None]:
         """A park action as (pedal, steer, gear request); a cruise driver's ``[throttle, steer]`` keeps the gear."""
