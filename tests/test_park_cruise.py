@@ -21,6 +21,7 @@ from garage_mj.driving.results import (
 from garage_mj.driving.sources import CruiseError, CruiseSettings
 from garage_mj.grid.painters import paint_garage
 from garage_mj.reporting.cruise import run_cruise
+from garage_mj.scene.park_levels import LEVELS
 
 FAST = {"outcome": {"min_mean_speed": 2.0, "time_slack": 5.0}}  # short cruise time limits keep tests quick
 QUIET = Compute(progress=False)
@@ -44,7 +45,9 @@ def test_cli_cruise_task_park_writes_the_park_columns_and_warns_of_a_cruise_driv
     out = tmp_path / "park"
     assert main(["cruise", "--packs", str(packs), "--tests", "2", "--driver", "waypoint", "--task", "park",
                  "--maneuver", "forward", "--out", str(out), "--quiet"]) == 0
-    err = capsys.readouterr().err
+    printed = capsys.readouterr()
+    err = printed.err
+    assert "success by level: " in printed.out and "success by stall angle [deg]: 90 " in printed.out
     warning = [line for line in err.splitlines() if "warning" in line]
     assert len(warning) == 1 and "'waypoint'" in warning[0] and "cannot select reverse" in warning[0]
     rows = rows_of(out / "tests.csv")
@@ -55,9 +58,15 @@ def test_cli_cruise_task_park_writes_the_park_columns_and_warns_of_a_cruise_driv
         assert float(r["plan_length_m"]) > 0 and int(r["plan_cusps"]) >= 0 and float(r["plan_clearance_m"]) >= 0
         assert r["position_error_m"] != "" and r["heading_error_deg"] != "" and r["lateral_offset_m"] != ""
         assert int(r["direction_changes"]) >= 0 and float(r["park_time_s"]) > 0 and r["min_clearance_m"] != ""
+        assert r["park_level"] in LEVELS and r["stall_angle_deg"] == "90.0"  # docs/spec.md section 9
+        assert r["inner_margin_m"] != "" and r["outline_clearance_m"] != ""
+        if r["outcome"] == "success":
+            assert float(r["min_clearance_m"]) > 0 and float(r["inner_margin_m"]) >= 0
     summary = rows_of(out / "summary.csv")
     assert list(summary[0]) == [*SUMMARY_COLUMNS, *PARK_SUMMARY_COLUMNS]
     assert summary[0]["mean_position_error_m"] != ""
+    stats = json.loads((out / "summary.json").read_text())
+    assert sum(g["tests"] for g in stats["by_level"].values()) == 2 and list(stats["by_maneuver"]) == ["forward"]
     run = json.loads((out / "run.json").read_text())
     assert (run["task"], run["maneuver"]) == ("park", "forward")
     # a resume with another task is refused by the settings check, naming it

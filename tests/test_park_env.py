@@ -80,8 +80,13 @@ def test_a_car_at_rest_on_the_stall_pose_is_parked(park_env):
     _, info = park_env.reset(seed=0)
     pose = info["park_plan"]["stall_pose"]
     park_env.car.reset(park_env.data, *pose)  # placed in the stall, at rest
-    _, reward, term, _, info = park_env.step([-1.0, 0.0, 1.0])
+    for _ in range(round(2 * park_env.park_outcome_config.dwell / park_env.dt) + 1):
+        _, reward, term, _, info = park_env.step([-1.0, 0.0, 1.0])
+        if term:
+            break
+        assert "outcome" not in info  # not before the dwell at rest (docs/spec.md section 9)
     assert term and info["outcome"] == "success", info["reason"]
+    assert info["time"] >= park_env.park_outcome_config.dwell
     assert info["position_error"] < 0.1 and info["heading_error"] < 1.0 and abs(info["lateral_offset"]) < 0.1
     assert reward >= 10.0
 

@@ -127,7 +127,8 @@ def test_an_unproven_park_test_is_never_driven_and_counted_apart(painted_tiny, t
                 "difficulty": "0.5", "mean_road_length": "2", "mean_intersection_degree": "2", "pedestrians": "",
                 "moving_cars": "", "clutter": "", "wall_s": "0.1", "task": "park", "maneuver": "reverse",
                 "position_error_m": "", "heading_error_deg": "", "lateral_offset_m": "", "direction_changes": "",
-                "park_time_s": "", "min_clearance_m": "", "plan_length_m": "", "plan_cusps": "", "plan_clearance_m": ""}
+                "park_time_s": "", "min_clearance_m": "", "plan_length_m": "", "plan_cusps": "", "plan_clearance_m": "",
+                "park_level": "complex", "inner_margin_m": "", "outline_clearance_m": "", "stall_angle_deg": "90.0"}
 
     rows = [row(0, "success"), row(1, "collision"), row(2, "unproven"), row(3, "infeasible")]
     # a resumed row of an unproven test validates; one that calls it feasible, or a cruise run's, does not

@@ -34,7 +34,7 @@ from garage_mj.core.fsutil import atomic_write, ensure_dir
 from garage_mj.driving.actors.config import load_scenario_config
 from garage_mj.driving.difficulty.regression import r_text
 from garage_mj.driving.replay import replay_xosc
-from garage_mj.driving.results import TEST_COLUMNS
+from garage_mj.driving.results import BREAKDOWNS, TEST_COLUMNS, breakdown_lines
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
 from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
 from garage_mj.driving.sources import (
@@ -343,6 +343,9 @@ def run(args: argparse.Namespace) -> int:
           f"(excluded){unproven}, success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
           f"Pearson r(difficulty, success) = {r_text(s['r'], s['n'])} (paper {s['paper_r']}), {route_text(s)}; "
           f"results in {res.out_dir}")
+    if "by_level" in s:  # a park or AVP run: its success by level, maneuver and stall angle (docs/spec.md section 9)
+        for line in breakdown_lines({k: s[k] for k in BREAKDOWNS}):
+            print(f"  {line}")
     lost = runner_failures(s["failures"])
     if lost:
         print(f"{lost}: the driver's process died or hung (reasons in {res.out_dir / 'tests.csv'})")

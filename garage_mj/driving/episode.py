@@ -130,9 +130,11 @@ def park_cells(info: dict[str, Any]) -> dict[str, Any]:
     cells |= {"task": info["task"], "maneuver": info["maneuver"],
              "plan_length_m": _cell(info["plan_length"]) if found else "",
              "plan_cusps": info["plan_cusps"] if found else "",
-             "plan_clearance_m": _cell(info["plan_clearance"]) if found else ""}
+             "plan_clearance_m": _cell(info["plan_clearance"]) if found else "",
+             "park_level": info["park_level"], "stall_angle_deg": _cell(info["stall_angle"])}
     if "position_error" in info:  # driven: the metrics at its end
         cells.update(position_error_m=_cell(info["position_error"]), heading_error_deg=_cell(info["heading_error"], 2),
                      lateral_offset_m=_cell(info["lateral_offset"]), direction_changes=info["direction_changes"],
-                     park_time_s=_cell(info["park_time"]), min_clearance_m=_cell(info["min_clearance"]))
+                     park_time_s=_cell(info["park_time"]), min_clearance_m=_cell(info["min_clearance"]),
+                     inner_margin_m=_cell(info["inner_margin"]), outline_clearance_m=_cell(info["outline_clearance"]))
     return cells

@@ -13,7 +13,8 @@ has no feasible stall or was not computed (a run without a route model, a run of
 
 A park or AVP run (``CruiseSettings.task``) writes the same files; its ``tests.csv`` rows fill the park
 columns (:data:`PARK_COLUMNS`, empty but ``task`` in a cruise row), and its ``summary.csv`` and
-``summary.json`` add :data:`PARK_SUMMARY_COLUMNS` (a cruise run's keep their columns).
+``summary.json`` add :data:`PARK_SUMMARY_COLUMNS` (a cruise run's keep their columns); its ``summary.json`` also breaks
+success down by level, maneuver and stall angle (:func:`park_breakdown`, docs/spec.md section 9).
 
 Failures are counted per failure kind of :data:`garage_mj.driving.sim.outcomes.OUTCOMES`
 (:data:`FAILURE_KINDS`, each with its column of :data:`COUNT_COLUMNS`), and folded into the paper's three
@@ -47,18 +48,23 @@ from garage_mj.driving.sources import (
     CruiseSource,
     cruise_seed,
 )
+from garage_mj.scene.park_levels import LEVELS
 
 #: The columns of ``tests.csv`` before park tests (a file with these alone is repaired to :data:`TEST_COLUMNS`).
 LEGACY_TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "target_stall", "feasible", "outcome",
                        "hit", "hit_geom", "reason", "time", "path_length", "route_length", "difficulty",
                        "mean_road_length", "mean_intersection_degree", "pedestrians", "moving_cars", "clutter",
                        "wall_s")
-#: A test's task and the parking metrics of docs/spec.md section 8 (empty in a cruise test's row, but ``task``):
+#: A test's task and the parking metrics of docs/spec.md sections 8 and 9 (empty in a cruise test's row, but ``task``):
 #: the car's final pose against the stall pose, the cusps driven, the parking time [s] (an AVP test's from the
-#: end of its cruise route), the footprint's least clearance along the driven path, and the reference plan's
-#: length, cusps and clearance.
+#: end of its cruise route; the dwell at rest included), the footprint's least clearance along the driven path to the
+#: solid bodies (parked cars as they stand, pillars, walls, obstacle blocks), the reference plan's length, cusps and
+#: clearance; the test's level (every park or AVP test, driven or not), the final footprint's smallest margin inside
+#: the stall's painted inner edges (negative: over a line), the least clearance along the driven path to the stall
+#: outlines of the occupied stalls and the rest (what the planner measures; section 8's figure), the stall's angle.
 PARK_COLUMNS = ("task", "maneuver", "position_error_m", "heading_error_deg", "lateral_offset_m", "direction_changes",
-                "park_time_s", "min_clearance_m", "plan_length_m", "plan_cusps", "plan_clearance_m")
+                "park_time_s", "min_clearance_m", "plan_length_m", "plan_cusps", "plan_clearance_m", "park_level",
+                "inner_margin_m", "outline_clearance_m", "stall_angle_deg")
 TEST_COLUMNS = (*LEGACY_TEST_COLUMNS, *PARK_COLUMNS)
 #: What a collision can hit (``hit`` column): the summary counts collisions per class.
 HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
@@ -131,6 +137,8 @@ def parse_tests(path: Path) -> ParsedTests:
             row = dict(zip(LEGACY_TEST_COLUMNS, fields))
         if row is not None and "task" not in row:  # a row from before park tests: a cruise test
             row = {**row, **dict.fromkeys(PARK_COLUMNS, ""), "task": "cruise"}
+        if row is not None and len(row) < len(TEST_COLUMNS):  # a header without a later column: it is empty
+            row = {**dict.fromkeys(TEST_COLUMNS, ""), **row}
         if row is None or not _complete(row) or (row["garage_hash"], row["test"]) in seen:
             dropped += 1
             continue
@@ -165,7 +173,8 @@ def read_tests(path: Path) -> list[dict[str, str]]:
 _COUNT_CELLS = ("target_stall", "pedestrians", "moving_cars", "clutter", "direction_changes", "plan_cusps")
 _NUMBER_CELLS = ("time", "path_length", "route_length", "difficulty", "mean_road_length", "mean_intersection_degree",
                  "wall_s", "position_error_m", "heading_error_deg", "lateral_offset_m", "park_time_s",
-                 "min_clearance_m", "plan_length_m", "plan_clearance_m")
+                 "min_clearance_m", "plan_length_m", "plan_clearance_m", "inner_margin_m", "outline_clearance_m",
+                 "stall_angle_deg")
 #: Cells every row of a test holds (the rest are empty where a test was not driven or its process died).
 _REQUIRED_CELLS = ("garage", "garage_hash", "test", "seed", "driver", "outcome", "difficulty", "mean_road_length",
                    "mean_intersection_degree", "wall_s", "task")
@@ -217,6 +226,23 @@ def row_problem(row: dict[str, str], settings: CruiseSettings) -> tuple[str, str
     elif row["maneuver"] not in ("", "reverse", "forward") or (
             settings.maneuver != "any" and row["maneuver"] not in ("", settings.maneuver)):
         return "maneuver", f"is not this run's maneuver ({settings.maneuver})"
+    else:
+        return _park_row_problem(row)
+    return None
+
+
+def _park_row_problem(row: dict[str, str]) -> tuple[str, str] | None:
+    """:func:`row_problem` of a park or AVP test's row: its level (section 9), and a success as section 9 judges one."""
+    if row["park_level"] == "":
+        return "park_level", ("is empty; every park or AVP test's row holds its level (a row written before "
+                              "docs/spec.md section 9's levels and success rule was judged by section 8's)")
+    if row["park_level"] not in LEVELS:
+        return "park_level", f"is not a level (one of {', '.join(LEVELS)})"
+    if row["outcome"] == OutcomeKind.SUCCESS.value:
+        if row["inner_margin_m"] != "" and float(row["inner_margin_m"]) < 0:
+            return "inner_margin_m", "is negative in a success (a successful car stands inside the lines)"
+        if row["min_clearance_m"] != "" and float(row["min_clearance_m"]) <= 0:
+            return "min_clearance_m", "is not above 0 in a success (a successful car touched nothing)"
     return None
 
 
@@ -348,6 +374,61 @@ def park_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "mean_direction_changes": _mean(successes, "direction_changes")}
 
 
+#: The breakdowns of a park or AVP run's success (docs/spec.md section 9): summary.json key -> the tests.csv column
+#: whose value groups the tests.
+BREAKDOWNS = {"by_level": "park_level", "by_maneuver": "maneuver", "by_stall_angle": "stall_angle_deg"}
+
+
+def _group_key(column: str, value: str) -> str:
+    """The group a cell puts its test in: a stall angle as a plain number (``90``), anything else as written."""
+    if column == "stall_angle_deg" and _finite(value):
+        return f"{float(value):g}"
+    return value
+
+
+def _group_order(column: str, keys: Iterable[str]) -> list[str]:
+    """``keys`` in display order: levels easiest first, maneuvers as the planner lists them, angles by size."""
+    known = {"park_level": LEVELS, "maneuver": ("reverse", "forward")}.get(column)
+    if known is not None:
+        return [k for k in known if k in keys] + sorted(k for k in keys if k not in known)
+    return sorted(keys, key=lambda k: (not _finite(k), float(k) if _finite(k) else 0.0, k))
+
+
+def park_breakdown(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
+    """Success of a park or AVP run's tests per level, per maneuver and per stall angle (:data:`BREAKDOWNS`): for each
+    group its ``tests``, ``infeasible``, ``unproven``, ``feasible`` (driven), ``successes`` and ``success_pct`` (over the
+    feasible ones; None without any). A test whose cell is empty (not drawn: an infeasible test's maneuver is still
+    written) is grouped under ``""``."""
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for key, column in BREAKDOWNS.items():
+        groups: dict[str, list[dict[str, Any]]] = {}
+        for r in rows:
+            groups.setdefault(_group_key(column, str(r.get(column, ""))), []).append(r)
+        out[key] = {}
+        for name in _group_order(column, groups):
+            mine = groups[name]
+            kinds = [r["outcome"] for r in mine]
+            driven = len(driven_tests(mine))
+            wins = kinds.count(OutcomeKind.SUCCESS.value)
+            out[key][name] = {"tests": len(mine), "infeasible": kinds.count(OutcomeKind.INFEASIBLE.value),
+                              "unproven": kinds.count(OutcomeKind.UNPROVEN.value), "feasible": driven,
+                              "successes": wins, "success_pct": round(100.0 * wins / driven, 2) if driven else None}
+    return out
+
+
+def breakdown_lines(breakdown: dict[str, dict[str, dict[str, Any]]]) -> list[str]:
+    """One line per breakdown of :func:`park_breakdown`, e.g. ``by level: normal 9/10 (90.0%), complex ...``: what a
+    park run's closing lines and the report print."""
+    lines = []
+    for key, groups in breakdown.items():
+        parts = [f"{name or 'n/a'} {g['successes']}/{g['feasible']}"
+                 + (f" ({g['success_pct']}%)" if g["success_pct"] is not None else "")
+                 + (f", {g['unproven']} unproven" if g["unproven"] else "") for name, g in groups.items()]
+        what = key.removeprefix("by_").replace("_", " ")
+        lines.append(f"success by {what}{' [deg]' if what == 'stall angle' else ''}: {'; '.join(parts) or 'no tests'}")
+    return lines
+
+
 def rounded(value: float | None, digits: int = 4) -> float | None:
     """``value`` rounded for a CSV or JSON file; None (empty) for None, NaN or an infinity."""
     return None if value is None or not math.isfinite(value) else round(float(value), digits)
@@ -425,6 +506,6 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], sources: Sequence[C
              "seconds_per_test": round(float(np.mean(walls)), 4) if walls else None,
              "sim_seconds_per_wall_second": round(sum(sims) / sum(walls), 2) if walls and sum(walls) else None}
     if parking:
-        stats.update(task=settings.task, maneuver=settings.maneuver, **park_summary(rows))
+        stats.update(task=settings.task, maneuver=settings.maneuver, **park_summary(rows), **park_breakdown(rows))
     write_json(out / "summary.json", stats)
     return summary, stats

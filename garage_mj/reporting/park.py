@@ -1,10 +1,11 @@
-"""A park or AVP run (docs/spec.md section 8) as a report shows it: the park table and a top-down picture of
+"""A park or AVP run (docs/spec.md sections 8 and 9) as a report shows it: the park table and a top-down picture of
 each failure shown.
 
 - :func:`park_table`: per garage of ``summary.csv`` (and over the run, ``summary.json``) the tests, the
   infeasible ones, success of the feasible ones and the columns of
   :data:`~garage_mj.driving.results.PARK_SUMMARY_COLUMNS` (their headers made from the column names, so
-  a new summary column shows up without an edit here), with :data:`SUCCESS_NOTE`. A cruise run's
+  a new summary column shows up without an edit here), with :data:`SUCCESS_NOTE` and the run's success by level,
+  maneuver and stall angle (``summary.json``'s breakdowns, docs/spec.md section 9). A cruise run's
   ``summary.csv`` has none of those columns: no table.
 - :func:`park_picture`: one test driven again as the run drove it (its seed, settings and driver, as the
   failure videos are), drawn from above with matplotlib: the stall outlines and obstacles around the test,
@@ -32,7 +33,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from garage_mj.core.fsutil import FolderLock, atomic_write  # noqa: E402
-from garage_mj.driving.results import PARK_SUMMARY_COLUMNS  # noqa: E402
+from garage_mj.driving.results import BREAKDOWNS, PARK_SUMMARY_COLUMNS, breakdown_lines  # noqa: E402
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN  # noqa: E402
 from garage_mj.driving.sources import CruiseSettings, CruiseSource, cruise_seed  # noqa: E402
 from garage_mj.reporting.plots import DPI  # noqa: E402
@@ -40,7 +41,7 @@ from garage_mj.reporting.report import ParkTable, fmt_percent  # noqa: E402
 from garage_mj.scene.car import CarGeometry  # noqa: E402
 from garage_mj.scene.clearance import Obstacles, footprint, scene_obstacles  # noqa: E402
 from garage_mj.scene.park_planning import (  # noqa: E402
-    FAR_END_OVER,
+    FAR_END_SLACK,
     HEADING_TOLERANCE,
     centre_to_rear,
     park_obstacles,
@@ -50,8 +51,10 @@ PICTURES = "pictures"  # a run folder's top-down pictures of park and AVP failur
 #: The CARLA end-to-end parking benchmark's success box, for comparison (SPEC 8).
 CARLA_BOX = {"lateral_m": 0.6, "longitudinal_m": 1.0, "heading_deg": 10.0}
 SUCCESS_NOTE = (
-    f"Success (docs/spec.md section 8): at rest, the footprint inside the stall's lines (the far end up to {FAR_END_OVER} m past "
-    f"the aisle line), heading within {HEADING_TOLERANCE:g} deg of the stall axis, no contact; the CARLA parking "
+    "Success (docs/spec.md section 9): no contact at any time; at rest for the dwell (1 s by default); the footprint "
+    "inside the paint's inner edges (a car longer than the stall's room may stand past its open end by the stall "
+    f"pose's own overhang + {FAR_END_SLACK} m: 0.3 m for the default car); heading within {HEADING_TOLERANCE:g} deg of "
+    "the stall axis. Levels after the HOPE planner's: extreme, complex, normal (docs/spec.md section 9); the CARLA parking "
     f"benchmark's: within {CARLA_BOX['lateral_m']} m lateral, {CARLA_BOX['longitudinal_m']} m longitudinal, "
     f"{CARLA_BOX['heading_deg']:g} deg. Unproven tests (no reference plan within the planner's escalated budget, "
     "and no proof that none exists: docs/spec.md section 9) are neither feasible nor infeasible: never driven, "
@@ -101,7 +104,8 @@ def park_table(run_dir: str | Path, label: str | None = None) -> ParkTable | Non
     columns = ["garage", "tests", "infeasible", "success of feasible", *map(column_label, PARK_SUMMARY_COLUMNS)]
     table = [_row(r["garage"], r) for r in rows] + [_row("all garages", stats)]
     what = f"{stats.get('driver', '?')}, {stats.get('task', 'park')} tests ({stats.get('maneuver', 'reverse')})"
-    return ParkTable(label or what, columns, table, SUCCESS_NOTE)
+    breakdown = breakdown_lines({k: stats[k] for k in BREAKDOWNS}) if all(k in stats for k in BREAKDOWNS) else []
+    return ParkTable(label or what, columns, table, SUCCESS_NOTE, breakdown)
 
 
 @dataclass(frozen=True)

@@ -94,6 +94,7 @@ class ParkTable:
     columns: list[str]
     rows: list[list[object]]
     note: str = ""
+    breakdown: list[str] = field(default_factory=list)  # success by level, maneuver and stall angle, one line each
 
 
 @dataclass
@@ -168,6 +169,9 @@ def _park_table(table: ParkTable, index: int) -> str:
     parts.append("</tr></thead><tbody>")
     parts += ["<tr>" + "".join(f"<td>{_fmt(v)}</td>" for v in row) + "</tr>" for row in table.rows]
     parts.append("</tbody></table></div>")
+    if table.breakdown:
+        parts.append(f"<ul id=park-breakdown-{index}>" + "".join(f"<li>{e(line)}</li>" for line in table.breakdown)
+                     + "</ul>")
     if table.note:
         parts.append(f"<p class=muted>{e(table.note)}</p>")
     return "".join(parts)

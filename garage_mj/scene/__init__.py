@@ -16,6 +16,9 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 - ``drivable``: the planned test to each stall (goal, route, checks) and a garage's drivability.
 - ``park_planning``: park tests: the stall pose, the success geometry, and the reference Reeds-Shepp planner
   (OMPL) that decides a park test's feasibility and gives the path a reference driver tracks.
+- ``body_outlines``: solid bodies as floor outlines of any orientation, the footprint's clearance to them, and
+  what a straight segment crosses (what section 9 judges a park test against).
+- ``park_levels``: a park test's level (normal, complex, extreme), after the HOPE parking planner's rules.
 - ``route_features``: what a test asks of a driver, from its planned route (turns, curvature, clearance, ...).
 - ``route_difficulty``: the route-aware difficulty, a monotone logistic model of failure on route features.
 - ``car``: the ego car's model file and geometry (outline, axles, steering limit, camera poses).

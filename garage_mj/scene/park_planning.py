@@ -58,13 +58,18 @@ import numpy as np
 from garage_mj.scene.clearance import (Obstacles, footprint, nearest_obstacle, polygon_axes, polygon_distance,
                                        scene_obstacles)
 from garage_mj.scene.garage_scene import GarageScene
+from garage_mj.scene.world import DEFAULT_WORLD
 
 if TYPE_CHECKING:
     from garage_mj.scene.car import CarGeometry
     from garage_mj.scene.stalls import Stall
 
 BACK_GAP = 0.15  # [m] the car's rear (reverse-in) or nose (nose-in) to the stall's back line
-FAR_END_OVER = 0.3  # [m] how far the car's far end may stand beyond the stall's aisle-side line
+#: [m] how far past the stall pose's own overhang the car's far end may stand beyond the stall's open, aisle-side edge
+#: (:func:`far_end_allowance`: 0.3 m for the default car in a 4.5 m stall, section 8's figure)
+FAR_END_SLACK = 0.05
+#: The limits of the footprint in a stall (:func:`in_stall`), as a reason names them; sides looking out of the stall
+STALL_LINES = ("left side line", "right side line", "back line", "aisle-side limit")
 HEADING_TOLERANCE = 10.0  # [deg] the car's axis to the stall's, in the maneuver's direction
 _EPS = 1e-9  # [m] geometric tolerance of the inside test
 
@@ -132,26 +137,42 @@ def park_pose(stall: Stall, car: CarGeometry, maneuver_name: str = "reverse") ->
     return stall.x + s * ux, stall.y + s * uy, float(m.heading(stall))
 
 
+def far_end_allowance(stall: Stall, car: CarGeometry) -> float:
+    """[m] how far the car's far end may stand beyond ``stall``'s open (aisle-side) edge: none for a car that fits
+    the stall with its :data:`BACK_GAP`, else the stall pose's own overhang plus :data:`FAR_END_SLACK` (SPEC 8: the
+    default 4.6 m car in a 4.5 m stall, 0.3 m; a longer class, what the same rule gives)."""
+    return max(0.0, (car.front - car.rear) + BACK_GAP + FAR_END_SLACK - stall.length)
+
+
 @dataclass(frozen=True)
 class ParkFit:
-    """How a car pose sits in a stall: the success geometry and the parking metrics of SPEC 8."""
+    """How a car pose sits in a stall: the success geometry (SPEC 9) and the parking metrics of SPEC 8."""
 
-    inside: bool  # the footprint inside the stall's lines (the far end up to FAR_END_OVER beyond the aisle line)
+    inside: bool  # the footprint inside the paint's inner edges (the far end up to far_end_allowance past the open end)
     aligned: bool  # heading within HEADING_TOLERANCE of the stall axis in the maneuver's direction
     position_error: float  # [m] car centre to the target pose's centre
     heading_error: float  # [deg] |car heading - target heading|
     lateral_offset: float  # [m] car centre off the stall axis, > 0 left looking out of the stall
     longitudinal_offset: float  # [m] car centre to the target along the stall axis, > 0 towards the aisle
     overhang: float  # [m] how far the footprint crosses a line it may not (0 when inside)
+    margin: float = math.inf  # [m] the footprint's smallest distance inside a limit of STALL_LINES (< 0: over it)
+    line: str = ""  # the limit of STALL_LINES with that smallest margin (the one crossed when not inside)
 
     @property
     def parked(self) -> bool:
-        """Inside and aligned: the geometry of a success (the env adds: at rest, no contact)."""
+        """Inside and aligned: the geometry of a success (the env adds: at rest for the dwell, no contact)."""
         return self.inside and self.aligned
 
 
-def in_stall(stall: Stall, car: CarGeometry, pose, maneuver_name: str = "reverse") -> ParkFit:
-    """The success geometry and parking metrics of the car at ``pose`` (car centre) in ``stall``."""
+def in_stall(stall: Stall, car: CarGeometry, pose, maneuver_name: str = "reverse",
+             marking: float = DEFAULT_WORLD.marking_width) -> ParkFit:
+    """The success geometry and parking metrics of the car at ``pose`` (car centre) in ``stall``.
+
+    Inside (SPEC 9) means inside the paint's inner edges: the side and back lines are ``marking`` [m] wide and centred
+    on the stall's outline, so the footprint keeps ``marking / 2`` inside each outline edge there (a 2.5 m stall has
+    2.35 m); the open, aisle-side end is not painted, and the far end may stand :func:`far_end_allowance` beyond it.
+    ``margin`` is the smallest of the four distances (negative: over that limit), ``line`` names it.
+    """
     tx, ty, tyaw = park_pose(stall, car, maneuver_name)
     x, y, yaw = (float(v) for v in pose)
     ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)
@@ -160,14 +181,17 @@ def in_stall(stall: Stall, car: CarGeometry, pose, maneuver_name: str = "reverse
     rel = corners - (stall.x, stall.y)
     s = rel @ (ux, uy)  # along the stall axis, towards the aisle
     t = rel @ (-uy, ux)  # across it, to the left
-    over = max(float(np.abs(t).max()) - stall.width / 2, -float(s.min()) - stall.length / 2,
-               float(s.max()) - stall.length / 2 - FAR_END_OVER, 0.0)
+    half_w, half_l = stall.width / 2 - marking / 2, stall.length / 2 - marking / 2  # [m] the inner edges
+    margins = (half_w - float(t.max()), half_w + float(t.min()), half_l + float(s.min()),
+               stall.length / 2 + far_end_allowance(stall, car) - float(s.max()))
+    k = int(np.argmin(margins))
     heading = abs(math.degrees(_wrap(yaw - tyaw)))
     cx, cy = x - stall.x, y - stall.y
-    return ParkFit(inside=over <= _EPS, aligned=heading <= HEADING_TOLERANCE,
+    return ParkFit(inside=margins[k] >= -_EPS, aligned=heading <= HEADING_TOLERANCE,
                    position_error=math.hypot(x - tx, y - ty), heading_error=heading,
                    lateral_offset=-uy * cx + ux * cy,
-                   longitudinal_offset=(x - tx) * ux + (y - ty) * uy, overhang=over)
+                   longitudinal_offset=(x - tx) * ux + (y - ty) * uy, overhang=max(0.0, -margins[k]),
+                   margin=margins[k], line=STALL_LINES[k])
 
 
 # -- the obstacles of one park test --------------------------------------------------------------------
@@ -856,6 +880,7 @@ def park_planner(scene: GarageScene, car: CarGeometry | None = None, config: Par
     return ParkPlanner(scene, car, config or DEFAULT_PARK)
 
 
-__all__ = ["BACK_GAP", "FAR_END_OVER", "HEADING_TOLERANCE", "MANEUVERS", "SAMPLERS", "DEFAULT_PARK", "Maneuver",
-           "ParkConfig", "ParkFit", "ParkPlan", "ParkPlanner", "centre_to_rear", "in_stall", "maneuver",
+__all__ = ["BACK_GAP", "FAR_END_SLACK", "HEADING_TOLERANCE", "MANEUVERS", "SAMPLERS", "DEFAULT_PARK", "Maneuver",
+           "STALL_LINES", "ParkConfig", "ParkFit", "ParkPlan", "ParkPlanner", "centre_to_rear", "far_end_allowance",
+           "in_stall", "maneuver",
            "park_obstacles", "park_planner", "park_pose", "rear_to_centre"]

@@ -71,8 +71,10 @@ from garage_mj.driving.sim.park_task import (
     end_info,
     park_info,
     park_monitor,
+    test_level,
 )
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
+from garage_mj.driving.sim.solid_bodies import solid_bodies
 from garage_mj.driving.sim.vehicle import (
     Car,
     DiscreteAction,
@@ -444,6 +446,8 @@ class GarageDriveEnv(gym.Env):
         self._parked_cars.apply(self.model, None, test.occupied)
         self._place_actors()
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward; in D, at rest
+        self._bodies = solid_bodies(self.model, self.data, self.car.geom_mask, self.classes)  # as they stand
+        self._park_level = test_level(self, test, self._bodies)
         self.path_length = 0.0  # [m] driven
         self._last_xy = (x, y)
         self.outcome = None if test.feasible else Outcome(OutcomeKind(test.verdict), 0.0, test.reason)
@@ -574,7 +578,8 @@ class GarageDriveEnv(gym.Env):
             if self.scenario.missing:
                 self._info_test["actors_missing"] = dict(self.scenario.missing)
             if self._park is not None:
-                self._info_test.update(park_info(self._park), feasible=self._park.feasible)
+                stall = self.stalls[self._park.stall]
+                self._info_test.update(park_info(self._park, self._park_level, stall), feasible=self._park.feasible)
         info: dict[str, Any] = {"time": float(self.data.time), "path_length": self.path_length,
                                 "progress": self.monitor.progress, "pose": (x, y, yaw), **self._info_test}
         info["actors"] = dict(info["actors"])  # fresh dicts: a caller may keep or change an info
@@ -585,7 +590,7 @@ class GarageDriveEnv(gym.Env):
                         hit=self.outcome.hit_class, hit_geom=self.outcome.hit_geom)
             if self._park is not None and self._park.feasible:  # the parking metrics, once the test is over
                 if self._end_info is None:
-                    self._end_info = end_info(self, self._park, self.monitor)
+                    self._end_info = end_info(self, self._park, self.monitor, self._bodies)
                 info.update(self._end_info)
         return info
 

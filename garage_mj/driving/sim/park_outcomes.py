@@ -1,4 +1,4 @@
-"""Outcome of one park or AVP test (docs/spec.md section 8), decided by the environment, never by the driver.
+"""Outcome of one park or AVP test (docs/spec.md sections 8 and 9), decided by the environment, never by the driver.
 
 :class:`ParkMonitor` is the park tests' twin of :class:`~garage_mj.driving.sim.outcomes.OutcomeMonitor`
 (which cruise tests keep, untouched), with the same interface (``update``, ``progress``, ``time_limit``,
@@ -7,15 +7,16 @@
 cruise route followed by the park plan (AVP test, scored as one test). Checks, in this order:
 
 - collision: ego touches a wall, pillar, obstacle, parked car or actor (as in cruise);
-- success: at rest (``|speed| < rest_speed``) with the footprint inside the target stall and the heading
-  within 10 degrees of its axis in the maneuver's direction
-  (:func:`~garage_mj.scene.park_planning.in_stall` ``.parked``); a contact ends the test first, so a
-  success had none at any time;
+- success (SPEC 9): at rest (``|speed| < rest_speed``) for ``dwell`` seconds on end, all that time with the
+  footprint inside the paint's inner edges of the target stall and the heading within 10 degrees of its axis
+  in the maneuver's direction (:func:`~garage_mj.scene.park_planning.in_stall` ``.parked``, the scene's marking
+  width); a car that stops there and moves off sooner starts its dwell again. A contact ends the test first,
+  so a success had none at any time. While the car dwells it is not stuck;
 - no progress for ``stuck_time``: neither along the reference path nor towards the stall pose by
   ``stuck_progress``, nor a new direction change (a cusp driven: a multi-point turn of short shuffles,
   each with the wheels turned at rest, is progress; the time limit still bounds it): ``outside_stall`` within ``outside_radius`` of the stall pose (stopped, but not
-  parked: the reason gives the errors), ``deadlock`` farther away;
-- timeout: ``time_limit`` from the reference length (``park_time_limit``), set by the env.
+  parked: the reason gives the errors and names the line crossed), ``deadlock`` farther away;
+- timeout: ``time_limit`` from the reference length (``park_time_limit``, the dwell included), set by the env.
 
 It also records what ``tests.csv`` reports of the drive: the driven poses (one per control step, for the
 minimum clearance along the driven path), the direction changes (the sign of the speed flipping between
@@ -32,11 +33,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from garage_mj.driving.sim.outcomes import BaseMonitor, Contact, Outcome, OutcomeKind
+from garage_mj.scene.body_outlines import BodyOutlines, body_clearance
 from garage_mj.scene.car import CarGeometry
 from garage_mj.scene.clearance import Obstacles, nearest_obstacle
 from garage_mj.scene.park_planning import ParkFit, centre_to_rear, in_stall, park_pose
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.stalls import Stall
+from garage_mj.scene.world import DEFAULT_WORLD
 
 MOVING_SPEED = 0.1  # [m/s] faster than this the car is moving (a direction change counts between two such stretches)
 
@@ -52,27 +55,32 @@ class ParkOutcomeConfig:
     stuck_time: float = 8.0  # [s] window in which the car must make progress
     stuck_progress: float = 0.3  # [m] progress along the reference, or towards the stall pose, needed in it
     outside_radius: float = 6.0  # [m] no progress this close to the stall pose: outside_stall, not deadlock
+    dwell: float = 1.0  # [s] a success stands parked at rest this long on end (SPEC 9; 0: the first parked step)
 
     def __post_init__(self) -> None:
         for name in ("rest_speed", "min_mean_speed", "stuck_time", "stuck_progress"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"ParkOutcomeConfig.{name} must be > 0, got {getattr(self, name)}")
+        if not (math.isfinite(self.dwell) and self.dwell >= 0):
+            raise ValueError(f"ParkOutcomeConfig.dwell must be a number of seconds >= 0, got {self.dwell}")
 
 
 def park_time_limit(config: ParkOutcomeConfig, length: float, cusps: int) -> float:
-    """[s] the time limit of parking along a plan of ``length`` [m] with ``cusps`` gear changes."""
-    return length / config.min_mean_speed + config.time_slack + cusps * config.cusp_time
+    """[s] the time limit of parking along a plan of ``length`` [m] with ``cusps`` gear changes, and dwelling at rest."""
+    return length / config.min_mean_speed + config.time_slack + cusps * config.cusp_time + config.dwell
 
 
 class ParkMonitor(BaseMonitor):
     """Watches one park (or AVP) test along ``reference`` and says when and how it ended (module docstring).
 
     ``reference``: the reference path of the car's centre; ``stall`` and ``maneuver``: the target;
-    ``time_limit`` [s]; ``park_from`` [m]: where along ``reference`` the parking begins.
+    ``time_limit`` [s]; ``park_from`` [m]: where along ``reference`` the parking begins; ``marking`` [m]: the width of
+    the stall's painted lines (the scene's ``WorldConfig.marking_width``).
     """
 
     def __init__(self, reference: Route, stall: Stall, car: CarGeometry, maneuver: str, time_limit: float,
-                 config: ParkOutcomeConfig | None = None, park_from: float = 0.0) -> None:
+                 config: ParkOutcomeConfig | None = None, park_from: float = 0.0,
+                 marking: float = DEFAULT_WORLD.marking_width) -> None:
         self.route = reference
         self.stall = stall
         self.car = car
@@ -80,6 +88,7 @@ class ParkMonitor(BaseMonitor):
         self.config = config or ParkOutcomeConfig()
         self.time_limit = float(time_limit)
         self.park_from = float(park_from)
+        self.marking = float(marking)
         self.target = park_pose(stall, car, maneuver)
         self.goal = np.array(self.target[:2])
         self.reset()
@@ -96,6 +105,7 @@ class ParkMonitor(BaseMonitor):
         self.poses: list[tuple[float, float, float]] = []  # driven poses, one per update
         self.direction_changes = 0
         self.park_start: float | None = None  # [s] when the parking began
+        self.rest_since: float | None = None  # [s] since when the car stands parked at rest (None: it does not)
         self._sign = 0  # direction of the last stretch of motion
         self._mark_time = 0.0
         self._mark_progress = 0.0
@@ -123,23 +133,30 @@ class ParkMonitor(BaseMonitor):
             sign = 1 if speed > 0 else -1
             self.direction_changes += self._sign != 0 and sign != self._sign
             self._sign = sign
-        fit = self.fit = in_stall(self.stall, self.car, (x, y, yaw), self.maneuver)
-        if abs(speed) < cfg.rest_speed and fit.parked:
+        fit = self.fit = in_stall(self.stall, self.car, (x, y, yaw), self.maneuver, self.marking)
+        dwelling = abs(speed) < cfg.rest_speed and fit.parked
+        if not dwelling:
+            self.rest_since = None
+        elif self.rest_since is None:
+            self.rest_since = float(time)
+        if dwelling and time - self.rest_since >= cfg.dwell - 1e-9:
             return self._end(OutcomeKind.SUCCESS, time, f"parked ({fit.position_error:.2f} m, "
-                             f"{fit.heading_error:.1f} deg from the stall pose)")
+                             f"{fit.heading_error:.1f} deg from the stall pose, {fit.margin:.2f} m inside the "
+                             f"{fit.line}), at rest {time - self.rest_since:.1f} s")
         s, _ = self.route.project((x, y), self.progress - 1.0, self.progress + 2.0 + abs(speed))
         self.progress = max(self.progress, s)
         if self.park_start is None and self.progress >= self.park_from:
             self.park_start = float(time)
         dist = math.dist((x, y), self.target[:2])
-        if hold or self.progress - self._mark_progress >= cfg.stuck_progress or \
+        if hold or dwelling or self.progress - self._mark_progress >= cfg.stuck_progress or \
                 self._mark_dist - dist >= cfg.stuck_progress or self.direction_changes > self._mark_changes:
             self._mark_time, self._mark_progress, self._mark_dist = time, self.progress, min(dist, self._mark_dist)
             self._mark_changes = self.direction_changes
         elif time - self._mark_time >= cfg.stuck_time:
             why = f"no progress for {time - self._mark_time:.1f} s"
             if dist <= cfg.outside_radius:
-                where = "inside the lines" if fit.inside else f"{fit.overhang:.2f} m over a line"
+                where = f"inside the lines ({fit.margin:.2f} m from the {fit.line})" if fit.inside else \
+                    f"{fit.overhang:.2f} m over the {fit.line}"
                 return self._end(OutcomeKind.OUTSIDE_STALL, time,
                                  f"not parked: {fit.position_error:.2f} m and {fit.heading_error:.1f} deg from the "
                                  f"stall pose, lateral offset {fit.lateral_offset:+.2f} m, {where}, {why}")
@@ -149,9 +166,18 @@ class ParkMonitor(BaseMonitor):
         return None
 
     def min_clearance(self, obstacles: Obstacles) -> float:
-        """[m] the footprint's smallest distance to ``obstacles`` over the driven poses (as the planner measures)."""
+        """[m] the footprint's smallest distance to ``obstacles`` over the driven poses (as the planner measures: stall
+        outlines for parked cars)."""
         if not self.poses or not len(obstacles.boxes):
             return math.nan
         rear = centre_to_rear(np.array(self.poses), self.car)
         dist, _ = nearest_obstacle(obstacles, self.car, rear[:, :2], rear[:, 2])
+        return float(dist.min())
+
+    def body_clearance(self, bodies: BodyOutlines) -> float:
+        """[m] the footprint's smallest distance to the solid ``bodies`` over the driven poses (SPEC 9; 0: touching)."""
+        if not self.poses or not len(bodies):
+            return math.nan
+        rear = centre_to_rear(np.array(self.poses), self.car)
+        dist, _ = body_clearance(bodies, self.car, rear[:, :2], rear[:, 2])
         return float(dist.min())

@@ -18,6 +18,10 @@ the maneuver where it is ``"any"``. A test without a cruise route to the stall, 
 exists, is ``infeasible`` with the planner's reason; one without a park plan within the planner's escalated
 budget and without a proof is ``unproven`` (docs/spec.md section 9); with ``infeasible="skip"`` another
 stall is drawn instead of either (unless the stall is fixed), while one is left.
+
+Every test, driven or not, has a level (:func:`test_level`, docs/spec.md section 9), from the solid bodies of the
+reset scene (:func:`~garage_mj.driving.sim.solid_bodies.solid_bodies`); a driven one ends with the metrics of
+:func:`end_info`.
 """
 
 from __future__ import annotations
@@ -29,9 +33,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from garage_mj.driving.sim.park_outcomes import ParkMonitor, park_time_limit
+from garage_mj.scene.body_outlines import BodyOutlines
 from garage_mj.scene.drivable import START_OFFSET, TestPlan
+from garage_mj.scene.park_levels import ParkLevel, park_level
 from garage_mj.scene.park_planning import MANEUVERS, ParkPlan, park_obstacles
 from garage_mj.scene.route_line import Route
+from garage_mj.scene.stalls import Stall
 
 if TYPE_CHECKING:
     from garage_mj.driving.sim.drive_env import GarageDriveEnv
@@ -143,29 +150,44 @@ def park_monitor(env: GarageDriveEnv, test: ParkTest) -> ParkMonitor:
     """The outcome monitor of ``test``: its time limit from the plan (and, for AVP, the cruise route)."""
     cfg = env.park_outcome_config
     stall = env.stalls[test.stall]
+    marking = env.scene.world.marking_width
     if not test.feasible:
-        monitor = ParkMonitor(test.reference, stall, env.car_geometry, test.maneuver, 0.0, cfg, test.park_from)
+        monitor = ParkMonitor(test.reference, stall, env.car_geometry, test.maneuver, 0.0, cfg, test.park_from,
+                              marking)
     else:
         limit = park_time_limit(cfg, test.plan.length, test.plan.cusps)
         if test.task == "avp":
             oc = env.outcome_config
             limit += test.park_from / oc.min_mean_speed + oc.time_slack
-        monitor = ParkMonitor(test.reference, stall, env.car_geometry, test.maneuver, limit, cfg, test.park_from)
+        monitor = ParkMonitor(test.reference, stall, env.car_geometry, test.maneuver, limit, cfg, test.park_from,
+                              marking)
     monitor.start(test.start, test.progress)
     return monitor
 
 
-def park_info(test: ParkTest) -> dict[str, Any]:
-    """What the env's info says of a park test for all of it (with the cruise entries)."""
+def test_level(env: GarageDriveEnv, test: ParkTest, bodies: BodyOutlines) -> ParkLevel:
+    """The level of ``test`` (docs/spec.md section 9, :func:`~garage_mj.scene.park_levels.park_level`): the car under
+    test's outline, the target stall, the scene's aisle width, the test's start and the reset scene's solid bodies."""
+    car = env.car_geometry
+    return park_level(env.stalls[test.stall], car.front - car.rear, 2 * car.half_width, env.scene.world.aisle_width,
+                      test.start, bodies)
+
+
+def park_info(test: ParkTest, level: ParkLevel, stall: Stall) -> dict[str, Any]:
+    """What the env's info says of a park test for all of it (with the cruise entries); ``stall``: its target."""
     plan = test.plan
     found = plan is not None and plan.found
     return {"task": test.task, "maneuver": test.maneuver, "stall_pose": test.stall_pose,
             "plan_length": plan.length if found else math.nan, "plan_cusps": plan.cusps if found else -1,
-            "plan_clearance": plan.min_clearance if found else math.nan}
+            "plan_clearance": plan.min_clearance if found else math.nan,
+            "park_level": level.level, "park_level_reason": level.reason, "stall_angle": float(stall.angle)}
 
 
-def end_info(env: GarageDriveEnv, test: ParkTest, monitor: ParkMonitor) -> dict[str, Any]:
-    """The parking metrics of SPEC 8 at the end of a driven test (``tests.csv``'s park columns)."""
+def end_info(env: GarageDriveEnv, test: ParkTest, monitor: ParkMonitor, bodies: BodyOutlines) -> dict[str, Any]:
+    """The parking metrics of SPEC 8 and 9 at the end of a driven test (``tests.csv``'s park columns): ``min_clearance``
+    along the driven path to the solid ``bodies`` of the test (parked cars as they stand, pillars, walls, obstacle
+    blocks), ``outline_clearance`` the same to the occupied stalls' outlines and the rest (section 8's figure),
+    ``inner_margin`` the final footprint's smallest margin inside the stall's limits (negative: over one)."""
     fit = monitor.fit
     outcome = monitor.outcome
     obstacles = park_obstacles(env.park_planner.obstacles(), test.stall, test.occupied)
@@ -173,9 +195,12 @@ def end_info(env: GarageDriveEnv, test: ParkTest, monitor: ParkMonitor) -> dict[
     return {"position_error": fit.position_error if fit else math.nan,
             "heading_error": fit.heading_error if fit else math.nan,
             "lateral_offset": fit.lateral_offset if fit else math.nan,
+            "inner_margin": fit.margin if fit else math.nan,
             "direction_changes": monitor.direction_changes,
             "park_time": math.nan if park_time is None else park_time,
-            "min_clearance": monitor.min_clearance(obstacles)}
+            "min_clearance": monitor.body_clearance(bodies),
+            "outline_clearance": monitor.min_clearance(obstacles)}
 
 
-__all__ = ["MANEUVER_CHOICES", "TASKS", "ParkTest", "draw_park_test", "end_info", "park_info", "park_monitor"]
+__all__ = ["MANEUVER_CHOICES", "TASKS", "ParkTest", "draw_park_test", "end_info", "park_info", "park_monitor",
+           "test_level"]
