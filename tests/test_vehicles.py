@@ -110,3 +110,141 @@ def test_the_oracle_parks_every_class_on_the_tiny_garage(painted_tiny, name):
             break
     env.close()
     assert info["outcome"] == "success", info["reason"]
+
+
+# -- parked cars as real bodies ---------------------------------------------------------------------------------
+def _hull_outline(model, data, geom: int) -> np.ndarray:
+    """(4, 2) the floor outline of a box geom as the compiled model and data hold it."""
+    rot = data.geom_xmat[geom].reshape(3, 3)
+    hx, hy, _ = model.geom_size[geom]
+    local = np.array([[hx, hy, 0], [-hx, hy, 0], [-hx, -hy, 0], [hx, -hy, 0]])
+    return (data.geom_xpos[geom] + local @ rot.T)[:, :2]
+
+
+def _same_outline(a: np.ndarray, b: np.ndarray) -> bool:
+    return any(np.allclose(np.roll(a, k, axis=0), b, atol=1e-9) for k in range(4))
+
+
+def test_a_mixed_jittered_fleet_is_drawn_from_the_test_seed_alone(painted_tiny):
+    fleet = {"parked_fleet": "mixed", "parked_jitter": 0.5}
+    env = GarageDriveEnv(painted_tiny, **fleet)
+    env.reset(seed=7)
+    first = dict(env.parked_bodies)
+    env.reset(seed=3)
+    assert env.parked_bodies != first  # another test, other cars
+    env.reset(seed=7)
+    assert env.parked_bodies == first and set(first) == set(env.occupied)
+    assert {b.vehicle for b in first.values()} <= set(FLEET) and len({b.vehicle for b in first.values()}) > 1
+    # a fresh env (another worker process) draws the same cars for the same test seed
+    other = GarageDriveEnv(painted_tiny, **fleet)
+    other.reset(seed=7)
+    assert other.parked_bodies == first
+    other.close()
+    # the test's other draws are those of the default fleet: same target, parked stalls and start
+    default = GarageDriveEnv(painted_tiny)
+    _, info = default.reset(seed=7)
+    assert (default.target, default.occupied, default.start_pose) == (env.target, env.occupied, env.start_pose)
+    assert default.parked_bodies == {}  # the scene's own cars, never moved
+    default.close()
+    env.close()
+
+
+def test_jitter_stays_in_bounds_and_out_of_the_target_stall_and_other_cars(painted_tiny):
+    from garage_mj.scene.garage_scene import GarageScene
+    from garage_mj.scene.parked_fleet import (
+        CAR_GAP,
+        JITTER_YAW,
+        ParkedFleet,
+        _overlap,
+        draw_parked,
+        fleet_rng,
+        stall_inner,
+    )
+
+    stalls = GarageScene(painted_tiny).stalls.stalls
+    fleet = ParkedFleet("mixed", 0.5)
+    moved = 0
+    for seed in range(12):
+        target = (7 * seed) % len(stalls)
+        bodies = draw_parked(stalls, range(len(stalls)), target, fleet, fleet_rng(seed))
+        assert target not in bodies and len(bodies) == len(stalls) - 1
+        inner = stall_inner(stalls[target])
+        placed = list(bodies.values())
+        for k, b in enumerate(placed):
+            s = stalls[b.stall]
+            lateral = -(b.x - s.x) * math.sin(s.yaw) + (b.y - s.y) * math.cos(s.yaw)
+            turn = math.remainder(b.yaw - s.yaw, math.tau)
+            assert abs(lateral) <= 0.5 + 1e-9 and abs(turn) <= JITTER_YAW * 0.5 + 1e-9
+            moved += abs(lateral) > 0.25
+            assert not _overlap(b.corners(), inner)  # never into the target stall's paint
+            assert not any(_overlap(b.corners(), o.corners(), CAR_GAP - 1e-9) for o in placed[k + 1:])
+    assert moved > 0  # some cars do stand over their line
+
+
+def test_the_planner_the_cameras_and_the_collisions_see_the_same_parked_bodies(painted_tiny):
+    from garage_mj.scene.parked_fleet import body_obstacles
+
+    env = GarageDriveEnv(painted_tiny, task="park", parked_fleet="mixed", parked_jitter=0.4)
+    env.reset(seed=2)
+    bodies = env.parked_bodies
+    assert bodies and set(bodies) == set(env.occupied)
+    obstacles = body_obstacles(env.park_planner.obstacles(), env.target, bodies)
+    cars = [k for k, c in enumerate(obstacles.classes) if c == "parked_car"]
+    assert sorted(obstacles.stall[cars].tolist()) == sorted(bodies)  # one outline per parked car, no stall outline
+    for k in cars:
+        sid = int(obstacles.stall[k])
+        hull = mujoco.mj_name2id(env.model, mujoco.mjtObj.mjOBJ_GEOM, f"parkedcar_{sid}_hull")
+        drawn = _hull_outline(env.model, env.data, hull)  # where MuJoCo draws and collides the car's hull
+        assert _same_outline(drawn, obstacles.outlines[k]) and _same_outline(drawn, bodies[sid].corners())
+        assert env.model.geom_size[hull, 0] == pytest.approx(bodies[sid].length / 2)
+    # a moved car is hit where it stands: the ego car put onto a parked car's corner outside its compiled box
+    sid = max(bodies, key=lambda s: abs(math.remainder(bodies[s].yaw - env.stalls[s].yaw, math.tau)))
+    corner = bodies[sid].corners()[0]
+    env.car.reset(env.data, float(corner[0]), float(corner[1]), bodies[sid].yaw)
+    mujoco.mj_step(env.model, env.data)
+    hit = {mujoco.mj_id2name(env.model, mujoco.mjtObj.mjOBJ_GEOM, int(g)) for c in env.data.contact[:env.data.ncon]
+           for g in (c.geom1, c.geom2)}
+    assert f"parkedcar_{sid}_hull" in hit
+    env.close()
+
+
+def test_the_default_fleet_plans_around_the_parked_cars_bodies(painted_tiny):
+    from garage_mj.scene.parked_fleet import uniform_size
+
+    env = GarageDriveEnv(painted_tiny, task="park")
+    env.reset(seed=0)
+    assert env.parked_bodies and set(env.parked_bodies) == set(env.occupied)
+    for b in env.parked_bodies.values():  # models/parked_car, centred and square in its stall
+        s = env.stalls[b.stall]
+        assert (b.x, b.y, b.yaw) == (s.x, s.y, s.yaw) and (b.length, b.width, b.height) == uniform_size()
+    env.close()
+
+
+def test_cli_cruise_records_the_vehicles_in_run_json_and_tests_csv(painted_tiny, tmp_path):
+    import csv
+    import json
+
+    from garage_mj.cli import main
+    from garage_mj.driving.results import TEST_COLUMNS, VEHICLE_COLUMNS
+    from garage_mj.export.pack import export_pack
+
+    packs = tmp_path / "packs"
+    export_pack(painted_tiny, packs)
+    out = tmp_path / "run"
+    assert main(["cruise", "--packs", str(packs), "--tests", "2", "--driver", "oracle", "--task", "park",
+                 "--vehicle", "compact", "--parked-fleet", "mixed", "--parked-jitter", "0.3", "--out", str(out),
+                 "--quiet"]) == 0
+    with open(out / "tests.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == list(TEST_COLUMNS) and set(VEHICLE_COLUMNS) <= set(TEST_COLUMNS)
+    assert [(r["vehicle"], r["parked_fleet"], r["parked_jitter_m"]) for r in rows] == [("compact", "mixed", "0.3")] * 2
+    env = json.loads((out / "run.json").read_text())["env"]
+    assert env == {"vehicle": "compact", "parked_fleet": "mixed", "parked_jitter": 0.3}
+    # a default run stores none of them in run.json and writes the defaults into tests.csv
+    default = tmp_path / "default"
+    assert main(["cruise", "--packs", str(packs), "--tests", "1", "--driver", "oracle", "--out", str(default),
+                 "--quiet"]) == 0
+    assert json.loads((default / "run.json").read_text())["env"] == {}
+    with open(default / "tests.csv", newline="") as f:
+        (row,) = csv.DictReader(f)
+    assert (row["vehicle"], row["parked_fleet"], row["parked_jitter_m"]) == ("sedan", "uniform", "0")

@@ -120,8 +120,54 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "pack get one in OUT/packs/); replay one with --scenario-file")
     add_task_args(p, stall=True)
     add_geometry_args(p)
+    add_vehicle_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=user_errors(run))
+
+
+def add_vehicle_args(p: argparse.ArgumentParser) -> None:
+    """``--vehicle``, ``--parked-fleet`` and ``--parked-jitter``: the cars of each test (docs/spec.md section 9)."""
+    from garage_mj.scene.parked_fleet import MAX_PARKED_JITTER, PARKED_FLEETS
+    from garage_mj.scene.vehicles import DEFAULT_VEHICLE, FLEET
+
+    g = p.add_argument_group("vehicles (docs/spec.md section 9; stored in run.json and tests.csv)")
+    g.add_argument("--vehicle", choices=tuple(FLEET), default=DEFAULT_VEHICLE,
+                   help=f"the car under test's class (default {DEFAULT_VEHICLE}: models/car): its body, axles and "
+                        "full lock in MuJoCo, the planners and the monitors")
+    g.add_argument("--parked-fleet", choices=PARKED_FLEETS, default="uniform",
+                   help="uniform: every parked car is models/parked_car, centred (default); mixed: each parked car's "
+                        "class drawn from the fleet per test (seeded)")
+    g.add_argument("--parked-jitter", type=jitter_metres, default=0.0, metavar="M",
+                   help=f"each parked car's lateral offset, up to M metres (0 to {MAX_PARKED_JITTER:g}, default 0), and a "
+                        "heading jitter in proportion, drawn per test; never into the target stall's paint")
+
+
+def jitter_metres(text: str) -> float:
+    """argparse type of --parked-jitter: metres from 0 to :data:`~garage_mj.scene.parked_fleet.MAX_PARKED_JITTER`."""
+    from garage_mj.scene.parked_fleet import MAX_PARKED_JITTER
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of metres") from None
+    if not 0.0 <= value <= MAX_PARKED_JITTER:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"{text} m is outside 0 to {MAX_PARKED_JITTER:g} m")
+    return value
+
+
+def vehicle_env(args: argparse.Namespace) -> dict:
+    """The ``GarageDriveEnv`` keyword arguments of the vehicle options, only those that differ from the defaults (so a
+    default run's ``run.json`` stays as it was)."""
+    from garage_mj.scene.vehicles import DEFAULT_VEHICLE
+
+    env: dict = {}
+    if args.vehicle != DEFAULT_VEHICLE:
+        env["vehicle"] = args.vehicle
+    if args.parked_fleet != "uniform":
+        env["parked_fleet"] = args.parked_fleet
+    if args.parked_jitter > 0:
+        env["parked_jitter"] = args.parked_jitter
+    return env
 
 
 def add_task_args(p: argparse.ArgumentParser, stall: bool = False) -> None:
@@ -328,6 +374,7 @@ def run(args: argparse.Namespace) -> int:
     scen = scenario(args)
     if scen is not None:
         env["scenario"] = scen
+    env.update(vehicle_env(args))
     with action_warnings("cruise"):
         settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
                                   test_timeout=args.test_timeout, task=args.task, maneuver=args.maneuver,

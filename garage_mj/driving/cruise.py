@@ -48,6 +48,7 @@ from garage_mj.driving.results import (
     parse_tests,
     read_tests,  # noqa: F401  (imported from here by callers)
     repair_tests,
+    vehicle_cells,
     write_csv,
     write_outputs,
 )
@@ -115,7 +116,8 @@ def lost_row(job: tuple[CruiseSource, int, CruiseSettings, str | None, bool], wh
             "outcome": kind.value, "reason": f"driver {settings.driver}: {why.reason}", "difficulty": source.difficulty,
             "mean_road_length": source.mean_road_length, "mean_intersection_degree": source.mean_intersection_degree,
             "wall_s": round(why.seconds, 3), "task": settings.task,
-            "maneuver": settings.maneuver if settings.task != "cruise" and settings.maneuver != "any" else ""}
+            "maneuver": settings.maneuver if settings.task != "cruise" and settings.maneuver != "any" else "",
+            **vehicle_cells(settings.env)}
 
 
 # -- OpenSCENARIO export --------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ import traceback
 from typing import Any
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.driving.results import PARK_COLUMNS
+from garage_mj.driving.results import PARK_COLUMNS, vehicle_cells
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
@@ -110,6 +110,7 @@ def drive_test(env, obs, info, seed: int, settings: CruiseSettings, source: Crui
         "clutter": info["actors"]["clutter"],
         "wall_s": round(time.perf_counter() - start, 3),
         **park_cells(info),
+        **vehicle_cells(settings.env),
     }
 
 

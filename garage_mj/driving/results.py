@@ -65,7 +65,11 @@ LEGACY_TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "targe
 PARK_COLUMNS = ("task", "maneuver", "position_error_m", "heading_error_deg", "lateral_offset_m", "direction_changes",
                 "park_time_s", "min_clearance_m", "plan_length_m", "plan_cusps", "plan_clearance_m", "park_level",
                 "inner_margin_m", "outline_clearance_m", "stall_angle_deg")
-TEST_COLUMNS = (*LEGACY_TEST_COLUMNS, *PARK_COLUMNS)
+#: The vehicles of a test (docs/spec.md section 9): the car under test's class, the parked fleet (``uniform`` or
+#: ``mixed``) and the parked cars' jitter bound [m]; a row from before them holds the defaults (:data:`VEHICLE_DEFAULTS`).
+VEHICLE_COLUMNS = ("vehicle", "parked_fleet", "parked_jitter_m")
+VEHICLE_DEFAULTS = {"vehicle": "sedan", "parked_fleet": "uniform", "parked_jitter_m": "0"}
+TEST_COLUMNS = (*LEGACY_TEST_COLUMNS, *PARK_COLUMNS, *VEHICLE_COLUMNS)
 #: What a collision can hit (``hit`` column): the summary counts collisions per class.
 HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
 #: The failure outcomes, as ``tests.csv`` writes them, in display order.
@@ -87,6 +91,14 @@ PARK_SUMMARY_COLUMNS = ("unproven", "unproven_pct", "collision_pct", "timeout_pc
 TASK_DEFAULTS = {"task": "cruise", "maneuver": "reverse", "stall": None}
 #: Settings beside the compared ones in ``run.json``: how they were chosen, not what the tests are.
 PROVENANCE_KEYS = ("action_type_from",)
+
+
+def vehicle_cells(env: dict[str, Any]) -> dict[str, str]:
+    """The :data:`VEHICLE_COLUMNS` cells of a run whose ``GarageDriveEnv`` keyword arguments are ``env``."""
+    jitter, vehicle = env.get("parked_jitter", 0), env.get("vehicle")
+    return {"vehicle": getattr(vehicle, "name", vehicle) or VEHICLE_DEFAULTS["vehicle"],
+            "parked_fleet": env.get("parked_fleet", VEHICLE_DEFAULTS["parked_fleet"]),
+            "parked_jitter_m": f"{float(jitter):g}"}
 
 
 def _is_header(fields: Sequence[str]) -> bool:
@@ -137,6 +149,8 @@ def parse_tests(path: Path) -> ParsedTests:
             row = dict(zip(LEGACY_TEST_COLUMNS, fields))
         if row is not None and "task" not in row:  # a row from before park tests: a cruise test
             row = {**row, **dict.fromkeys(PARK_COLUMNS, ""), "task": "cruise"}
+        if row is not None and "vehicle" not in row:  # a row from before vehicle classes: the default vehicles
+            row = {**row, **VEHICLE_DEFAULTS}
         if row is not None and len(row) < len(TEST_COLUMNS):  # a header without a later column: it is empty
             row = {**dict.fromkeys(TEST_COLUMNS, ""), **row}
         if row is None or not _complete(row) or (row["garage_hash"], row["test"]) in seen:

@@ -27,7 +27,8 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
   stall, reference planner and MuJoCo scene.
 - ``layout``: the garage as named, classified boxes and model placements (pure, no MuJoCo).
 - ``templates``: the models of ``models/`` as stamps for scene builders.
-- ``mjcf_scene``: the MuJoCo scene (``build_scene``) and parked-car occupancy on a compiled model.
+- ``mjcf_scene``: the MuJoCo scene (``build_scene``) and parked-car occupancy and placement on a compiled model.
+- ``parked_fleet``: a test's parked cars as real bodies: their classes (uniform or mixed fleet) and jittered poses.
 - ``semantics``: the semantic classes and the geom naming rule that carries them.
 - ``actor_spec``: what an actor of a cruise test is (kind, shape, size, trajectory, trigger).
 - ``actor_bodies``: the actors' kinematic mocap bodies in the MuJoCo scene.

@@ -8,8 +8,10 @@ entrance/exit patches and sites, an optional ceiling, lights, a top-down orthogr
 Parked-car occupancy on a compiled model (no recompiling): every stall always has its car in
 place; the car of an empty stall neither collides nor renders (its geoms get ``contype =
 conaffinity = 0`` and alpha 0, which MuJoCo's scene update skips). :func:`set_parked` toggles that
-on a compiled ``mujoco.MjModel``; it moves nothing, because MuJoCo keeps precomputed bounding
-volumes of static geoms, and a static geom moved after compiling would be missed by collisions.
+on a compiled ``mujoco.MjModel``; it moves nothing. :meth:`ParkedCars.place` moves, turns and resizes
+parked cars (a test's mixed fleet and jitter, :mod:`garage_mj.scene.parked_fleet`): MuJoCo keeps precomputed
+bounding volumes of static geoms, and a static geom moved after compiling would be missed by collisions, so
+it rewrites them too (the geoms' bounding spheres and boxes and their body's bounding-volume tree).
 ``build_scene(..., parked=ids)`` sets the initial occupancy in the MJCF itself, with the cars of
 the other stalls :data:`HIDDEN_DEPTH` below the floor (what a reader of ``scene.xml`` expects).
 
@@ -38,7 +40,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import mujoco
@@ -48,6 +50,7 @@ from dm_control import mjcf
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.layout import CLASS_RGBA, Box, SceneLayout, build_layout
+from garage_mj.scene.parked_fleet import ParkedBody, part_boxes
 from garage_mj.scene.semantics import Semantic, geom_name
 from garage_mj.scene.templates import (
     PARKED_CAR,
@@ -86,10 +89,17 @@ _MATERIALS = {
 
 
 def _tops_mesh(boxes: list[Box]) -> tuple[np.ndarray, np.ndarray]:
-    """Flat ``(vertex, face)`` arrays of one mesh of the top faces of axis-aligned ``boxes`` (2 triangles each)."""
+    """Flat ``(vertex, face)`` arrays of one mesh of the top faces of ``boxes`` (2 triangles each), each turned by
+    its yaw (the painted lines of angled stalls)."""
     centers = np.array([b.center for b in boxes])
     halves = np.array([b.half for b in boxes])
-    vertex = centers[:, None, :] + halves[:, None, :] * _TOP_CORNERS[None]
+    corners = halves[:, None, :] * _TOP_CORNERS[None]
+    yaws = np.array([b.yaw for b in boxes])
+    if yaws.any():
+        c, s = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
+        x, y = corners[..., 0].copy(), corners[..., 1].copy()
+        corners[..., 0], corners[..., 1] = c * x - s * y, s * x + c * y
+    vertex = centers[:, None, :] + corners
     face = _TOP_FACES[None] + 4 * np.arange(len(boxes))[:, None, None]
     return vertex.ravel(), face.ravel()
 
@@ -169,8 +179,9 @@ def build_scene(
     for cls, boxes in painted.items():
         if len(boxes) == 1:
             (box,) = boxes
+            turn = {"euler": (0.0, 0.0, box.yaw)} if box.yaw else {}
             wb.add("geom", name=box.name, dclass="marking", material=_MATERIALS[cls], pos=box.center,
-                   size=box.half)
+                   size=box.half, **turn)
         else:  # a hundred stall lines as one mesh geom: one element instead of one per line
             name = geom_name(cls)
             vertex, face = _tops_mesh(boxes)
@@ -281,6 +292,8 @@ class ParkedCars:
         self._contype = np.array([b[0] for b in bits], dtype=int)
         self._conaffinity = np.array([b[1] for b in bits], dtype=int)
         self.bodies = parked_car_bodies(model)  # {} when fused: nothing can lie below the floor then
+        self._part = [_car_geom_part(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g))[1] for g in ids]
+        self._compiled: tuple[np.ndarray, ...] | None = None  # the parked geoms as compiled, once place() moved any
 
     def apply(self, model: mujoco.MjModel, data: mujoco.MjData | None, occupied: Iterable[int]) -> None:
         """:func:`set_parked` on ``model``, the compiled scene this was made from."""
@@ -296,6 +309,93 @@ class ParkedCars:
             model.body_pos[self.bodies[sid], 2] = 0.0
         if data is not None:
             mujoco.mj_forward(model, data)
+
+
+    def place(self, model: mujoco.MjModel, data: mujoco.MjData | None, bodies: Mapping[int, ParkedBody]) -> None:
+        """Stand each parked car of ``bodies`` (stall id -> :class:`~garage_mj.scene.parked_fleet.ParkedBody`) as it
+        says: its geoms moved, turned and resized on ``model`` (the hull and cabin of
+        :func:`~garage_mj.scene.parked_fleet.part_boxes`); every other stall's car back as compiled. Keeps what MuJoCo
+        precomputed of them consistent (bounding spheres and boxes, whether a geom shares its body's frame, and the
+        bounding-volume tree of the body that holds them, so a moved car is never missed by a collision and is drawn
+        where it stands); occupancy stays :meth:`apply`'s. With ``data``
+        the kinematics are refreshed (``mj_forward``)."""
+        if self._compiled is None:  # first move: keep what the compiler made, to put back later
+            ids = self._ids
+            self._compiled = (model.geom_pos[ids].copy(), model.geom_quat[ids].copy(), model.geom_size[ids].copy(),
+                              model.geom_rbound[ids].copy(), model.geom_aabb[ids].copy(),
+                              model.geom_sameframe[ids].copy())
+        pos, quat, size, rbound, aabb, same = (a.copy() for a in self._compiled)
+        where = {int(g): k for k, g in enumerate(self._ids)}
+        for sid, body in bodies.items():
+            if sid not in self.geoms:
+                raise ValueError(f"no stall with id {sid}; the scene has stalls 0..{len(self.geoms) - 1}")
+            c, s = math.cos(body.yaw), math.sin(body.yaw)
+            q = np.array([math.cos(body.yaw / 2), 0.0, 0.0, math.sin(body.yaw / 2)])
+            parts = part_boxes(body)
+            for g in self.geoms[sid]:
+                k = where[int(g)]
+                (px, py, pz), half = parts[self._part[k]]
+                world = np.array([body.x + px * c - py * s, body.y + px * s + py * c, pz])
+                pos[k], quat[k] = _in_body_frame(model, int(model.geom_bodyid[g]), world, q)
+                size[k] = half
+                rbound[k] = float(np.linalg.norm(half))
+                aabb[k] = (0.0, 0.0, 0.0, *half)
+                same[k] = mujoco.mjtSameFrame.mjSAMEFRAME_NONE  # its own pose, not its body's (which MuJoCo would copy)
+        ids = self._ids
+        model.geom_pos[ids], model.geom_quat[ids], model.geom_size[ids] = pos, quat, size
+        model.geom_rbound[ids], model.geom_aabb[ids], model.geom_sameframe[ids] = rbound, aabb, same
+        for b in np.unique(model.geom_bodyid[ids]):
+            _refresh_bvh(model, int(b), set(ids.tolist()))
+        if data is not None:
+            mujoco.mj_forward(model, data)
+
+
+def _in_body_frame(model: mujoco.MjModel, body: int, pos: np.ndarray, quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A world pose as a pose in static ``body``'s frame (the world body's is the world's; a parked car's body hangs
+    from the world body)."""
+    if body == 0:
+        return pos, quat
+    bq = model.body_quat[body]
+    rot = np.empty(9)
+    mujoco.mju_quat2Mat(rot, bq)
+    local = rot.reshape(3, 3).T @ (pos - model.body_pos[body])
+    inv, out = np.empty(4), np.empty(4)
+    mujoco.mju_negQuat(inv, bq)
+    mujoco.mju_mulQuat(out, inv, quat)
+    return local, out
+
+
+def _refresh_bvh(model: mujoco.MjModel, body: int, geoms: set[int]) -> None:
+    """Recompute ``body``'s bounding-volume tree over its geoms ``geoms`` (moved): their leaves from their box, then
+    every inner node as the union of its children (child indices count from the body's first node). The tree lies
+    in the body's inertial frame, as MuJoCo keeps it."""
+    adr, num = int(model.body_bvhadr[body]), int(model.body_bvhnum[body])
+    if adr < 0 or num <= 0:
+        return
+    nodeid, child, box = model.bvh_nodeid[adr:adr + num], model.bvh_child[adr:adr + num], model.bvh_aabb[adr:adr + num]
+    rot, inertial = np.empty(9), np.empty(9)
+    mujoco.mju_quat2Mat(inertial, model.body_iquat[body])
+    ri = inertial.reshape(3, 3)
+    order, stack = [], [0]  # the nodes from the root (the body's first node), each parent before its children
+    while stack:
+        k = stack.pop()
+        order.append(k)
+        stack.extend(int(j) for j in child[k] if j >= 0)
+    for k in reversed(order):  # children before their parent
+        g = int(nodeid[k])
+        if g >= 0:
+            if g in geoms:
+                mujoco.mju_quat2Mat(rot, model.geom_quat[g])
+                r = ri.T @ rot.reshape(3, 3)
+                centre = ri.T @ (model.geom_pos[g] - model.body_ipos[body]) + r @ model.geom_aabb[g, :3]
+                box[k] = (*centre, *(np.abs(r) @ model.geom_aabb[g, 3:]))
+            continue
+        kids = [int(j) for j in child[k] if j >= 0]
+        if not kids:
+            continue
+        lo = np.min([box[j, :3] - box[j, 3:] for j in kids], axis=0)
+        hi = np.max([box[j, :3] + box[j, 3:] for j in kids], axis=0)
+        box[k] = (*((lo + hi) / 2), *((hi - lo) / 2))
 
 
 def set_parked(model: mujoco.MjModel, data: mujoco.MjData | None, occupied: Iterable[int]) -> None:

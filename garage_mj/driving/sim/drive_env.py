@@ -93,6 +93,7 @@ from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
 from garage_mj.scene.park_planning import ParkConfig, ParkPlanner
+from garage_mj.scene.parked_fleet import ParkedBody, ParkedFleet, draw_parked, fleet_rng
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, geom_classes
 from garage_mj.scene.vehicles import VehicleClass, vehicle_class
@@ -229,6 +230,13 @@ class GarageDriveEnv(gym.Env):
             ``models/car``, the sedan, with ``car``'s full lock. A class brings its MuJoCo model
             (:func:`~garage_mj.scene.car.car_model`), its outline and axles, and its full lock, which every planner,
             monitor and observation of the env then uses (``car`` may not set another ``max_steer``).
+        parked_fleet: ``"uniform"`` (the default: every parked car is ``models/parked_car``, centred in its stall) or
+            ``"mixed"`` (each parked car's class drawn per test from the fleet); :mod:`~garage_mj.scene.parked_fleet`.
+        parked_jitter: [m] each parked car's lateral offset bound (0 to 0.5; its heading's is proportional), drawn per
+            test. A mixed fleet or a jitter draws from a generator of its own, seeded by the test's seed, and moves
+            the parked cars' geoms in the compiled model (no recompiling): cameras, collisions and the park planner
+            see them where they stand (``parked_bodies``). Park and AVP tests plan around the parked cars' bodies with
+            any fleet; cruise tests' drivability checks keep the stall outlines.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -256,6 +264,8 @@ class GarageDriveEnv(gym.Env):
         park_outcome: ParkOutcomeConfig | dict[str, Any] | None = None,
         vehicle: str | VehicleClass | None = None,
         world: WorldConfig | dict[str, Any] | None = None,
+        parked_fleet: str = "uniform",
+        parked_jitter: float = 0.0,
     ) -> None:
         if not isinstance(garage, Garage):
             raise ValueError("GarageDriveEnv needs garage= (a garage_mj.Garage; for a pack: load_pack(folder).garage)")
@@ -286,6 +296,7 @@ class GarageDriveEnv(gym.Env):
             cam = CameraConfig(**{**cam.__dict__, "rgb": True})
         self.camera_config = cam
         self.vehicle = None if vehicle is None else vehicle_class(vehicle)
+        self.parked_fleet = ParkedFleet(parked_fleet, parked_jitter)
         self.car_config = _as(CarConfig, car)
         if self.vehicle is None:  # models/car as it is: the sedan, steered to the car config's full lock
             self.car_geometry = car_geometry(self.car_config)
@@ -369,6 +380,9 @@ class GarageDriveEnv(gym.Env):
         super().reset(seed=seed)
         rng = self.np_random
         options = options or {}
+        # the parked fleet's draws: a generator of their own (none for the scene's own cars)
+        self._fleet_rng = None if self.parked_fleet.default else fleet_rng(seed) if seed is not None else rng
+        self.parked_bodies: dict[int, ParkedBody] = {}
         if self.task != "cruise":
             return self._reset_park(rng, options)
         if "target" in options:
@@ -405,6 +419,9 @@ class GarageDriveEnv(gym.Env):
         self.start_pose = (x, y, yaw)  # exactly as set (the measured pose after mj_forward differs in the last bits)
         mujoco.mj_resetData(self.model, self.data)
         self._parked_cars.apply(self.model, None, occupied)
+        if not self.parked_fleet.default:
+            self.parked_bodies = self.draw_parked_bodies(target, occupied)
+            self._parked_cars.place(self.model, None, self.parked_bodies)
         self._place_actors()
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward
         self.monitor.progress = START_OFFSET  # [m] the car starts this far along the route
@@ -434,6 +451,12 @@ class GarageDriveEnv(gym.Env):
         dyaw = rng.uniform(-1.0, 1.0) * self.start_noise[1]
         return occupied, lateral, dyaw
 
+    def draw_parked_bodies(self, target: int, occupied: list[int]) -> dict[int, ParkedBody]:
+        """The parked cars of this reset's test on ``target`` as they stand (:func:`~garage_mj.scene.parked_fleet.
+        draw_parked` from the reset's fleet generator; the scene's own cars, centred, with the default fleet)."""
+        return draw_parked(self.stalls, occupied, target, self.parked_fleet, self._fleet_rng,
+                           self.scene.world.marking_width)
+
     def _reset_park(self, rng, options: dict[str, Any]):
         """:meth:`reset` of a park or AVP test (:mod:`~garage_mj.driving.sim.park_task`)."""
         self._park = test = self._draw_park_test(rng, options)
@@ -444,6 +467,9 @@ class GarageDriveEnv(gym.Env):
         self.start_pose = x, y, yaw = test.start
         mujoco.mj_resetData(self.model, self.data)
         self._parked_cars.apply(self.model, None, test.occupied)
+        self.parked_bodies = test.bodies
+        if not self.parked_fleet.default:
+            self._parked_cars.place(self.model, None, test.bodies)
         self._place_actors()
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward; in D, at rest
         self._bodies = solid_bodies(self.model, self.data, self.car.geom_mask, self.classes)  # as they stand

@@ -8,7 +8,7 @@ test (``task="cruise"``, the default) never comes here.
   goal for that stall (:attr:`~garage_mj.scene.drivable.TestPlan.goal`, on the lane beside the stall)
   with the usual start noise (lateral and yaw), at rest, in D. The reference plan is the
   :class:`~garage_mj.scene.park_planning.ParkPlanner`'s from that start into the stall, around the test's
-  parked cars.
+  parked cars as they stand (their bodies, :mod:`~garage_mj.scene.parked_fleet`; never the stall outlines).
 - ``avp``: the start is the cruise test's, at the entrance; the reference is the cruise route followed by
   the park plan from the cruise goal; one test, a success only when parked.
 
@@ -27,7 +27,7 @@ reset scene (:func:`~garage_mj.driving.sim.solid_bodies.solid_bodies`); a driven
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -37,6 +37,7 @@ from garage_mj.scene.body_outlines import BodyOutlines
 from garage_mj.scene.drivable import START_OFFSET, TestPlan
 from garage_mj.scene.park_levels import ParkLevel, park_level
 from garage_mj.scene.park_planning import MANEUVERS, ParkPlan, park_obstacles
+from garage_mj.scene.parked_fleet import ParkedBody, body_obstacles
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.stalls import Stall
 
@@ -64,6 +65,7 @@ class ParkTest:
     reference: Route  # the path progress is measured along (park plan, or cruise route + park plan)
     progress: float  # [m] the start along ``reference``
     park_from: float  # [m] where along ``reference`` the parking begins
+    bodies: dict[int, ParkedBody] = field(default_factory=dict)  # the parked cars as they stand (the plan avoids them)
 
     @property
     def feasible(self) -> bool:
@@ -104,12 +106,14 @@ def _draw_one(env: GarageDriveEnv, rng: np.random.Generator, options: dict[str, 
     target = fixed if fixed is not None else int(rng.choice(candidates))
     occupied, lateral, dyaw = env.draw_parked_and_noise(rng, target, options)
     name = env.maneuver if env.maneuver != "any" else tuple(MANEUVERS)[int(rng.integers(len(MANEUVERS)))]
+    bodies = env.draw_parked_bodies(target, occupied)
     cruise = env.planner.plan(target)
     if not cruise.feasible:  # no start pose: never driven, the car waits at the entrance
         x0, y0, h0 = env.scene.entrance_pose
         ahead = Route([(x0 + k * math.cos(h0), y0 + k * math.sin(h0)) for k in (0.0, START_OFFSET + 5.0)])
         start = (*(float(v) for v in ahead.point_at(START_OFFSET)), h0)
-        return ParkTest(env.task, target, name, occupied, cruise, None, start, cruise.reason, ahead, START_OFFSET, 0.0)
+        return ParkTest(env.task, target, name, occupied, cruise, None, start, cruise.reason, ahead, START_OFFSET, 0.0,
+                        bodies)
     route = Route(cruise.centre)
     if env.task == "park":
         start = _noisy(cruise.goal, lateral, dyaw)
@@ -120,14 +124,17 @@ def _draw_one(env: GarageDriveEnv, rng: np.random.Generator, options: dict[str, 
     if "start" in options:
         start = tuple(float(v) for v in options["start"])
     plan_from = start if env.task == "park" else cruise.goal
-    plan = env.park_planner.plan(plan_from, target, name, occupied=occupied)
+    plan = env.park_planner.plan(plan_from, target, name, occupied=occupied,
+                                 obstacles=body_obstacles(env.park_planner.obstacles(), target, bodies))
     if not plan.found:
         pts = [start[:2], np.add(start[:2], (math.cos(start[2]), math.sin(start[2])))]
-        return ParkTest(env.task, target, name, occupied, cruise, plan, start, plan.reason, Route(pts), 0.0, 0.0)
+        return ParkTest(env.task, target, name, occupied, cruise, plan, start, plan.reason, Route(pts), 0.0, 0.0, bodies)
     if env.task == "park":
-        return ParkTest(env.task, target, name, occupied, cruise, plan, start, "", Route(plan.poses[:, :2]), 0.0, 0.0)
+        return ParkTest(env.task, target, name, occupied, cruise, plan, start, "", Route(plan.poses[:, :2]), 0.0, 0.0,
+                        bodies)
     reference = Route(np.vstack([cruise.centre, plan.poses[:, :2]]))
-    return ParkTest(env.task, target, name, occupied, cruise, plan, start, "", reference, START_OFFSET, route.length)
+    return ParkTest(env.task, target, name, occupied, cruise, plan, start, "", reference, START_OFFSET, route.length,
+                    bodies)
 
 
 def draw_park_test(env: GarageDriveEnv, rng: np.random.Generator, options: dict[str, Any]) -> ParkTest:
