@@ -43,6 +43,7 @@ from garage_mj.scene.case_scene import CaseScene, build_case_scene
 from garage_mj.scene.drivable import TestPlan
 from garage_mj.scene.mjcf_scene import ParkedCars
 from garage_mj.scene.park_planning import ParkConfig, ParkPlan
+from garage_mj.scene.parked_fleet import ParkedFleet
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import geom_classes
 
@@ -88,6 +89,7 @@ class CaseDriveEnv(GarageDriveEnv):
             cam = CameraConfig(**{**cam.__dict__, "rgb": True})
         self.camera_config = cam
         self.vehicle = case.case.vehicle
+        self.parked_fleet = ParkedFleet()  # none drawn: a case's parked cars are its obstacles
         self.car_config = self.vehicle.car_config(_as(CarConfig, car))
         self.car_geometry = self.vehicle.geometry(self.car_config)
         self.outcome_config = _as(OutcomeConfig, outcome)
