@@ -14,7 +14,15 @@ from garage_mj.cli import UserError
 from garage_mj.core.backends import Compute
 from garage_mj.core.errors import GarageMJError
 from garage_mj.scene.route_difficulty import load_route_model
-from garage_mj.scene.world import DEFAULT_WORLD, GEOMETRY_KEYS, GeometryError, WorldConfig, geometry, load_layout, world_with
+from garage_mj.scene.world import (
+    DEFAULT_WORLD,
+    GEOMETRY_KEYS,
+    GeometryError,
+    WorldConfig,
+    geometry,
+    load_layout,
+    world_with,
+)
 
 
 def user_errors(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:

@@ -168,7 +168,6 @@ def _export(args: argparse.Namespace, garages: list[Garage]) -> None:
               "into CARLA's Import/ folder and run `make import`")
     if args.park_problems is not None:
         from garage_mj.export.park_problems import write_park_problems
-
         from garage_mj.scene.garage_scene import GarageScene
 
         index = write_park_problems([GarageScene(g, args.world) for g in garages], args.park_problems, locked=True)

@@ -77,7 +77,7 @@ def layout_meshes(layout: SceneLayout, parked: Iterable[int] | None = None) -> t
     """A trimesh scene of ``layout``: one mesh and one material per class."""
     parts: dict[Semantic, list[np.ndarray]] = {}
     for box in layout.boxes:
-        parts.setdefault(box.cls, []).append(_box(box.center, box.half))
+        parts.setdefault(box.cls, []).append(_box(box.center, box.half, box.yaw))
     pillar = load_template(PILLAR)
     z_scale = layout.world.ceiling_height / 3.0
     for p in layout.pillars:

@@ -62,7 +62,8 @@ import re
 import stat
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +77,6 @@ from garage_mj.grid.garage import MAX_NAME, MAX_SIDE, Garage, grid_hash
 from garage_mj.scene.car import CarGeometry, car_geometry
 from garage_mj.scene.drivable import drive_planner
 from garage_mj.scene.garage_scene import GarageScene
-from garage_mj.scene.world import DEFAULT_WORLD, GeometryError, geometry, world_with
 from garage_mj.scene.park_planning import (
     DEFAULT_PARK,
     MANEUVERS,
@@ -86,6 +86,7 @@ from garage_mj.scene.park_planning import (
     park_obstacles,
     park_pose,
 )
+from garage_mj.scene.world import DEFAULT_WORLD, GeometryError, geometry, world_with
 
 FORMAT = "garage-mj park problem"
 VERSION = 2  # 2: the garage's grid and six-stall axis, so that garage_hash can be checked
@@ -136,7 +137,7 @@ class ParkProblem:
     car: dict[str, float]
     planner: dict[str, float]
     obstacles: tuple[tuple[str, tuple[tuple[float, float], ...]], ...]  # (class, vertices)
-    geometry: dict[str, float] = field(default_factory=lambda: geometry(DEFAULT_WORLD))  # the park geometry
+    geometry: dict[str, float] = dataclass_field(default_factory=lambda: geometry(DEFAULT_WORLD))  # the park geometry
 
     @property
     def name(self) -> str:

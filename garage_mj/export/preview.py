@@ -67,6 +67,9 @@ def render_preview(
     half_road, half = world.road_width / 2, world.block / 2
     for box in boxes:
         (cx, cy, _), (hx, hy, _) = box.center, box.half
+        if box.yaw:  # a painted line of an angled stall
+            canvas.poly(rectangle(cx, cy, box.yaw, 2 * hx, 2 * hy), _bgr(box.cls))
+            continue
         canvas.rect(cx - hx, cy - hy, cx + hx, cy + hy, _bgr(box.cls))
         if box.cls == Semantic.FLOOR:  # asphalt of the roads, under the markings
             for cell in scene.network.cells.values():

@@ -118,16 +118,18 @@ def _road(root: etree._Element, model: RoadModel, road: Road, spaces: list[Parki
                 pitch=0.0,
                 roll=0.0,
                 orientation="none",
-                length=world.stall_length,
-                width=world.stall_width,
+                length=p.stall.length,
+                width=p.stall.width,
                 height=0.0,
                 validLength=0.0,
             )
             outline = _sub(_sub(obj, "outlines"), "outline", id=0, closed="true", fillType="paint")
-            hl, hw = world.stall_length / 2, world.stall_width / 2
+            hl, hw = p.stall.length / 2, p.stall.width / 2
             for k, (su, sv) in enumerate(((1, 1), (-1, 1), (-1, -1), (1, -1))):
                 _sub(outline, "cornerLocal", id=k, u=p.du + su * hl, v=p.dv + sv * hw, z=0.0, height=0.0)
             _sub(obj, "parkingSpace", access="all", restrictions="none")
+            if not world.is_default_geometry:  # the stall's angle to its aisle [deg] (docs/spec.md section 9)
+                _sub(obj, "userData", code="garage-mj:stallAngle", value=f"{p.stall.angle:g}")
 
 
 def to_tree(model: RoadModel) -> etree._ElementTree:

@@ -132,7 +132,8 @@ def polygon_axes(poly: np.ndarray) -> np.ndarray:
 
 
 def scene_obstacles(scene: GarageScene) -> Obstacles:
-    """Walls, obstacle blocks, pillars and stall outlines of ``scene`` as axis-aligned rectangles."""
+    """Walls, obstacle blocks, pillars and stall outlines of ``scene`` as axis-aligned rectangles (angled stalls:
+    every obstacle as its outline, :meth:`Obstacles.from_polygons`)."""
     boxes, classes, stall = [], [], []
     lay = scene.layout
     for box in lay.boxes:
@@ -151,6 +152,10 @@ def scene_obstacles(scene: GarageScene) -> Obstacles:
         boxes.append((min(xs), min(ys), max(xs), max(ys)))
         classes.append("parked_car")
         stall.append(s.id)
+    if any(s.angle not in (90.0, 0.0) for s in scene.stalls.stalls):  # angled stalls: their outlines, not boxes
+        fixed = np.array(boxes[: len(boxes) - len(scene.stalls.stalls)], dtype=float).reshape(-1, 4)
+        outlines = [*_box_corners(fixed), *(np.array(s.corners) for s in scene.stalls.stalls)]
+        return Obstacles.from_polygons(outlines, classes, stall)
     return Obstacles(np.array(boxes, dtype=float).reshape(-1, 4), classes, np.array(stall, dtype=int))
 
 

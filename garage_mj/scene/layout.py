@@ -20,6 +20,7 @@ What it holds (z up, floor top at z = 0):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,13 +57,15 @@ CLASS_RGBA: dict[Semantic, tuple[float, float, float, float]] = {
 
 @dataclass(frozen=True)
 class Box:
-    """An axis-aligned box: ``center`` and ``half`` sizes [m], carrying its class in ``name``."""
+    """A box: ``center`` and ``half`` sizes [m], turned by ``yaw`` about z (0: axis-aligned; only the painted
+    lines of angled stalls are turned), carrying its class in ``name``."""
 
     name: str
     cls: Semantic
     center: tuple[float, float, float]
     half: tuple[float, float, float]
     collides: bool  # solid (walls, obstacles, floor) or visual only (markings, gate patches)
+    yaw: float = 0.0  # [rad] counter-clockwise about z
 
 
 @dataclass(frozen=True)
@@ -174,7 +177,7 @@ def build_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD, ceiling: bo
     boxes += _gate_patch_boxes(garage, net, world)
     if world.aisle_setback > 0:
         boxes += _kerb_boxes(garage.grid, net, stalls, world)
-    parked = [Placement(f"parkedcar_{s.id}", s.x, s.y, s.yaw, s.id) for s in stalls.stalls]
+    parked = [Placement(f"parkedcar_{s.id}", s.x, s.y, s.car_yaw, s.id) for s in stalls.stalls]
     return SceneLayout(rows, cols, world, tuple(boxes), tuple(_pillar_placements(garage.grid, stalls, world)),
                        tuple(parked))
 
@@ -272,10 +275,15 @@ def _lane_marking_boxes(net: RoadNetwork, world: WorldConfig) -> list[Box]:
 
 
 def _stall_marking_boxes(stalls: StallLayout, world: WorldConfig) -> list[Box]:
-    """Stall outlines: two sides and the back line, open towards the road."""
+    """Stall outlines: two sides and the back line, open towards the road (angled stalls: turned lines, one box each)."""
     stall_segs = []
-    L, W, mw = world.stall_length, world.stall_width, world.marking_width
+    mw = world.marking_width
+    turned: list[Box] = []
     for s in stalls.stalls:
+        L, W = s.length, s.width
+        if s.angle not in (90.0, 0.0):
+            turned += _turned_marking_boxes(s, mw, len(turned))
+            continue
         ux, uy = WORLD_DIR[s.side]
         tx, ty = -uy, ux
         for sgn in (-1, 1):
@@ -284,7 +292,21 @@ def _stall_marking_boxes(stalls: StallLayout, world: WorldConfig) -> list[Box]:
         bx, by = s.x - ux * L / 2, s.y - uy * L / 2
         e = W / 2 + mw / 2
         stall_segs.append(_segment(bx - tx * e, by - ty * e, bx + tx * e, by + ty * e))
-    return _line_boxes(stall_segs, Semantic.STALL_MARKING, mw)
+    return _line_boxes(stall_segs, Semantic.STALL_MARKING, mw) + turned
+
+
+def _turned_marking_boxes(s, mw: float, first: int) -> list[Box]:
+    """The two sides and the back line of angled stall ``s``, each a box turned by the stall's yaw."""
+    ca, sa = math.cos(s.yaw), math.sin(s.yaw)
+    z = MARKING_HEIGHT / 2
+    lines = [((0.0, sgn * s.width / 2), (s.length / 2, mw / 2)) for sgn in (-1, 1)]
+    lines.append(((-s.length / 2, 0.0), (mw / 2, s.width / 2 + mw / 2)))
+    out = []
+    for k, ((du, dv), half) in enumerate(lines):
+        center = (s.x + du * ca - dv * sa, s.y + du * sa + dv * ca, z)
+        out.append(Box(geom_name(Semantic.STALL_MARKING, "turned", first + k), Semantic.STALL_MARKING, center,
+                       (*half, MARKING_HEIGHT / 2), False, s.yaw))
+    return out
 
 
 def _gate_patch_boxes(garage: Garage, net: RoadNetwork, world: WorldConfig) -> list[Box]:

@@ -89,10 +89,17 @@ _MATERIALS = {
 
 
 def _tops_mesh(boxes: list[Box]) -> tuple[np.ndarray, np.ndarray]:
-    """Flat ``(vertex, face)`` arrays of one mesh of the top faces of axis-aligned ``boxes`` (2 triangles each)."""
+    """Flat ``(vertex, face)`` arrays of one mesh of the top faces of ``boxes`` (2 triangles each), each turned by
+    its yaw (the painted lines of angled stalls)."""
     centers = np.array([b.center for b in boxes])
     halves = np.array([b.half for b in boxes])
-    vertex = centers[:, None, :] + halves[:, None, :] * _TOP_CORNERS[None]
+    corners = halves[:, None, :] * _TOP_CORNERS[None]
+    yaws = np.array([b.yaw for b in boxes])
+    if yaws.any():
+        c, s = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
+        x, y = corners[..., 0].copy(), corners[..., 1].copy()
+        corners[..., 0], corners[..., 1] = c * x - s * y, s * x + c * y
+    vertex = centers[:, None, :] + corners
     face = _TOP_FACES[None] + 4 * np.arange(len(boxes))[:, None, None]
     return vertex.ravel(), face.ravel()
 
@@ -172,8 +179,9 @@ def build_scene(
     for cls, boxes in painted.items():
         if len(boxes) == 1:
             (box,) = boxes
+            turn = {"euler": (0.0, 0.0, box.yaw)} if box.yaw else {}
             wb.add("geom", name=box.name, dclass="marking", material=_MATERIALS[cls], pos=box.center,
-                   size=box.half)
+                   size=box.half, **turn)
         else:  # a hundred stall lines as one mesh geom: one element instead of one per line
             name = geom_name(cls)
             vertex, face = _tops_mesh(boxes)

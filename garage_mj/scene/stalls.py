@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from garage_mj.core.geometry import DELTAS, EAST, NORTH, OPPOSITE, SOUTH, WEST
 from garage_mj.grid.blocks import ROAD_LIKE_TABLE, STALLS_PER_BLOCK, Block
@@ -41,7 +42,7 @@ class Stall:
     block: tuple[int, int]  # (row, col) of the stall block
     x: float  # [m] stall centre
     y: float  # [m]
-    yaw: float  # [rad] direction the stall opens to (towards its road)
+    yaw: float  # [rad] direction the stall opens to (towards its road; an angled stall: along its axis)
     side: int  # grid direction of its road from the block (0 W, 1 E, 2 N, 3 S)
     road_cell: tuple[int, int]  # the ROAD cell it faces
     road_x: float  # [m] point on the near lane of that road, beside the stall
@@ -55,6 +56,12 @@ class Stall:
     def corners(self) -> list[tuple[float, float]]:
         """Rectangle corners (x, y) [m], counter-clockwise."""
         return rectangle(self.x, self.y, self.yaw, self.length, self.width)
+
+    @property
+    def car_yaw(self) -> float:
+        """[rad] the heading of a car parked nose out: ``yaw``, or for a parallel slot (``angle`` 0) along the
+        aisle, the way the traffic of its lane drives."""
+        return self.yaw - math.pi / 2 if self.angle == 0.0 else self.yaw
 
     @property
     def entry(self) -> tuple[float, float]:
@@ -113,15 +120,53 @@ def _plan(code: Block, sides: list[int], axis: str) -> list[tuple[int, int]]:
     return []
 
 
+class RowShape(NamedTuple):
+    """The shape of one stall of a row in the row's frame (u: out of the block toward its road, t: along the
+    block edge, counter-clockwise): the stall's rectangle is ``length`` along its axis u sin + t cos (pointing
+    out of its open end) and ``width`` across; the row takes ``depth`` along u, each stall ``extent`` along t, one
+    stall the next ``pitch`` along t."""
+
+    length: float  # [m] along the stall's yaw (a parallel slot: its depth across the aisle, the stall width)
+    width: float  # [m] across (a parallel slot: its length along the aisle, the slot length)
+    sin: float
+    cos: float
+    depth: float  # [m] along u
+    extent: float  # [m] along t
+    pitch: float  # [m] along t
+
+
+def row_shape(world: WorldConfig) -> RowShape:
+    """The stalls of ``world``'s park geometry in a row's frame: perpendicular (90), angled (60, 45: the
+    rectangle turned so that its axis makes the angle with the aisle), or parallel (0: a slot of ``slot_length``
+    along the edge, ``stall_width`` deep, opening onto the aisle along its length)."""
+    L, W = world.stall_length, world.stall_width
+    if world.stall_angle == 90.0:
+        return RowShape(L, W, 1.0, 0.0, L, W, W)
+    if world.stall_angle == 0.0:
+        return RowShape(W, world.slot_length, 1.0, 0.0, W, world.slot_length, world.slot_length)
+    a = math.radians(world.stall_angle)
+    sn, cs = math.sin(a), math.cos(a)
+    return RowShape(L, W, sn, cs, L * sn + W * cs, L * cs + W * sn, W / sn)
+
+
+def row_count(world: WorldConfig, grid_count: int, pillars: bool) -> int:
+    """How many stalls of ``world``'s shape a block edge holds, at most ``grid_count`` (the grid's count), with
+    room for two obstruction pillars at the row's ends when ``pillars``."""
+    shape = row_shape(world)
+    room = world.block - (2 * world.pillar_size if pillars else 0.0)
+    n = grid_count
+    while n > 0 and (n - 1) * shape.pitch + shape.extent > room + 1e-9:
+        n -= 1
+    return n
+
+
 def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLayout:
     """Every stall of ``garage`` with its pose and the road point beside it."""
-    if world.stall_angle != 90.0:
-        raise GeometryError(f"stall angle {world.stall_angle:g} degrees: angled and parallel stalls are not built yet; "
-                            "give --stall-angle 90 (perpendicular)")
     grid = garage.grid
     rows = grid.shape[0]
     half = world.block / 2
     margin = (world.block - world.road_width) / 2  # [m] from block edge to the road's lane edge
+    shape = row_shape(world)
     stalls: list[Stall] = []
     pillars: list[Pillar] = []
     for r in range(grid.shape[0]):
@@ -143,45 +188,60 @@ def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLay
             setbacks = [world.aisle_setback if narrowed(grid, r + DELTAS[d][0], c + DELTAS[d][1]) else 0.0
                         for d, _ in plan]
             _check_fit(garage, world, (r, c), code, setbacks)
-            for (side, n), setback in zip(plan, setbacks, strict=True):
+            first = len(stalls)
+            counts = []
+            for k, ((side, n), setback) in enumerate(zip(plan, setbacks, strict=True)):
                 ux, uy = WORLD_DIR[side]
                 tx, ty = -uy, ux
-                depth = half - world.stall_length / 2 + setback
-                if n == 3:
-                    offsets = [(k - 1) * world.stall_width for k in range(3)]
-                else:  # lone stall: on the far side of the block from the row, clear of it
+                depth = half - shape.depth / 2 + setback
+                n = row_count(world, n, obstructed and k == 0)
+                if k > 0 and _lone_gap(world, setbacks[0]) < _lone_least(world, setbacks[0]) - 1e-9:
+                    n = 0  # the lone stall has no room beside this row: left out
+                counts.append(n)
+                if n == 1 and k > 0:  # lone stall: on the far side of the block from the row, clear of it
                     ax, ay = WORLD_DIR[row_side]
-                    s = -(world.stall_width / 2 + _lone_gap(world, setbacks[0]))
+                    s = -(shape.extent / 2 + _lone_gap(world, setbacks[0]))
                     offsets = [s * (ax * tx + ay * ty)]
+                else:
+                    offsets = [(j - (n - 1) / 2) * shape.pitch for j in range(n)]
+                if shape.cos == 0.0:
+                    yaw = DIR_YAW[side]
+                else:  # angled: the stall's axis leans toward +t, where the traffic of its lane comes from
+                    yaw = math.atan2(uy * shape.sin + ty * shape.cos, ux * shape.sin + tx * shape.cos)
                 for off in offsets:
                     x = cx + ux * depth + tx * off
                     y = cy + uy * depth + ty * off
-                    reach = world.stall_length / 2 + margin + world.drive_lane_width / 2 - setback
+                    reach = shape.depth / 2 + margin + world.drive_lane_width / 2 - setback
                     stalls.append(
                         Stall(
                             id=len(stalls),
                             block=(r, c),
                             x=x,
                             y=y,
-                            yaw=DIR_YAW[side],
+                            yaw=yaw,
                             side=side,
                             road_cell=(r + DELTAS[side][0], c + DELTAS[side][1]),
                             road_x=x + ux * reach,
                             road_y=y + uy * reach,
                             obstructed=obstructed,
-                            length=world.stall_length,
-                            width=world.stall_width,
+                            length=shape.length,
+                            width=shape.width,
+                            angle=world.stall_angle,
                         )
                     )
-            if obstructed:
+            block_pillars = []
+            if obstructed and counts[0]:
                 ux, uy = WORLD_DIR[row_side]
                 tx, ty = -uy, ux
                 front = half - world.pillar_size / 2 + setbacks[0]
-                along = 1.5 * world.stall_width + world.pillar_size / 2
+                along = (counts[0] - 1) / 2 * shape.pitch + shape.extent / 2 + world.pillar_size / 2
                 for sgn in (-1, 1):
-                    pillars.append(
+                    block_pillars.append(
                         Pillar((r, c), cx + ux * front + sgn * tx * along, cy + uy * front + sgn * ty * along)
                     )
+            if not world.is_default_geometry:
+                _check_disjoint(garage, world, (r, c), stalls[first:], block_pillars)
+            pillars += block_pillars
     return StallLayout(tuple(stalls), tuple(pillars))
 
 
@@ -196,28 +256,58 @@ def narrowed(grid, r: int, c: int) -> bool:
 
 
 def _lone_gap(world: WorldConfig, row_setback: float) -> float:
-    """[m] from a four-stall block's centre line to its lone stall: :data:`LONE_GAP` past the inner end of
-    the row (which a deep stall or a narrowed aisle moves), at least :data:`LONE_GAP`."""
-    return max(LONE_GAP, world.stall_length - world.block / 2 - row_setback + LONE_GAP)
+    """[m] from a four-stall block's centre line to the near end of its lone stall, on the far side from the row:
+    :data:`LONE_GAP` past the inner end of the row (which a deep stall or a narrowed aisle moves), at least
+    :data:`LONE_GAP`; less (even past the centre line, toward a shallow row) when the lone stall would leave
+    the block otherwise. Clear of the row when it is at least :func:`_lone_least`."""
+    shape = row_shape(world)
+    return min(max(LONE_GAP, _lone_least(world, row_setback)), world.block / 2 - shape.extent)
+
+
+def _lone_least(world: WorldConfig, row_setback: float) -> float:
+    """[m] the smallest :func:`_lone_gap` that keeps the lone stall :data:`LONE_GAP` clear of the row's inner end."""
+    return LONE_GAP - (world.block / 2 + row_setback - row_shape(world).depth)
 
 
 def _check_fit(garage: Garage, world: WorldConfig, where: tuple[int, int], code: Block,
                setbacks: list[float]) -> None:
     """Refuse a geometry stall block ``where`` cannot hold with its rows moved by ``setbacks``, naming the fix."""
-    half, pillar, L, W = world.block / 2, world.pillar_size, world.stall_length, world.stall_width
+    half, shape = world.block / 2, row_shape(world)
     at = f"garage {garage.name or 'garage'!r}, row {where[0]}, column {where[1]}"
-    if code == Block.STALL6 and 2 * L > world.block + sum(setbacks) + 1e-9:
+    if code == Block.STALL6 and 2 * shape.depth > world.block + sum(setbacks) + 1e-9:
         deepest = half + min(setbacks)
+        beside = "a junction or turn" if min(setbacks) == 0 else f"{world.aisle_width:g} m aisles"
         raise GeometryError(
-            f"{at}: stall depth {L:g} m does not fit the back-to-back rows of a six-stall block (at most "
-            f"{deepest:g} m beside {'a junction or turn' if min(setbacks) == 0 else f'{world.aisle_width:g} m aisles'})"
-            f"; give --stall-depth {math.floor(deepest * 100) / 100:g} or less")
-    if code in (Block.STALL4, Block.OBST_STALL4) and W + _lone_gap(world, setbacks[0]) > half + 1e-9:
-        raise GeometryError(
-            f"{at}: a four-stall block's lone stall does not fit beside its row at stall width {W:g} m and depth "
-            f"{L:g} m; give a smaller --stall-depth or --stall-width")
-    if code in (Block.OBST_STALL3, Block.OBST_STALL4) and 3 * W + 2 * pillar > world.block + 1e-9:
-        widest = (world.block - 2 * pillar) / 3
-        raise GeometryError(
-            f"{at}: an obstructed stall block (codes 3 and 9) holds three stalls and two {pillar:g} m pillars in "
-            f"{world.block:g} m; give --stall-width {math.floor(widest * 100) / 100:g} or less")
+            f"{at}: its back-to-back rows reach {shape.depth:.2f} m deep each (stall depth {world.stall_length:g} m "
+            f"at {world.stall_angle:g} degrees), at most {deepest:g} m beside {beside}; give a smaller --stall-depth "
+            "or a narrower --aisle-width")
+
+
+def _check_disjoint(garage: Garage, world: WorldConfig, where: tuple[int, int], stalls: list[Stall],
+                    pillars: list[Pillar]) -> None:
+    """Refuse a block whose stalls overlap each other or its pillars (what the checks above do not foresee)."""
+    h = world.pillar_size / 2
+    shapes = [s.corners for s in stalls] + [rectangle(p.x, p.y, 0.0, 2 * h, 2 * h) for p in pillars]
+    for i in range(len(stalls)):
+        for j in range(i + 1, len(shapes)):
+            if polygons_overlap(shapes[i], shapes[j]):
+                raise GeometryError(
+                    f"garage {garage.name or 'garage'!r}, row {where[0]}, column {where[1]}: its stalls overlap "
+                    f"{'each other' if j < len(stalls) else 'its pillars'} at stall width {world.stall_width:g} m, "
+                    f"depth {world.stall_length:g} m and angle {world.stall_angle:g} degrees; give smaller stalls")
+
+
+def polygons_overlap(a: list[tuple[float, float]], b: list[tuple[float, float]], tol: float = 1e-6) -> bool:
+    """Whether two convex polygons overlap by more than ``tol`` (touching edges do not): separating axes."""
+    for poly in (a, b):
+        for k in range(len(poly)):
+            (x0, y0), (x1, y1) = poly[k], poly[(k + 1) % len(poly)]
+            nx, ny = y0 - y1, x1 - x0
+            norm = math.hypot(nx, ny)
+            if norm == 0.0:
+                continue
+            pa = [(x * nx + y * ny) / norm for x, y in a]
+            pb = [(x * nx + y * ny) / norm for x, y in b]
+            if min(pa) >= max(pb) - tol or min(pb) >= max(pa) - tol:
+                return False
+    return True

@@ -19,8 +19,10 @@ from garage_mj.core.geometry import EAST, NORTH, SOUTH, WEST
 
 #: Stall angles to the aisle [deg] a garage can be built with: perpendicular, angled, parallel (0).
 STALL_ANGLES = (90.0, 60.0, 45.0, 0.0)
-#: [m] a lane keeps this much floor to its aisle's edge (today's 9 m aisle: 4.5 - 3.5 = 1.0).
-LANE_TO_AISLE_EDGE = 1.0
+#: [m per m] a lane narrows by this much for every metre an aisle is narrower than its block: the lanes of a
+#: narrow aisle draw together toward its middle (a 5.5 m aisle: 0.875 m lanes, a car drives down the middle), so a
+#: car turning into it keeps its swing clear of the kerb.
+LANE_NARROWING = 0.75
 #: [m] a parallel slot is the vehicle's length plus this (SPEC section 9).
 SLOT_SPARE = 1.0
 #: [m] bumper to bumper of the default vehicle (the sedan of models/car, section 6).
@@ -65,9 +67,9 @@ class WorldConfig:
 
     @property
     def drive_lane_width(self) -> float:
-        """[m] the lane width the roads are built with: ``lane_width``, narrowed so that a lane keeps
-        :data:`LANE_TO_AISLE_EDGE` to the edge of an aisle narrower than the block."""
-        return min(self.lane_width, self.aisle_width / 2 - LANE_TO_AISLE_EDGE)
+        """[m] the lane width the roads are built with: ``lane_width``, narrowed by :data:`LANE_NARROWING` per metre
+        of an aisle narrower than the block (``lane_width`` itself for the full block)."""
+        return self.lane_width - LANE_NARROWING * (self.block - self.aisle_width)
 
     @property
     def road_width(self) -> float:
