@@ -3,17 +3,38 @@
 ``bench_park.py``, ``bench_park_plan.py`` and ``bench_park_verdicts.py`` take ``--maps`` (default every shipped
 map), ``--garages`` painted garages per map, ``--occupancy``, ``--seed`` and ``--out``; each paints a map's garages with
 ``painted_sources(map, garages, seed=seed)`` and seeds the tests of its garage ``k`` with ``seed * 1000 + k``.
+:data:`GEOMETRIES` names the garage geometries they run on (docs/spec.md section 9).
 """
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from garage_mj import list_maps
 from garage_mj.driving.sources import CruiseSource, painted_sources
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """One garage geometry of the grid: WorldConfig fields, the parked fleet and its jitter [m]."""
+
+    name: str
+    world: dict = field(default_factory=dict)
+    parked_fleet: str = "uniform"
+    parked_jitter: float = 0.0
+
+
+#: The garage geometries a park benchmark may run on by name (docs/spec.md section 9).
+GEOMETRIES = {g.name: g for g in (
+    Geometry("default"),
+    Geometry("tight", {"stall_width": 2.3, "aisle_width": 6.5}, "mixed", 0.15),
+    Geometry("angled60", {"stall_angle": 60.0}),
+    Geometry("angled45", {"stall_angle": 45.0}),
+    Geometry("parallel", {"stall_angle": 0.0}),
+)}
 
 
 def park_parser(description: str, garages: int, out: Path) -> argparse.ArgumentParser:

@@ -34,10 +34,16 @@ import statistics
 import time
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
-from _park_garages import map_names, painted_garages, park_parser  # eval/_park_garages.py: options, garages
+from _park_garages import (  # eval/_park_garages.py
+    GEOMETRIES,
+    Geometry,
+    map_names,
+    painted_garages,
+    park_parser,
+)
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
 from garage_mj.driving.drivers import load_driver
@@ -56,24 +62,6 @@ class Kind:
 KINDS = (Kind("park_reverse", "park", "reverse"), Kind("park_forward", "park", "forward"), Kind("avp", "avp", "any"))
 
 
-@dataclass(frozen=True)
-class Geometry:
-    """One garage geometry of the grid: WorldConfig fields, the parked fleet and its jitter [m]."""
-
-    name: str
-    world: dict = field(default_factory=dict)
-    parked_fleet: str = "uniform"
-    parked_jitter: float = 0.0
-
-
-#: The geometries ``--geometries`` may name (docs/spec.md section 9).
-GEOMETRIES = {g.name: g for g in (
-    Geometry("default"),
-    Geometry("tight", {"stall_width": 2.3, "aisle_width": 6.5}, "mixed", 0.15),
-    Geometry("angled60", {"stall_angle": 60.0}),
-    Geometry("angled45", {"stall_angle": 45.0}),
-    Geometry("parallel", {"stall_angle": 0.0}),
-)}
 DRIVERS = ("oracle", "park_assist")
 TARGETS = {"oracle_park_success_pct": 99.0, "oracle_avp_success_pct": 98.0}
 

@@ -18,6 +18,13 @@ independent path (a proof that fails is a bug).
 
     .venv/bin/python eval/bench_park_verdicts.py --maps tiny_7x11 m5_13x13_aligned --garages 1
         # writes docs/bench_park_verdicts.json
+
+``--geometry NAME`` builds the garages with one of the park geometries of ``eval/_park_garages.py`` instead (the
+aisle as the geometry narrows it, no added wall; docs/spec.md section 9), its parked cars where the planner sees
+them.
+
+    .venv/bin/python eval/bench_park_verdicts.py --maps tiny_7x11 m5_13x13_aligned --garages 1 --geometry tight \\
+        --out docs/bench_park_verdicts_tight.json
 """
 
 from __future__ import annotations
@@ -30,7 +37,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
-from _park_garages import map_names, painted_garages, park_parser  # eval/_park_garages.py: options, garages
+from _park_garages import GEOMETRIES, map_names, painted_garages, park_parser  # eval/_park_garages.py
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
 from garage_mj.scene.car import car_geometry
@@ -51,6 +58,7 @@ from garage_mj.scene.park_planning import (
     park_obstacles,
     park_pose,
 )
+from garage_mj.scene.world import DEFAULT_WORLD, world_with
 
 TARGETS = {"independent_found_pct": 98.0, "unproven_pct": 1.0, "median_cpu_s": 0.5, "p99_cpu_s": 5.0}
 ROAD = 9.0  # [m] the road cell in front of a stall: the aisle at its full width
@@ -119,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = park_parser(__doc__, garages=1, out=Path("docs/bench_park_verdicts.json"))
     ap.add_argument("--aisle", type=float, default=7.35, help="aisle width in front of each stall [m] (default 7.35)")
     ap.add_argument("--wall-span", type=float, default=27.0, help="the narrowing wall's length along the aisle [m]")
+    ap.add_argument("--geometry", choices=sorted(GEOMETRIES), default=None,
+                    help="build the garages with this park geometry (no added wall; --aisle is not used)")
     ap.add_argument("--independent-s", type=float, default=12.0,
                     help="CPU-s of each independent planner (RRT-Connect, then BIT*) per test not called feasible")
     args = ap.parse_args(argv)
@@ -126,8 +136,9 @@ def main(argv: list[str] | None = None) -> int:
     maps = map_names(args)
     car, config = car_geometry(), DEFAULT_PARK
     rows, skipped, t0 = [], 0, time.perf_counter()
+    geo = GEOMETRIES[args.geometry] if args.geometry else None
     for pg in painted_garages(args, maps):
-        scene = GarageScene(pg.source.garage)
+        scene = GarageScene(pg.source.garage, world_with(geo.world) if geo else DEFAULT_WORLD)
         planner = ParkPlanner(scene, car, config)
         cruise = drive_planner(scene, car)
         rng = np.random.default_rng(pg.seed)
@@ -139,6 +150,15 @@ def main(argv: list[str] | None = None) -> int:
             if not test.feasible:
                 continue
             base = park_obstacles(planner.obstacles(), stall.id, occupied)
+            if geo is not None:  # the geometry's own aisle
+                for name in MANEUVERS:
+                    plan = planner.plan(test.goal, stall.id, name, obstacles=base)
+                    row = {**plan.summary(), "map": pg.map, "garage": scene.name}
+                    if plan.verdict != "feasible":
+                        row["independent"] = independent(planner, base, test.goal, stall, name, args.independent_s,
+                                                         pg.seed)
+                    rows.append(row)
+                continue
             wall = aisle_wall(stall, args.aisle, args.wall_span)
             rear = centre_to_rear(test.goal, car)
             if nearest_obstacle(Obstacles(wall[None], ["wall"], np.array([-1])), car, rear[None, :2],
@@ -189,7 +209,8 @@ def main(argv: list[str] | None = None) -> int:
            "p99_cpu_s": total["p99_cpu_s"] is not None and total["p99_cpu_s"] <= TARGETS["p99_cpu_s"],
            "proofs_hold": total["independent_found_on_proven_infeasible"] == 0}
     result = {"settings": {"maps": maps, "garages_per_map": args.garages, "occupancy": args.occupancy,
-                           "seed": args.seed, "aisle_m": args.aisle, "wall_span_m": args.wall_span,
+                           "seed": args.seed, "geometry": None if geo is None else asdict(geo),
+                           "aisle_m": None if geo else args.aisle, "wall_span_m": None if geo else args.wall_span,
                            "independent_s": args.independent_s, "config": asdict(config)},
               "targets": TARGETS, "targets_met": met, "total": total,
               "not_feasible": [{k: r[k] for k in ("map", "garage", "stall", "maneuver", "verdict", "reason",
@@ -197,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
               "wall_s": round(time.perf_counter() - t0, 1), "provenance": prov}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"TOTAL {total['tests']} tests (aisle {args.aisle} m): feasible {verdicts['feasible']} "
+    print(f"TOTAL {total['tests']} tests ({args.geometry or f'aisle {args.aisle} m'}): feasible {verdicts['feasible']} "
           f"({total['escalated_found']} after escalation), infeasible {verdicts['infeasible']} {total['infeasible_reasons']}, "
           f"unproven {verdicts['unproven']} ({total['unproven_pct']}%); independent search found {len(indep)} of "
           f"{len(checked)} not called feasible ({total['independent_found_on_proven_infeasible']} of them proven "
