@@ -248,3 +248,20 @@ def test_cli_cruise_records_the_vehicles_in_run_json_and_tests_csv(painted_tiny,
     with open(default / "tests.csv", newline="") as f:
         (row,) = csv.DictReader(f)
     assert (row["vehicle"], row["parked_fleet"], row["parked_jitter_m"]) == ("sedan", "uniform", "0")
+
+
+def test_exported_park_problems_hold_the_parked_cars_bodies(painted_tiny):
+    from garage_mj.export.park_problems import park_problems
+    from garage_mj.scene.garage_scene import GarageScene
+    from garage_mj.scene.parked_fleet import uniform_size
+
+    scene = GarageScene(painted_tiny)
+    problems, _ = park_problems(scene)
+    length, width, _ = uniform_size()
+    cars = [np.array(c) for p in problems[:4] for k, c in p.obstacles if k == "parked_car"]
+    assert cars
+    for c in cars:  # 4.3 x 1.9 m rectangles centred in a stall that is not the problem's
+        sides = sorted(np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1).round(9))
+        assert sides == pytest.approx([width, width, length, length])
+        centre = c.mean(axis=0)
+        assert any(np.allclose(centre, (s.x, s.y)) for s in scene.stalls.stalls)

@@ -28,9 +28,10 @@ holds the lock of ``DIR`` (:class:`~garage_mj.core.fsutil.FolderLock`), so a sec
 stops in one line; a folder it cannot write is named in one line before anything is written.
 
 The obstacles are those of the reference planner (:mod:`garage_mj.scene.park_planning`) within reach
-of its planning area: walls, obstacle blocks, pillars, and a parked car in every other stall (the
-outline of the stall, which a parked car lies inside: the worst case of any occupancy), each an
-axis-aligned rectangle written as its four corners, counter-clockwise. The target stall is empty.
+of its planning area: walls, obstacle blocks, pillars, and a parked car in every other stall (the worst case
+of any occupancy), each written as its corners, counter-clockwise: a parked car is its body as a park test
+plans around it (``models/parked_car``, 4.3 x 1.9 m, centred and square in its stall: the default fleet of
+:mod:`garage_mj.scene.parked_fleet`), never the whole stall outline. The target stall is empty.
 
 JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 2; lengths in metres, angles in radians)::
 
@@ -83,9 +84,9 @@ from garage_mj.scene.park_planning import (
     ParkConfig,
     ParkPlanner,
     centre_to_rear,
-    park_obstacles,
     park_pose,
 )
+from garage_mj.scene.parked_fleet import ParkedFleet, body_obstacles, draw_parked
 from garage_mj.scene.world import DEFAULT_WORLD, GeometryError, geometry, world_with
 
 FORMAT = "garage-mj park problem"
@@ -181,12 +182,14 @@ def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: Pa
     problems, skipped = [], {}
     garage = scene.garage
     rows = tuple("".join(str(int(v)) for v in row) for row in garage.grid)
-    for stall in scene.stalls.stalls:
+    stalls = scene.stalls.stalls
+    parked = draw_parked(stalls, [s.id for s in stalls], None, ParkedFleet(), None, scene.world.marking_width)
+    for stall in stalls:
         test = cruise.plan(stall.id)
         if not test.feasible:
             skipped[stall.id] = f"no feasible cruise test to the stall, so no start pose: {test.reason}"
             continue
-        obs = park_obstacles(planner.obstacles(), stall.id)
+        obs = body_obstacles(planner.obstacles(), stall.id, parked)
         for name in MANEUVERS:
             region = planner.area(test.goal, stall.id, name)
             near = planner.near(obs, region)
@@ -199,7 +202,7 @@ def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: Pa
                 stall_outline=tuple((float(x), float(y)) for x, y in stall.corners),
                 region=tuple(float(v) for v in region), car=_car(car),
                 planner={"margin": config.margin, "turning_radius": planner.radius},
-                obstacles=tuple((c, _corners(b)) for c, b in zip(near.classes, near.boxes.tolist(), strict=True)),
+                obstacles=tuple((c, _corners(o)) for c, o in zip(near.classes, near.outlines, strict=True)),
                 geometry=geometry(scene.world)))
     return problems, skipped
 
@@ -208,9 +211,13 @@ def _pose(p) -> tuple[float, float, float]:
     return float(p[0]), float(p[1]), float(p[2])
 
 
-def _corners(box: list[float]) -> tuple[tuple[float, float], ...]:
-    x0, y0, x1, y1 = box
-    return (x0, y0), (x1, y0), (x1, y1), (x0, y1)
+def _corners(outline) -> tuple[tuple[float, float], ...]:
+    """An obstacle's outline (K, 2) as its corners, without the repeats that pad a short one."""
+    out: list[tuple[float, float]] = []
+    for x, y in outline.tolist():
+        if not out or (x, y) != out[-1]:
+            out.append((float(x), float(y)))
+    return tuple(out)
 
 
 def write_park_problems(garages: Iterable[Garage | GarageScene], out_dir: str | Path, car: CarGeometry | None = None,
