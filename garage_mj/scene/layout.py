@@ -13,9 +13,9 @@ What it holds (z up, floor top at z = 0):
   lane) and include a stall block, plus the obstruction pillars of codes 3 and 9 from ``stall_layout``;
 - lane centre lines and stall outlines as thin boxes, collinear pieces merged;
 - entrance and exit floor patches; an optional ceiling; one parked-car placement per stall;
-- kerb walls where the aisle is narrower than its road block (``WorldConfig.aisle_width`` < block): on
-  each side of a straight road block (:func:`~garage_mj.scene.stalls.narrowed`) that is no opening, a wall ``aisle_setback`` deep along the block edge, except
-  where stalls stand in that strip (their rows moved onto the aisle's edge, :mod:`garage_mj.scene.stalls`).
+- kerb walls where the aisle is narrower than its road block (``WorldConfig.aisle_width`` < block): along
+  each side of a stretch of aisle (:func:`~garage_mj.scene.stalls.narrowed`), a wall ``aisle_setback`` deep,
+  except where stalls stand in that strip (their rows moved onto the aisle's edge, :mod:`garage_mj.scene.stalls`).
 """
 
 from __future__ import annotations
@@ -322,8 +322,8 @@ def _gate_patch_boxes(garage: Garage, net: RoadNetwork, world: WorldConfig) -> l
 
 
 def _kerb_boxes(grid: np.ndarray, net: RoadNetwork, stalls: StallLayout, world: WorldConfig) -> list[Box]:
-    """Kerb walls: the strip of ``aisle_setback`` along each side of a road block that is no opening (for a
-    gate, no side it is entered or left by), less the spans of the stalls that stand in it."""
+    """Kerb walls: the strip of ``aisle_setback`` along each side of a stretch of aisle that runs along it
+    (:func:`~garage_mj.scene.stalls.narrowed`), less the spans of the stalls that stand in it."""
     k, b, h = world.aisle_setback, world.block, world.ceiling_height
     facing: dict[tuple[int, int], list[tuple[float, float, float, float]]] = {}
     for st in stalls.stalls:
@@ -332,12 +332,7 @@ def _kerb_boxes(grid: np.ndarray, net: RoadNetwork, stalls: StallLayout, world: 
     boxes: list[Box] = []
     for pos in sorted(net.cells):
         cell = net.cells[pos]
-        if not narrowed(grid, *pos):
-            continue  # junctions and turns keep the whole block
-        through = set(cell.openings)
-        if cell.tile in (RoadTile.ENTRANCE, RoadTile.EXIT):
-            through |= {OPPOSITE[d] for d in cell.openings}
-        for d in sorted(set(WORLD_DIR) - through):
+        for d in sorted(d for d in WORLD_DIR if narrowed(grid, *pos, d)):  # junctions and turns keep the block
             ux, uy = WORLD_DIR[d]
             if ux:  # a strip along y at the east or west edge
                 x0 = cell.x + ux * (b / 2 - k / 2) - k / 2

@@ -167,6 +167,7 @@ def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLay
     half = world.block / 2
     margin = (world.block - world.road_width) / 2  # [m] from block edge to the road's lane edge
     shape = row_shape(world)
+    flow = traffic_flow(garage) if shape.cos else {}
     stalls: list[Stall] = []
     pillars: list[Pillar] = []
     for r in range(grid.shape[0]):
@@ -185,7 +186,7 @@ def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLay
             obstructed = code in (Block.OBST_STALL3, Block.OBST_STALL4)
             row_side = plan[0][0]
             # [m] each row moves this far into its road block, onto the edge of a narrowed aisle
-            setbacks = [world.aisle_setback if narrowed(grid, r + DELTAS[d][0], c + DELTAS[d][1]) else 0.0
+            setbacks = [world.aisle_setback if narrowed(grid, r + DELTAS[d][0], c + DELTAS[d][1], d) else 0.0
                         for d, _ in plan]
             _check_fit(garage, world, (r, c), code, setbacks)
             first = len(stalls)
@@ -206,8 +207,9 @@ def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLay
                     offsets = [(j - (n - 1) / 2) * shape.pitch for j in range(n)]
                 if shape.cos == 0.0:
                     yaw = DIR_YAW[side]
-                else:  # angled: the stall's axis leans toward +t, where the traffic of its lane comes from
-                    yaw = math.atan2(uy * shape.sin + ty * shape.cos, ux * shape.sin + tx * shape.cos)
+                else:  # angled: the stall's axis leans toward where the aisle's traffic comes from
+                    vx, vy = _upstream(flow.get((r + DELTAS[side][0], c + DELTAS[side][1])), side)
+                    yaw = math.atan2(uy * shape.sin + vy * shape.cos, ux * shape.sin + vx * shape.cos)
                 for off in offsets:
                     x = cx + ux * depth + tx * off
                     y = cy + uy * depth + ty * off
@@ -245,14 +247,46 @@ def stall_layout(garage: Garage, world: WorldConfig = DEFAULT_WORLD) -> StallLay
     return StallLayout(tuple(stalls), tuple(pillars))
 
 
-def narrowed(grid, r: int, c: int) -> bool:
-    """Whether road cell (r, c) is a stretch of aisle that ``WorldConfig.aisle_width`` narrows: its road-like
-    neighbours lie on one axis (a straight road, a gate, a dead end). Junctions and turns keep the whole block,
-    so that a car can turn there."""
+def traffic_flow(garage: Garage) -> dict[tuple[int, int], int]:
+    """The one-way direction of every road-like cell for angled stalls (docs/spec.md section 9): the grid direction a
+    car drives in when it first reaches the cell from the entrance (breadth first, neighbours in
+    :data:`SIDE_ORDER`), so that every angled stall leans toward the entrance side of its aisle and is entered
+    forward at a shallow turn."""
+    grid = garage.grid
+    h, w = grid.shape
+    flow: dict[tuple[int, int], int] = {}
+    seen = {garage.entrance}
+    queue = [garage.entrance]
+    for r, c in queue:
+        for d in SIDE_ORDER:
+            rr, cc = r + DELTAS[d][0], c + DELTAS[d][1]
+            if 0 <= rr < h and 0 <= cc < w and (rr, cc) not in seen and ROAD_LIKE_TABLE[grid[rr, cc]]:
+                seen.add((rr, cc))
+                flow[(rr, cc)] = d
+                queue.append((rr, cc))
+    return flow
+
+
+def _upstream(flow: int | None, side: int) -> tuple[float, float]:
+    """Unit vector along a block edge on ``side`` toward where its road's traffic comes from: against ``flow`` when
+    that runs along the edge; else (a car meets the row head-on, in a turn) the edge's counter-clockwise direction."""
+    ux, uy = WORLD_DIR[side]
+    if flow is not None and flow not in (side, OPPOSITE[side]):
+        fx, fy = WORLD_DIR[flow]
+        return -fx, -fy
+    return -uy, ux
+
+
+def narrowed(grid, r: int, c: int, side: int) -> bool:
+    """Whether ``WorldConfig.aisle_width`` narrows road cell (r, c) on its ``side`` (a grid direction): the cell is a
+    stretch of aisle (its road-like neighbours lie on one axis: a straight road, a gate, a dead end) and ``side``
+    runs along it. Junctions and turns keep the whole block, so that a car can turn there, and so does a dead
+    end's far end."""
     h, w = grid.shape
     dirs = {d for d in SIDE_ORDER if 0 <= r + DELTAS[d][0] < h and 0 <= c + DELTAS[d][1] < w
             and ROAD_LIKE_TABLE[grid[r + DELTAS[d][0], c + DELTAS[d][1]]]}
-    return dirs <= {NORTH, SOUTH} or dirs <= {WEST, EAST}
+    across = {NORTH, SOUTH} if side in (WEST, EAST) else {WEST, EAST}
+    return bool(dirs) and dirs <= across
 
 
 def _lone_gap(world: WorldConfig, row_setback: float) -> float:
