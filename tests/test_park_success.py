@@ -175,6 +175,20 @@ def test_an_oracle_success_keeps_clear_of_the_bodies_and_inside_the_lines(painte
     assert "at rest 1.0 s" in info["reason"] and "inside the" in info["reason"]
 
 
+def test_the_solid_bodies_are_those_in_place_never_an_empty_stall_s_car(painted_tiny):
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+
+    env = GarageDriveEnv(painted_tiny, task="park", action_type="continuous", infeasible="report")
+    try:
+        env.reset(seed=0, options={"target": 3, "occupied": [0, 4]})
+        named = {n.split("_")[1] for n, c in zip(env._bodies.names, env._bodies.classes) if c == "parked_car"}
+        assert named == {"0", "4"} and {"wall", "parked_car"} <= set(env._bodies.classes)
+        env.reset(seed=0, options={"target": 3, "occupied": []})
+        assert "parked_car" not in env._bodies.classes
+    finally:
+        env.close()
+
+
 # -- levels ----------------------------------------------------------------------------------------------------
 def _stall(width: float = 2.5, length: float = 4.5, angle: float = 90.0) -> Stall:
     return Stall(id=0, block=(0, 0), x=0.0, y=0.0, yaw=math.pi / 2, side=2, road_cell=(0, 1), road_x=0.0,
