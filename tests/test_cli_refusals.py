@@ -24,6 +24,7 @@ from tests._cli import one_line_error, snapshot
 LIB, PACKS, GARAGE, TEXT, FOLDER, FILE, MISSING, OUT = ("lib.sqlite", "packs", "garage.json", "notes.txt", "folder",
                                                        "a_file", "missing.json", "out")
 BAD_LAYOUT = "bad_layout.toml"  # a park geometry file with an unknown key
+CASE, CROSSED = "Case1.csv", "crossed.csv"  # a TPCAP case; one whose obstacle crosses itself
 TINY = ["--map", "tiny_7x11"]
 GEN = ["generate", *TINY, "--difficulty", "0.2", "0.8", "--count", "1", "--library", "new.sqlite", "--no-progress"]
 TRAIN = ["train", *TINY, "--timesteps", "200", "--out", OUT, "--no-progress"]
@@ -126,6 +127,17 @@ BAD: list[tuple[str, list[str], str]] = [
     ("cruise", [*CRUISE, "--stall-width", "1.8"], "stall_width (--stall-width)"),
     ("cruise", [*CRUISE, "--aisle-width", "6.5"], "another park geometry"),  # the pack was built in the default
     ("cruise", [*CRUISE, "--layout", BAD_LAYOUT], "unknown key(s) bogus"),
+    ("cruise", ["cruise", "--cases", MISSING, "--out", OUT], MISSING),
+    ("cruise", ["cruise", "--cases", TEXT, "--out", OUT], TEXT),
+    ("cruise", ["cruise", "--cases", GARAGE, "--out", OUT], GARAGE),
+    ("cruise", ["cruise", "--cases", FOLDER, "--out", OUT], FOLDER),
+    ("cruise", ["cruise", "--cases", CROSSED, "--out", OUT], CROSSED),
+    ("cruise", ["cruise", "--cases", CASE, CASE, "--out", OUT], "same case"),
+    ("cruise", ["cruise", "--cases", CASE, "--stall", "1", "--out", OUT], "--stall"),
+    ("cruise", ["cruise", "--cases", CASE, "--vehicle", "van", "--out", OUT], "--vehicle"),
+    ("cruise", ["cruise", "--cases", CASE, "--task", "avp", "--out", OUT], "--task avp"),
+    ("cruise", ["cruise", "--cases", CASE, "--driver", "no_such_driver", "--out", OUT], "no_such_driver"),
+    ("cruise", ["cruise", "--cases", CASE, "--out", FILE], FILE),
     ("cruise", ["cruise", "--library", LIB, "--tests", "1", "--out", OUT, "--stall-angle", "0", "--task", "park"],
      "no parallel manoeuvre"),
     ("cruise", ["cruise", "--library", LIB, "--tests", "1", "--out", OUT, "--stall-angle", "75"], "stall angle 75"),
@@ -183,6 +195,8 @@ def inputs(tmp_path_factory) -> Path:
     (root / BAD_LAYOUT).write_text("stall_width = 2.3\nbogus = 1\n")
     (root / FILE).write_text("a file where a folder belongs\n")
     (root / FOLDER).mkdir()
+    (root / CASE).write_text("0,0,0,10,0,0,1,4,12,2,14,2,14,-2,12,-2\r\n")
+    (root / CROSSED).write_text("0,0,0,10,0,0,1,4,3,3,7,6,7,3,3,5\r\n")
     return root
 
 

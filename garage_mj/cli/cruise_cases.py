@@ -8,8 +8,9 @@ from collections.abc import Callable
 from contextlib import AbstractContextManager
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import compute
+from garage_mj.cli._common import GEOMETRY_KEYS, compute
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
+from garage_mj.scene.vehicles import DEFAULT_VEHICLE
 
 #: Options of ``cruise`` that choose garages or shape a garage's tests: a run of cases has neither.
 _NOT_FOR_CASES = (("sample", "--sample"), ("ids", "--ids"), ("map", "--map"), ("difficulty", "--difficulty"),
@@ -28,6 +29,16 @@ def refuse_options(args: argparse.Namespace) -> None:
     for attr, flag in (("xosc", "--xosc"), ("videos", "--videos"), ("report", "--report")):
         if getattr(args, attr, None):
             raise UserError(f"{flag} is for garage runs (--packs or --library), not --cases; leave it out")
+    for attr in (*GEOMETRY_KEYS, "layout"):
+        if getattr(args, attr, None) is not None:
+            raise UserError(f"--{attr.replace('_', '-')} does not apply to --cases: a case's obstacles are its own "
+                            "geometry; leave it out")
+    if args.vehicle != DEFAULT_VEHICLE:
+        raise UserError(f"--vehicle {args.vehicle}: a case brings its own vehicle (TPCAP's car, or the park problem's "
+                        "car); leave --vehicle out")
+    if args.parked_fleet != "uniform" or args.parked_jitter:
+        raise UserError("--parked-fleet and --parked-jitter draw a garage's parked cars; a case's are its obstacles: "
+                        "leave them out")
     if args.task == "avp":
         raise UserError("--task avp: a case is a park test (it starts where the parking starts); leave --task out")
 
@@ -41,6 +52,8 @@ def run_cases_cli(args: argparse.Namespace, action_warnings: Callable[[str], Abs
 
     refuse_options(args)
     cases = read_cases(args.cases)
+    if args.out.exists() and not args.out.is_dir():
+        raise UserError(f"--out {args.out} is a file, not a folder; choose another path")
     args.driver = args.driver or "vision"
     with action_warnings("cruise"):
         settings = case_settings(args.driver, args.seed, args.action_type, test_timeout=args.test_timeout)

@@ -100,7 +100,8 @@ def signed_area(poly) -> float:
 
 def simple_outline(poly) -> np.ndarray:
     """``poly`` counter-clockwise, without repeated vertices and without vertices on a straight line between their
-    neighbours (TPCAP's case 19 has such): the same region, fewer corners. ValueError when nothing of an area is left."""
+    neighbours (TPCAP's case 19 has such): the same region, fewer corners. ValueError when nothing of an area is left
+    or two of its edges cross."""
     p = np.asarray(poly, dtype=float).reshape(-1, 2)
     if signed_area(p) < 0:
         p = p[::-1]
@@ -116,7 +117,25 @@ def simple_outline(poly) -> np.ndarray:
                 break
     if len(p) < 3 or signed_area(p) <= 0:
         raise ValueError("the polygon has no area")
+    n = len(p)
+    for i in range(n):
+        for j in range(i + 2, n):
+            if (j + 1) % n != i and _segments_cross(p[i], p[(i + 1) % n], p[j], p[(j + 1) % n]):
+                raise ValueError(f"the polygon crosses itself (its edges {i + 1} and {j + 1})")
     return p
+
+
+def _segments_cross(a, b, c, d) -> bool:
+    """Whether the segments ab and cd (of non-adjacent edges) touch or cross."""
+    d1, d2, d3, d4 = _cross(c, d, a), _cross(c, d, b), _cross(a, b, c), _cross(a, b, d)
+    if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and 0 not in (d1, d2, d3, d4):
+        return True
+
+    def on(p, q, r) -> bool:  # r on the segment pq, given the three are collinear
+        return min(p[0], q[0]) <= r[0] <= max(p[0], q[0]) and min(p[1], q[1]) <= r[1] <= max(p[1], q[1])
+
+    return (d1 == 0 and on(c, d, a)) or (d2 == 0 and on(c, d, b)) or (d3 == 0 and on(a, b, c)) or \
+        (d4 == 0 and on(a, b, d))
 
 
 def is_convex(p: np.ndarray) -> bool:
