@@ -15,13 +15,13 @@ Fixtures:
   ``tiny_7x11`` garages.
 - ``garage_packs`` (session): a folder of the asset packs of those 3 garages (shared: copy it to change it).
 - ``garage_cruise``: ``garage_cruise(MyDriver)`` runs cruise tests (``task="park"`` or ``"avp"``: park or
-  AVP tests, with ``maneuver`` and ``stall``) of a driver class and returns
+  AVP tests, with ``maneuver`` and ``stall``; ``vehicle``: the car under test's class) of a driver class and returns
   :class:`garage_mj.testing.DriverTests` (the results table; ``.assert_success()`` fails listing each
   failed test with how it failed, its MP4 and its ``.xosc``). Output in the test's ``tmp_path``.
 
 What ``garage_cruise`` tests, from the command line (``pytest --garage-tests 20``), else the marker
 ``@pytest.mark.garage_mj(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS, task=..., maneuver=...,
-stall=ID)``, else the
+stall=ID, vehicle=...)``, else the
 defaults; an argument given to ``garage_cruise(...)`` in the test itself wins over both. A test that runs
 past ``test_timeout`` (default 120 s) fails as ``driver_timeout`` and the others still run.
 """
@@ -39,15 +39,17 @@ import pytest
 MARKER = "garage_mj"
 #: What the options and the marker choose, with the defaults: maps to paint garages of, garages per map,
 #: cruise tests per garage, worker processes, wall time a test may take [s] (garage_mj's DEFAULT_TEST_TIMEOUT),
-#: the task (cruise, park, avp), the park maneuver (reverse, forward, any) and the target stall (None: drawn).
+#: the task (cruise, park, avp), the park maneuver (reverse, forward, any), the target stall (None: drawn) and the
+#: car under test's class (docs/spec.md section 9).
 DEFAULTS: dict[str, Any] = {"maps": ["tiny_7x11"], "per_map": 1, "tests": 3, "workers": 1, "test_timeout": 120.0,
-                            "task": "cruise", "maneuver": "reverse", "stall": None}
-TASKS = ("cruise", "park", "avp")  # garage_mj's TASKS and MANEUVER_CHOICES (not imported: see above)
+                            "task": "cruise", "maneuver": "reverse", "stall": None, "vehicle": "sedan"}
+TASKS = ("cruise", "park", "avp")  # garage_mj's TASKS, MANEUVER_CHOICES and FLEET (not imported: see above)
 MANEUVERS = ("reverse", "forward", "any")
+VEHICLES = ("compact", "sedan", "suv", "van")
 _CLI_HINT = " (put --debug before the command for its traceback)"  # the command line's advice; the traceback follows here
 _OPTIONS = {"maps": "garage_maps", "per_map": "garage_per_map", "tests": "garage_tests", "workers": "garage_workers",
             "test_timeout": "garage_test_timeout", "task": "garage_task", "maneuver": "garage_maneuver",
-            "stall": "garage_stall"}
+            "stall": "garage_stall", "vehicle": "garage_vehicle"}
 
 
 def _number(text: str, convert: Callable[[str], Any], valid: Callable[[Any], bool], hint: str):
@@ -95,11 +97,12 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                     help="park and AVP tests: reverse-in, nose-in (forward) or drawn per test (any; default reverse)")
     group.addoption("--garage-stall", type=_stall, metavar="ID",
                     help="the stall every test targets (default: drawn per test)")
+    group.addoption("--garage-vehicle", choices=VEHICLES, help="the car under test's class (default sedan)")
 
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", f"{MARKER}(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS, task=..., "
-                                       "maneuver=..., stall=ID): what the "
+                                       "maneuver=..., stall=ID, vehicle=...): what the "
                                        "garage_cruise fixture tests by default (--garage-* options override it)")
 
 
@@ -175,7 +178,7 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
                       per_map: int | None = None, seed: int = 0, action_type: str | None = None,
                       occupancy: float = 0.5, driver_kwargs: dict[str, Any] | None = None,
                       env: dict[str, Any] | None = None, task: str | None = None, maneuver: str | None = None,
-                      stall: int | None = None):
+                      stall: int | None = None, vehicle: str | None = None):
         from garage_mj.core.backends import Compute
         from garage_mj.core.errors import GarageMJError
         from garage_mj.driving.sources import CruiseSettings
@@ -184,10 +187,13 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
         __tracebackhide__ = True
         k = next(runs)
         given = {"maps": garages, "tests": tests, "workers": workers, "test_timeout": test_timeout,
-                 "per_map": per_map, "task": task, "maneuver": maneuver, "stall": stall}
+                 "per_map": per_map, "task": task, "maneuver": maneuver, "stall": stall, "vehicle": vehicle}
         use = {key: chosen[key] if value is None else value for key, value in given.items()}  # the call's, else chosen
+        env = dict(env or {})
+        if use["vehicle"] != DEFAULTS["vehicle"]:  # the default car: run.json as without the option
+            env.setdefault("vehicle", use["vehicle"])
         try:
-            settings = CruiseSettings(seed=seed, action_type=action_type, occupancy=occupancy, env=dict(env or {}),
+            settings = CruiseSettings(seed=seed, action_type=action_type, occupancy=occupancy, env=env,
                                       driver_kwargs=dict(driver_kwargs or {}),  # the driver: run_driver_tests sets it
                                       task=use["task"], maneuver=use["maneuver"], stall=use["stall"])
             compute = Compute(workers=use["workers"], progress=False)

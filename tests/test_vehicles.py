@@ -265,3 +265,11 @@ def test_exported_park_problems_hold_the_parked_cars_bodies(painted_tiny):
         assert sides == pytest.approx([width, width, length, length])
         centre = c.mean(axis=0)
         assert any(np.allclose(centre, (s.x, s.y)) for s in scene.stalls.stalls)
+
+
+def test_the_pytest_plugin_offers_the_fleet_and_hands_a_vehicle_to_the_env(garage_cruise):
+    import pytest_garage_mj as plugin
+
+    assert plugin.VEHICLES == tuple(FLEET) and plugin.DEFAULTS["vehicle"] == "sedan"
+    tests = garage_cruise("oracle", tests=1, vehicle="compact")
+    assert [r["vehicle"] for r in tests.rows] == ["compact"]
