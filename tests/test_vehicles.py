@@ -273,3 +273,27 @@ def test_the_pytest_plugin_offers_the_fleet_and_hands_a_vehicle_to_the_env(garag
     assert plugin.VEHICLES == tuple(FLEET) and plugin.DEFAULTS["vehicle"] == "sedan"
     tests = garage_cruise("oracle", tests=1, vehicle="compact")
     assert [r["vehicle"] for r in tests.rows] == ["compact"]
+
+
+def test_the_cameras_draw_the_parked_cars_where_they_stand(painted_tiny):
+    from garage_mj.driving.sim.sensors import Camera, CameraConfig
+    from garage_mj.scene.semantics import Semantic
+
+    env = GarageDriveEnv(painted_tiny, parked_fleet="mixed", parked_jitter=0.5)
+    env.reset(seed=2)
+    width, height = 800, 600
+    cam = Camera(env.model, CameraConfig(camera="overview", width=width, height=height, depth=False, near=0.1,
+                                         far=100.0))
+    seg = cam.render(env.data)["segmentation"]
+    k = mujoco.mj_name2id(env.model, mujoco.mjtObj.mjOBJ_CAMERA, "overview")
+    assert env.model.cam_projection[k] == mujoco.mjtProjection.mjPROJ_ORTHOGRAPHIC
+    (cx, cy, _), scale = env.data.cam_xpos[k], height / env.model.cam_fovy[k]  # [px per m], looking down
+    seen = []
+    for b in env.parked_bodies.values():
+        centre = np.array([b.x, b.y])
+        for corner in b.corners():  # half a metre in from each corner of the body as it stands
+            x, y = corner + 0.5 * (centre - corner) / np.linalg.norm(centre - corner)
+            seen.append(seg[round(height / 2 - (y - cy) * scale), round(width / 2 + (x - cx) * scale)])
+    cam.close()
+    env.close()
+    assert len(seen) > 8 and set(seen) == {Semantic.PARKED_CAR}
