@@ -46,6 +46,7 @@ from garage_mj.driving.sources import (
 )
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
+from garage_mj.scene.world import geometry
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -275,7 +276,6 @@ def geometry_env(args: argparse.Namespace, srcs: list) -> dict:
     (so a default run's ``run.json`` stays as it was). Packs bring the geometry they were built in: the options, when
     given, must name it; every garage must hold it (else one line names the block and the fix)."""
     from garage_mj.export.pack import check_geometry, manifest_world
-    from garage_mj.scene.world import geometry
 
     world = geometry_world(args)
     asked = args.layout is not None or any(getattr(args, k) is not None for k in geometry(world))

@@ -50,6 +50,7 @@ from garage_mj.grid.garage import Garage, MapError, validate_garage
 from garage_mj.grid.metrics import evaluate
 from garage_mj.scene.drivable import drivability
 from garage_mj.scene.garage_scene import GarageScene
+from garage_mj.scene.stalls import stall_layout
 from garage_mj.scene.world import DEFAULT_WORLD, GeometryError, WorldConfig, geometry, world_with
 
 PACK_FORMAT = 1
@@ -308,8 +309,6 @@ def check_geometry(garages: Iterable[Garage], world: WorldConfig) -> None:
     the block and the fix), before anything is written."""
     if world.is_default_geometry:
         return  # every garage holds the default geometry
-    from garage_mj.scene.stalls import stall_layout
-
     for garage in garages:
         stall_layout(garage, world)
 
