@@ -54,6 +54,7 @@ from garage_mj.export.park_problems import (
     read_tpcap_case,
 )
 from garage_mj.scene.case_scene import CaseObstacle, CaseScene, ParkCase, convex_pieces, tpcap_class
+from garage_mj.scene.park_planning import ParkPlan
 from garage_mj.scene.vehicles import FLEET, TPCAP_VEHICLE, VehicleClass
 
 if TYPE_CHECKING:
@@ -195,18 +196,24 @@ def case_settings(driver: str, seed: int = 0, action_type: str | None = None, **
     return CruiseSettings(driver, seed, action_type, 0.0, dict(CASES_ENV), task="park", maneuver="any", **fields)
 
 
-def case_env(case: ParkCase, settings: CruiseSettings):
-    """The :class:`~garage_mj.driving.sim.case_env.CaseDriveEnv` of ``case`` for a run with ``settings``."""
+def case_env(case: ParkCase, settings: CruiseSettings, plan: ParkPlan | None = None):
+    """The :class:`~garage_mj.driving.sim.case_env.CaseDriveEnv` of ``case`` for a run with ``settings`` (``plan``: its
+    reference plan, when planned already)."""
     from garage_mj.driving.sim.case_env import CaseDriveEnv
 
     env = {k: v for k, v in settings.env.items() if k not in CASES_ENV}
-    return CaseDriveEnv(CaseScene(case), action_type=settings.action_type, **env)
+    return CaseDriveEnv(CaseScene(case), action_type=settings.action_type, plan=plan, **env)
 
 
-def run_case(case: ParkCase, settings: CruiseSettings) -> dict[str, Any]:
-    """Drive ``case`` once with ``settings``; its ``tests.csv`` row."""
+def plan_case(case: ParkCase) -> ParkPlan:
+    """The reference plan of ``case`` (:data:`~garage_mj.scene.case_scene.CASE_PARK`): its verdict before the drive."""
+    return CaseScene(case).planner().plan_case()
+
+
+def run_case(case: ParkCase, settings: CruiseSettings, plan: ParkPlan | None = None) -> dict[str, Any]:
+    """Drive ``case`` once with ``settings`` (``plan``: its reference plan, planned here when None); its row."""
     start = time.perf_counter()
-    env = case_env(case, settings)
+    env = case_env(case, settings, plan)
     try:
         seed = cruise_seed(settings.seed, case.digest, 0)
         obs, info = env.reset(seed=seed)
@@ -215,12 +222,12 @@ def run_case(case: ParkCase, settings: CruiseSettings) -> dict[str, Any]:
         env.close()
 
 
-def _task(job: tuple[ParkCase, CruiseSettings]) -> dict[str, Any]:
+def _task(job: tuple[ParkCase, CruiseSettings, ParkPlan]) -> dict[str, Any]:
     return run_case(*job)
 
 
-def _lost(job: tuple[ParkCase, CruiseSettings], why: LostJob) -> dict[str, Any]:
-    case, settings = job
+def _lost(job: tuple[ParkCase, CruiseSettings, ParkPlan], why: LostJob) -> dict[str, Any]:
+    case, settings, _ = job
     kind = OutcomeKind.DRIVER_TIMEOUT if why.kind == "timeout" else OutcomeKind.DRIVER_CRASH
     return {**dict.fromkeys(TEST_COLUMNS, ""), "garage": case.source, "garage_hash": case.digest, "test": 0,
             "seed": cruise_seed(settings.seed, case.digest, 0), "driver": settings.driver, "outcome": kind.value,
@@ -315,12 +322,24 @@ def run_cases(cases: Sequence[ParkCase], settings: CruiseSettings, out_dir: str 
         return CaseResult(out, new, mine, stats, choice.label, list(cases))
 
 
+def _plans(cases: Sequence[ParkCase], compute: Compute) -> dict[str, ParkPlan]:
+    """Every case's reference plan by its digest, on ``compute``'s backend: planned before the drives, so that
+    ``--test-timeout`` bounds the driver alone (a case's search may take a minute where a garage's takes seconds)."""
+    return {cases[k].digest: plan for k, plan in map_unordered(_plan_job, list(enumerate(cases)), compute=compute)}
+
+
+def _plan_job(job: tuple[int, ParkCase]) -> tuple[int, ParkPlan]:
+    return job[0], plan_case(job[1])
+
+
 def _rows(jobs: list, compute: Compute, settings: CruiseSettings) -> Iterator[dict[str, Any]]:
-    """Rows as cases end, on ``compute``'s backend; a case past ``settings.test_timeout`` is a ``driver_timeout``."""
+    """Rows as cases end, on ``compute``'s backend; a drive past ``settings.test_timeout`` is a ``driver_timeout``."""
     from tqdm import tqdm
 
+    plans = _plans([c for c, _ in jobs], compute)
     with tqdm(total=len(jobs), disable=not compute.progress, desc="cases", unit="case") as bar:
-        for row in map_unordered(_task, jobs, compute=compute, timeout=settings.test_timeout, on_lost=_lost):
+        for row in map_unordered(_task, [(c, st, plans[c.digest]) for c, st in jobs], compute=compute,
+                                 timeout=settings.test_timeout, on_lost=_lost):
             bar.update()
             yield row
 
@@ -333,5 +352,5 @@ def stats_line(res: CaseResult) -> str:
             f"({res.action_label}); results in {res.out_dir}")
 
 
-__all__ = ["CASES_ENV", "CaseResult", "case_env", "case_files", "case_settings", "case_summary", "read_case",
-           "read_cases", "run_case", "run_cases", "stats_line"]
+__all__ = ["CASES_ENV", "CaseResult", "case_env", "case_files", "case_settings", "case_summary", "plan_case",
+           "read_case", "read_cases", "run_case", "run_cases", "stats_line"]
