@@ -297,3 +297,22 @@ def test_the_cameras_draw_the_parked_cars_where_they_stand(painted_tiny):
     cam.close()
     env.close()
     assert len(seen) > 8 and set(seen) == {Semantic.PARKED_CAR}
+
+
+def test_an_openscenario_test_holds_the_parked_cars_as_they_stand(painted_tiny, tmp_path):
+    from garage_mj.driving.replay import write_test_xosc
+    from garage_mj.driving.sources import CruiseSettings, CruiseSource
+    from garage_mj.export.pack import export_pack
+
+    pack = export_pack(painted_tiny, tmp_path / "packs")
+    source = CruiseSource.from_pack(pack)
+    env_kwargs = {"parked_fleet": "mixed", "parked_jitter": 0.4}
+    env = GarageDriveEnv(source.garage, action_type="continuous", **env_kwargs)
+    obs, info = env.reset(seed=4)
+    path = write_test_xosc(env, info, tmp_path / "t.xosc", source, 0, 4,
+                           CruiseSettings("oracle", 4, "continuous", env=env_kwargs))
+    text = path.read_text()
+    for sid, b in env.parked_bodies.items():
+        block = text[text.index(f'name="parkedcar_{sid}"'):]
+        assert f'length="{b.length}"' in block[:2000] or f'length="{b.length:g}"' in block[:2000]
+    env.close()

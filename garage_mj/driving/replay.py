@@ -57,10 +57,11 @@ def write_test_xosc(env, info: dict[str, Any], path: Path, source: CruiseSource,
     if settings.task != "cruise":  # a cruise test's file stays as it was
         route, plan_start = _park_route(env, info)
         meta.update(task=settings.task, maneuver=info["maneuver"], plan_start=plan_start)
+    # the parked cars as they stand (a mixed fleet's classes, a jitter's poses), else the scene's own
+    parked = env.scene.layout.parked_cars if env.parked_fleet.default else env.parked_bodies
     return write_xosc(
         path, pack_dir=source.pack, target_stall=env.target, occupied=env.occupied, start=env.start_pose,
-        route=route, goal=env.monitor.goal_pose, actors=env.scenario.actors,
-        parked_poses=env.scene.layout.parked_cars, meta=meta)
+        route=route, goal=env.monitor.goal_pose, actors=env.scenario.actors, parked_poses=parked, meta=meta)
 
 
 def replay_xosc(path: str | Path, driver: str | None = None, driver_kwargs: dict[str, Any] | None = None

@@ -116,12 +116,18 @@ def _pose(p: Sequence[float], what: str) -> tuple[float, float, float]:
     return _f(x, f"{what} x"), _f(y, f"{what} y"), _f(yaw, f"{what} yaw")
 
 
-def _parked_table(parked_poses: Any) -> dict[int, tuple[float, float, float]]:
-    """stall -> pose from a mapping stall -> (x, y, yaw) or from layout placements (x, y, yaw, stall_id)."""
-    out: dict[int, tuple[float, float, float]] = {}
+def _parked_table(parked_poses: Any) -> dict[int, tuple[float, ...]]:
+    """stall -> pose from a mapping stall -> (x, y, yaw) or from layout placements (x, y, yaw, stall_id); a mapping's
+    value may also be a parked car's body (``x``, ``y``, ``yaw``, ``length``, ``width``, ``height``, as
+    :class:`~garage_mj.scene.parked_fleet.ParkedBody` has them): pose then size (x, y, yaw, length, width, height)."""
+    out: dict[int, tuple[float, ...]] = {}
     if isinstance(parked_poses, Mapping):
         for k, v in parked_poses.items():
-            out[int(k)] = _pose(v, f"parked car {k}")
+            if hasattr(v, "length"):  # a body as it stands: its pose and its size
+                size = tuple(_f(getattr(v, n), f"parked car {k} {n}") for n in ("length", "width", "height"))
+                out[int(k)] = (*_pose((v.x, v.y, v.yaw), f"parked car {k}"), *size)
+            else:
+                out[int(k)] = _pose(v, f"parked car {k}")
         return out
     for p in parked_poses or ():
         sid = getattr(p, "stall_id", None)
@@ -293,13 +299,14 @@ def _add_ego(xosc, entities, init, start: tuple[float, float, float], pts: np.nd
     init.add_init_action(EGO, xosc.FollowTrajectoryAction(ego_traj, xosc.FollowingMode.position))
 
 
-def _add_parked(xosc, entities, init, occupied: list[int], parked: dict[int, tuple[float, float, float]]) -> None:
-    """A parked car entity, at its pose, in every occupied stall."""
+def _add_parked(xosc, entities, init, occupied: list[int], parked: dict[int, tuple[float, ...]]) -> None:
+    """A parked car entity, at its pose (and with its size, where given), in every occupied stall."""
     for s in occupied:
         name = f"{PARKED_PREFIX}{s}"
         hx, hy, hz = SHAPE_SIZE["car"]
-        entities.add_scenario_object(name, _car(xosc, name, 2 * hx, 2 * hy, 2 * hz))
-        init.add_init_action(name, xosc.TeleportAction(_wpos(xosc, *parked[s])))
+        length, width, height = parked[s][3:] or (2 * hx, 2 * hy, 2 * hz)
+        entities.add_scenario_object(name, _car(xosc, name, length, width, height))
+        init.add_init_action(name, xosc.TeleportAction(_wpos(xosc, *parked[s][:3])))
 
 
 def _actor_group(xosc, minor: int, a: ActorSpec, w: np.ndarray):
@@ -366,8 +373,8 @@ def write_xosc(
 ) -> Path:
     """Write one cruise test as OpenSCENARIO 1.``osc_minor`` (default 1.2) to ``path`` (atomically); returns it.
 
-    ``xodr_path`` defaults to ``pack_dir/garage.xodr``. ``parked_poses``: stall -> (x, y, yaw), or
-    the scene layout's ``parked_cars`` placements; a parked car is written for every stall of
+    ``xodr_path`` defaults to ``pack_dir/garage.xodr``. ``parked_poses``: stall -> (x, y, yaw) or a parked car's
+    body (its pose and size), or the scene layout's ``parked_cars`` placements; a parked car is written for every stall of
     ``occupied``. ``route``: (N, 2) centre points (vertex heading: the travel direction) or (N, 3) poses
     (x, y, yaw: a park plan's, reverse stretches included). ``meta``: ``garage_hash`` (else read from the pack's manifest), ``seed``,
     ``driver``, ``action_type`` and any other scalar / JSON-able entries, all kept as ``gmj_``
