@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from garage_mj.driving.cases import case_settings, case_summary
 from garage_mj.driving.results import (
     BREAKDOWNS,
     TEST_COLUMNS,
@@ -281,6 +282,7 @@ def test_success_breaks_down_by_level_maneuver_and_stall_angle(painted_tiny):
     assert out["by_level"]["normal"]["feasible"] == 1 and out["by_level"]["normal"]["infeasible"] == 1
     assert list(out["by_maneuver"]) == ["reverse", "forward"] and out["by_maneuver"]["forward"]["successes"] == 0
     assert list(out["by_stall_angle"]) == ["60", "90"]
+    assert case_summary(rows, case_settings("oracle", 0, "continuous"), "--action-type")["by_level"] == out["by_level"]
     lines = breakdown_lines(out)
     assert lines[0] == "success by level: normal 1/1 (100.0%); complex 1/2 (50.0%); extreme 0/0, 1 unproven"
     assert lines[2] == "success by stall angle [deg]: 60 1/1 (100.0%); 90 1/2 (50.0%), 1 unproven"

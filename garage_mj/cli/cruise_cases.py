@@ -9,6 +9,7 @@ from contextlib import AbstractContextManager
 
 from garage_mj.cli import UserError
 from garage_mj.cli._common import GEOMETRY_KEYS, compute
+from garage_mj.driving.results import BREAKDOWNS, breakdown_lines
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
 from garage_mj.scene.vehicles import DEFAULT_VEHICLE
 
@@ -61,6 +62,8 @@ def run_cases_cli(args: argparse.Namespace, action_warnings: Callable[[str], Abs
         task_warning("cruise", args.driver, "park")
         res = run_cases(cases, settings, args.out, compute=compute(args))
     print(stats_line(res))
+    for line in breakdown_lines({k: res.stats[k] for k in BREAKDOWNS if k in res.stats}):
+        print(f"  {line}")
     for row in res.rows:
         if row["outcome"] != "success":
             print(f"  {row['garage']}: {row['outcome']}{' (' + row['hit'] + ')' if row['hit'] else ''}: {row['reason']}")

@@ -40,6 +40,7 @@ from garage_mj.driving.results import (
     TEST_COLUMNS,
     check_settings,
     failure_counts,
+    park_breakdown,
     park_summary,
     parse_tests,
     repair_tests,
@@ -268,14 +269,16 @@ def _check_rows(path: Path, rows: Sequence[dict[str, str]], lines: Sequence[int]
 
 
 def case_summary(rows: Sequence[dict[str, Any]], settings: CruiseSettings, action_from: str) -> dict[str, Any]:
-    """``summary.json`` of a run of cases: counts by verdict and outcome, success over feasible cases, park metrics."""
+    """``summary.json`` of a run of cases: counts by verdict and outcome, success over feasible cases, park metrics, and
+    success by level, maneuver and stall angle (:func:`~garage_mj.driving.results.park_breakdown`)."""
     kinds = [r["outcome"] for r in rows]
     driven = [r for r in rows if r["outcome"] not in NOT_DRIVEN]
     successes = kinds.count(OutcomeKind.SUCCESS.value)
     return {"cases": len(rows), "infeasible": kinds.count(OutcomeKind.INFEASIBLE.value), "feasible": len(driven),
             "successes": successes, "success_pct": round(100.0 * successes / len(driven), 2) if driven else None,
             "driver": settings.driver, "seed": settings.seed, "action_type": settings.action_type,
-            "action_type_from": action_from, "task": "park", "failures": failure_counts(rows), **park_summary(rows)}
+            "action_type_from": action_from, "task": "park", "failures": failure_counts(rows), **park_summary(rows),
+            **park_breakdown(rows)}
 
 
 def run_cases(cases: Sequence[ParkCase], settings: CruiseSettings, out_dir: str | Path = "cruise", *,
