@@ -82,6 +82,9 @@ def test_the_env_plans_judges_and_observes_with_the_class(painted_tiny):
         assert value == pytest.approx(getattr(van.geometry(), key), abs=1e-9), key
     obs, info = env.reset(seed=0)
     assert env.monitor.car is env.car_geometry and env.driver_info(0)["car"] is env.car_geometry
+    camera = env.driver_info(0)["camera"]  # where a camera driver's geometry says the van's camera is
+    front = mujoco.mj_name2id(env.model, mujoco.mjtObj.mjOBJ_CAMERA, "ego/front")
+    assert camera["x"] == pytest.approx(env.model.cam_pos[front, 0]) and camera["x"] > car_geometry().front
     env.close()
     # the default env is models/car with the car config's full lock, as before classes existed
     default = GarageDriveEnv(painted_tiny, car={"max_steer": 0.5})

@@ -110,20 +110,25 @@ def car_body(model: mujoco.MjModel, prefix: str = "") -> dict[str, float]:
             "front": cx + half_len, "rear": cx - half_len}
 
 
-def car_camera(camera: str = FRONT_CAMERA, path: str | Path | None = None) -> dict[str, float]:
+def car_camera(camera: str = FRONT_CAMERA, path: str | Path | None = None,
+               vehicle: VehicleClass | None = None) -> dict[str, float]:
     """Where camera ``camera`` of the car model sits and looks, read from its compiled model.
 
     ``x`` [m] forward of the car centre, ``z`` [m] above the ground, ``pitch`` [rad] downward tilt
     of the optical axis (to :data:`PITCH_DECIMALS` decimals of a degree), ``fovy`` [deg] vertical
-    field of view. ``path``: another car MJCF than ``models/car/car.xml``. The camera must sit on
-    the car's centre line and look straight ahead (what a driver's camera geometry assumes).
+    field of view. ``path``: another car MJCF than ``models/car/car.xml``; ``vehicle``: the car of a fleet class
+    (:func:`car_model`) instead. The camera must sit on the car's centre line and look straight ahead (what a
+    driver's camera geometry assumes).
     """
-    return dict(_car_camera(camera, None if path is None else str(path)))
+    return dict(_car_camera(camera, None if path is None else str(path), vehicle))
 
 
 @functools.lru_cache(maxsize=8)
-def _car_camera(camera: str, path: str | None) -> tuple[tuple[str, float], ...]:
-    if path is None:
+def _car_camera(camera: str, path: str | None, vehicle: VehicleClass | None = None) -> tuple[tuple[str, float], ...]:
+    if vehicle is not None:
+        root = car_model(vehicle)
+        model = mujoco.MjModel.from_xml_string(root.to_xml_string(), root.get_assets())
+    elif path is None:
         with importlib.resources.as_file(car_xml_path()) as default:
             model = mujoco.MjModel.from_xml_path(str(default))
     else:

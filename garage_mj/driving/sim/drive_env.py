@@ -76,6 +76,7 @@ from garage_mj.driving.sim.park_task import (
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
 from garage_mj.driving.sim.solid_bodies import solid_bodies
 from garage_mj.driving.sim.vehicle import (
+    EGO_NAME,
     Car,
     DiscreteAction,
     Gear,
@@ -88,7 +89,7 @@ from garage_mj.driving.sim.vehicle import (
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies
 from garage_mj.scene.actor_spec import ActorSpec
-from garage_mj.scene.car import CarConfig, car_geometry
+from garage_mj.scene.car import FRONT_CAMERA, CarConfig, car_camera, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
@@ -630,7 +631,8 @@ class GarageDriveEnv(gym.Env):
         (as in the reset info); its ``route`` is the reference path (park: the park plan's centre
         path; AVP: the cruise route then the park plan), ``goal`` the stall pose, and ``rear_path``,
         ``rear_heading``, ``rear_curvature`` stay the cruise plan's to the stall (for a park test, the
-        drive that ended at its start).
+        drive that ended at its start). An env of a vehicle class (``vehicle=``) observing through the front camera
+        adds ``camera``: where that class's front camera sits (:func:`~garage_mj.scene.car.car_camera`).
         """
         plan = self.test_plan
         info = {"seed": int(seed), "action_type": self.action_type, "dt": self.dt,
@@ -640,6 +642,9 @@ class GarageDriveEnv(gym.Env):
                 "actors": [a.as_dict() for a in self.scenario.actors]}
         if self._park is not None:
             info.update(task=self.task, maneuver=self._park.maneuver, park_plan=self._park.plan_info())
+        if self.vehicle is not None and self.camera_config.camera == f"{EGO_NAME}/{FRONT_CAMERA}":
+            # a class's front camera sits where its body puts it (models/car's is what drivers assume by default)
+            info["camera"] = car_camera(FRONT_CAMERA, vehicle=self.vehicle)
         return info
 
     def render(self) -> np.ndarray | None:
