@@ -101,6 +101,7 @@ def test_tpcap_polygons_of_a_car_s_size_are_parked_cars():
     assert tpcap_class(_rect(0, 0, 4.5, 1.9, 0.3)) == "parked_car"
     assert tpcap_class(_rect(0, 0, 20.0, 1.0)) == "wall"
     assert tpcap_class([(0, 0), (4, 0), (4, 1), (1, 1), (1, 3), (0, 3)]) == "wall"
+    assert tpcap_class([(0, 0), (1.2, 0.1), (0.9, 1.0)]) == "obstacle"
 
 
 # -- the scene ---------------------------------------------------------------------------------------------------
@@ -220,3 +221,26 @@ def test_tpcap_s_published_cases_build_scenes_and_case_2_is_feasible():
         assert max(abs(v) for v in scene.extent) < 200, k  # subtracted: near the origin, cases 13 to 15 too
     plan = CaseScene(read_case(Path(TPCAP_CASES) / "Case2.csv")).planner().plan_case()
     assert plan.verdict == "feasible", plan.reason
+
+
+def test_a_mesh_obstacle_s_body_outline_holds_its_polygon_tightly():
+    """The solid body outline that min_clearance_m is measured to (driving/sim/solid_bodies.py): a case's triangle,
+    extruded to a mesh geom, within the box of its vertices, not a square of its bounding sphere."""
+    from garage_mj.driving.sim.solid_bodies import solid_bodies
+    from garage_mj.scene.semantics import geom_classes
+
+    tri = ((4.0, -6.0), (12.0, -5.0), (6.0, -2.0))
+    case = ParkCase("t", "t", "0" * 64, "tpcap", (0.0, 0.0), TPCAP_VEHICLE, (0.0, 0.0, 0.0), (-3.0, 0.0, 0.0),
+                    (CaseObstacle("wall", tri),))
+    model = compile_mjcf(build_case_scene(CaseScene(case)))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    bodies = solid_bodies(model, data, np.zeros(model.ngeom, dtype=bool), geom_classes(model))
+    (outline,) = [c for c, n in zip(bodies.corners, bodies.names, strict=True) if n.startswith("wall_0")]
+    area = abs(signed_area(outline))
+    assert abs(signed_area(tri)) <= area <= 2.0 * abs(signed_area(tri)) + 1e-6
+    turn = np.sign(signed_area(outline))
+    for q in np.asarray(tri):  # every corner of the triangle inside the (convex) outline
+        for i in range(4):
+            (ex, ey), (qx, qy) = outline[(i + 1) % 4] - outline[i], q - outline[i]
+            assert (ex * qy - ey * qx) * turn >= -1e-6

@@ -59,6 +59,7 @@ SEMANTICS = {"wall": Semantic.WALL, "pillar": Semantic.PILLAR, "obstacle": Seman
              "parked_car": Semantic.PARKED_CAR}
 #: A TPCAP polygon is a parked car when it is a rectangle this long and this wide [m] (else a wall).
 CAR_LENGTHS, CAR_WIDTHS = (3.5, 6.0), (1.4, 2.5)
+SMALL = 3.0  # [m] a TPCAP polygon less than this across (in x and in y) is an obstacle, not a wall
 _EPS = 1e-9
 #: The reference planner's settings for a case: :data:`~garage_mj.scene.park_planning.DEFAULT_PARK`'s, its escalation
 #: ending with two longer BIT* runs from the straight exit (20,000 and 60,000 iterations). A case's start may lie tens
@@ -212,12 +213,14 @@ def convex_pieces(poly) -> list[np.ndarray]:
 
 
 def tpcap_class(poly) -> str:
-    """``parked_car`` for a rectangle of a car's size (:data:`CAR_LENGTHS` x :data:`CAR_WIDTHS`), else ``wall``:
-    a TPCAP case gives no classes."""
+    """``parked_car`` for a rectangle of a car's size (:data:`CAR_LENGTHS` x :data:`CAR_WIDTHS`), ``obstacle`` for
+    anything smaller than :data:`SMALL` across (TPCAP's clutter), else ``wall``: a TPCAP case gives no classes."""
     try:
         p = simple_outline(poly)
     except ValueError:
         return "wall"
+    if float(np.ptp(p, axis=0).max()) < SMALL:
+        return "obstacle"
     if len(p) != 4 or not is_convex(p):
         return "wall"
     e = np.roll(p, -1, axis=0) - p

@@ -6,8 +6,8 @@ block), never a stall outline: every geom of a collidable class (:data:`~garage_
 that is in place (it collides: a parked car of an empty stall does not), is not the car's own, and reaches
 into the height band of the car's own collision geoms (a ceiling above the car is no obstacle to it).
 Each box geom gives its footprint (the box turned only about the vertical: its rectangle; turned otherwise:
-the bounding rectangle of its corners); any other geom type its bounding square (``geom_rbound``), a bound
-that never makes a body look farther than it is.
+the bounding rectangle of its corners), a mesh geom the smallest rectangle holding its vertices; any other geom
+type its bounding square (``geom_rbound``), a bound that never makes a body look farther than it is.
 """
 
 from __future__ import annotations
@@ -24,6 +24,10 @@ _VERTICAL = 1e-6  # a box whose z axis is this close to vertical is turned about
 def _extent(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> tuple[np.ndarray, float, float]:
     """Geom ``g``'s floor outline (4, 2) [m] and its height band (z low, z high)."""
     pos, rot = data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
+    if int(model.geom_type[g]) == mujoco.mjtGeom.mjGEOM_MESH:
+        mesh = int(model.geom_dataid[g])
+        vert = pos + model.mesh_vert[model.mesh_vertadr[mesh]:model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]] @ rot.T
+        return _smallest_rectangle(vert[:, :2]), float(vert[:, 2].min()), float(vert[:, 2].max())
     if int(model.geom_type[g]) == mujoco.mjtGeom.mjGEOM_BOX:
         half = model.geom_size[g]
         signs = np.array([[1, 1, 1], [-1, 1, 1], [-1, -1, 1], [1, -1, 1]], dtype=float)
@@ -39,6 +43,20 @@ def _extent(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> tuple[np.ndar
     r = float(model.geom_rbound[g])
     x, y, z = (float(v) for v in pos)
     return np.array([[x - r, y - r], [x + r, y - r], [x + r, y + r], [x - r, y + r]]), z - r, z + r
+
+
+def _smallest_rectangle(points: np.ndarray) -> np.ndarray:
+    """(4, 2) the smallest-area rectangle holding ``points`` (N, 2), in order round it: one side lies along a side of
+    their convex hull, so the directions between any two points hold the best one (a mesh has few vertices)."""
+    d = (points[None] - points[:, None]).reshape(-1, 2)
+    d = d[np.hypot(d[:, 0], d[:, 1]) > 1e-9]
+    u = d / np.hypot(d[:, 0], d[:, 1])[:, None]  # (D, 2) candidate axes
+    a = points @ u.T  # (N, D) along each axis
+    b = points @ np.stack([-u[:, 1], u[:, 0]], axis=1).T  # across
+    k = int(np.argmin(np.ptp(a, axis=0) * np.ptp(b, axis=0)))
+    ux, vx = u[k], np.array([-u[k, 1], u[k, 0]])
+    (a0, a1), (b0, b1) = (a[:, k].min(), a[:, k].max()), (b[:, k].min(), b[:, k].max())
+    return np.array([ux * s + vx * t for s, t in ((a0, b0), (a1, b0), (a1, b1), (a0, b1))])
 
 
 def solid_bodies(model: mujoco.MjModel, data: mujoco.MjData, own: np.ndarray, classes: np.ndarray) -> BodyOutlines:
