@@ -89,7 +89,11 @@ FLEET: dict[str, VehicleClass] = {
 DEFAULT_VEHICLE = "sedan"
 
 #: The car of the TPCAP benchmark's cases (its published vehicle: wheelbase 2.8 m, overhangs 0.96 m front and
-#: 0.929 m rear, width 1.942 m).
+#: 0.929 m rear, width 1.942 m). TPCAP publishes no steering limit: its benchmark repository, its MATLAB and Python
+#: demos and its site give the body alone (the competition's tracking controller, which held one, was never
+#: published). 0.75 rad (a 3.02 m turning radius of the rear axle) is this project's choice, and no height is
+#: published either. Planners published for this body use other limits (its author's LIOM demo, 0.5 rad; another
+#: public planner, 0.7), so a result on TPCAP's cases names the limit it was planned with.
 TPCAP_VEHICLE = VehicleClass("tpcap", length=0.96 + 2.8 + 0.929, width=1.942, height=1.5, wheelbase=2.8,
                              front_overhang=0.96, max_steer=0.75)
 
