@@ -223,6 +223,32 @@ def test_the_default_fleet_plans_around_the_parked_cars_bodies(painted_tiny):
     env.close()
 
 
+@pytest.mark.parametrize("angle", [0.0, 45.0])
+def test_parked_bodies_stand_as_the_scene_builds_its_cars_in_angled_and_parallel_stalls(painted_tiny, angle):
+    from garage_mj.scene.garage_scene import GarageScene
+    from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
+    from garage_mj.scene.parked_fleet import ParkedFleet, _overlap, draw_parked, fleet_rng, stall_inner
+    from garage_mj.scene.world import world_with
+
+    scene = GarageScene(painted_tiny, world_with({"stall_angle": angle}))
+    stalls = scene.stalls.stalls
+    assert {s.angle for s in stalls} == {angle}
+    ids = [s.id for s in stalls]
+    own = draw_parked(stalls, ids, None, ParkedFleet(), None)
+    placed = {p.stall_id: p for p in scene.layout.parked_cars}
+    for sid, b in own.items():  # the default fleet is the scene's own cars
+        assert (b.x, b.y, b.yaw) == pytest.approx((placed[sid].x, placed[sid].y, placed[sid].yaw))
+    root = build_scene(scene, fuse_static=True)
+    model = mujoco.MjModel.from_xml_string(root.to_xml_string(), root.get_assets())
+    data = mujoco.MjData(model)
+    mixed = draw_parked(stalls, ids, ids[0], ParkedFleet("mixed", 0.5), fleet_rng(5))
+    assert not any(_overlap(b.corners(), stall_inner(stalls[ids[0]])) for b in mixed.values())
+    ParkedCars(model).place(model, data, mixed)
+    for sid, b in mixed.items():  # and a mixed, jittered fleet stands in MuJoCo where its bodies say
+        hull = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"parkedcar_{sid}_hull")
+        assert _same_outline(_hull_outline(model, data, hull), b.corners())
+
+
 def test_cli_cruise_records_the_vehicles_in_run_json_and_tests_csv(painted_tiny, tmp_path):
     import csv
     import json

@@ -1,13 +1,13 @@
 """The parked cars of one test as real bodies: which class each is, and where it stands (docs/spec.md section 9).
 
 A scene holds one parked car per stall (``models/parked_car``: 4.3 x 1.9 m, centred in its stall, square to
-it). :class:`ParkedFleet` says what a test makes of them:
+it, heading as ``Stall.car_yaw`` says). :class:`ParkedFleet` says what a test makes of them:
 
 - ``uniform`` (the default): every parked car is that model, centred, square, exactly as the scene was built;
 - ``mixed``: each parked car's class is drawn from the fleet table (:data:`~garage_mj.scene.vehicles.FLEET`:
-  compact, sedan, SUV, van), seeded per test; a car that fits the stall with :data:`END_GAP` at each end is
+  compact, sedan, SUV, van), seeded per test; in a bay, a car that fits with :data:`END_GAP` at each end is
   centred along it, a longer one stands with its back :data:`END_GAP` from the back line and overhangs the
-  aisle-side end;
+  aisle-side end; in a parallel slot, a car is centred along it;
 - ``jitter`` [m] (0 to :data:`MAX_PARKED_JITTER`): each parked car is moved sideways by up to that much and
   turned by up to :data:`JITTER_YAW` x that much (radians), drawn per test. A car may stand over its lines,
   never into the target stall's paint (its inner edges, :func:`stall_inner`) nor within :data:`CAR_GAP` of another
@@ -145,13 +145,17 @@ def _overlap(a: np.ndarray, b: np.ndarray, gap: float = 0.0) -> bool:
 
 
 def _place(stall: Stall, name: str, size: tuple[float, float, float], lateral: float, dyaw: float) -> ParkedBody:
-    """A car of ``size`` in ``stall``: centred or at END_GAP from the back line, moved ``lateral`` to the stall's
-    left (looking out of it) and turned by ``dyaw``."""
+    """A car of ``size`` in ``stall``, heading as a parked car there does (``Stall.car_yaw``: a bay's axis, nose out;
+    a parallel slot's length): centred, or in a bay too short for it with :data:`END_GAP` at each end, its rear
+    END_GAP from the back line; then moved ``lateral`` to its left and turned by ``dyaw``."""
     length, width, height = size
-    along = 0.0 if length + 2 * END_GAP <= stall.length else -stall.length / 2 + END_GAP + length / 2
-    ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)
+    parallel = stall.angle == 0.0
+    room = stall.width if parallel else stall.length  # [m] the stall along the car's axis
+    along = 0.0 if parallel or length + 2 * END_GAP <= room else -room / 2 + END_GAP + length / 2
+    yaw = stall.car_yaw
+    ux, uy = math.cos(yaw), math.sin(yaw)
     return ParkedBody(stall.id, name, stall.x + along * ux - lateral * uy, stall.y + along * uy + lateral * ux,
-                      stall.yaw + dyaw, length, width, height)
+                      yaw + dyaw, length, width, height)
 
 
 def fleet_rng(seed: int) -> np.random.Generator:
