@@ -55,6 +55,14 @@ def garages():
 
 
 # -- the geometry record --------------------------------------------------------------------------------------------
+def test_the_default_slot_is_the_sedan_plus_a_metre():
+    from garage_mj.scene.vehicles import DEFAULT_VEHICLE, FLEET
+    from garage_mj.scene.world import DEFAULT_VEHICLE_LENGTH, SLOT_SPARE
+
+    assert DEFAULT_VEHICLE_LENGTH == FLEET[DEFAULT_VEHICLE].length
+    assert DEFAULT_WORLD.slot_length == pytest.approx(FLEET[DEFAULT_VEHICLE].length + SLOT_SPARE)
+
+
 def test_defaults_are_todays_garage():
     assert geometry(DEFAULT_WORLD) == {"stall_width": 2.5, "stall_depth": 4.5, "aisle_width": 9.0, "stall_angle": 90.0,
                                        "slot_length": 5.6}

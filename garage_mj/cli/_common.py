@@ -248,8 +248,8 @@ def add_geometry_args(p: argparse.ArgumentParser) -> None:
         "aisle_width": ("M", f"drivable width of a straight road block, 5.5 to 9.0 m (default "
                              f"{default['aisle_width']:g}: the whole block); the rest is kerb or stalls moved "
                              "toward the aisle"),
-        "stall_angle": ("DEG", "stall angle to the aisle: 90 (default, perpendicular); 60, 45 (angled) and 0 "
-                               "(parallel) are refused until they are built"),
+        "stall_angle": ("DEG", "stall angle to the aisle: 90 (default, perpendicular), 60 or 45 (angled: aisles "
+                               "one-way from the entrance), 0 (parallel slots; cruise tests only)"),
         "slot_length": ("M", f"parallel slot length, 4.5 to 8.0 m (default {default['slot_length']:g}: the "
                              "sedan's length + 1 m)"),
     }

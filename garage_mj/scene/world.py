@@ -25,7 +25,8 @@ STALL_ANGLES = (90.0, 60.0, 45.0, 0.0)
 LANE_NARROWING = 0.75
 #: [m] a parallel slot is the vehicle's length plus this (SPEC section 9).
 SLOT_SPARE = 1.0
-#: [m] bumper to bumper of the default vehicle (the sedan of models/car, section 6).
+#: [m] bumper to bumper of the default vehicle (the sedan of models/car, section 6; ``FLEET["sedan"].length`` in
+#: :mod:`garage_mj.scene.vehicles`, which reads the car's model: a test keeps the two equal).
 DEFAULT_VEHICLE_LENGTH = 4.6
 
 
