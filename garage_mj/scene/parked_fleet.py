@@ -192,14 +192,15 @@ def draw_parked(stalls: list[Stall], occupied, target: int | None, fleet: Parked
     placed: dict[int, ParkedBody] = {}
     for sid, (name, size, lateral, dyaw) in cars.items():
         me = square[sid]
+        if lateral == 0.0 and dyaw == 0.0:  # no jitter: nothing to check
+            placed[sid] = me
+            continue
         reach = math.hypot(me.length, me.width) / 2 + MAX_PARKED_JITTER + CAR_GAP  # [m] farther cars cannot touch it
         near = [b for b in (*placed.values(), *(square[o] for o in cars if o != sid and o not in placed))
                 if math.hypot(b.x - me.x, b.y - me.y) <= reach + math.hypot(b.length, b.width) / 2]
         others = [b.corners() for b in near]
         body = me
         for _ in range(JITTER_HALVINGS + 1):
-            if lateral == 0.0 and dyaw == 0.0:
-                break
             trial = _place(stalls[sid], name, size, lateral, dyaw)
             c = trial.corners()
             if not ((keep_out is not None and _overlap(c, keep_out)) or any(_overlap(c, o, CAR_GAP) for o in others)):
