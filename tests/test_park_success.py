@@ -212,8 +212,10 @@ def test_each_level_rule_at_its_boundary():
     assert level(_stall(width=wide), start=(0.0, FAR)) == "normal"
     assert level(_stall(width=wide), start=(0.0, FAR + 0.01)) == "complex"
     slot = LENGTH + PARALLEL_EXTREME
-    assert level(_stall(width=2.2, length=slot, angle=0.0)) == "normal"  # a parallel slot: the bay rule is not its
-    assert level(_stall(width=2.2, length=slot - 0.01, angle=0.0)) == "extreme"
+    # a parallel slot: its length along the aisle is Stall.width (Stall.length its depth); the bay rule is not its
+    assert level(_stall(width=slot, length=2.2, angle=0.0)) == "normal"
+    assert level(_stall(width=slot - 0.01, length=2.2, angle=0.0)) == "extreme"
+    assert level(_stall(width=slot - 0.01, length=9.0, angle=0.0)) == "extreme"  # a deep slot is no longer
     pillar = BodyOutlines.from_boxes([[-0.3, 2.0, 0.3, 2.6]], ["pillar"])
     beside = BodyOutlines.from_boxes([[1.0, 2.0, 1.6, 2.6]], ["pillar"])
     blocked = park_level(_stall(width=wide), LENGTH, WIDTH, 9.0, (0.0, 5.0), pillar)

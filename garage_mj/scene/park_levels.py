@@ -16,8 +16,9 @@ Precisely: *the start* is the car centre where the test starts (a park test's st
 an AVP test's, at the entrance); *from the stall* is to the stall's centre (``Stall.x``, ``Stall.y``); *the
 straight way is blocked* when the straight segment from the start to the stall's centre crosses or touches
 the floor outline of a solid body of the test (a wall, pillar, obstacle block or parked car as it stands; not
-a stall outline, not the car under test). A bay's width is ``Stall.width`` and a parallel slot's length
-``Stall.length`` (the painted outline's, both as ``WorldConfig`` lays them out).
+a stall outline, not the car under test). A bay's width is ``Stall.width``; so is a parallel slot's length, the
+slot lying along its aisle and opening onto it along its length (``Stall.length`` is then its depth, ``Stall.yaw``
+points at the aisle; :func:`~garage_mj.scene.stalls.row_shape`).
 
 Where ours differ from HOPE's (``map_level.py``): HOPE measures a slot by the free space between the obstacles
 nearest to the goal (left and right for a bay, front and back for a parallel slot), we by its paint; HOPE's
@@ -65,8 +66,8 @@ def park_level(stall: Stall, length: float, width: float, aisle: float, start, b
     far = math.hypot(float(start[0]) - stall.x, float(start[1]) - stall.y)  # [m]
     narrow = not parallel and stall.width < width + NARROW_BAY
     extreme, complex_ = [], []
-    if parallel and stall.length < length + PARALLEL_EXTREME:
-        extreme.append(f"parallel slot {stall.length:.2f} m < vehicle length + {PARALLEL_EXTREME:g} m "
+    if parallel and stall.width < length + PARALLEL_EXTREME:  # a parallel slot's length along its aisle: its width
+        extreme.append(f"parallel slot {stall.width:.2f} m < vehicle length + {PARALLEL_EXTREME:g} m "
                        f"({length + PARALLEL_EXTREME:.2f} m)")
     bay = f"bay {stall.width:.2f} m < vehicle width + {NARROW_BAY:g} m ({width + NARROW_BAY:.2f} m)"
     if narrow and far > VERY_FAR:
