@@ -272,3 +272,23 @@ def test_export_cli_writes_the_layout_files_geometry(painted_tiny, tmp_path):
     (folder,) = [p for p in (tmp_path / "packs").iterdir() if p.is_dir()]
     assert load_pack(folder).manifest["geometry"] == {"stall_width": 2.3, "stall_depth": 4.8, "aisle_width": 6.5,
                                                       "stall_angle": 90.0, "slot_length": 5.6}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("values", [{"stall_angle": 60}, {"stall_width": 2.3, "aisle_width": 6.5}],
+                         ids=["angle60", "bay2.3-aisle6.5"])
+def test_the_oracle_parks_in_the_geometry(painted_tiny, values):
+    """A park test on the geometry drives to success: the reference planner plans in it, the env judges it."""
+    from garage_mj.driving.drivers import load_driver
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+
+    env = GarageDriveEnv(garage=painted_tiny, action_type="continuous", task="park", world=values)
+    try:
+        obs, info = env.reset(seed=0)
+        driver = load_driver("oracle")
+        driver.reset(env.driver_info(0))
+        while "outcome" not in info:
+            obs, _, _, _, info = env.step(driver.act(obs))
+        assert info["outcome"] == "success", info["reason"]
+    finally:
+        env.close()
