@@ -118,6 +118,7 @@ BAD: list[tuple[str, list[str], str]] = [
     ("cruise", [*CRUISE, "--parked-fleet", "random"], "random"),
     ("cruise", [*CRUISE, "--parked-jitter", "0.8"], "0.8"),
     ("cruise", [*CRUISE, "--parked-jitter", "nan"], "nan"),
+    ("cruise", ["cruise", "--cases", GARAGE, "--vehicle", "van", "--out", OUT], "--vehicle"),
     ("cruise", [*CRUISE, "--test-timeout", "nan"], "nan"),
     ("cruise", [*CRUISE, "--workers", "-1"], "-1"),
     ("cruise", [*CRUISE, "--scenario", MISSING], MISSING),

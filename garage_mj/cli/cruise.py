@@ -368,6 +368,11 @@ def run(args: argparse.Namespace) -> int:
     from garage_mj.driving.cruise import check_stall, check_task
     from garage_mj.reporting.cruise import run_cruise  # matplotlib, for regression.png
 
+    if (args.scenario_file is not None or args.cases is not None) and vehicle_env(args):
+        given = "--scenario-file replays the vehicles its file records" if args.cases is None else \
+            "--cases tests the car and the obstacles each case file gives"
+        raise UserError(f"--vehicle, --parked-fleet and --parked-jitter choose the cars of a --packs or --library run; "
+                        f"{given}: leave them out")
     if args.scenario_file is not None:
         return replay(args)
     if args.cases is not None:
