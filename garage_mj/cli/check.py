@@ -43,7 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _garages(args: argparse.Namespace) -> list[tuple[str, object]]:
+def _garages(args: argparse.Namespace) -> list[tuple[str, object, object]]:
+    """(name, garage or scene, library id or None) of each garage to check: a pack's scene is built in its geometry."""
     if args.library is not None:
         if args.packs:
             raise UserError("give pack folders or --library, not both")
@@ -60,14 +61,16 @@ def _garages(args: argparse.Namespace) -> list[tuple[str, object]]:
     if any(v is not None for v in (args.map, args.difficulty, args.limit)):
         raise UserError("--map, --difficulty and --limit filter a --library, not pack folders")
     from garage_mj.export.pack import load_pack
+    from garage_mj.scene.garage_scene import GarageScene
 
-    return [(Path(p).name, load_pack(p).garage, None) for p in args.packs]
+    packs = [load_pack(p) for p in args.packs]
+    return [(Path(p.path).name, GarageScene(p.garage, p.world), None) for p in packs]  # in the geometry it was built in
 
 
 def run(args: argparse.Namespace) -> int:
     from garage_mj.scene.car import CarConfig, car_geometry
     from garage_mj.scene.drivable import drivability, drive_planner
-    from garage_mj.scene.garage_scene import GarageScene
+    from garage_mj.scene.garage_scene import as_scene
 
     if args.max_steer is not None and not 0.05 <= args.max_steer <= 1.2:
         raise UserError(f"--max-steer {args.max_steer} rad is not a plausible full-lock angle; use 0.05 to 1.2")
@@ -84,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'garage':32s} {'feasible':>12s} {'clearance':>10s} {'curvature/limit':>16s}  commonest reason")
     car_key = f"models/car max_steer={car.max_steer:g}"
     for name, garage, lib_id in found:
-        scene = GarageScene(garage)
+        scene = as_scene(garage)
         d = drivability(scene, car)
         reasons = sorted(d["infeasible_reasons"].items(), key=lambda kv: -kv[1])
         why = f"{reasons[0][0]} ({reasons[0][1]})" if reasons else "-"
