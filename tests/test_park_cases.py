@@ -163,6 +163,7 @@ def test_a_hand_made_tpcap_parallel_slot_is_parked_by_the_oracle(slot_case, tmp_
     assert main(["cruise", "--cases", str(slot_case), "--driver", "oracle", "--out", str(out), "--quiet"]) == 0
     (row,) = _rows(out)
     assert row["garage"] == str(slot_case) and row["task"] == "park" and row["feasible"] == "1"
+    assert row["vehicle"] == "tpcap"
     assert row["outcome"] == "success", row["reason"]
     assert float(row["position_error_m"]) < 0.3 and float(row["heading_error_deg"]) < 10
     summary = json.loads((out / "summary.json").read_text())
@@ -195,7 +196,7 @@ def test_an_exported_park_problem_runs_end_to_end(painted_tiny, tmp_path):
     out = tmp_path / "run"
     assert main(["cruise", "--cases", str(problem), "--driver", "oracle", "--out", str(out), "--quiet"]) == 0
     (row,) = _rows(out)
-    assert row["garage"] == str(problem) and row["maneuver"] == "reverse"
+    assert row["garage"] == str(problem) and row["maneuver"] == "reverse" and row["vehicle"] == "sedan"
     assert row["outcome"] == "success", row["reason"]
 
 

@@ -218,9 +218,12 @@ def run_case(case: ParkCase, settings: CruiseSettings, plan: ParkPlan | None = N
     try:
         seed = cruise_seed(settings.seed, case.digest, 0)
         obs, info = env.reset(seed=seed)
-        return drive_test(env, obs, info, seed, settings, _CaseSource(case.source, case.digest), 0, start)
+        row = drive_test(env, obs, info, seed, settings, _CaseSource(case.source, case.digest), 0, start)
     finally:
         env.close()
+    if "vehicle" in row:  # the case's own, not a run setting's
+        row["vehicle"] = case.vehicle.name
+    return row
 
 
 def _task(job: tuple[ParkCase, CruiseSettings, ParkPlan]) -> dict[str, Any]:
@@ -232,7 +235,8 @@ def _lost(job: tuple[ParkCase, CruiseSettings, ParkPlan], why: LostJob) -> dict[
     kind = OutcomeKind.DRIVER_TIMEOUT if why.kind == "timeout" else OutcomeKind.DRIVER_CRASH
     return {**dict.fromkeys(TEST_COLUMNS, ""), "garage": case.source, "garage_hash": case.digest, "test": 0,
             "seed": cruise_seed(settings.seed, case.digest, 0), "driver": settings.driver, "outcome": kind.value,
-            "reason": f"driver {settings.driver}: {why.reason}", "wall_s": round(why.seconds, 3), "task": "park"}
+            "reason": f"driver {settings.driver}: {why.reason}", "wall_s": round(why.seconds, 3), "task": "park",
+            **({"vehicle": case.vehicle.name} if "vehicle" in TEST_COLUMNS else {})}
 
 
 @dataclass(frozen=True)
