@@ -365,7 +365,7 @@ def runner_failures(failures: dict[str, int]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.driving.cruise import check_stall, check_task
+    from garage_mj.driving.cruise import check_stall, check_task, run_world
     from garage_mj.reporting.cruise import run_cruise  # matplotlib, for regression.png
 
     if (args.scenario_file is not None or args.cases is not None) and vehicle_env(args):
@@ -391,7 +391,7 @@ def run(args: argparse.Namespace) -> int:
                                   test_timeout=args.test_timeout, task=args.task, maneuver=args.maneuver,
                                   stall=args.stall)
         check_task(settings)  # refused before the warning below, as run_cruise would
-        check_stall(srcs, settings.stall)
+        check_stall(srcs, settings.stall, run_world(settings))
         task_warning("cruise", args.driver, args.task)
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)

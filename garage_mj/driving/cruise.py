@@ -56,6 +56,7 @@ from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sources import MAX_TESTS, CruiseError, CruiseSettings, CruiseSource, cruise_seed
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.stalls import stall_layout
+from garage_mj.scene.world import DEFAULT_WORLD, WorldConfig, world_with
 
 GARAGES_FILE = "garages.json"  # the run's garages (GarageSet.to_json), for reading its tests back later
 
@@ -202,7 +203,7 @@ def run_cruise(
         raise CruiseError("the same garage is listed twice; give each garage once")
     settings = settings.resolved(choice.action_type)
     check_task(settings)  # a driver made for other tasks, or a stall a garage lacks, is refused before any write
-    check_stall(srcs, settings.stall)
+    check_stall(srcs, settings.stall, run_world(settings))
     check_driver(settings)  # a driver that cannot be built stops the run before anything is written
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise", remove=True):  # a second run into `out` is refused, naming this one
@@ -224,12 +225,17 @@ def check_task(settings: CruiseSettings) -> None:
                       f"{tasks!r}); give {fix}, or a --driver made for {settings.task} tests")
 
 
-def check_stall(sources: Sequence[CruiseSource], stall: int | None) -> None:
-    """Refuse a ``stall`` id that a garage of ``sources`` lacks (a :class:`CruiseError` line naming the garage and the
-    ids every garage has), before anything is written or any test runs."""
+def run_world(settings: CruiseSettings) -> WorldConfig:
+    """The world a run's garages are built in: its park geometry (``settings.env["world"]``; none: the defaults)."""
+    return world_with((settings.env or {}).get("world"))
+
+
+def check_stall(sources: Sequence[CruiseSource], stall: int | None, world: WorldConfig | None = None) -> None:
+    """Refuse a ``stall`` id that a garage of ``sources`` lacks in ``world`` (a :class:`CruiseError` line naming the
+    garage and the ids every garage has), before anything is written or any test runs."""
     if stall is None:
         return
-    counts = [(s, len(stall_layout(s.garage).stalls)) for s in sources]
+    counts = [(s, len(stall_layout(s.garage, world or DEFAULT_WORLD).stalls)) for s in sources]
     lacking = [(s, n) for s, n in counts if not 0 <= stall < n]
     if not lacking:
         return
@@ -242,11 +248,14 @@ def check_stall(sources: Sequence[CruiseSource], stall: int | None) -> None:
                       f"give {fix}, or leave --stall out to draw one per test")
 
 
-def _with_packs(srcs: Sequence[CruiseSource], out: Path) -> list[CruiseSource]:
-    """Every source with an asset pack: those without one get it in ``out/packs``."""
+def _with_packs(srcs: Sequence[CruiseSource], out: Path, settings: CruiseSettings) -> list[CruiseSource]:
+    """Every source with an asset pack: those without one get it in ``out/packs``, built in the run's park geometry
+    (``settings.env["world"]``, docs/spec.md section 9)."""
     from garage_mj.export.pack import export_pack
 
-    return [s if s.pack else dataclasses.replace(s, pack=str(export_pack(s.garage, out / "packs").resolve()))
+    world = run_world(settings)
+    return [s if s.pack else dataclasses.replace(s, pack=str(export_pack(s.garage, out / "packs", world=world)
+                                                                .resolve()))
             for s in srcs]
 
 
@@ -282,7 +291,7 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: C
     done = {(r["garage_hash"], int(r["test"])) for r in rows}
     xosc_dir, exported = None, None
     if xosc:
-        srcs = _with_packs(srcs, out)
+        srcs = _with_packs(srcs, out, settings)
         xosc_dir = str(out / "xosc")
         have = {p.name for p in (out / "xosc").glob("*.xosc")} if (out / "xosc").is_dir() else set()
         exported = {(s.hash, i) for s in srcs for i in range(tests) if xosc_name(s, i) in have}
