@@ -74,7 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --library: N garages stratified by difficulty (seeded by --seed)")
     p.add_argument("--tests", type=int_in(1, MAX_TESTS), default=50,
                    help=f"tests per garage, 1 to {MAX_TESTS:,} (default 50)")
-    p.add_argument("--driver", help="built-in driver (oracle, waypoint, vision; learned: the shipped deep-RL "
+    p.add_argument("--driver", help=f"built-in driver ({built_in_drivers()}; learned: the shipped deep-RL "
                                     "model), learned:PATH (a model zip of garage-mj train-driver), module:Class (a module "
                                     "on the Python path or in the current folder) or path/to/file.py:Class (default vision; with --scenario-file: the one the file records)")
     p.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=1,
@@ -124,6 +124,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_vehicle_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=user_errors(run))
+
+
+def built_in_drivers() -> str:
+    """The hand-written built-in drivers as ``--driver`` help names them (the ``DRIVERS`` table), one not made for
+    cruise tests with the tasks it is: ``oracle, waypoint, vision, park_assist (park and avp tests only)``."""
+    from garage_mj.driving.drivers import DRIVERS, tasks_of
+
+    def named(name: str) -> str:
+        tasks = tasks_of(name)
+        return name if "cruise" in tasks else f"{name} ({' and '.join(tasks)} tests only)"
+
+    return ", ".join(map(named, DRIVERS))
 
 
 def add_vehicle_args(p: argparse.ArgumentParser) -> None:

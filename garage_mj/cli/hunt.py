@@ -11,6 +11,7 @@ from garage_mj.cli.cruise import (
     MAX_WORKERS,
     action_warnings,
     add_task_args,
+    built_in_drivers,
     runner_failures,
     scenario,
     task_warning,
@@ -34,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--library", type=Path, metavar="FILE", help="start from garages drawn from this library")
     p.add_argument("--library-map", metavar="NAME", help="with --library: only garages of this map")
     p.add_argument("--driver", default="vision",
-                   help="built-in driver (oracle, waypoint, vision; learned: the shipped deep-RL model), "
+                   help=f"built-in driver ({built_in_drivers()}; learned: the shipped deep-RL model), "
                         "learned:PATH (a model zip of garage-mj train-driver), module:Class (a module on the Python path or "
                         "in the current folder) or path/to/file.py:Class (default vision)")
     p.add_argument("--budget", type=int_in(1, MAX_BUDGET), default=1000,

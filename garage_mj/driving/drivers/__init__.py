@@ -73,6 +73,7 @@ __all__ = [
     "learned_model",
     "load_driver",
     "resolve_driver",
+    "tasks_of",
 ]
 
 #: The action types a driver can be made for: ``[throttle, steer]`` in [-1, 1], or the paper's 4 actions.
@@ -179,6 +180,17 @@ def load_driver(spec: str, **kwargs: Any) -> Driver:
         return cls(**kwargs)
     except TypeError as exc:
         raise DriverError(f"driver {spec!r}: cannot construct {cls.__name__} ({exc})") from None
+
+
+#: The tasks of a driver class that does not declare ``tasks``: a cruise driver (docs/own-driver.md).
+UNDECLARED_TASKS = ("cruise",)
+
+
+def tasks_of(spec: str) -> tuple[str, ...]:
+    """The tasks driver ``spec`` is made for: its class's ``tasks`` attribute (a string names one), ``("cruise",)``
+    when it has none."""
+    declared = getattr(resolve_driver(spec), "tasks", UNDECLARED_TASKS)
+    return (declared,) if isinstance(declared, str) else tuple(map(str, declared))
 
 
 class ActionTypeWarning(UserWarning):
