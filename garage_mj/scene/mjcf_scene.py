@@ -294,6 +294,7 @@ class ParkedCars:
         self.bodies = parked_car_bodies(model)  # {} when fused: nothing can lie below the floor then
         self._part = [_car_geom_part(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g))[1] for g in ids]
         self._compiled: tuple[np.ndarray, ...] | None = None  # the parked geoms as compiled, once place() moved any
+        self._trees: list[_Tree] | None = None  # the bounding-volume trees holding them, once place() moved any
 
     def apply(self, model: mujoco.MjModel, data: mujoco.MjData | None, occupied: Iterable[int]) -> None:
         """:func:`set_parked` on ``model``, the compiled scene this was made from."""
@@ -344,8 +345,10 @@ class ParkedCars:
         ids = self._ids
         model.geom_pos[ids], model.geom_quat[ids], model.geom_size[ids] = pos, quat, size
         model.geom_rbound[ids], model.geom_aabb[ids], model.geom_sameframe[ids] = rbound, aabb, same
-        for b in np.unique(model.geom_bodyid[ids]):
-            _refresh_bvh(model, int(b), set(ids.tolist()))
+        if self._trees is None:
+            self._trees = [_Tree(model, int(b), ids) for b in np.unique(model.geom_bodyid[ids])]
+        for tree in self._trees:
+            tree.refresh(model)
         if data is not None:
             mujoco.mj_forward(model, data)
 
@@ -365,37 +368,51 @@ def _in_body_frame(model: mujoco.MjModel, body: int, pos: np.ndarray, quat: np.n
     return local, out
 
 
-def _refresh_bvh(model: mujoco.MjModel, body: int, geoms: set[int]) -> None:
-    """Recompute ``body``'s bounding-volume tree over its geoms ``geoms`` (moved): their leaves from their box, then
-    every inner node as the union of its children (child indices count from the body's first node). The tree lies
-    in the body's inertial frame, as MuJoCo keeps it."""
-    adr, num = int(model.body_bvhadr[body]), int(model.body_bvhnum[body])
-    if adr < 0 or num <= 0:
-        return
-    nodeid, child, box = model.bvh_nodeid[adr:adr + num], model.bvh_child[adr:adr + num], model.bvh_aabb[adr:adr + num]
-    rot, inertial = np.empty(9), np.empty(9)
-    mujoco.mju_quat2Mat(inertial, model.body_iquat[body])
-    ri = inertial.reshape(3, 3)
-    order, stack = [], [0]  # the nodes from the root (the body's first node), each parent before its children
-    while stack:
-        k = stack.pop()
-        order.append(k)
-        stack.extend(int(j) for j in child[k] if j >= 0)
-    for k in reversed(order):  # children before their parent
-        g = int(nodeid[k])
-        if g >= 0:
-            if g in geoms:
-                mujoco.mju_quat2Mat(rot, model.geom_quat[g])
-                r = ri.T @ rot.reshape(3, 3)
-                centre = ri.T @ (model.geom_pos[g] - model.body_ipos[body]) + r @ model.geom_aabb[g, :3]
-                box[k] = (*centre, *(np.abs(r) @ model.geom_aabb[g, 3:]))
-            continue
-        kids = [int(j) for j in child[k] if j >= 0]
-        if not kids:
-            continue
-        lo = np.min([box[j, :3] - box[j, 3:] for j in kids], axis=0)
-        hi = np.max([box[j, :3] + box[j, 3:] for j in kids], axis=0)
-        box[k] = (*((lo + hi) / 2), *((hi - lo) / 2))
+def _quat_mats(quat: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotation matrices of unit quaternions (N, 4) ``(w, x, y, z)``, as ``mju_quat2Mat`` makes them."""
+    w, x, y, z = quat.T
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)], axis=1)
+
+
+class _Tree:
+    """One static body's bounding-volume tree, as :meth:`ParkedCars.place` rewrites it: the leaves of the geoms
+    ``geoms`` from their boxes, then every inner node, deepest first, as the union of its children. MuJoCo keeps the
+    tree in the body's inertial frame; a node's child indices count from the body's first node."""
+
+    def __init__(self, model: mujoco.MjModel, body: int, geoms: np.ndarray) -> None:
+        self.adr, self.num = int(model.body_bvhadr[body]), int(model.body_bvhnum[body])
+        nodeid, child = model.bvh_nodeid[self.adr:self.adr + self.num], model.bvh_child[self.adr:self.adr + self.num]
+        depth = np.full(self.num, -1)
+        stack = [(0, 0)] if self.num > 0 else []
+        while stack:
+            k, d = stack.pop()
+            depth[k] = d
+            stack.extend((int(j), d + 1) for j in child[k] if j >= 0)
+        inner = np.flatnonzero((nodeid < 0) & (child >= 0).any(axis=1) & (depth >= 0))
+        self.levels = []  # (nodes, first child, second child) per depth, deepest first
+        for d in sorted(set(depth[inner].tolist()), reverse=True):
+            nodes = inner[depth[inner] == d]
+            c = child[nodes]
+            self.levels.append((nodes, np.where(c[:, 0] >= 0, c[:, 0], c[:, 1]), np.where(c[:, 1] >= 0, c[:, 1], c[:, 0])))
+        leaf = np.isin(nodeid, geoms) & (depth >= 0)
+        self.leaves, self.leaf_geoms = np.flatnonzero(leaf), nodeid[leaf].astype(int)
+        self.inertial = _quat_mats(model.body_iquat[body][None])[0]  # body frame <- inertial frame
+        self.ipos = model.body_ipos[body].copy()
+
+    def refresh(self, model: mujoco.MjModel) -> None:
+        if not self.num:
+            return
+        box = model.bvh_aabb[self.adr:self.adr + self.num]  # a view: written through to the model
+        g = self.leaf_geoms
+        rot = np.einsum("ji,njk->nik", self.inertial, _quat_mats(model.geom_quat[g]))  # geom -> inertial frame
+        centre = (model.geom_pos[g] - self.ipos) @ self.inertial + np.einsum("nij,nj->ni", rot, model.geom_aabb[g, :3])
+        box[self.leaves] = np.hstack([centre, np.einsum("nij,nj->ni", np.abs(rot), model.geom_aabb[g, 3:])])
+        for nodes, c0, c1 in self.levels:
+            lo = np.minimum(box[c0, :3] - box[c0, 3:], box[c1, :3] - box[c1, 3:])
+            hi = np.maximum(box[c0, :3] + box[c0, 3:], box[c1, :3] + box[c1, 3:])
+            box[nodes] = np.hstack([(lo + hi) / 2, (hi - lo) / 2])
 
 
 def set_parked(model: mujoco.MjModel, data: mujoco.MjData | None, occupied: Iterable[int]) -> None:

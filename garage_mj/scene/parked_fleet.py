@@ -133,14 +133,19 @@ def stall_inner(stall: Stall, marking: float = DEFAULT_WORLD.marking_width) -> n
 
 def _overlap(a: np.ndarray, b: np.ndarray, gap: float = 0.0) -> bool:
     """Whether convex polygons ``a`` and ``b`` (K, 2) come closer than ``gap`` along any of their edges' normals
-    (separating axes; with a gap, the polygons grown by it along those axes)."""
-    for poly in (a, b):
-        e = np.roll(poly, -1, axis=0) - poly
-        n = np.column_stack([-e[:, 1], e[:, 0]])
-        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-        pa, pb = a @ n.T, b @ n.T
-        if ((pa.max(axis=0) + gap <= pb.min(axis=0)) | (pb.max(axis=0) + gap <= pa.min(axis=0))).any():
-            return False
+    (separating axes; with a gap, the polygons grown by it along those axes). Plain floats: a handful of corners."""
+    pa, pb = a.tolist(), b.tolist()
+    for poly in (pa, pb):
+        for (x0, y0), (x1, y1) in zip(poly, poly[1:] + poly[:1], strict=True):
+            nx, ny = y0 - y1, x1 - x0
+            norm = math.hypot(nx, ny)
+            if norm < 1e-12:
+                continue
+            nx, ny = nx / norm, ny / norm
+            da = [x * nx + y * ny for x, y in pa]
+            db = [x * nx + y * ny for x, y in pb]
+            if max(da) + gap <= min(db) or max(db) + gap <= min(da):
+                return False
     return True
 
 
