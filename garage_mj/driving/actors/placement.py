@@ -191,7 +191,7 @@ class _Placer:
         corr = self.corr
         out = []
         for st in self.planner.scene.stalls.stalls:
-            if st.id in self.taken or st.obstructed:
+            if st.id in self.taken or st.obstructed or st.angle == 0.0:  # a parallel slot's car leaves along the aisle
                 continue
             e = np.array(st.entry)
             d = np.linalg.norm(corr.centre - e, axis=1)
