@@ -147,3 +147,189 @@ def test_every_built_in_driver_is_named_in_the_guide_and_the_help():
         if "cruise" not in tasks_of(name):
             assert f"{name} ({' and '.join(tasks_of(name))} tests only)" in built_in_drivers()
     assert re.search(r"`tasks`", _section(OWN_DRIVER.read_text(), "Park and AVP drivers"))
+
+
+# -- a park run's outputs name its task and show what parking is judged by ----------------------------------------
+def test_a_park_run_reads_as_a_park_run(tiny_garage, tmp_path, capsys):
+    """The progress bar, the closing lines, the figure and the report say park, and nothing cites the paper's cruise
+    regression; --pictures all draws the successes too, listed apart in the report."""
+    from garage_mj.cli import main
+    from garage_mj.export.pack import export_pack
+    from garage_mj.reporting.cruise import cruise_figure
+    from garage_mj.reporting.park import PICTURES
+    from garage_mj.reporting.park_figure import PARK_FIGURE
+
+    export_pack(tiny_garage, tmp_path / "packs")
+    out = tmp_path / "park"
+    assert main(["cruise", "--packs", str(tmp_path / "packs"), "--tests", "2", "--driver", "oracle", "--task", "park",
+                 "--out", str(out), "--report", "--pictures", "all"]) == 0
+    printed = capsys.readouterr()
+    assert "park: 100%" in printed.err and "cruise:" not in printed.err  # the progress bar
+    lines = printed.out.splitlines()
+    assert lines[0].startswith("2 park tests (reverse) on 1 garages (2 new): ") and "success 100.0% of 2" in lines[0]
+    assert "Pearson" not in printed.out and "-0.638" not in printed.out and "paper" not in printed.out
+    assert f"park success by level and maneuver: {out / PARK_FIGURE}" in printed.out
+    assert (out / PARK_FIGURE).stat().st_size > 1000
+    assert not (out / "regression.png").exists() and not (out / "regression_route.png").exists()
+    assert cruise_figure(out) is None and not (out / "regression.png").exists()
+    html = (out / "report.html").read_text()
+    assert "<title>garage-mj park tests: oracle</title>" in html and "2 park tests (reverse) on 1 garage" in html
+    assert f'src="{PARK_FIGURE}"' in html and "regression" not in html and "-0.638" not in html
+    pictures = sorted((out / PICTURES).glob("*_success.png"))
+    assert len(pictures) == 2 and "id=parked-table" in html
+    assert all(f"{PICTURES}/{p.name}" in html for p in pictures)
+
+
+def test_the_park_figure_draws_each_level_and_maneuver_with_its_counts(tmp_path):
+    import json
+
+    from garage_mj.reporting.park_figure import PARK_FIGURE, group_label, park_figure
+
+    group = {"tests": 3, "infeasible": 0, "unproven": 1, "feasible": 2, "successes": 1, "success_pct": 50.0}
+    none = {"tests": 1, "infeasible": 0, "unproven": 1, "feasible": 0, "successes": 0, "success_pct": None}
+    assert group_label(group) == "1/2, 1 unproven" and group_label(none) == "0 feasible, 1 unproven"
+    stats = {"task": "avp", "driver": "mine", "tests": 4, "feasible": 2,
+             "by_level": {"complex": group, "extreme": none}, "by_maneuver": {"reverse": group, "forward": none}}
+    (tmp_path / "summary.json").write_text(json.dumps(stats))
+    assert park_figure(tmp_path) == tmp_path / PARK_FIGURE and (tmp_path / PARK_FIGURE).stat().st_size > 1000
+    (tmp_path / "summary.json").write_text(json.dumps({"driver": "mine", "tests": 4, "feasible": 2}))  # a cruise run's
+    assert park_figure(tmp_path / ".") is None
+
+
+def test_pictures_are_refused_for_a_cruise_run(tiny_garage, tmp_path, capsys):
+    from garage_mj.cli import main
+
+    assert main(["cruise", "--packs", str(tmp_path), "--tests", "1", "--pictures", "all", "--out",
+                 str(tmp_path / "out")]) != 0
+    err = capsys.readouterr().err
+    assert "--pictures draws park and AVP tests" in err and "--videos" in err and not (tmp_path / "out").exists()
+
+
+# -- the pictures ---------------------------------------------------------------------------------------------------
+class ShortParker:
+    """The oracle, braking for good once the car centre comes within 0.7 m of the stall pose: it stops short, over
+    the stall's aisle-side limit (an ``outside_stall``)."""
+
+    action_type = "continuous"
+    tasks = ("park", "avp")
+
+    def __init__(self) -> None:
+        from garage_mj.driving.drivers.oracle import OracleDriver
+
+        self.oracle = OracleDriver()
+
+    def reset(self, info) -> None:
+        self.oracle.reset(info)
+
+    def act(self, obs):
+        if float(np.hypot(*obs["stall"][:2])) < 0.7:
+            return np.array([-1.0, 0.0, float(obs["gear"][0])])
+        return self.oracle.act(obs)
+
+
+def _settings(driver: str, **kwargs):
+    from garage_mj.driving.sources import CruiseSettings
+
+    return CruiseSettings(driver, 0, "continuous", task="park", **kwargs)
+
+
+def test_an_outside_stall_picture_draws_the_line_its_reason_names(tiny_garage, tmp_path):
+    from garage_mj.driving.sources import CruiseSource
+    from garage_mj.reporting.park import drive_park_test, park_axes, park_picture
+    from garage_mj.scene.park_planning import STALL_LINES
+
+    settings = _settings("tests.test_park_outputs:ShortParker")
+    source = CruiseSource.from_garage(tiny_garage)
+    drive = drive_park_test(source, settings, 0)
+    assert "outside stall" in drive.title and drive.limit is not None
+    name, segment, label = drive.limit
+    assert name in STALL_LINES and label.startswith(f"{name}: ") and label.endswith(" m over") and segment.shape == (2, 2)
+    ax = park_axes(drive)
+    try:
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert label in labels and "parked car" in labels
+        drawn = [line for line in ax.get_lines() if line.get_label() == label]
+        assert len(drawn) == 1 and np.allclose(drawn[0].get_xydata(), segment)
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(ax.figure)
+    assert park_picture(source, tmp_path / "p.png", settings, 0).stat().st_size > 1000
+
+
+def test_a_collision_picture_marks_where_the_car_touched(tiny_garage):
+    """park_assist's third test of seed 0 (nose-in, drawn per test) hits the parked car beside the stall; the mark is
+    on the final footprint's edge, on the parked car's outline."""
+    from matplotlib.path import Path as Outline
+
+    from garage_mj.driving.sources import CruiseSource
+    from garage_mj.reporting.park import _body, drive_park_test, park_axes
+
+    drive = drive_park_test(CruiseSource.from_garage(tiny_garage), _settings("park_assist", maneuver="any"), 2)
+    assert "collision (parked_car)" in drive.title and drive.hit == "parked_car" and drive.contact is not None
+    body = _body(drive.car, drive.driven[-1])
+    assert Outline(body).contains_point(drive.contact, radius=0.1) or Outline(body).contains_point(
+        drive.contact, radius=-0.1)
+    cars = [o for o, c in zip(drive.obstacles.outlines, drive.obstacles.classes, strict=True) if c == "parked_car"]
+    assert min(np.abs(np.linalg.norm(o - drive.contact, axis=1)).min() for o in cars) < 2.5
+    assert any(Outline(o).contains_point(drive.contact, radius=0.1) or Outline(o).contains_point(drive.contact,
+                                                                                                   radius=-0.1)
+               for o in cars)
+    ax = park_axes(drive)
+    try:
+        assert "collision point (parked_car)" in [t.get_text() for t in ax.get_legend().get_texts()]
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(ax.figure)
+
+
+def test_obstacles_are_drawn_as_their_outlines_with_a_legend():
+    """A turned obstacle is its polygon, not its bounding box; every class drawn is in the legend once."""
+    import math
+
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Polygon
+
+    from garage_mj.reporting.park import OBSTACLE_STYLES, ParkDrive, park_axes
+    from garage_mj.scene.car import car_geometry
+    from garage_mj.scene.clearance import Obstacles
+    from garage_mj.scene.stalls import Stall
+
+    turned = np.array([[3.0 + math.cos(a), 3.0 + math.sin(a)] for a in np.arange(4) * math.pi / 2 + math.pi / 4])
+    square = np.array([[8.0, 0.0], [9.0, 0.0], [9.0, 1.0], [8.0, 1.0]])
+    obstacles = Obstacles.from_polygons([turned, square, square + 2.0], ["pillar", "wall", "wall"])
+    stall = Stall(id=0, block=(0, 0), x=5.0, y=5.0, yaw=0.0, side=1, road_cell=(0, 1), road_x=9.0, road_y=5.0,
+                  obstructed=False)
+    plan = {"poses": np.zeros((0, 3)), "directions": np.zeros(0), "stall_pose": (5.0, 5.0, 0.0)}
+    drive = ParkDrive("t", stall, obstacles, [np.array(stall.corners)], plan, np.array([[5.0, 2.0, 0.0]] * 2),
+                      car_geometry())
+    ax = park_axes(drive)
+    try:
+        patches = [p for p in ax.patches if isinstance(p, Polygon)]
+        assert any(np.allclose(p.get_xy()[:4], turned) for p in patches)
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert labels.count(OBSTACLE_STYLES["wall"][1]) == 1 and OBSTACLE_STYLES["pillar"][1] in labels
+    finally:
+        plt.close(ax.figure)
+
+
+@pytest.mark.parametrize("offset", [(0.3, 0.0), (-0.4, 0.0), (0.0, 0.3), (0.0, -0.3), (0.2, 0.25)])
+def test_the_stall_limits_are_the_lines_in_stall_measures(tiny_garage, offset):
+    """The footprint's signed distance inside the segment of the limit ``in_stall`` names is its margin."""
+    from garage_mj.scene.car import car_geometry
+    from garage_mj.scene.clearance import footprint
+    from garage_mj.scene.garage_scene import GarageScene
+    from garage_mj.scene.park_planning import centre_to_rear, in_stall, park_pose, stall_limits
+
+    car = car_geometry()
+    stall = GarageScene(tiny_garage).stalls.stalls[0]
+    x, y, yaw = park_pose(stall, car, "reverse")
+    pose = (x + offset[0], y + offset[1], yaw)
+    fit = in_stall(stall, car, pose, "reverse")
+    a, b = stall_limits(stall, car)[fit.line]
+    normal = np.array([a[1] - b[1], b[0] - a[0]]) / np.linalg.norm(b - a)
+    normal *= np.sign((np.array([stall.x, stall.y]) - a) @ normal)  # towards the stall's centre
+    rear = centre_to_rear(pose, car)
+    corners = footprint(car, rear[None, :2], np.array([yaw]))[0]
+    assert float(((corners - a) @ normal).min()) == pytest.approx(fit.margin, abs=1e-9)

@@ -46,6 +46,7 @@ from garage_mj.driving.sources import (
 )
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
+from garage_mj.reporting.report import PICTURE_CHOICES
 from garage_mj.scene.world import geometry
 
 
@@ -57,7 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "the paper's difficulty and the route difficulty under --route-model beside the outcomes; without it the "
                     "driver's shipped model: 'learned' for the shipped learned driver, else the default), "
                     "summary.json (Pearson r and regression on each), regression.png and regression_route.png "
-                    "into --out, with --videos N MP4s of N tests into OUT/videos/, and with --report "
+                    "into --out (a park or avp run: park_success.png, its success by level and maneuver), with --videos N MP4s of N tests into OUT/videos/, and with --report "
                     "OUT/report.html.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--packs", type=Path, metavar="DIR", help="a folder of asset packs (garage-mj export)")
@@ -104,8 +105,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report", action="store_true",
                    help="after the tests (and videos), OUT/report.html: the success and regression figures, the "
                         "failures' reasons per class and the first failures with their files (MP4 from --videos, "
-                        ".xosc from --xosc); a park or AVP run adds the park table and a top-down picture of each "
-                        "failure shown (OUT/pictures/)")
+                        ".xosc from --xosc); a park or AVP run's has the park table, its success by level and "
+                        "maneuver instead of the regressions, and a top-down picture of each failure shown "
+                        "(OUT/pictures/; --pictures all: of every driven test)")
+    p.add_argument("--pictures", choices=PICTURE_CHOICES, default=None,
+                   help="park and avp: top-down pictures into OUT/pictures/ (the stalls, obstacles, plan, driven path, "
+                        "final footprint, a collision's point, the line an outside_stall crosses): failures (the "
+                        "failures the report shows; the default with --report) or all (every driven test, successes "
+                        "too); drawn with --report or when given")
     act = p.add_argument_group("adverse events (garage_mj.driving.actors.scenario; drawn per test from its seed)")
     act.add_argument("--pedestrians", type=non_negative_int, metavar="N",
                      help="pedestrians per test: crossing, stepping out between parked cars, walking along")
@@ -347,6 +354,9 @@ def replay(args: argparse.Namespace) -> int:
         raise UserError("--videos records tests of a batch (--packs or --library), not --scenario-file replays")
     if args.report:
         raise UserError("--report reports a batch (--packs or --library), not --scenario-file replays")
+    if args.pictures is not None:
+        raise UserError("--pictures draws tests of a park or AVP batch (--packs or --library), not --scenario-file "
+                        "replays")
     if args.ids is not None:
         raise UserError("--ids picks garages of a --library, not --scenario-file replays")
     if args.action_type is not None:
@@ -376,6 +386,29 @@ def runner_failures(failures: dict[str, int]) -> str:
     return ", ".join(f"{failures[k.value]} {k.value}" for k in RUNNER_KINDS if failures.get(k.value))
 
 
+def closing_lines(s: dict, new: int, action_label: str, out: Path) -> list[str]:
+    """What a run prints when its tests are done, naming its task. A cruise run: its success and the Pearson r of
+    success on the paper's difficulty beside the paper's (docs/spec.md section 7). A park or AVP run is judged by
+    section 9 instead: its success, then by level, maneuver and stall angle, and its figure; no cruise regression."""
+    from garage_mj.reporting.park_figure import PARK_FIGURE
+    from garage_mj.reporting.report import task_noun
+
+    task = s.get("task", "cruise")
+    unproven = f", {s['unproven']} unproven ({s['unproven_pct']}%, excluded)" if "unproven" in s else ""
+    done = (f"{s['infeasible']} infeasible (excluded){unproven}, success {s['success_pct']}% of {s['feasible']} "
+            f"feasible ({action_label})")
+    if task == "cruise":
+        return [f"{s['tests']} tests on {s['garages']} garages ({new} new): {done}, Pearson r(difficulty, success) = "
+                f"{r_text(s['r'], s['n'])} (paper {s['paper_r']}), {route_text(s)}; results in {out}"]
+    lines = [f"{s['tests']} {task_noun(task)} tests ({s.get('maneuver', 'reverse')}) on {s['garages']} garages ({new} "
+             f"new): {done}; results in {out}"]
+    if "by_level" in s:  # its success by level, maneuver and stall angle (docs/spec.md section 9)
+        lines += [f"  {line}" for line in breakdown_lines({k: s[k] for k in BREAKDOWNS})]
+    if (out / PARK_FIGURE).is_file():
+        lines.append(f"  {task_noun(task)} success by level and maneuver: {out / PARK_FIGURE}")
+    return lines
+
+
 def run(args: argparse.Namespace) -> int:
     from garage_mj.driving.cruise import check_stall, check_task, run_world
     from garage_mj.reporting.cruise import run_cruise  # matplotlib, for regression.png
@@ -391,6 +424,9 @@ def run(args: argparse.Namespace) -> int:
         from garage_mj.cli.cruise_cases import run_cases_cli
 
         return run_cases_cli(args, action_warnings, task_warning)
+    if args.pictures is not None and args.task == "cruise":
+        raise UserError("--pictures draws park and AVP tests from above (--task park or avp); watch a cruise run's "
+                        "tests with --videos N")
     args.driver = args.driver or "vision"
     srcs = sources(args)
     env = geometry_env(args, srcs)
@@ -408,14 +444,8 @@ def run(args: argparse.Namespace) -> int:
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
                          route_model=args.route_model or True)
     s = res.stats
-    unproven = f", {s['unproven']} unproven ({s['unproven_pct']}%, excluded)" if "unproven" in s else ""
-    print(f"{s['tests']} tests on {s['garages']} garages ({res.tests_run} new): {s['infeasible']} infeasible "
-          f"(excluded){unproven}, success {s['success_pct']}% of {s['feasible']} feasible ({res.action_label}), "
-          f"Pearson r(difficulty, success) = {r_text(s['r'], s['n'])} (paper {s['paper_r']}), {route_text(s)}; "
-          f"results in {res.out_dir}")
-    if "by_level" in s:  # a park or AVP run: its success by level, maneuver and stall angle (docs/spec.md section 9)
-        for line in breakdown_lines({k: s[k] for k in BREAKDOWNS}):
-            print(f"  {line}")
+    for line in closing_lines(s, res.tests_run, res.action_label, res.out_dir):
+        print(line)
     lost = runner_failures(s["failures"])
     if lost:
         print(f"{lost}: the driver's process died or hung (reasons in {res.out_dir / 'tests.csv'})")
@@ -430,5 +460,11 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from garage_mj.reporting.run_report import REPORT_FAILURES, cruise_report
 
-        print(f"report: {cruise_report(res.out_dir, srcs, max(REPORT_FAILURES, args.videos or 0))}")
+        print(f"report: {cruise_report(res.out_dir, srcs, max(REPORT_FAILURES, args.videos or 0), args.pictures or 'failures')}")
+    elif args.pictures is not None and args.task != "cruise":  # pictures asked for without a report
+        from garage_mj.reporting.park import PICTURES, record_park_pictures
+        from garage_mj.reporting.run_report import REPORT_FAILURES
+
+        made = record_park_pictures(res.out_dir, res.rows, srcs, max(REPORT_FAILURES, args.videos or 0), args.pictures)
+        print(f"{len(made)} top-down picture(s) in {res.out_dir / PICTURES}")
     return 0

@@ -305,7 +305,7 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: C
         if not csv_path.is_file():  # repair_tests left an existing file with its header and whole lines
             write_csv(csv_path, TEST_COLUMNS, [])
         with csv_path.open("a", newline="") as f, tqdm(total=len(jobs), disable=not compute.progress,
-                                                       desc="cruise", unit="test") as bar:
+                                                       desc=settings.task, unit="test") as bar:
             writer = csv.DictWriter(f, fieldnames=TEST_COLUMNS)
             for row in _results(jobs, compute):
                 if row is None:  # an export-only job

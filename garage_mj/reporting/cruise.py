@@ -1,6 +1,7 @@
 """A cruise run as the command runs it: the tests (:func:`garage_mj.driving.cruise.run_cruise`), then
 what a person reads and watches of it: the regression figures (``regression.png`` on the paper's
-difficulty, ``regression_route.png`` on the route difficulty) and, if asked, MP4s of chosen tests
+difficulty, ``regression_route.png`` on the route difficulty; a park or AVP run has neither, but
+``park_success.png``, :mod:`garage_mj.reporting.park_figure`) and, if asked, MP4s of chosen tests
 (``videos/``).
 
 The driving stage writes the run's numbers (``tests.csv``, ``summary.csv``, ``summary.json`` with
@@ -42,12 +43,15 @@ def cruise_figure(out_dir: str | Path, metric: str = "paper") -> Path | None:
 
     ``metric="paper"``: the paper's difficulty, ``regression.png``; ``"route"``: the route difficulty,
     ``regression_route.png``, or None (nothing drawn) when ``summary.csv`` has no route difficulty (a run
-    of an older garage-mj, or one without a route model).
+    of an older garage-mj, or one without a route model). A park or AVP run gets neither (None): it is judged by
+    docs/spec.md section 9, not by the paper's cruise regression (:func:`run_figures` draws its figure).
     """
     if metric not in FIGURES:
         raise ValueError(f"metric must be one of {', '.join(FIGURES)}, got {metric!r}")
     name, column = FIGURES[metric]
     out = Path(out_dir)
+    if run_task(out) != "cruise":  # judged by docs/spec.md section 9, not the paper's regression: run_figures
+        return None
     with open(out / "summary.csv", newline="") as f:
         # garages with a feasible test (and a route difficulty: one with a feasible test has one when computed)
         rated = [r for r in csv.DictReader(f) if r["success_pct"] != "" and r.get(column, "") != ""]
@@ -57,6 +61,24 @@ def cruise_figure(out_dir: str | Path, metric: str = "paper") -> Path | None:
     what = "difficulty" if metric == "paper" else "route difficulty"
     return regression_plot([float(r[column]) for r in rated], [float(r["success_pct"]) for r in rated],
                            out / name, title=f"Cruise success vs. {what} ({driver})", metric=metric)
+
+
+def run_task(out_dir: str | Path) -> str:
+    """The task of the run in ``out_dir`` (``run.json``; a run from before tasks: ``cruise``)."""
+    return json.loads((Path(out_dir) / "run.json").read_text()).get("task", "cruise")
+
+
+def run_figures(out_dir: str | Path) -> list[Path]:
+    """The figures of the run in ``out_dir``, by its task: a cruise run's regressions (:func:`cruise_figure`, each
+    metric), a park or AVP run's success by level and maneuver (:func:`~garage_mj.reporting.park_figure.park_figure`:
+    ``park_success.png``; it is not judged by the paper's cruise regression). Returns the files drawn."""
+    from garage_mj.reporting.park_figure import park_figure
+
+    if run_task(out_dir) == "cruise":
+        drawn = [cruise_figure(out_dir, metric) for metric in FIGURES]
+    else:
+        drawn = [park_figure(out_dir)]
+    return [p for p in drawn if p is not None]
 
 
 def video_name(row: dict[str, Any]) -> str:
@@ -96,9 +118,9 @@ def record_cruise_videos(result: CruiseResult, sources: Sequence[CruiseSource | 
 
 
 def run_cruise(*args: Any, **kwargs: Any) -> CruiseResult:
-    """:func:`garage_mj.driving.cruise.run_cruise` (same arguments), then both :func:`cruise_figure` of its folder."""
+    """:func:`garage_mj.driving.cruise.run_cruise` (same arguments), then the figures of its folder (:func:`run_figures`:
+    a cruise run's regressions, a park or AVP run's success by level and maneuver)."""
     result = driving_cruise.run_cruise(*args, **kwargs)
-    for metric in FIGURES:
-        cruise_figure(result.out_dir, metric)
+    run_figures(result.out_dir)
     return result
 

@@ -2,8 +2,8 @@
 watches and reads of it.
 
 The driving stage writes the hunt's results (``hunt.sqlite``, ``failures.csv``, packs, ``.xosc``
-files); :func:`hunt` then draws ``OUT/cruise/regression.png``
-(:func:`garage_mj.reporting.cruise.cruise_figure`), records an MP4 of the first failing test of each
+files); :func:`hunt` then draws ``OUT/cruise/regression.png`` (a park or AVP hunt: ``park_success.png``;
+:func:`garage_mj.reporting.cruise.run_figures`), records an MP4 of the first failing test of each
 of the worst garages into ``OUT/videos/`` (:func:`record_videos`, the same seed as the hunt's test, named
 by garage, test and outcome as cruise names its videos)
 and writes ``OUT/report.html`` (:func:`write_hunt_report`): the ranking, then per worst garage its
@@ -23,18 +23,18 @@ from garage_mj.driving.hunt import HuntResult, Scored, add_file, read_settings
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
 from garage_mj.driving.sources import CruiseSettings
 from garage_mj.export.artefacts import PREVIEW
-from garage_mj.reporting.cruise import cruise_figure, video_name
+from garage_mj.reporting.cruise import run_figures, video_name
 from garage_mj.reporting.report import CSS
 from garage_mj.reporting.video import record_video
 
 
 def hunt(settings: CruiseSettings, out_dir: str | Path, *, videos: bool = True, **kwargs: Any) -> HuntResult:
-    """:func:`garage_mj.driving.hunt.hunt` (same arguments), then the cruise figure, with ``videos`` the MP4s
+    """:func:`garage_mj.driving.hunt.hunt` (same arguments), then the run's figures (``run_figures``), with ``videos`` the MP4s
     of the worst garages' first failing tests, and ``report.html`` (``files["report"]``, named in hunt.json)."""
     result = driving_hunt.hunt(settings, out_dir, **kwargs)
     out = result.out_dir
     with FolderLock(out, "garage-mj hunt", remove=True):
-        cruise_figure(out / "cruise")
+        run_figures(out / "cruise")  # a park hunt's: success by level and maneuver, not the cruise regression
         mp4s = record_videos(result) if videos else []
         report = write_hunt_report(out, result.table, result.worst, result.files["packs"], result.files["xosc"],
                                    mp4s, settings.driver)

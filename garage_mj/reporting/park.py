@@ -8,12 +8,15 @@ each failure shown.
   maneuver and stall angle (``summary.json``'s breakdowns, docs/spec.md section 9). A cruise run's
   ``summary.csv`` has none of those columns: no table.
 - :func:`park_picture`: one test driven again as the run drove it (its seed, settings and driver, as the
-  failure videos are), drawn from above with matplotlib: the stall outlines and obstacles around the test,
-  the reference plan of the reset info (``park_plan``: forward solid, reverse dashed), the driven path (the
-  car centre each control step; an AVP test's shown from near the stall), the stall pose and the final
-  footprint.
-  :func:`record_park_pictures` writes them into ``OUT/pictures/<garage>_<test>_<outcome>.png`` for the
-  first failures (the ones the report shows, as :func:`garage_mj.reporting.failures.run_failures` picks).
+  failure videos are), drawn from above with matplotlib: the stall outlines, and the walls, pillars, obstacle
+  blocks and parked cars around the test as their outlines (the parked cars where they stand, as the planner
+  and the simulation see them), with a legend; the reference plan of the reset info (``park_plan``: forward
+  solid, reverse dashed), the driven path (the car centre each control step; an AVP test's shown from near
+  the stall), the stall pose and the final footprint; a collision's contact point, and an ``outside_stall``
+  test's limit that its reason names (:func:`~garage_mj.scene.park_planning.stall_limits`).
+  :func:`record_park_pictures` writes them into ``OUT/pictures/<garage>_<test>_<outcome>.png``: for the
+  first failures (the ones the report shows, as :func:`garage_mj.reporting.failures.run_failures` picks), or
+  with ``which="all"`` for every driven test, successes too (``cruise --pictures``).
 """
 
 from __future__ import annotations
@@ -37,15 +40,16 @@ from garage_mj.driving.results import BREAKDOWNS, PARK_SUMMARY_COLUMNS, breakdow
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN  # noqa: E402
 from garage_mj.driving.sources import CruiseSettings, CruiseSource, cruise_seed  # noqa: E402
 from garage_mj.reporting.plots import DPI  # noqa: E402
-from garage_mj.reporting.report import ParkTable, fmt_percent  # noqa: E402
+from garage_mj.reporting.report import PICTURE_CHOICES, ParkTable, fmt_percent  # noqa: E402
 from garage_mj.scene.car import CarGeometry  # noqa: E402
-from garage_mj.scene.clearance import Obstacles, footprint, scene_obstacles  # noqa: E402
+from garage_mj.scene.clearance import Obstacles, footprint  # noqa: E402
 from garage_mj.scene.park_planning import (  # noqa: E402
     FAR_END_SLACK,
     HEADING_TOLERANCE,
     centre_to_rear,
-    park_obstacles,
+    stall_limits,
 )
+from garage_mj.scene.parked_fleet import body_obstacles  # noqa: E402
 
 PICTURES = "pictures"  # a run folder's top-down pictures of park and AVP failures
 #: The CARLA end-to-end parking benchmark's success box, for comparison (SPEC 8).
@@ -65,7 +69,10 @@ UNITS = {"_pct": "%", "_m": "[m]", "_deg": "[deg]", "_s": "[s]"}
 VIEW_MARGIN = 4.0  # [m] around the plan, the driven path and the stall
 NEAR_STALL = 15.0  # [m] driven poses farther from the stall centre widen the view only as the final pose
 PICTURE_SIZE = (6.4, 5.6)  # [in] at plots' DPI
-OBSTACLE_COLOURS = {"wall": "#6b7280", "pillar": "#374151", "obstacle": "#92400e", "parked_car": "#93c5fd"}
+#: Each obstacle class of a picture: its fill and its legend label (a class not here is drawn grey, named as it is).
+OBSTACLE_STYLES = {"parked_car": ("#93c5fd", "parked car"), "pillar": ("#9ca3af", "pillar"),
+                   "wall": ("#374151", "wall"), "obstacle": ("#92400e", "obstacle block")}
+CONTACT_SEARCH = 1.0  # [m] how far from the car a collision's contact point is looked for (it touched: ~0)
 
 
 def column_label(column: str) -> str:
@@ -114,11 +121,46 @@ class ParkDrive:
 
     title: str
     stall: Any  # the target Stall
-    obstacles: Obstacles  # walls, pillars, obstacle blocks and occupied stall outlines of the test
+    obstacles: Obstacles  # walls, pillars, obstacle blocks and the parked cars of the test as they stand
     stall_corners: list[np.ndarray]  # every stall's outline, (4, 2) each
     plan: dict[str, Any]  # the reset info's park_plan: poses (N, 3), directions (N,), stall_pose
     driven: np.ndarray  # (M, 3) the car centre at the reset and after every control step
     car: CarGeometry
+    contact: np.ndarray | None = None  # (2,) where a collision touched (x, y) [m]
+    hit: str = ""  # the class a collision hit
+    limit: tuple[str, np.ndarray, str] | None = None  # an outside_stall test's limit: name, (2, 2) segment, label
+
+
+def collision_point(env: Any, geom: str) -> np.ndarray | None:
+    """(x, y) [m] where the car touches geom ``geom`` at the end of a collision: the middle of the nearest points of
+    the car's collidable geoms and it (``mj_geomDistance``); None for a geom without a name, or none within
+    :data:`CONTACT_SEARCH`."""
+    import mujoco
+
+    model, data = env.model, env.data
+    other = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, geom)
+    if other < 0:
+        return None
+    best, point = CONTACT_SEARCH, None
+    fromto = np.zeros(6)
+    for g in np.flatnonzero(env.car.geom_mask):
+        if not (model.geom_contype[g] or model.geom_conaffinity[g]):
+            continue
+        dist = mujoco.mj_geomDistance(model, data, int(g), other, CONTACT_SEARCH, fromto)
+        if dist < best:
+            best, point = dist, (fromto[:2] + fromto[3:5]) / 2
+    return point
+
+
+def _limit(env: Any, outcome: str) -> tuple[str, np.ndarray, str] | None:
+    """The limit of the target stall an ``outside_stall`` test's reason names (the nearest at its final pose), with
+    how far over or inside it the footprint stands; None for another outcome."""
+    fit = getattr(env.monitor, "fit", None)
+    if outcome != "outside_stall" or fit is None or not fit.line:
+        return None
+    segment = stall_limits(env.stalls[env.target], env.car_geometry, env.scene.world.marking_width)[fit.line]
+    label = f"{fit.line}: {fit.overhang:.2f} m over" if not fit.inside else f"{fit.line}: {fit.margin:.2f} m inside"
+    return fit.line, segment, label
 
 
 def drive_park_test(source: CruiseSource, settings: CruiseSettings, test: int) -> ParkDrive:
@@ -143,11 +185,14 @@ def drive_park_test(source: CruiseSource, settings: CruiseSettings, test: int) -
                 poses.append(env.car.pose(env.data))
                 if term or trunc:
                     break
-        obstacles = park_obstacles(scene_obstacles(env.scene), env.target, env.occupied)
+        obstacles = body_obstacles(env.park_planner.obstacles(), env.target, env.parked_bodies)  # cars as they stand
         hit = f" ({info['hit']})" if info.get("hit") else ""
-        return ParkDrive(f"{source.name} test {test}: {info['outcome'].replace('_', ' ')}{hit}",
+        contact = collision_point(env, info["hit_geom"]) if info.get("outcome") == "collision" and info.get(
+            "hit_geom") else None
+        return ParkDrive(f"{source.name} {settings.task} test {test}: {info['outcome'].replace('_', ' ')}{hit}",
                          env.stalls[env.target], obstacles, [np.array(s.corners) for s in env.stalls], plan,
-                         np.array(poses, dtype=float), env.car_geometry)
+                         np.array(poses, dtype=float), env.car_geometry, contact, info.get("hit") or "",
+                         _limit(env, info["outcome"]))
     finally:
         env.close()
 
@@ -166,6 +211,8 @@ def _view(drive: ParkDrive) -> tuple[float, float, float, float]:
     pts = [near, np.array(drive.stall.corners), _body(drive.car, drive.driven[-1])]
     if len(drive.plan["poses"]):
         pts.append(np.asarray(drive.plan["poses"])[:, :2])
+    if drive.limit is not None:
+        pts.append(drive.limit[1])
     xy = np.vstack(pts)
     (x0, y0), (x1, y1) = xy.min(axis=0) - VIEW_MARGIN, xy.max(axis=0) + VIEW_MARGIN
     return float(x0), float(y0), float(x1), float(y1)
@@ -182,16 +229,29 @@ def _draw_plan(ax, plan: dict[str, Any]) -> None:
 
 def draw_park_picture(drive: ParkDrive, path: str | Path) -> Path:
     """The top-down PNG of ``drive`` at ``path`` (written atomically)."""
-    from matplotlib.patches import Polygon, Rectangle
+    fig = park_axes(drive).figure
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return atomic_write(Path(path), buf.getvalue())
+
+
+def park_axes(drive: ParkDrive):
+    """The matplotlib axes of ``drive``'s top-down picture, legend included (the caller closes its figure)."""
+    from matplotlib.patches import Polygon
 
     x0, y0, x1, y1 = _view(drive)
     fig, ax = plt.subplots(figsize=PICTURE_SIZE)
     for corners in drive.stall_corners:
         ax.add_patch(Polygon(corners, closed=True, fill=False, ec="#9ca3af", lw=0.8))
-    for (bx0, by0, bx1, by1), cls in zip(drive.obstacles.boxes, drive.obstacles.classes, strict=True):
+    shown = set()
+    for (bx0, by0, bx1, by1), outline, cls in zip(drive.obstacles.boxes, drive.obstacles.outlines,
+                                                  drive.obstacles.classes, strict=True):
         if bx1 >= x0 and bx0 <= x1 and by1 >= y0 and by0 <= y1:
-            ax.add_patch(Rectangle((bx0, by0), bx1 - bx0, by1 - by0, color=OBSTACLE_COLOURS.get(cls, "#9ca3af"),
-                                   alpha=0.8, lw=0))
+            colour, label = OBSTACLE_STYLES.get(cls, ("#9ca3af", cls.replace("_", " ")))
+            ax.add_patch(Polygon(outline, closed=True, fc=colour, ec="#1f2937", lw=0.5, alpha=0.85,
+                                 label=None if cls in shown else label))
+            shown.add(cls)
     ax.add_patch(Polygon(drive.stall.corners, closed=True, fill=False, ec="#16a34a", lw=2.0, label="target stall"))
     goal = drive.plan.get("stall_pose")
     if goal is not None and np.all(np.isfinite(goal)):
@@ -204,6 +264,12 @@ def draw_park_picture(drive: ParkDrive, path: str | Path) -> Path:
                          label="start"))
     ax.add_patch(Polygon(_body(drive.car, drive.driven[-1]), closed=True, fc="#dc2626", alpha=0.45, ec="#dc2626",
                          lw=1.2, label="final footprint"))
+    if drive.limit is not None:  # the line an outside_stall reason names
+        _, segment, label = drive.limit
+        ax.plot(segment[:, 0], segment[:, 1], color="#c026d3", lw=2.6, ls=(0, (4, 2)), label=label, zorder=5)
+    if drive.contact is not None:
+        ax.plot(*drive.contact, marker="X", ms=13, mfc="#facc15", mec="#111827", mew=1.2, ls="none", zorder=6,
+                label=f"collision point{f' ({drive.hit})' if drive.hit else ''}")
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
@@ -211,10 +277,7 @@ def draw_park_picture(drive: ParkDrive, path: str | Path) -> Path:
     ax.set_ylabel("y [m]")
     ax.set_title(drive.title, fontsize=9)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
-    plt.close(fig)
-    return atomic_write(Path(path), buf.getvalue())
+    return ax
 
 
 def picture_name(row: dict[str, Any]) -> str:
@@ -230,21 +293,30 @@ def park_picture(source: CruiseSource, path: str | Path, settings: CruiseSetting
 
 
 def record_park_pictures(run_dir: str | Path, rows: Sequence[dict[str, Any]], sources: Sequence[CruiseSource],
-                         n: int) -> dict[tuple[str, int], Path]:
-    """The top-down pictures of the first ``n`` failures of the park or AVP run in ``run_dir`` (garage and test
-    order; a test whose driver crashed or hung is left out) in ``OUT/pictures/``; one already there is kept.
-    Returns (garage hash, test) -> path; a cruise run gets none."""
+                         n: int, which: str = "failures") -> dict[tuple[str, int], Path]:
+    """The top-down pictures of the park or AVP run in ``run_dir`` in ``OUT/pictures/``: ``which="failures"`` (the
+    default) the first ``n`` failures (garage and test order, the ones the report shows), ``"all"`` every driven
+    test, successes too (:data:`PICTURE_CHOICES`); a test whose driver crashed or hung is left out, one already
+    drawn is kept. Returns (garage hash, test) -> path; a cruise run gets none."""
     from garage_mj.reporting.cruise import UNWATCHABLE
     from garage_mj.reporting.failures import first_failures
 
+    if which not in PICTURE_CHOICES:
+        raise ValueError(f"which must be one of {', '.join(PICTURE_CHOICES)}, got {which!r}")
     run = Path(run_dir)
     settings = CruiseSettings.from_stored(json.loads((run / "run.json").read_text()))
     if settings.task == "cruise":
         return {}
     by_hash = {s.hash: s for s in sources}
+    if which == "all":
+        order = {s.hash: k for k, s in enumerate(sources)}
+        chosen = sorted((r for r in rows if r["garage_hash"] in order),
+                        key=lambda r: (order[r["garage_hash"]], int(r["test"])))
+    else:
+        chosen = first_failures(rows, sources, n)
     made = {}
     with FolderLock(run, "garage-mj cruise", remove=True):
-        for row in first_failures(rows, sources, n):
+        for row in chosen:
             if row["outcome"] in UNWATCHABLE:
                 continue
             path = run / PICTURES / picture_name(row)

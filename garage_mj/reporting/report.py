@@ -49,6 +49,20 @@ def fmt_percent(value: float | None) -> str:
     return "n/a" if value is None or value != value else f"{float(value):.1f}%"
 
 
+#: How outputs name each task of the drive env (``cruise``, ``park``, ``avp``): a run's title, progress and closing lines.
+TASK_NOUNS = {"cruise": "cruise", "park": "park", "avp": "AVP"}
+
+
+#: The top-down pictures a park or AVP run may draw (``cruise --pictures``): the failures its report shows, or every
+#: driven test, successes too (:func:`garage_mj.reporting.park.record_park_pictures`).
+PICTURE_CHOICES = ("failures", "all")
+
+
+def task_noun(task: str) -> str:
+    """The task as outputs name it: ``cruise``, ``park``, ``AVP`` (``park tests``, ``AVP success``)."""
+    return TASK_NOUNS.get(task, task)
+
+
 def count_noun(n: int, singular: str, plural: str | None = None) -> str:
     """``1 pedestrian``, ``2 pedestrians``; ``plural`` for nouns that do not just add an s."""
     return f"{n} {singular if n == 1 else (plural or singular + 's')}"
@@ -122,6 +136,8 @@ class ReportData:
     cruise_rows: list[list[object]] = field(default_factory=list)
     cruise_note: str = ""  # under the table: what the columns mean
     park_tables: list[ParkTable] = field(default_factory=list)  # park and AVP runs only
+    park_figure_png: Path | None = None  # a park or AVP run's success by level and maneuver (park_success.png)
+    parked: list[FailureItem] = field(default_factory=list)  # successes with a top-down picture (cruise --pictures all)
     failures: list[RunFailures] = field(default_factory=list)
     regression_png: Path | None = None  # success rate vs the paper's difficulty
     regression_route_png: Path | None = None  # success rate vs the route difficulty
@@ -212,6 +228,18 @@ def _run_failures(run: RunFailures, out_dir: Path) -> str:
     return "\n".join(parts)
 
 
+def _parked(items: list[FailureItem], out_dir: Path) -> str:
+    """The successes of a park or AVP run with their top-down pictures (``cruise --pictures all``)."""
+    e = html.escape
+    parts = [f"<h2 id=parked>Successes</h2><div class=wide><table class=failures id=parked-table><caption>"
+             f"{count_noun(len(items), 'success')} with a top-down picture</caption><thead><tr><th>garage</th>"
+             "<th>test</th><th>reason</th><th>top-down</th></tr></thead><tbody>"]
+    parts += [f"<tr><td>{e(f.garage)}</td><td>{f.test}</td><td>{e(f.reason)}</td>"
+              f"<td>{_thumb(f.picture, f'{f.garage} test {f.test} top-down', out_dir)}</td></tr>" for f in items]
+    parts.append("</tbody></table></div>")
+    return "".join(parts)
+
+
 def render_html(data: ReportData, out_dir: Path) -> str:
     """The report page as a string; image and pack links are relative to ``out_dir``."""
     out_dir = Path(out_dir)
@@ -260,9 +288,14 @@ def render_html(data: ReportData, out_dir: Path) -> str:
     if data.park_tables:
         parts.append("<h2 id=park>Park tests</h2>")
         parts += [_park_table(t, k) for k, t in enumerate(data.park_tables, 1)]
+        if data.park_figure_png is not None:
+            parts.append("<div class=figs>" + _figure(data.park_figure_png, "Success of the feasible tests by level and "
+                                                      "by maneuver (each bar: successes/feasible)", out_dir) + "</div>")
     if data.failures:
         parts.append("<h2 id=failures>Failures</h2>")
         parts += [_run_failures(f, out_dir) for f in data.failures]
+    if data.parked:
+        parts.append(_parked(data.parked, out_dir))
     if data.regression_png is not None or data.regression_route_png is not None or data.regression_text:
         parts.append("<h2 id=regression>Success rate vs difficulty</h2>")
         if data.regression_text:
@@ -284,7 +317,8 @@ def write_report(data: ReportData, out_dir: Path, name: str = "report.html") -> 
     out_dir.mkdir(parents=True, exist_ok=True)
     missing = [
         p
-        for p in [data.convergence_png, data.heatmap_png, data.regression_png, data.regression_route_png]
+        for p in [data.convergence_png, data.heatmap_png, data.regression_png, data.regression_route_png,
+                  data.park_figure_png]
         + [g.preview_png for g in data.gallery]
         + [g.render_png for g in data.gallery]
         if p is not None and not Path(p).is_file()
@@ -292,7 +326,7 @@ def write_report(data: ReportData, out_dir: Path, name: str = "report.html") -> 
     if missing:
         raise FileNotFoundError(f"report images missing: {', '.join(str(m) for m in missing)}")
     links = [r.tests_csv for r in data.failures] + [p for r in data.failures for f in r.shown
-                                                    for p in (f.video, f.xosc, f.picture)]
+                                                    for p in (f.video, f.xosc, f.picture)] + [f.picture for f in data.parked]
     missing = [p for p in links if p is not None and not Path(p).is_file()]
     if missing:
         raise FileNotFoundError(f"report links missing: {', '.join(str(m) for m in missing)}")

@@ -194,6 +194,26 @@ def in_stall(stall: Stall, car: CarGeometry, pose, maneuver_name: str = "reverse
                    margin=margins[k], line=STALL_LINES[k])
 
 
+def stall_limits(stall: Stall, car: CarGeometry, marking: float = DEFAULT_WORLD.marking_width) -> dict[str, np.ndarray]:
+    """The four limits :func:`in_stall` holds the footprint within, as world segments: name (:data:`STALL_LINES`) ->
+    (2, 2) end points [m]. The side lines and the back line are the paint's inner edges (``marking / 2`` inside the
+    outline); the aisle-side limit lies :func:`far_end_allowance` beyond the open end. A side line runs from the back
+    of the outline to the aisle-side limit; the back line and the aisle-side limit span the stall's width. What a
+    picture draws for an ``outside_stall`` reason's line."""
+    ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)
+    half_w, half_l = stall.width / 2 - marking / 2, stall.length / 2 - marking / 2  # [m] the inner edges
+    far = stall.length / 2 + far_end_allowance(stall, car)
+    back = -stall.length / 2
+
+    def world(s: float, t: float) -> tuple[float, float]:  # s along the axis towards the aisle, t across to the left
+        return stall.x + s * ux - t * uy, stall.y + s * uy + t * ux
+
+    ends = ((back, half_w, far, half_w), (back, -half_w, far, -half_w), (-half_l, -stall.width / 2, -half_l,
+            stall.width / 2), (far, -stall.width / 2, far, stall.width / 2))
+    return {name: np.array([world(s0, t0), world(s1, t1)]) for name, (s0, t0, s1, t1) in zip(STALL_LINES, ends,
+                                                                                           strict=True)}
+
+
 # -- the obstacles of one park test --------------------------------------------------------------------
 def park_obstacles(obstacles: Obstacles, target: int, occupied: Iterable[int] | None = None) -> Obstacles:
     """The obstacles of a park test into stall ``target``: every non-stall obstacle, and the outlines of the
@@ -882,5 +902,5 @@ def park_planner(scene: GarageScene, car: CarGeometry | None = None, config: Par
 
 __all__ = ["BACK_GAP", "FAR_END_SLACK", "HEADING_TOLERANCE", "MANEUVERS", "SAMPLERS", "DEFAULT_PARK", "Maneuver",
            "STALL_LINES", "ParkConfig", "ParkFit", "ParkPlan", "ParkPlanner", "centre_to_rear", "far_end_allowance",
-           "in_stall", "maneuver",
+           "in_stall", "maneuver", "stall_limits",
            "park_obstacles", "park_planner", "park_pose", "rear_to_centre"]
