@@ -55,6 +55,8 @@ BAD: list[tuple[str, list[str], str]] = [
     ("export", ["export", "--library", LIB, "--out", OUT, "--park-problems", FILE], FILE),
     ("export", ["export", "--library", LIB, "--out", OUT, "--carla-package", FILE], FILE),
     ("export", ["export", "--library", TEXT, "--out", OUT], TEXT),
+    ("export", ["export", "--library", LIB, "--out", OUT, "--vehicle", "van"], "--park-problems"),
+    ("export", ["export", "--library", LIB, "--park-problems", OUT, "--vehicle", "truck"], "truck"),
     # park geometry (docs/spec.md section 9): a bay narrower than the car, an angle no block holds, a geometry the
     # garage's blocks cannot hold, bad layout files
     ("export", ["export", "--garage", GARAGE, "--out", OUT, "--stall-width", "1.8"], "stall_width (--stall-width)"),

@@ -353,3 +353,18 @@ def test_an_openscenario_test_holds_the_parked_cars_as_they_stand(painted_tiny, 
         block = text[text.index(f'name="parkedcar_{sid}"'):]
         assert f'length="{b.length}"' in block[:2000] or f'length="{b.length:g}"' in block[:2000]
     env.close()
+
+
+def test_cli_export_writes_park_problems_for_a_vehicle_class(painted_tiny, tmp_path):
+    import json
+
+    from garage_mj.cli import main
+
+    garage = tmp_path / "garage.json"
+    garage.write_text(painted_tiny.to_json())
+    out = tmp_path / "problems"
+    assert main(["export", "--garage", str(garage), "--park-problems", str(out), "--vehicle", "van", "--quiet"]) == 0
+    car = json.loads((out / "park_problems.json").read_text())["car"]
+    van = FLEET["van"]
+    assert (car["length"], car["width"], car["wheelbase"]) == pytest.approx((van.length, van.width, van.wheelbase))
+    assert car["min_turning_radius"] == pytest.approx(van.min_radius)

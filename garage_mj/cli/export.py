@@ -26,6 +26,7 @@ from garage_mj.cli._common import add_geometry_args, add_ids, geometry_world, re
 from garage_mj.export.artefacts import INDEX, contents, formats, left_out_here
 from garage_mj.generation.library import Library, LibraryError, garages_from_json
 from garage_mj.grid.garage import Garage
+from garage_mj.scene.vehicles import DEFAULT_VEHICLE, FLEET, vehicle_class
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -61,6 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also (or only) write every park test (each stall with a feasible cruise test, reverse-in "
                    "and nose-in) as a planning problem: start pose, stall pose and obstacle polygons, as JSON and "
                    "as a TPCAP benchmark case (CSV), one folder per garage, index DIR/park_problems.json")
+    p.add_argument("--vehicle", choices=tuple(FLEET), default=DEFAULT_VEHICLE,
+                   help=f"with --park-problems: the car the problems are for, a class of the fleet (default "
+                        f"{DEFAULT_VEHICLE}: models/car); its outline, axles and turning radius shape every problem")
     add_geometry_args(p)
     p.add_argument("--force", action="store_true", help="rebuild packs and CARLA maps that are already complete")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -96,6 +100,9 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None and args.carla_package is None and args.park_problems is None:
         raise UserError("give --out DIR (asset packs), --carla-package DIR (a CARLA import package), or both"
                         " (or --park-problems DIR)")
+    if args.vehicle != DEFAULT_VEHICLE and args.park_problems is None:
+        raise UserError(f"--vehicle {args.vehicle} chooses the car of --park-problems (packs hold no car); give "
+                        "--park-problems DIR or leave --vehicle out")
     if args.out is not None and args.carla_package is not None and \
             args.out.resolve() == args.carla_package.resolve():
         raise UserError(f"--out and --carla-package both name {args.out}; give the package a folder of its own")
@@ -170,6 +177,8 @@ def _export(args: argparse.Namespace, garages: list[Garage]) -> None:
         from garage_mj.export.park_problems import write_park_problems
         from garage_mj.scene.garage_scene import GarageScene
 
-        index = write_park_problems([GarageScene(g, args.world) for g in garages], args.park_problems, locked=True)
+        car = None if args.vehicle == DEFAULT_VEHICLE else vehicle_class(args.vehicle).geometry()
+        index = write_park_problems([GarageScene(g, args.world) for g in garages], args.park_problems, car,
+                                    locked=True)
         count = len(json.loads(index.read_text())["problems"])
         print(f"{count} park problem(s) of {len(garages)} garage(s) in {args.park_problems} (index: {index})")
