@@ -333,3 +333,12 @@ def test_the_stall_limits_are_the_lines_in_stall_measures(tiny_garage, offset):
     rear = centre_to_rear(pose, car)
     corners = footprint(car, rear[None, :2], np.array([yaw]))[0]
     assert float(((corners - a) @ normal).min()) == pytest.approx(fit.margin, abs=1e-9)
+
+
+def test_a_park_hunt_names_its_task_in_its_closing_line(tmp_path):
+    from garage_mj.cli.hunt import failure_summary
+    from garage_mj.driving.hunt import HuntResult
+
+    res = HuntResult(tmp_path, 2, 1, [], {}, action_label="x")
+    assert failure_summary(res, task="avp") == "2 AVP tests on 0 garages in 1 generation (x); 0 garages with a failure"
+    assert failure_summary(res).startswith("2 tests on 0 garages")  # a cruise hunt's, as it was

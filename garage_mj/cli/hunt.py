@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         task_warning("hunt", args.driver, args.task)
         res = hunt(settings, args.out, map=args.map if args.library is None else args.library_map,
                    library=args.library, config=cfg, compute=compute(args), videos=not args.no_videos)
-    print(failure_summary(res))
+    print(failure_summary(res, task=args.task))
     print(f"ranking: {res.files['failures']}; report: {res.files['report']}")
     return 0
 
@@ -104,10 +104,14 @@ def _n(count: int, noun: str) -> str:
     return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
-def failure_summary(res: HuntResult, show: int = 5) -> str:
-    """The closing lines: tests, garages, the action type, how many garages failed, and the worst of those."""
+def failure_summary(res: HuntResult, show: int = 5, task: str = "cruise") -> str:
+    """The closing lines: tests (a park or AVP hunt's named so: ``40 park tests``), garages, the action type, how
+    many garages failed, and the worst of those."""
+    from garage_mj.reporting.report import task_noun
+
     failing = [s for s in res.ranked if s.failures]  # ranked worst first
-    head = (f"{_n(res.tests, 'test')} on {_n(len(res.ranked), 'garage')} in {_n(res.generations, 'generation')} "
+    test = "test" if task == "cruise" else f"{task_noun(task)} test"
+    head = (f"{_n(res.tests, test)} on {_n(len(res.ranked), 'garage')} in {_n(res.generations, 'generation')} "
             f"({res.action_label}); {_n(len(failing), 'garage')} with a failure")
     if len(failing) > show:
         head += f", the {show} worst:"

@@ -267,7 +267,8 @@ def _hunt(settings: CruiseSettings, choice: ActionChoice, out: Path, start: list
         spent += cfg.tests * len(batch)
         bar.update(cfg.tests * len(batch))
 
-    bar = tqdm(total=cfg.budget, disable=not compute.progress, desc="hunt", unit="test")
+    bar = tqdm(total=cfg.budget, disable=not compute.progress, unit="test",
+               desc="hunt" if settings.task == "cruise" else f"hunt ({settings.task})")
     for s in start:
         scored[s.hash] = Scored(s)
     run([(scored[s.hash], 0) for s in start])
