@@ -46,7 +46,7 @@ from garage_mj.driving.sources import (
 )
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
-from garage_mj.reporting.report import PICTURE_CHOICES
+from garage_mj.reporting.report import PICTURE_CHOICES, task_noun
 from garage_mj.scene.world import geometry
 
 
@@ -390,8 +390,7 @@ def closing_lines(s: dict, new: int, action_label: str, out: Path) -> list[str]:
     """What a run prints when its tests are done, naming its task. A cruise run: its success and the Pearson r of
     success on the paper's difficulty beside the paper's (docs/spec.md section 7). A park or AVP run is judged by
     section 9 instead: its success, then by level, maneuver and stall angle, and its figure; no cruise regression."""
-    from garage_mj.reporting.park_figure import PARK_FIGURE
-    from garage_mj.reporting.report import task_noun
+    from garage_mj.reporting.park_figure import PARK_FIGURE  # matplotlib: deferred
 
     task = s.get("task", "cruise")
     unproven = f", {s['unproven']} unproven ({s['unproven_pct']}%, excluded)" if "unproven" in s else ""

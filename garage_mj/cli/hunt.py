@@ -19,6 +19,7 @@ from garage_mj.cli.cruise import (
 )
 from garage_mj.driving.hunt import MAX_BUDGET, MAX_POPULATION, HuntConfig, HuntResult
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, MAX_TEST_TIMEOUT, MAX_TESTS, CruiseSettings
+from garage_mj.reporting.report import task_noun
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -107,8 +108,6 @@ def _n(count: int, noun: str) -> str:
 def failure_summary(res: HuntResult, show: int = 5, task: str = "cruise") -> str:
     """The closing lines: tests (a park or AVP hunt's named so: ``40 park tests``), garages, the action type, how
     many garages failed, and the worst of those."""
-    from garage_mj.reporting.report import task_noun
-
     failing = [s for s in res.ranked if s.failures]  # ranked worst first
     test = "test" if task == "cruise" else f"{task_noun(task)} test"
     head = (f"{_n(res.tests, test)} on {_n(len(res.ranked), 'garage')} in {_n(res.generations, 'generation')} "
