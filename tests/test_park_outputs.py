@@ -166,7 +166,7 @@ def test_a_park_run_reads_as_a_park_run(tiny_garage, tmp_path, capsys):
     printed = capsys.readouterr()
     assert "park: 100%" in printed.err and "cruise:" not in printed.err  # the progress bar
     lines = printed.out.splitlines()
-    assert lines[0].startswith("2 park tests (reverse) on 1 garages (2 new): ") and "success 100.0% of 2" in lines[0]
+    assert lines[0].startswith("2 park tests (reverse) on 1 garage (2 new): ") and "success 100.0% of 2" in lines[0]
     assert "Pearson" not in printed.out and "-0.638" not in printed.out and "paper" not in printed.out
     assert f"park success by level and maneuver: {out / PARK_FIGURE}" in printed.out
     assert (out / PARK_FIGURE).stat().st_size > 1000

@@ -46,7 +46,7 @@ from garage_mj.driving.sources import (
 )
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
-from garage_mj.reporting.report import PICTURE_CHOICES, task_noun
+from garage_mj.reporting.report import PICTURE_CHOICES, count_noun, task_noun
 from garage_mj.scene.world import geometry
 
 
@@ -399,8 +399,8 @@ def closing_lines(s: dict, new: int, action_label: str, out: Path) -> list[str]:
     if task == "cruise":
         return [f"{s['tests']} tests on {s['garages']} garages ({new} new): {done}, Pearson r(difficulty, success) = "
                 f"{r_text(s['r'], s['n'])} (paper {s['paper_r']}), {route_text(s)}; results in {out}"]
-    lines = [f"{s['tests']} {task_noun(task)} tests ({s.get('maneuver', 'reverse')}) on {s['garages']} garages ({new} "
-             f"new): {done}; results in {out}"]
+    lines = [f"{count_noun(s['tests'], f'{task_noun(task)} test')} ({s.get('maneuver', 'reverse')}) on "
+             f"{count_noun(s['garages'], 'garage')} ({new} new): {done}; results in {out}"]
     if "by_level" in s:  # its success by level, maneuver and stall angle (docs/spec.md section 9)
         lines += [f"  {line}" for line in breakdown_lines({k: s[k] for k in BREAKDOWNS})]
     if (out / PARK_FIGURE).is_file():

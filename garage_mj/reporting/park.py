@@ -129,6 +129,7 @@ class ParkDrive:
     contact: np.ndarray | None = None  # (2,) where a collision touched (x, y) [m]
     hit: str = ""  # the class a collision hit
     limit: tuple[str, np.ndarray, str] | None = None  # an outside_stall test's limit: name, (2, 2) segment, label
+    outcome: str = ""  # the test's outcome (a success's final footprint is drawn green, a failure's red)
 
 
 def collision_point(env: Any, geom: str) -> np.ndarray | None:
@@ -192,7 +193,7 @@ def drive_park_test(source: CruiseSource, settings: CruiseSettings, test: int) -
         return ParkDrive(f"{source.name} {settings.task} test {test}: {info['outcome'].replace('_', ' ')}{hit}",
                          env.stalls[env.target], obstacles, [np.array(s.corners) for s in env.stalls], plan,
                          np.array(poses, dtype=float), env.car_geometry, contact, info.get("hit") or "",
-                         _limit(env, info["outcome"]))
+                         _limit(env, info["outcome"]), info["outcome"])
     finally:
         env.close()
 
@@ -262,8 +263,9 @@ def park_axes(drive: ParkDrive):
     ax.plot(drive.driven[:, 0], drive.driven[:, 1], color="#f97316", lw=1.6, label="driven")
     ax.add_patch(Polygon(_body(drive.car, drive.driven[0]), closed=True, fill=False, ec="#6b7280", lw=1.0,
                          label="start"))
-    ax.add_patch(Polygon(_body(drive.car, drive.driven[-1]), closed=True, fc="#dc2626", alpha=0.45, ec="#dc2626",
-                         lw=1.2, label="final footprint"))
+    final = "#16a34a" if drive.outcome == "success" else "#dc2626"
+    ax.add_patch(Polygon(_body(drive.car, drive.driven[-1]), closed=True, fc=final, alpha=0.45, ec=final, lw=1.2,
+                         label="final footprint" + (" (parked)" if drive.outcome == "success" else "")))
     if drive.limit is not None:  # the line an outside_stall reason names
         _, segment, label = drive.limit
         ax.plot(segment[:, 0], segment[:, 1], color="#c026d3", lw=2.6, ls=(0, (4, 2)), label=label, zorder=5)
