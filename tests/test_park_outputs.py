@@ -314,20 +314,24 @@ def test_obstacles_are_drawn_as_their_outlines_with_a_legend():
         plt.close(ax.figure)
 
 
+@pytest.mark.parametrize("angle", [90, 60])
 @pytest.mark.parametrize("offset", [(0.3, 0.0), (-0.4, 0.0), (0.0, 0.3), (0.0, -0.3), (0.2, 0.25)])
-def test_the_stall_limits_are_the_lines_in_stall_measures(tiny_garage, offset):
-    """The footprint's signed distance inside the segment of the limit ``in_stall`` names is its margin."""
+def test_the_stall_limits_are_the_lines_in_stall_measures(tiny_garage, offset, angle):
+    """The footprint's signed distance inside the segment of the limit ``in_stall`` names is its margin, in a
+    perpendicular and an angled stall."""
     from garage_mj.scene.car import car_geometry
     from garage_mj.scene.clearance import footprint
     from garage_mj.scene.garage_scene import GarageScene
     from garage_mj.scene.park_planning import centre_to_rear, in_stall, park_pose, stall_limits
+    from garage_mj.scene.world import world_with
 
     car = car_geometry()
-    stall = GarageScene(tiny_garage).stalls.stalls[0]
+    world = world_with({"stall_angle": angle})
+    stall = GarageScene(tiny_garage, world).stalls.stalls[0]
     x, y, yaw = park_pose(stall, car, "reverse")
     pose = (x + offset[0], y + offset[1], yaw)
-    fit = in_stall(stall, car, pose, "reverse")
-    a, b = stall_limits(stall, car)[fit.line]
+    fit = in_stall(stall, car, pose, "reverse", world.marking_width)
+    a, b = stall_limits(stall, car, world.marking_width)[fit.line]
     normal = np.array([a[1] - b[1], b[0] - a[0]]) / np.linalg.norm(b - a)
     normal *= np.sign((np.array([stall.x, stall.y]) - a) @ normal)  # towards the stall's centre
     rear = centre_to_rear(pose, car)
