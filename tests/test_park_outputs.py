@@ -172,6 +172,9 @@ def test_a_park_run_reads_as_a_park_run(tiny_garage, tmp_path, capsys):
     assert (out / PARK_FIGURE).stat().st_size > 1000
     assert not (out / "regression.png").exists() and not (out / "regression_route.png").exists()
     assert cruise_figure(out) is None and not (out / "regression.png").exists()
+    import json
+
+    assert "paper_r" not in json.loads((out / "summary.json").read_text())
     html = (out / "report.html").read_text()
     assert "<title>garage-mj park tests: oracle</title>" in html and "2 park tests (reverse) on 1 garage" in html
     assert f'src="{PARK_FIGURE}"' in html and "regression" not in html and "-0.638" not in html
