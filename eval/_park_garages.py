@@ -34,6 +34,7 @@ GEOMETRIES = {g.name: g for g in (
     Geometry("angled60", {"stall_angle": 60.0}),
     Geometry("angled45", {"stall_angle": 45.0}),
     Geometry("parallel", {"stall_angle": 0.0}),
+    Geometry("parallel_mixed", {"stall_angle": 0.0}, "mixed", 0.15),
 )}
 
 

@@ -249,7 +249,7 @@ def add_geometry_args(p: argparse.ArgumentParser) -> None:
                              f"{default['aisle_width']:g}: the whole block); the rest is kerb or stalls moved "
                              "toward the aisle"),
         "stall_angle": ("DEG", "stall angle to the aisle: 90 (default, perpendicular), 60 or 45 (angled: aisles "
-                               "one-way from the entrance), 0 (parallel slots; cruise tests only)"),
+                               "one-way from the entrance), 0 (parallel slots along the aisle)"),
         "slot_length": ("M", f"parallel slot length, 4.5 to 8.0 m (default {default['slot_length']:g}: the "
                              "sedan's length + 1 m)"),
     }

@@ -314,12 +314,6 @@ def geometry_env(args: argparse.Namespace, srcs: list) -> dict:
                             f"{pack_world.aisle_width:g} m aisles); leave the geometry options out to cruise in its "
                             "own, or export the packs in the geometry asked for")
         world = pack_world
-    if world.stall_angle == 0.0 and args.task != "cruise":
-        raise UserError(f"--task {args.task}: the park planner parks along a stall's axis and has no parallel "
-                        "manoeuvre yet; run parallel slots (--stall-angle 0) with --task cruise")
-    if world.stall_angle == 0.0 and (args.parked_fleet != "uniform" or args.parked_jitter > 0):
-        raise UserError("--parked-fleet mixed and --parked-jitter stand cars along a stall's axis, across a parallel "
-                        "slot; leave them out with --stall-angle 0")
     check_geometry([src.garage for src in srcs], world)
     return {} if world.is_default_geometry else {"world": geometry(world)}
 

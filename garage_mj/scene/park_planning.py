@@ -8,7 +8,10 @@ Reeds-Shepp curve describes for a bicycle-model car, and the point ``clearance.f
 
 **The stall pose** (:func:`park_pose`): the car centred between the stall's side lines, its axis along the
 stall, its rear (``reverse``: reverse-in) or nose (``forward``: nose-in) :data:`BACK_GAP` from the stall's
-back line. :func:`in_stall` is the success geometry and the parking metrics.
+back line. A parallel slot (``Stall.angle`` 0): the car along the slot heading ``Stall.car_yaw`` (its lane's traffic
+direction, its right side to the kerb), centred along the slot, its right side :data:`BACK_GAP` from the kerb-side
+line; the maneuver says how the plan enters (:data:`MANEUVERS`). :func:`in_stall` is the success geometry and the
+parking metrics.
 
 **The reference planner** (:class:`ParkPlanner`) plans *from the stall outward* (leaving a stall is the
 narrow passage) in OMPL's ``ReedsSheppStateSpace`` with the car's turning radius (less a curvature
@@ -17,14 +20,18 @@ obstacle (walls, obstacle blocks, pillars and the outlines of the occupied stall
 wholly inside their outlines; the target stall is empty) and its rear axle lies in the planning area
 (the box around the start, the stall pose and the straight exit, grown by ``region``). First the
 analytic path, as Hybrid A* does: straight out of the stall along its axis by one of a few distances,
-then one Reeds-Shepp curve to the start pose, the whole curve checked; the shortest valid one wins.
+then one Reeds-Shepp curve to the start pose, the whole curve checked; the shortest valid one wins. A parallel slot,
+which the car leaves sideways, has its own analytic attempt (:meth:`ParkPlanner._analytic_parallel`: one curve out of
+the slot, straight to the start or through a pre-park pose beside the slot, the classic S, its first stretch in the
+exit gear), and its sampled plans leave the stall pose by a nudge in the exit gear.
 Else a seeded sampling planner (BIT* by default) over the Reeds-Shepp space from the straight exit
 (the car just out of the stall), with a budget of loop iterations (not wall time: the same seed gives
 the same plan on a loaded machine), then OMPL's path simplification. The path is then reversed (its
 gears flip) so it runs start -> stall.
 
 **Verdicts** (``ParkPlan.verdict``, docs/spec.md section 8): ``feasible`` with a plan; ``infeasible`` only with a
-proof, named in the reason: the stall pose or the start pose is not clear, or (checked once the first attempt
+proof, named in the reason: a parallel slot too short for the car (the stall pose is not inside its end lines' inner
+edges, so no success exists), the stall pose or the start pose is not clear, or (checked once the first attempt
 found nothing) the stall is closed at the car's width (:meth:`ParkPlanner._closed`: the footprint's inscribed
 disc cannot leave the stall among the obstacles alone). Without a proof the planner escalates
 (``ParkConfig.escalation``: seeded sampling stages, each with its own seed, by default RRT-Connect restarts
@@ -70,6 +77,8 @@ BACK_GAP = 0.15  # [m] the car's rear (reverse-in) or nose (nose-in) to the stal
 FAR_END_SLACK = 0.05
 #: The limits of the footprint in a stall (:func:`in_stall`), as a reason names them; sides looking out of the stall
 STALL_LINES = ("left side line", "right side line", "back line", "aisle-side limit")
+#: [m] how far ahead of a parallel slot's stall pose (behind it, nose-in) the analytic attempt's pre-park poses lie
+PRE_PARK_AHEAD = (1.5, 2.5, 3.5, 4.5, 5.5, 6.5)
 HEADING_TOLERANCE = 10.0  # [deg] the car's axis to the stall's, in the maneuver's direction
 _EPS = 1e-9  # [m] geometric tolerance of the inside test
 
@@ -84,14 +93,26 @@ class Maneuver:
     exit_gear: int  # +1: the car leaves the stall driving forward, -1 reversing
 
     def heading(self, stall: Stall) -> float:
-        return _wrap(stall.yaw + self.turn)
+        """[rad] the car's heading at the stall pose: along a bay's axis as :attr:`turn` says; along a parallel slot
+        in the traffic direction of its lane (``Stall.car_yaw``) for either maneuver."""
+        return _wrap(stall.car_yaw) if is_parallel(stall) else _wrap(stall.yaw + self.turn)
 
 
-#: The park maneuvers (SPEC 8): reverse-in is the default.
+#: The park maneuvers (SPEC 8): reverse-in is the default. In a bay the maneuver says which end is at the back line. In a
+#: parallel slot both end in the same pose (along the slot, in its lane's traffic direction) and the maneuver says how
+#: the reference plan enters it, the gear of its last stretch: ``reverse`` backs in (the classic parallel park: past
+#: the slot, then back in on an S), ``forward`` noses in (forward into the slot, straightening in it: it needs more
+#: room, or more shuffles). Success judges the final pose alone, as in a bay: a driver under test may enter either way.
 MANEUVERS: dict[str, Maneuver] = {
     "reverse": Maneuver("reverse", 0.0, "rear", +1),
     "forward": Maneuver("forward", math.pi, "front", -1),
 }
+
+
+def is_parallel(stall: Stall) -> bool:
+    """Whether ``stall`` is a parallel slot along its aisle (``Stall.angle`` 0): its ``width`` is the slot's length along
+    the aisle, its ``length`` the depth from the kerb-side line to the aisle, ``yaw`` points at the aisle."""
+    return float(stall.angle) == 0.0
 
 
 def maneuver(name: str) -> Maneuver:
@@ -128,8 +149,20 @@ def rear_to_centre(pose, car: CarGeometry) -> np.ndarray:
 
 # -- the stall pose and the success geometry -----------------------------------------------------------
 def park_pose(stall: Stall, car: CarGeometry, maneuver_name: str = "reverse") -> tuple[float, float, float]:
-    """The target pose (car centre, SPEC 8) of a park test into ``stall`` with maneuver ``maneuver_name``."""
+    """The target pose (car centre, SPEC 8) of a park test into ``stall`` with maneuver ``maneuver_name``.
+
+    A parallel slot (:func:`is_parallel`): the car along the slot heading ``Stall.car_yaw`` (the traffic direction of
+    the slot's lane: its right side to the kerb, as a driver parallel-parks), its outline centred along the slot and
+    its right side :data:`BACK_GAP` from the kerb-side line; the same pose for either maneuver (the maneuver says
+    how the reference plan enters: :data:`MANEUVERS`)."""
     m = maneuver(maneuver_name)
+    if is_parallel(stall):
+        h = stall.car_yaw
+        ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)  # from the kerb-side line towards the aisle
+        across = BACK_GAP + car.half_width - stall.length / 2  # [m] the car's centre line from the slot's centre
+        along = -(car.front + car.rear) / 2  # [m] the outline's middle on the slot's middle
+        return (stall.x + across * ux + along * math.cos(h), stall.y + across * uy + along * math.sin(h),
+                float(_wrap(h)))
     ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)  # from the back line towards the aisle
     # the centre lies this far from the back line: the gap plus the centre-to-end length of the end there
     d = BACK_GAP + (-car.rear if m.at_back == "rear" else car.front)
@@ -140,7 +173,10 @@ def park_pose(stall: Stall, car: CarGeometry, maneuver_name: str = "reverse") ->
 def far_end_allowance(stall: Stall, car: CarGeometry) -> float:
     """[m] how far the car's far end may stand beyond ``stall``'s open (aisle-side) edge: none for a car that fits
     the stall with its :data:`BACK_GAP`, else the stall pose's own overhang plus :data:`FAR_END_SLACK` (SPEC 8: the
-    default 4.6 m car in a 4.5 m stall, 0.3 m; a longer class, what the same rule gives)."""
+    default 4.6 m car in a 4.5 m stall, 0.3 m; a longer class, what the same rule gives). None for a parallel slot: the
+    car stands along it, its side to the open end, and its ends between the slot's painted end lines."""
+    if is_parallel(stall):
+        return 0.0
     return max(0.0, (car.front - car.rear) + BACK_GAP + FAR_END_SLACK - stall.length)
 
 
@@ -152,8 +188,10 @@ class ParkFit:
     aligned: bool  # heading within HEADING_TOLERANCE of the stall axis in the maneuver's direction
     position_error: float  # [m] car centre to the target pose's centre
     heading_error: float  # [deg] |car heading - target heading|
-    lateral_offset: float  # [m] car centre off the stall axis, > 0 left looking out of the stall
-    longitudinal_offset: float  # [m] car centre to the target along the stall axis, > 0 towards the aisle
+    lateral_offset: float  # [m] car centre off the stall axis, > 0 left looking out of the stall (parallel slot: off the
+    #                        target's line along the slot, > 0 towards the aisle)
+    longitudinal_offset: float  # [m] car centre to the target along the stall axis, > 0 towards the aisle (parallel
+    #                             slot: along the slot, > 0 ahead of the target)
     overhang: float  # [m] how far the footprint crosses a line it may not (0 when inside)
     margin: float = math.inf  # [m] the footprint's smallest distance inside a limit of STALL_LINES (< 0: over it)
     line: str = ""  # the limit of STALL_LINES with that smallest margin (the one crossed when not inside)
@@ -187,10 +225,13 @@ def in_stall(stall: Stall, car: CarGeometry, pose, maneuver_name: str = "reverse
     k = int(np.argmin(margins))
     heading = abs(math.degrees(_wrap(yaw - tyaw)))
     cx, cy = x - stall.x, y - stall.y
+    lateral, longitudinal = -uy * cx + ux * cy, (x - tx) * ux + (y - ty) * uy
+    if is_parallel(stall):  # off the target's line along the slot (> 0 towards the aisle), and along it (> 0 ahead)
+        hx, hy = math.cos(tyaw), math.sin(tyaw)
+        lateral, longitudinal = -hy * (x - tx) + hx * (y - ty), hx * (x - tx) + hy * (y - ty)
     return ParkFit(inside=margins[k] >= -_EPS, aligned=heading <= HEADING_TOLERANCE,
                    position_error=math.hypot(x - tx, y - ty), heading_error=heading,
-                   lateral_offset=-uy * cx + ux * cy,
-                   longitudinal_offset=(x - tx) * ux + (y - ty) * uy, overhang=max(0.0, -margins[k]),
+                   lateral_offset=lateral, longitudinal_offset=longitudinal, overhang=max(0.0, -margins[k]),
                    margin=margins[k], line=STALL_LINES[k])
 
 
@@ -689,7 +730,14 @@ class ParkPlanner:
         (0: the first; k: escalation stage k); or _NoPlan (no path, no proof), or _Proof (none can exist)."""
         cfg, car = self.config, self.car
         g, s = centre_to_rear(goal, car), centre_to_rear(start, car)
-        d_out = stall.length - BACK_GAP + cfg.margin  # [m] straight out this far, the car has left the stall
+        parallel = is_parallel(stall)
+        if parallel:
+            fit = in_stall(stall, car, goal, m.name, self.scene.world.marking_width)
+            if not fit.inside:  # no pose along the slot lies inside its lines: no success exists, whatever the path
+                inner = stall.width - self.scene.world.marking_width
+                raise _Proof(f"the slot is too short for the car: {inner:.2f} m between its end lines' inner edges, "
+                             f"the car {car.front - car.rear:.2f} m long")
+        d_out = self._exit_run(stall)  # [m] straight out this far, the car has left the stall (a slot: along it)
         out = _straight(g, m.exit_gear, d_out, cfg.step)
         region = self._region(np.array([g, s, out[-1]]))
         checker = _Checker(self.near(obs, region), car, cfg.margin, region)
@@ -698,9 +746,12 @@ class ParkPlanner:
                 raise _Proof(self._blocked(obs, pose, f"the {what}"))
         ok = checker.clear(out)
         d_ok = d_out if ok.all() else float(np.hypot(*(out[int(np.argmin(ok)) - 1, :2] - g[:2]))) if ok[0] else 0.0
+        # a parallel slot's sampled plans leave the stall pose by a nudge in the exit gear: they end in the maneuver's
+        nudge = min(cfg.step, d_ok) if parallel else 0.0
         with _ompl_seeded(cfg.seed) as (ob, og):
             curves = _Curves(ob, self.radius, region, cfg.step)
-            path = self._analytic(curves, checker, g, s, m, d_ok)
+            path = self._analytic_parallel(curves, checker, g, s, m, stall, d_ok) if parallel else \
+                self._analytic(curves, checker, g, s, m, d_ok)
             if path is not None:
                 return path, "analytic", 0, 0
             if cfg.iterations == 0:
@@ -724,7 +775,7 @@ class ParkPlanner:
                 _ompl()[2].RNG.setSeed(_stage_seed(cfg.seed, k))  # each stage its own seed: a restart
                 try:
                     path, method, n = self._sample(ob, og, *areas[wide], g, s, m,
-                                                   min(d_ok, d_out) if at == "out" else 0.0, name, iterations,
+                                                   min(d_ok, d_out) if at == "out" else nudge, name, iterations,
                                                    cfg.escalation_range)
                     return path, method, n + used, k
                 except _NoPlan:
@@ -797,8 +848,15 @@ class ParkPlanner:
         """[m] ``(xmin, ymin, xmax, ymax)``: the planning area of a park test (a plan's rear axle stays inside)."""
         stall, m = self.scene.stalls.stalls[stall_id], maneuver(maneuver_name)
         g = centre_to_rear(park_pose(stall, self.car, m.name), self.car)
-        out = _straight(g, m.exit_gear, stall.length - BACK_GAP + self.config.margin, 1.0)[-1]
+        out = _straight(g, m.exit_gear, self._exit_run(stall), 1.0)[-1]
         return self._region(np.array([g, centre_to_rear(start, self.car), out]))
+
+    def _exit_run(self, stall: Stall) -> float:
+        """[m] the straight exit: out of a bay along its axis until the car has left it; along a parallel slot (which
+        the car leaves sideways) the car's length, as far as a straight run along the kerb can help."""
+        if is_parallel(stall):
+            return self.car.front - self.car.rear
+        return stall.length - BACK_GAP + self.config.margin
 
     def _region(self, poses: np.ndarray, grow: float | None = None) -> tuple[float, float, float, float]:
         """[m] the planning area: the box around ``poses`` grown by ``grow`` (None: ``region``), within the garage."""
@@ -837,6 +895,44 @@ class ParkPlanner:
             curve = curves.curve(e, s, checker.pose_clear)
             path = _join(_straight(g, m.exit_gear, d, cfg.step), curve) if d > 0 else curve
             if checker.clear(path).all():
+                return path
+        return None
+
+    def _analytic_parallel(self, curves: _Curves, checker: _Checker, g: np.ndarray, s: np.ndarray, m: Maneuver,
+                           stall: Stall, d_ok: float) -> np.ndarray | None:
+        """A parallel slot's analytic attempt: out of the slot on one Reeds-Shepp curve, either straight to the start or
+        to a pre-park pose beside the slot (heading along it, between the slot and its lane's centre, ahead of the slot
+        for a reverse-in park and behind it for a nose-in one: the classic S), then one curve to the start; optionally
+        after a straight run along the slot in the exit gear. The shortest clear path whose first motion out of the
+        slot is in the exit gear (so the plan enters the slot in the maneuver's gear), or None."""
+        cfg = self.config
+        h = float(g[2])
+        fx, fy, lx, ly = math.cos(h), math.sin(h), -math.sin(h), math.cos(h)
+        lane = (stall.road_x - g[0]) * lx + (stall.road_y - g[1]) * ly  # [m] the lane's centre left of the stall pose
+        sides = sorted({round(v, 2) for v in (lane, lane - 0.5, lane - 1.0, lane + 0.5) if v >= 2 * self.car.half_width})
+        runs = [d for d in (0.0, 0.25, 0.5, 1.0) if d <= d_ok + 1e-9]
+
+        def along(p: np.ndarray, d: float, side: float = 0.0) -> np.ndarray:
+            return np.array([p[0] + d * fx + side * lx, p[1] + d * fy + side * ly, h])
+
+        candidates = []  # (estimated length, run, pre-park pose or None)
+        for d in runs:
+            e = along(g, d * m.exit_gear)
+            candidates.append((d + curves.length(e, s), d, None))
+            for side in sides:
+                for ahead in PRE_PARK_AHEAD:
+                    pre = along(g, ahead * m.exit_gear, side)
+                    candidates.append((d + curves.length(e, pre) + curves.length(pre, s), d, pre))
+        candidates.sort(key=lambda c: (c[0], c[1]))
+        for _, d, pre in candidates:
+            e = along(g, d * m.exit_gear)
+            parts = [_straight(g, m.exit_gear, d, cfg.step)] if d > 0 else []
+            if pre is None:
+                parts.append(curves.curve(e, s, checker.pose_clear))
+            else:
+                parts += [curves.curve(e, pre, checker.pose_clear), curves.curve(pre, s, checker.pose_clear)]
+            path = _join(*parts)
+            if _leaves(stall, path, m.exit_gear) and checker.clear(path).all():
                 return path
         return None
 
@@ -883,6 +979,18 @@ class ParkPlanner:
         if not checker.clear(dense).all():
             raise _NoPlan(f"{name}'s path grazes an obstacle between the poses it checked")
         return dense, name, min(used[0], iterations)
+
+
+def _leaves(stall: Stall, rear: np.ndarray, gear: int) -> bool:
+    """Whether the rear-axle path ``rear`` (from the stall pose outward) leaves parallel slot ``stall`` in ``gear``: its
+    first stretch, up to its first cusp, is in that gear and takes the rear axle past the slot's open, aisle-side
+    edge (driven the other way: the car enters the slot in the maneuver's gear, not by a last shuffle)."""
+    gears = _gears(rear)
+    if not len(gears) or gears[0] != gear:
+        return False
+    turn = np.flatnonzero(gears != gear)
+    end = rear[int(turn[0]) if len(turn) else len(rear) - 1]
+    return (end[0] - stall.x) * math.cos(stall.yaw) + (end[1] - stall.y) * math.sin(stall.yaw) > stall.length / 2
 
 
 def _edge(curves: _Curves, checker: _Checker, a: np.ndarray, b: np.ndarray) -> np.ndarray:

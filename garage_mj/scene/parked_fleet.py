@@ -7,9 +7,12 @@ it, heading as ``Stall.car_yaw`` says). :class:`ParkedFleet` says what a test ma
 - ``mixed``: each parked car's class is drawn from the fleet table (:data:`~garage_mj.scene.vehicles.FLEET`:
   compact, sedan, SUV, van), seeded per test; in a bay, a car that fits with :data:`END_GAP` at each end is
   centred along it, a longer one stands with its back :data:`END_GAP` from the back line and overhangs the
-  aisle-side end; in a parallel slot, a car is centred along it;
-- ``jitter`` [m] (0 to :data:`MAX_PARKED_JITTER`): each parked car is moved sideways by up to that much and
-  turned by up to :data:`JITTER_YAW` x that much (radians), drawn per test. A car may stand over its lines,
+  aisle-side end; in a parallel slot, a car is centred along it, and a class that does not fit the slot with
+  END_GAP at each end stands as the longest class that does (the compact in a 4.5 m slot: a longer car would stand
+  in the next slot, or in its car);
+- ``jitter`` [m] (0 to :data:`MAX_PARKED_JITTER`): each parked car is moved sideways (across a parallel slot) by up to
+  that much, in a parallel slot also along it by up to that much, and turned by up to :data:`JITTER_YAW` x that much
+  (radians), drawn per test. A car may stand over its lines,
   never into the target stall's paint (its inner edges, :func:`stall_inner`) nor within :data:`CAR_GAP` of another
   parked car (as placed, or where a car placed later stands without jitter): a draw that would is halved toward the
   stall's axis until it does not (:data:`JITTER_HALVINGS` times, then the car stands as without jitter).
@@ -34,7 +37,7 @@ import numpy as np
 from garage_mj.scene.clearance import Obstacles
 from garage_mj.scene.stalls import Stall
 from garage_mj.scene.templates import PARKED_CAR, load_template
-from garage_mj.scene.vehicles import FLEET
+from garage_mj.scene.vehicles import FLEET, VehicleClass
 from garage_mj.scene.world import DEFAULT_WORLD
 
 #: The parked fleets a run may ask for.
@@ -149,18 +152,29 @@ def _overlap(a: np.ndarray, b: np.ndarray, gap: float = 0.0) -> bool:
     return True
 
 
-def _place(stall: Stall, name: str, size: tuple[float, float, float], lateral: float, dyaw: float) -> ParkedBody:
+def _place(stall: Stall, name: str, size: tuple[float, float, float], lateral: float, dyaw: float,
+           shift: float = 0.0) -> ParkedBody:
     """A car of ``size`` in ``stall``, heading as a parked car there does (``Stall.car_yaw``: a bay's axis, nose out;
     a parallel slot's length): centred, or in a bay too short for it with :data:`END_GAP` at each end, its rear
-    END_GAP from the back line; then moved ``lateral`` to its left and turned by ``dyaw``."""
+    END_GAP from the back line; then moved ``lateral`` to its left, ``shift`` ahead and turned by ``dyaw``."""
     length, width, height = size
     parallel = stall.angle == 0.0
     room = stall.width if parallel else stall.length  # [m] the stall along the car's axis
-    along = 0.0 if parallel or length + 2 * END_GAP <= room else -room / 2 + END_GAP + length / 2
+    along = shift + (0.0 if parallel or length + 2 * END_GAP <= room else -room / 2 + END_GAP + length / 2)
     yaw = stall.car_yaw
     ux, uy = math.cos(yaw), math.sin(yaw)
     return ParkedBody(stall.id, name, stall.x + along * ux - lateral * uy, stall.y + along * uy + lateral * ux,
                       yaw + dyaw, length, width, height)
+
+
+def _fitting(stall: Stall, vehicle: VehicleClass) -> VehicleClass:
+    """The class a parked car drawn as ``vehicle`` is in ``stall``: itself, except in a parallel slot it does not fit
+    with :data:`END_GAP` at each end, where the longest class of the fleet that does stands instead (the slot's ends
+    are another slot's, or its car's: a longer car would stand in them), the shortest when none does."""
+    if stall.angle != 0.0 or vehicle.length + 2 * END_GAP <= stall.width:
+        return vehicle
+    fits = [v for v in FLEET.values() if v.length + 2 * END_GAP <= stall.width]
+    return max(fits, key=lambda v: v.length) if fits else min(FLEET.values(), key=lambda v: v.length)
 
 
 def fleet_rng(seed: int) -> np.random.Generator:
@@ -174,44 +188,48 @@ def draw_parked(stalls: list[Stall], occupied, target: int | None, fleet: Parked
 
     ``stalls``: every stall of the scene, by id. Per stall in id order, whether occupied or not (so the same seed
     gives each stall the same draw whatever the occupancy): one class index (mixed), then the lateral and heading
-    uniforms (jitter); then the cars are placed in stall id order. ``target``: the stall under test, kept clear inside
-    its paint (None: no test stall).
+    uniforms (jitter; in a garage of parallel slots a third, along the slot); then the cars are placed in stall id
+    order. ``target``: the stall under test, kept clear inside its paint (None: no test stall).
     """
     want = {int(s) for s in occupied} - ({int(target)} if target is not None else set())
     names = list(FLEET)
     n = len(stalls)
     kinds = rng.integers(len(names), size=n) if fleet.fleet == "mixed" else None
-    jit = rng.uniform(-1.0, 1.0, size=(n, 2)) if fleet.jitter > 0 else np.zeros((n, 2))
+    # a parallel slot's car is also moved along it: a third uniform per stall, drawn only in a garage of parallel slots
+    cols = 3 if any(s.angle == 0.0 for s in stalls) else 2
+    jit = rng.uniform(-1.0, 1.0, size=(n, cols)) if fleet.jitter > 0 else np.zeros((n, cols))
     keep_out = stall_inner(stalls[target], marking) if target is not None else None
-    cars: dict[int, tuple[str, tuple[float, float, float], float, float]] = {}  # stall -> class, size, jitter
+    cars: dict[int, tuple[str, tuple[float, float, float], float, float, float]] = {}  # stall -> class, size, jitter
     for k, stall in enumerate(stalls):
         if stall.id in want:
             if kinds is None:
                 name, size = UNIFORM, uniform_size()
             else:
-                v = FLEET[names[int(kinds[k])]]
+                v = _fitting(stall, FLEET[names[int(kinds[k])]])
                 name, size = v.name, (v.length, v.width, v.height)
-            cars[stall.id] = (name, size, jit[k, 0] * fleet.jitter, jit[k, 1] * JITTER_YAW * fleet.jitter)
+            shift = jit[k, 2] * fleet.jitter if stall.angle == 0.0 else 0.0
+            cars[stall.id] = (name, size, jit[k, 0] * fleet.jitter, jit[k, 1] * JITTER_YAW * fleet.jitter, shift)
     # where each car stands without jitter: what a car placed before it must leave free, so that it can always fall back
-    square = {sid: _place(stalls[sid], name, size, 0.0, 0.0) for sid, (name, size, _, _) in cars.items()}
+    square = {sid: _place(stalls[sid], name, size, 0.0, 0.0) for sid, (name, size, *_) in cars.items()}
     placed: dict[int, ParkedBody] = {}
-    for sid, (name, size, lateral, dyaw) in cars.items():
+    for sid, (name, size, lateral, dyaw, shift) in cars.items():
         me = square[sid]
-        if lateral == 0.0 and dyaw == 0.0:  # no jitter: nothing to check
+        if lateral == 0.0 and dyaw == 0.0 and shift == 0.0:  # no jitter: nothing to check
             placed[sid] = me
             continue
-        reach = math.hypot(me.length, me.width) / 2 + MAX_PARKED_JITTER + CAR_GAP  # [m] farther cars cannot touch it
+        # [m] farther cars cannot touch it (moved across, and in a parallel slot along, by up to MAX_PARKED_JITTER)
+        reach = math.hypot(me.length, me.width) / 2 + math.sqrt(2) * MAX_PARKED_JITTER + CAR_GAP
         near = [b for b in (*placed.values(), *(square[o] for o in cars if o != sid and o not in placed))
                 if math.hypot(b.x - me.x, b.y - me.y) <= reach + math.hypot(b.length, b.width) / 2]
         others = [b.corners() for b in near]
         body = me
         for _ in range(JITTER_HALVINGS + 1):
-            trial = _place(stalls[sid], name, size, lateral, dyaw)
+            trial = _place(stalls[sid], name, size, lateral, dyaw, shift)
             c = trial.corners()
             if not ((keep_out is not None and _overlap(c, keep_out)) or any(_overlap(c, o, CAR_GAP) for o in others)):
                 body = trial
                 break
-            lateral, dyaw = lateral / 2, dyaw / 2
+            lateral, dyaw, shift = lateral / 2, dyaw / 2, shift / 2
         placed[sid] = body
     return placed
 
