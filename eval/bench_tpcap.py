@@ -101,14 +101,19 @@ def main() -> None:
     ap.add_argument("--cases", type=Path, default=os.environ.get("GARAGE_MJ_TPCAP_CASES"),
                     help="the folder of TPCAP's Case1.csv ... Case20.csv (default: $GARAGE_MJ_TPCAP_CASES)")
     ap.add_argument("--drivers", nargs="+", default=list(DRIVERS))
+    ap.add_argument("--only", type=int, nargs="+", metavar="K",
+                    help="run only these cases (their rows join the others' in the rows file; a run of all 20 then "
+                         "writes the JSON from them)")
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parents[1] / "docs" / "bench_tpcap.json")
     args = ap.parse_args()
     if args.cases is None or not (args.cases / "Case1.csv").is_file():
         raise SystemExit("give --cases DIR (or GARAGE_MJ_TPCAP_CASES) naming a folder of TPCAP's Case1.csv ... "
                          "Case20.csv (a clone of github.com/libai1943/TPCAP_benchmarks)")
-    cases = [args.cases / f"Case{k}.csv" for k in range(1, 21)]
+    cases = [args.cases / f"Case{k}.csv" for k in (args.only or range(1, 21))]
     drivers = tuple(args.drivers)
     rows = run(cases, drivers, args.out.with_suffix(".rows.jsonl"))
+    if args.only:
+        return
     result = {"provenance": provenance(), "vehicle": {"name": TPCAP_VEHICLE.name, "length": TPCAP_VEHICLE.length,
                                                       "width": TPCAP_VEHICLE.width, "wheelbase": TPCAP_VEHICLE.wheelbase,
                                                       "max_steer": TPCAP_VEHICLE.max_steer},
