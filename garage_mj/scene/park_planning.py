@@ -55,7 +55,7 @@ import atexit
 import gc
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -77,6 +77,9 @@ BACK_GAP = 0.15  # [m] the car's rear (reverse-in) or nose (nose-in) to the stal
 FAR_END_SLACK = 0.05
 #: The limits of the footprint in a stall (:func:`in_stall`), as a reason names them; sides looking out of the stall
 STALL_LINES = ("left side line", "right side line", "back line", "aisle-side limit")
+#: [m] a parallel slot's sampled plans start where a turn out of the slot has taken the car's centre this far past its
+#: open edge (:meth:`ParkPlanner._slot_exit`)
+SLOT_EXIT_PAST = 0.5
 #: [m] how far ahead of a parallel slot's stall pose (behind it, nose-in) the analytic attempt's pre-park poses lie
 PRE_PARK_AHEAD = (1.5, 2.5, 3.5, 4.5, 5.5, 6.5)
 HEADING_TOLERANCE = 10.0  # [deg] the car's axis to the stall's, in the maneuver's direction
@@ -651,6 +654,17 @@ def _straight(p: np.ndarray, gear: int, dist: float, step: float) -> np.ndarray:
     return np.column_stack([p[0] + s * math.cos(p[2]), p[1] + s * math.sin(p[2]), np.full(n + 1, p[2])])
 
 
+def _arc(p: np.ndarray, gear: int, kappa: float, step: float, turn: float) -> np.ndarray:
+    """(N, 3) poses from rear-axle pose ``p`` along a circle of curvature ``kappa`` [1/m] (> 0 turning left) in
+    ``gear``, ``step`` apart, until the heading has turned by ``turn`` [rad]."""
+    length = turn / abs(kappa)
+    n = max(1, math.ceil(length / step - 1e-9))
+    t = np.linspace(0.0, length, n + 1) * gear  # [m] signed arc length
+    yaw = p[2] + kappa * t
+    return np.column_stack([p[0] + (np.sin(yaw) - math.sin(p[2])) / kappa,
+                            p[1] - (np.cos(yaw) - math.cos(p[2])) / kappa, yaw])
+
+
 def _join(*parts: np.ndarray) -> np.ndarray:
     """Pose arrays end to end, each one's first pose (the previous one's last) dropped."""
     return np.concatenate([parts[0], *(q[1:] for q in parts[1:])])
@@ -748,18 +762,23 @@ class ParkPlanner:
         d_ok = d_out if ok.all() else float(np.hypot(*(out[int(np.argmin(ok)) - 1, :2] - g[:2]))) if ok[0] else 0.0
         # a parallel slot's sampled plans leave the stall pose by a nudge in the exit gear: they end in the maneuver's
         nudge = min(cfg.step, d_ok) if parallel else 0.0
+        off = (car.front + car.rear) / 2 - car.rear_axle  # [m] rear axle to the footprint's centre
+        accept = (lambda rear: _enters(stall, rear, m.exit_gear, off)) if parallel else None
         with _ompl_seeded(cfg.seed) as (ob, og):
             curves = _Curves(ob, self.radius, region, cfg.step)
             path = self._analytic_parallel(curves, checker, g, s, m, stall, d_ok) if parallel else \
                 self._analytic(curves, checker, g, s, m, d_ok)
             if path is not None:
                 return path, "analytic", 0, 0
+            # a parallel slot's sampling (but the escalation's stages from the exit) starts where a turn in the exit
+            # gear has taken the car out of the slot
+            lead = self._slot_exit(checker, g, m, stall, d_ok) if parallel else None
             if cfg.iterations == 0:
                 first = _NoPlan("no straight exit and one Reeds-Shepp curve reach the start (sampling is off)")
             else:
                 try:
                     return (*self._sample(ob, og, curves, checker, g, s, m, min(d_ok, d_out), cfg.planner,
-                                          cfg.iterations), 0)
+                                          cfg.iterations, accept=accept, lead=lead), 0)
                 except _NoPlan as why:
                     first = why
             closed = self._closed(obs, g, s)
@@ -776,7 +795,8 @@ class ParkPlanner:
                 try:
                     path, method, n = self._sample(ob, og, *areas[wide], g, s, m,
                                                    min(d_ok, d_out) if at == "out" else nudge, name, iterations,
-                                                   cfg.escalation_range)
+                                                   cfg.escalation_range, accept,
+                                                   lead if at == "stall" and lead is not None else None)
                     return path, method, n + used, k
                 except _NoPlan:
                     used += iterations
@@ -903,8 +923,8 @@ class ParkPlanner:
         """A parallel slot's analytic attempt: out of the slot on one Reeds-Shepp curve, either straight to the start or
         to a pre-park pose beside the slot (heading along it, between the slot and its lane's centre, ahead of the slot
         for a reverse-in park and behind it for a nose-in one: the classic S), then one curve to the start; optionally
-        after a straight run along the slot in the exit gear. The shortest clear path whose first motion out of the
-        slot is in the exit gear (so the plan enters the slot in the maneuver's gear), or None."""
+        after a straight run along the slot in the exit gear. The shortest clear path that leaves the slot in the
+        exit gear (:func:`_enters`: driven, it enters the slot in the maneuver's gear), or None."""
         cfg = self.config
         h = float(g[2])
         fx, fy, lx, ly = math.cos(h), math.sin(h), -math.sin(h), math.cos(h)
@@ -932,20 +952,54 @@ class ParkPlanner:
             else:
                 parts += [curves.curve(e, pre, checker.pose_clear), curves.curve(pre, s, checker.pose_clear)]
             path = _join(*parts)
-            if _leaves(stall, path, m.exit_gear) and checker.clear(path).all():
+            if _enters(stall, path, m.exit_gear, checker.off) and checker.clear(path).all():
                 return path
         return None
 
+    def _slot_exit(self, checker: _Checker, g: np.ndarray, m: Maneuver, stall: Stall, d_ok: float
+                   ) -> np.ndarray | None:
+        """Rear-axle poses from the stall pose of parallel slot ``stall`` out of it in the exit gear: a run along the
+        slot (in either gear, at most ``d_ok`` in the exit gear), then one turn at the plan's tightest curvature, either
+        way, in the exit gear until the car's centre is :data:`SLOT_EXIT_PAST` past the slot's open edge; the shortest
+        clear one, or None. Driven the other way it enters the slot in the maneuver's gear."""
+        cfg = self.config
+        ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)
+        off = checker.off
+        best: np.ndarray | None = None
+        for run in sorted((r for r in (0.0, 0.5, -0.5, 1.0, -1.0) if r <= d_ok + 1e-9), key=abs):
+            gear = m.exit_gear if run >= 0 else -m.exit_gear
+            start = _straight(g, gear, abs(run), cfg.step) if run else g[None]
+            if not checker.clear(start).all():
+                continue
+            for turn in (1.0, -1.0):
+                arc = _arc(start[-1], m.exit_gear, turn / self.radius, cfg.step, math.pi / 2)
+                cx, cy = arc[:, 0] + off * np.cos(arc[:, 2]), arc[:, 1] + off * np.sin(arc[:, 2])
+                past = np.flatnonzero((cx - stall.x) * ux + (cy - stall.y) * uy > stall.length / 2 + SLOT_EXIT_PAST)
+                if not len(past):
+                    continue
+                arc = arc[:past[0] + 1]
+                if checker.clear(arc).all():
+                    path = _join(start, arc)
+                    if best is None or len(path) < len(best):
+                        best = path
+            if best is not None:
+                return best
+        return None
+
     def _sample(self, ob, og, curves: _Curves, checker: _Checker, g: np.ndarray, s: np.ndarray, m: Maneuver,
-                d_exit: float, name: str, iterations: int, reach: float | None = None) -> tuple[np.ndarray, str, int]:
+                d_exit: float, name: str, iterations: int, reach: float | None = None,
+                accept: Callable[[np.ndarray], bool] | None = None,
+                lead: np.ndarray | None = None) -> tuple[np.ndarray, str, int]:
         """The seeded sampling planner ``name`` (a key of SAMPLERS) with a budget of ``iterations`` from the straight
-        exit (``d_exit`` out of the stall) to the start; a ranged one's range ``reach`` (None: ``planner_range``)."""
+        exit (``d_exit`` out of the stall) to the start; a ranged one's range ``reach`` (None: ``planner_range``);
+        a path ``accept`` (given) refuses is no path (a parallel slot's: one that enters in the other gear); ``lead``
+        (given): the poses from the stall pose to where the sampling starts instead of the straight exit."""
         cfg = self.config
         si = ob.SpaceInformation(curves.space)
         si.setStateValidityChecker(checker)
         si.setStateValidityCheckingResolution(curves.resolution)
         si.setup()
-        e = _straight(g, m.exit_gear, d_exit, d_exit)[-1] if d_exit > 0 else g
+        e = lead[-1] if lead is not None else _straight(g, m.exit_gear, d_exit, d_exit)[-1] if d_exit > 0 else g
         pdef = ob.ProblemDefinition(si)
         pdef.setStartAndGoalStates(curves.state(e), curves.state(s), 1e-3)
         objective = ob.PathLengthOptimizationObjective(si)
@@ -973,24 +1027,28 @@ class ParkPlanner:
         if np.linalg.norm(np.subtract(way[-1], s)) > 1e-9:
             way.append(s)
         parts = [_edge(curves, checker, np.asarray(a), np.asarray(b)) for a, b in zip(way[:-1], way[1:], strict=True)]
-        if d_exit > 0:
+        if lead is not None and len(lead) > 1:
+            parts.insert(0, lead)
+        elif lead is None and d_exit > 0:
             parts.insert(0, _straight(g, m.exit_gear, d_exit, cfg.step))
         dense = _join(*parts)
         if not checker.clear(dense).all():
             raise _NoPlan(f"{name}'s path grazes an obstacle between the poses it checked")
+        if accept is not None and not accept(dense):
+            raise _NoPlan(f"{name}'s path enters the slot in the other gear than the maneuver's")
         return dense, name, min(used[0], iterations)
 
 
-def _leaves(stall: Stall, rear: np.ndarray, gear: int) -> bool:
-    """Whether the rear-axle path ``rear`` (from the stall pose outward) leaves parallel slot ``stall`` in ``gear``: its
-    first stretch, up to its first cusp, is in that gear and takes the rear axle past the slot's open, aisle-side
-    edge (driven the other way: the car enters the slot in the maneuver's gear, not by a last shuffle)."""
-    gears = _gears(rear)
-    if not len(gears) or gears[0] != gear:
+def _enters(stall: Stall, rear: np.ndarray, gear: int, off: float) -> bool:
+    """Whether the rear-axle path ``rear``, planned from the stall pose of parallel slot ``stall`` outward, takes the
+    car's centre (``off`` ahead of the rear axle) out past the slot's open, aisle-side edge in ``gear``: driven the other
+    way, the move that brings the car into the slot is in the maneuver's gear (shuffles inside it may follow)."""
+    ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)
+    cx, cy = rear[:, 0] + off * np.cos(rear[:, 2]), rear[:, 1] + off * np.sin(rear[:, 2])
+    out = np.flatnonzero((cx - stall.x) * ux + (cy - stall.y) * uy > stall.length / 2)
+    if not len(out) or out[0] == 0:
         return False
-    turn = np.flatnonzero(gears != gear)
-    end = rear[int(turn[0]) if len(turn) else len(rear) - 1]
-    return (end[0] - stall.x) * math.cos(stall.yaw) + (end[1] - stall.y) * math.sin(stall.yaw) > stall.length / 2
+    return bool(_gears(rear[out[0] - 1:out[0] + 1])[0] == gear)
 
 
 def _edge(curves: _Curves, checker: _Checker, a: np.ndarray, b: np.ndarray) -> np.ndarray:
