@@ -31,7 +31,7 @@ from garage_mj.cli._common import (
     user_errors,
 )
 from garage_mj.core.fsutil import atomic_write, ensure_dir
-from garage_mj.driving.actors.config import load_scenario_config
+from garage_mj.driving.actors.config import SCENARIOS, load_scenario_config
 from garage_mj.driving.difficulty.regression import r_text
 from garage_mj.driving.replay import replay_xosc
 from garage_mj.driving.results import BREAKDOWNS, TEST_COLUMNS, breakdown_lines
@@ -120,9 +120,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="moving cars per test: reversing out of a stall, oncoming, waiting at a junction")
     act.add_argument("--clutter", type=non_negative_int, metavar="K",
                      help="static clutter per test: cones, trolleys, a badly parked car")
-    act.add_argument("--scenario", type=Path, metavar="FILE.toml",
-                     help="every ScenarioConfig field ([scenario] table: behaviours, speeds, trigger lead, "
-                          "reaction time, braking); the three flags above override its counts")
+    act.add_argument("--scenario", metavar="NAME|FILE.toml",
+                     help="a named scenario (" + ", ".join(SCENARIOS) + ": park and avp tests' actors around the "
+                          "target stall) or a TOML file of every ScenarioConfig field ([scenario] table: behaviours, "
+                          "speeds, trigger lead, reaction time, braking); the three flags above override its counts")
     p.add_argument("--xosc", action="store_true",
                    help="also write every test as OpenSCENARIO 1.2 into OUT/xosc/ (garages without an asset "
                         "pack get one in OUT/packs/); replay one with --scenario-file")
@@ -323,9 +324,14 @@ def scenario(args: argparse.Namespace) -> dict | None:
     counts = {"pedestrians": args.pedestrians, "moving_cars": args.moving_cars, "clutter": args.clutter}
     if args.scenario is None and all(v is None for v in counts.values()):
         return None
-    if args.scenario is not None and not args.scenario.is_file():
-        raise UserError(f"--scenario {args.scenario}: no such file; give a TOML file with a [scenario] table")
-    cfg = load_scenario_config(args.scenario, **counts)
+    named = args.scenario in SCENARIOS
+    if named and args.scenario.startswith("park_") and getattr(args, "task", "cruise") == "cruise":
+        raise UserError(f"--scenario {args.scenario}: its actors stand around a target stall; run it with --task park "
+                        "or --task avp")
+    if args.scenario is not None and not named and not Path(args.scenario).is_file():
+        raise UserError(f"--scenario {args.scenario}: no such file or scenario; give a TOML file with a [scenario] "
+                        f"table or one of {', '.join(SCENARIOS)}")
+    cfg = load_scenario_config(args.scenario if named or args.scenario is None else Path(args.scenario), **counts)
     data = {f: getattr(cfg, f) for f in cfg.__dataclass_fields__}
     return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 

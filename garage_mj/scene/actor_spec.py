@@ -24,6 +24,21 @@ clutter        ``trolley``      a shopping trolley at the edge of the aisle (sta
 clutter        ``bad_parking``  a car parked crooked, its nose out of its stall into the aisle
 =============  ===============  ==============================================================
 
+Park and AVP tests (docs/spec.md section 8) draw their actors around the target stall and the reference
+park plan instead (:mod:`garage_mj.driving.actors.park_placement`):
+
+=============  ================  =============================================================
+kind           behaviour         what it does
+=============  ================  =============================================================
+pedestrian     ``behind_stall``  crosses the mouth of the target stall, behind the reversing car
+                                 (starts as the car reaches the plan's first reverse stretch)
+pedestrian     ``beside_stall``  walks along the aisle past the target stall
+moving_car     ``pull_out``      reverses out of an occupied stall near the target into the aisle,
+                                 waits, then drives off along the aisle away from the target
+clutter        ``cone``          a cone in the aisle beside the park plan's swept path (static)
+clutter        ``trolley``       a trolley in the aisle beside the park plan's swept path (static)
+=============  ================  =============================================================
+
 The trigger
 -----------
 A moving actor waits at its first waypoint until the ego car's centre comes within
@@ -41,14 +56,25 @@ from typing import Any, Protocol
 import numpy as np
 
 KINDS = ("pedestrian", "moving_car", "clutter")
-BEHAVIOURS = {
+#: The behaviours a cruise test draws among, per kind.
+CRUISE_BEHAVIOURS = {
     "pedestrian": ("cross", "step_out", "along"),
     "moving_car": ("reverse_out", "oncoming", "junction_wait"),
     "clutter": ("cone", "trolley", "bad_parking"),
 }
+#: The behaviours a park or AVP test draws among, per kind (placed around the target stall and the park plan).
+PARK_BEHAVIOURS = {
+    "pedestrian": ("behind_stall", "beside_stall"),
+    "moving_car": ("pull_out",),
+    "clutter": ("cone", "trolley"),
+}
+#: Every behaviour of each kind: a scenario config may list any; each task draws among its own.
+BEHAVIOURS = {k: CRUISE_BEHAVIOURS[k] + tuple(b for b in PARK_BEHAVIOURS[k] if b not in CRUISE_BEHAVIOURS[k])
+              for k in CRUISE_BEHAVIOURS}
 #: Body shape of each behaviour (the MJCF template the env moves).
 SHAPES = {"cross": "pedestrian", "step_out": "pedestrian", "along": "pedestrian", "reverse_out": "car",
-          "oncoming": "car", "junction_wait": "car", "cone": "cone", "trolley": "trolley", "bad_parking": "car"}
+          "oncoming": "car", "junction_wait": "car", "cone": "cone", "trolley": "trolley", "bad_parking": "car",
+          "behind_stall": "pedestrian", "beside_stall": "pedestrian", "pull_out": "car"}
 #: Half extents (length/2 along the actor's yaw, width/2, height/2) [m] of each shape's body.
 SHAPE_SIZE = {"pedestrian": (0.25, 0.25, 0.85), "car": (2.15, 0.95, 0.7), "cone": (0.18, 0.18, 0.35),
               "trolley": (0.45, 0.3, 0.5)}

@@ -1,4 +1,9 @@
-"""How many adverse events a cruise test gets, and the rules they are drawn by: :class:`ScenarioConfig`.
+"""How many adverse events a cruise, park or AVP test gets, and the rules they are drawn by: :class:`ScenarioConfig`.
+
+A config lists behaviours of both tasks (:data:`~garage_mj.scene.actor_spec.BEHAVIOURS`, all by default); a cruise
+test draws among the cruise behaviours it lists, a park or AVP test among the park ones
+(:data:`~garage_mj.scene.actor_spec.PARK_BEHAVIOURS`). :data:`SCENARIOS` names ready-made configs
+(``cruise --scenario NAME``).
 
 The actors themselves (:class:`~garage_mj.scene.actor_spec.ActorSpec`) are placed by
 :mod:`garage_mj.driving.actors.placement` and judged by :mod:`garage_mj.driving.actors.judging`.
@@ -42,6 +47,7 @@ class ScenarioConfig:
     reaction_time: float = bounded(0.5, ge=0.0)  # [s] feasibility: a driver reacts within this
     brake_decel: float = bounded(3.0, gt=0.0)  # [m/s^2] feasibility: a driver brakes at least this hard
     dwell: tuple[float, float] = bounded((1.0, 3.0), ge=0.0)  # [s] a reversing car waits this long in the aisle
+    park_speed: float = bounded(1.5, gt=0.0)  # [m/s] feasibility of park actors: a parking car drives at most this fast
 
     def __post_init__(self) -> None:
         check_bounds(self)  # types, finiteness and the ranges above (load_config checked a loaded one already)
@@ -64,9 +70,21 @@ class ScenarioConfig:
 
 NO_ACTORS = ScenarioConfig()
 
+_PARK_PEDESTRIANS = ("behind_stall", "beside_stall")
+#: Named scenarios (``cruise --scenario NAME``): the ScenarioConfig fields each sets (the rest keep their defaults).
+SCENARIOS: dict[str, dict[str, Any]] = {
+    "park_pedestrian_behind": {"pedestrians": 1, "pedestrian_behaviours": ("behind_stall",)},
+    "park_pedestrian_beside": {"pedestrians": 1, "pedestrian_behaviours": ("beside_stall",)},
+    "park_car_pulling_out": {"moving_cars": 1, "moving_car_behaviours": ("pull_out",)},
+    "park_clutter": {"clutter": 1, "clutter_behaviours": ("cone", "trolley")},
+    "park_mixed": {"pedestrians": 1, "pedestrian_behaviours": _PARK_PEDESTRIANS, "moving_cars": 1,
+                   "moving_car_behaviours": ("pull_out",), "clutter": 1, "clutter_behaviours": ("cone", "trolley")},
+}
+
 
 def load_scenario_config(source: str | dict[str, Any] | ScenarioConfig | None, **overrides: Any) -> ScenarioConfig:
-    """A :class:`ScenarioConfig` from a TOML file (``[scenario]`` table or top level), a dict or None.
+    """A :class:`ScenarioConfig` from a TOML file (``[scenario]`` table or top level), a name of :data:`SCENARIOS`,
+    a dict or None.
 
     ``overrides`` (e.g. ``pedestrians=2``; None values ignored) replace the file's values.
     """
@@ -76,6 +94,8 @@ def load_scenario_config(source: str | dict[str, Any] | ScenarioConfig | None, *
         data = dict(source)
     elif source is None:
         data = {}
+    elif isinstance(source, str) and source in SCENARIOS:
+        data = dict(SCENARIOS[source])
     else:
         raw = read_toml(source)
         data = dict(raw.get("scenario", raw)) if isinstance(raw.get("scenario", raw), dict) else {}

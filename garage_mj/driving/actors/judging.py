@@ -27,8 +27,13 @@ def judge(actors: list[ActorSpec], plan: TestPlan, planner: DrivePlanner, config
     if not actors or not plan.feasible:
         return True, ""
     margin = planner.config.clearance_margin if margin is None else float(margin)
-    corr = Corridor(plan, planner.car)
-    v = planner.car.max_speed
+    return judge_path(actors, Corridor(plan, planner.car), config, margin, planner.car.max_speed)
+
+
+def judge_path(actors: list[ActorSpec], corr: Corridor, config: ScenarioConfig, margin: float, v: float
+               ) -> tuple[bool, str]:
+    """:func:`judge` on the car's swept path ``corr`` driven at up to ``v`` [m/s] (a park plan's: ``park_speed``)."""
+    car = corr.car
     d_stop = config.stopping_distance(v)
     for a in actors:
         noun = a.name.replace("_", " ")
@@ -54,7 +59,7 @@ def judge(actors: list[ActorSpec], plan: TestPlan, planner: DrivePlanner, config
             fire = corr.s[int(np.argmin(d))]
         fire = max(fire, corr.s[corr.i0]) + v * CONTROL_LAG  # one control step late
         cols = np.flatnonzero(hit.any(axis=0))
-        body = planner.car.front - planner.car.rear + a.trigger_radius
+        body = car.front - car.rear + a.trigger_radius
         bad = cols[(corr.s[cols] >= fire - body) & (corr.s[cols] < fire + d_stop)]
         if len(bad):
             gap = corr.s[bad[0]] - fire

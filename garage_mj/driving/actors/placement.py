@@ -31,7 +31,7 @@ from garage_mj.driving.actors.scenario import (
     sample_times,
     shape_circles,
 )
-from garage_mj.scene.actor_spec import KINDS, SHAPE_SIZE, SHAPES, ActorSpec
+from garage_mj.scene.actor_spec import CRUISE_BEHAVIOURS, KINDS, SHAPE_SIZE, SHAPES, ActorSpec
 from garage_mj.scene.drivable import DrivePlanner, TestPlan
 from garage_mj.scene.world import WORLD_DIR, cell_center, world_to_cell
 
@@ -356,10 +356,11 @@ def draw_scenario(config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner,
             + [("moving_car", config.moving_car_behaviours)] * config.moving_cars
             + [("clutter", config.clutter_behaviours)] * config.clutter)
     counters = {k: 0 for k in KINDS}
-    for kind, behaviours in todo:
+    for kind, listed in todo:
         spec = None
         name = f"{kind.replace('_', '')}_{counters[kind]}"
-        for _ in range(PLACEMENT_TRIES):
+        behaviours = [b for b in listed if b in CRUISE_BEHAVIOURS[kind]]  # a park behaviour is a park test's
+        for _ in range(PLACEMENT_TRIES if behaviours else 0):
             behaviour = behaviours[int(rng.integers(len(behaviours)))]
             spec = getattr(placer, kind)(name, behaviour)
             if spec is not None:

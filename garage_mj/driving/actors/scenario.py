@@ -74,14 +74,15 @@ def circle_points(shape: str, poses: np.ndarray) -> tuple[np.ndarray, float]:
 class Corridor:
     """The ego car's swept path of a feasible test: body footprints along the planned route."""
 
-    def __init__(self, plan: TestPlan, car: CarGeometry) -> None:
+    def __init__(self, plan: TestPlan, car: CarGeometry, start: float = START_OFFSET) -> None:
+        """``start`` [m]: the station the car starts at (a cruise test's :data:`START_OFFSET`; a park plan's 0)."""
         self.car = car
         self.rear = np.asarray(plan.rear, dtype=float)
         self.heading = np.asarray(plan.heading, dtype=float)
         self.centre = np.asarray(plan.centre, dtype=float)
         seg = np.linalg.norm(np.diff(self.centre, axis=0), axis=1)
         self.s = np.concatenate([[0.0], np.cumsum(seg)])  # [m] centre-path stations
-        self.i0 = int(min(np.searchsorted(self.s, START_OFFSET), len(self.s) - 1))  # where the car starts
+        self.i0 = int(min(np.searchsorted(self.s, start), len(self.s) - 1))  # where the car starts
         self._cos, self._sin = np.cos(self.heading), np.sin(self.heading)
 
     def distance(self, points: np.ndarray, first: int = 0) -> np.ndarray:

@@ -85,6 +85,7 @@ class OracleDriver(BaseDriver):
         avp = info.get("task", "park") == "avp"
         if plan is not None and len(plan["poses"]) >= 2 and not avp:
             self.tracker = ParkTracker(plan["poses"], plan["directions"], self.car, self.park_config, self.dt)
+            self._park_yield(info)
             self.phase = "park"
             return
         rear = info.get("rear_path")
@@ -101,6 +102,15 @@ class OracleDriver(BaseDriver):
         self._actor_blocks(info.get("actors") or [])
         if plan is not None and len(plan["poses"]) >= 2:  # AVP: the route's last stretch, then the park plan
             self.tracker = self._handover(plan)
+            self._park_yield(info)
+
+    def _park_yield(self, info: dict[str, Any]) -> None:
+        """The park tracker yields to the test's moving actors as the cruise route does (``actor_margin``, ``_gap``,
+        ``_decel``)."""
+        actors = info.get("actors") or []
+        if actors:
+            cfg = self.config
+            self.tracker.watch(actors, cfg.actor_margin, cfg.actor_gap, cfg.actor_decel)
 
     def _handover(self, plan: dict[str, Any]) -> ParkTracker:
         """An AVP test's tracker: the last ``handover`` metres of the cruise route (forward), then the park
@@ -233,7 +243,7 @@ class OracleDriver(BaseDriver):
             throttle, steer, gear = self.tracker.command(
                 np.asarray(obs["pose"]).reshape(-1)[:3], speed,
                 None if seen is None else (Gear.R if float(np.asarray(seen).reshape(-1)[0]) < 0 else Gear.D),
-                None if wheel is None else float(np.asarray(wheel).reshape(-1)[0]))
+                None if wheel is None else float(np.asarray(wheel).reshape(-1)[0]), obs.get("actors"))
         throttle, steer = self.delayed(throttle, steer)
         if self.discrete:
             return self._park_discrete(throttle, steer, gear, obs)

@@ -30,9 +30,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from garage_mj.driving.actors.park_placement import park_corridor
+from garage_mj.driving.actors.scenario import actor_poses, sample_times
 from garage_mj.driving.sim.vehicle import Gear, clip
+from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.car import CarGeometry
-from garage_mj.scene.park_planning import centre_to_rear
+from garage_mj.scene.park_planning import centre_to_rear, rear_to_centre
 
 
 @dataclass(frozen=True)
@@ -154,6 +157,46 @@ class ParkTracker:
         self.steer_angle = 0.0  # [rad] road-wheel angle as far as the tracker knows (obs["steer"] wins)
         self.done = False  # at rest at the plan's end
         self._speed = 0.0  # [m/s] the speed of the current step
+        self.blocks: list[list[tuple[int, np.ndarray, np.ndarray]]] = [[] for _ in self.segments]
+        self._yield = (0.4, 0.5, 2.0)  # actor margin [m], gap [m], braking [m/s^2] (set by watch)
+
+    def watch(self, actors: list, margin: float, gap: float, decel: float) -> None:
+        """Yield to moving ``actors`` (:class:`~garage_mj.scene.actor_spec.ActorSpec` or their dicts), as the cruise
+        oracle does: per segment and per moment of each actor's trajectory, the poses of the segment the rest of
+        the trajectory comes within ``margin`` of; :meth:`command` then stops ``gap`` before the first such pose
+        ahead (braking at ``decel``) while a triggered actor still reaches it."""
+        self._yield = (float(margin), float(gap), float(decel))
+        self.blocks = [[] for _ in self.segments]
+        specs = [a if isinstance(a, ActorSpec) else ActorSpec.from_dict(a) for a in actors]
+        for seg, blocks in zip(self.segments, self.blocks, strict=True):
+            corr = park_corridor(rear_to_centre(np.column_stack([seg.points, seg.yaw]), self.car), self.car)
+            for k, a in enumerate(specs):
+                if a.static:
+                    continue
+                times = sample_times(a)
+                hit = corr.conflicts(a.shape, actor_poses(a, times), margin)  # (T, n)
+                if hit.any():
+                    blocks.append((k, times, np.logical_or.accumulate(hit[::-1], axis=0)[::-1]))
+
+    def _actor_stop(self, actors) -> float:
+        """[m] station of the current segment to stop at for the triggered actors (inf when none blocks ahead)."""
+        blocks = self.blocks[self.k]
+        if not blocks or actors is None:
+            return math.inf
+        state = np.asarray(actors, dtype=float).reshape(-1, 4)
+        seg, stop = self.segment, math.inf
+        for k, times, rest in blocks:
+            tau = float(state[k, 3]) if k < len(state) else -1.0
+            if tau < 0:  # not triggered: placement left the stopping distance once it is
+                continue
+            t = int(np.searchsorted(times, tau - 0.2))
+            if t >= len(times):  # its trajectory has run out
+                continue
+            cols = np.flatnonzero(rest[t])
+            cols = cols[cols >= self.index]
+            if len(cols):
+                stop = min(stop, float(seg.s[int(cols[0])]) - self._yield[1])
+        return stop
 
     @property
     def segment(self) -> Segment:
@@ -199,9 +242,10 @@ class ParkTracker:
         return pedal, steer, gear
 
     def command(self, pose, speed: float, gear: Gear | None = None,
-                steer: float | None = None) -> tuple[float, float, Gear]:
+                steer: float | None = None, actors=None) -> tuple[float, float, Gear]:
         """``(pedal, steer, gear request)`` for the car at ``pose`` (centre x, y, yaw) with signed ``speed``;
-        ``gear`` (the car's) and ``steer`` (its road-wheel angle, fraction of full lock) when observed."""
+        ``gear`` (the car's) and ``steer`` (its road-wheel angle, fraction of full lock) when observed; ``actors``
+        the observation's actor states (x, y, yaw, seconds since the trigger or -1) when it yields (:meth:`watch`)."""
         cfg = self.config
         if gear is not None:
             self.gear = gear
@@ -230,6 +274,12 @@ class ParkTracker:
             return self._answer(-1.0, wheel, seg.gear)  # change gear and turn the wheels at rest
         target = float(np.interp(s_now, seg.s, seg.v_limit))
         target = max(target, min(cfg.creep, math.sqrt(2.0 * cfg.stop_decel * max(remaining, 0.0))))
+        stop = self._actor_stop(actors)
+        if stop < math.inf:  # an actor ahead on this segment: stop short of it, go on once it has passed
+            room = stop - s_now
+            if room <= 0.05:
+                return self._answer(-1.0, wheel, seg.gear)
+            target = min(target, math.sqrt(2.0 * self._yield[2] * room))
         return self._answer(self._pedal(target, seg.gear.sign * speed), wheel, seg.gear)
 
     def _pedal(self, target: float, speed: float) -> float:

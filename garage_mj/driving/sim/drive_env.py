@@ -45,6 +45,7 @@ from gymnasium import spaces
 from garage_mj.core.config import load_config
 from garage_mj.driving.actors.config import NO_ACTORS, ScenarioConfig, load_scenario_config
 from garage_mj.driving.actors.judging import judge
+from garage_mj.driving.actors.park_placement import park_scenario
 from garage_mj.driving.actors.placement import draw_scenario
 from garage_mj.driving.actors.scenario import Scenario
 from garage_mj.driving.sim.observations import (
@@ -218,7 +219,9 @@ class GarageDriveEnv(gym.Env):
             :class:`~garage_mj.driving.sim.park_outcomes.ParkMonitor` (``park_outcome``: its
             :class:`~garage_mj.driving.sim.park_outcomes.ParkOutcomeConfig`), observe also ``stall`` and
             ``gear``, and give the reference plan in the reset info as ``park_plan`` (``poses`` (N, 3) car
-            centre, ``directions`` (N,) +1/-1, ``stall_pose``), as :meth:`driver_info` does. No actors.
+            centre, ``directions`` (N,) +1/-1, ``stall_pose``), as :meth:`driver_info` does. With ``scenario`` their
+            actors are the park behaviours, placed around the target stall and the park plan from a generator of
+            their own (:mod:`~garage_mj.driving.actors.park_placement`).
         maneuver: ``"reverse"`` (reverse-in, the default), ``"forward"`` (nose-in) or ``"any"`` (drawn per test).
         stall: a stall id every reset tests (default: drawn per test).
         park_config: :class:`~garage_mj.scene.park_planning.ParkConfig` of the reference park planner.
@@ -307,8 +310,6 @@ class GarageDriveEnv(gym.Env):
         self.drive_config = _as(DriveConfig, drive)
         self.outcome_config = _as(OutcomeConfig, outcome)
         self.scenario_config = scenario if isinstance(scenario, ScenarioConfig) else load_scenario_config(scenario)
-        if task != "cruise" and self.scenario_config.count:
-            raise ValueError(f"task {task!r} has no actors: a scenario with actors is for cruise tests")
         self.park_config = _as(ParkConfig, park_config)
         self.park_outcome_config = _as(ParkOutcomeConfig, park_outcome)
         self.render_mode = render_mode
@@ -385,7 +386,7 @@ class GarageDriveEnv(gym.Env):
         self._fleet_rng = None if self.parked_fleet.default else fleet_rng(seed) if seed is not None else rng
         self.parked_bodies: dict[int, ParkedBody] = {}
         if self.task != "cruise":
-            return self._reset_park(rng, options)
+            return self._reset_park(rng, options, seed)
         if "target" in options:
             target = int(options["target"])
         elif self.stall is not None:  # one stall for every test (no draw: the other draws as with none)
@@ -458,13 +459,20 @@ class GarageDriveEnv(gym.Env):
         return draw_parked(self.stalls, occupied, target, self.parked_fleet, self._fleet_rng,
                            self.scene.world.marking_width)
 
-    def _reset_park(self, rng, options: dict[str, Any]):
+    def _reset_park(self, rng, options: dict[str, Any], seed: int | None = None):
         """:meth:`reset` of a park or AVP test (:mod:`~garage_mj.driving.sim.park_task`)."""
-        self._park = test = self._draw_park_test(rng, options)
+        given = options.get("actors")
+        if given is not None and "occupied" in options:  # a replay: the stalls its actors take held parked cars
+            took = {int(a.stall if isinstance(a, ActorSpec) else a.get("stall", -1)) for a in given} - {-1}
+            options = {**options, "occupied": sorted({int(s) for s in options["occupied"]} | took)}
+        test = self._draw_park_test(rng, options)
+        # the actors: their own generator, after the test's draws (park_placement); the stalls they take are freed
+        self.scenario, test = park_scenario(self, test, seed, rng, given)
+        self._park = test
         self.target, self.occupied, self.test_plan = test.stall, test.occupied, test.cruise
-        self.scenario = Scenario()
         self.route = test.reference
         self.monitor = park_monitor(self, test)
+        self.monitor.time_limit += self.scenario.duration  # waiting for the actors is not the driver's time
         self.start_pose = x, y, yaw = test.start
         mujoco.mj_resetData(self.model, self.data)
         self._parked_cars.apply(self.model, None, test.occupied)
@@ -478,6 +486,8 @@ class GarageDriveEnv(gym.Env):
         self.path_length = 0.0  # [m] driven
         self._last_xy = (x, y)
         self.outcome = None if test.feasible else Outcome(OutcomeKind(test.verdict), 0.0, test.reason)
+        if self.outcome is None and not self.scenario.feasible:
+            self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, self.scenario.reason)
         self._info_test = None
         self._end_info: dict[str, Any] | None = None
         return self._observe(), {**self._info(), "park_plan": test.plan_info()}
@@ -606,7 +616,8 @@ class GarageDriveEnv(gym.Env):
                 self._info_test["actors_missing"] = dict(self.scenario.missing)
             if self._park is not None:
                 stall = self.stalls[self._park.stall]
-                self._info_test.update(park_info(self._park, self._park_level, stall), feasible=self._park.feasible)
+                self._info_test.update(park_info(self._park, self._park_level, stall),
+                                       feasible=self._park.feasible and self.scenario.feasible)
         info: dict[str, Any] = {"time": float(self.data.time), "path_length": self.path_length,
                                 "progress": self.monitor.progress, "pose": (x, y, yaw), **self._info_test}
         info["actors"] = dict(info["actors"])  # fresh dicts: a caller may keep or change an info
