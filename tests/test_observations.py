@@ -18,9 +18,11 @@ from garage_mj.driving.sim.observations import (
     observation_spaces,
     observations_markdown,
 )
+from garage_mj.driving.sim.park_sensors import ALL_SENSORS
 from garage_mj.driving.sim.sensors import CameraConfig
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "observations.md"
+SENSORS = {"rear_depth", "rear_segmentation", "ultrasonic", "slot"}  # opt-in: GarageDriveEnv(sensors=...)
 
 
 def test_docs_observations_md_is_rendered_from_the_table():
@@ -41,8 +43,11 @@ def test_table_entries_are_unique_and_documented():
     (ObservationSetup(CameraConfig()), {"depth", "segmentation", "waypoint", "speed", "goal", "remaining",
                                         "steer", "pose"}),
     (ObservationSetup(CameraConfig(rgb=True), image_obs=True, actors=3),
-     {e.name for e in OBSERVATIONS} - {"stall", "gear"}),  # a cruise test's: no stall, no gear
-    (ObservationSetup(CameraConfig(rgb=True), image_obs=True, actors=3, task="park"), {e.name for e in OBSERVATIONS}),
+     {e.name for e in OBSERVATIONS} - {"stall", "gear"} - SENSORS),  # a cruise test's: no stall, no gear
+    (ObservationSetup(CameraConfig(rgb=True), image_obs=True, actors=3, task="park"),
+     {e.name for e in OBSERVATIONS} - SENSORS),
+    (ObservationSetup(CameraConfig(rgb=True), image_obs=True, actors=3, task="park", sensors=ALL_SENSORS),
+     {e.name for e in OBSERVATIONS}),
 ])
 def test_options_pick_the_entries(setup, present):
     got = observation_spaces(setup)
@@ -56,7 +61,7 @@ def test_env_space_and_observation_follow_the_table(painted_tiny):
     setup = ObservationSetup(env.camera_config, actors=1)
     assert env.observation_space == spaces.Dict(observation_spaces(setup))
     obs, _ = env.reset(seed=0)
-    assert list(obs) == [e.name for e in OBSERVATIONS if e.name not in ("stall", "gear")]  # every cruise entry, in order
+    assert list(obs) == [e.name for e in OBSERVATIONS if e.name not in {"stall", "gear"} | SENSORS]  # in order
     assert env.observation_space.contains(obs)
     env.close()
 

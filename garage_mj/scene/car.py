@@ -25,6 +25,11 @@ if TYPE_CHECKING:
 
 CAR_MODEL = "car"  # folder under garage_mj.models
 FRONT_CAMERA = "front"  # the car model's forward camera (``ego/front`` once attached to a scene)
+REAR_CAMERA = "rear"  # the car model's backward camera (``ego/rear``): the front one's twin, looking back
+#: The ultrasonic park sensors of ``models/car`` (rangefinders on sites of the same names), front bumper then rear,
+#: each left to right: a side sensor, the outer (corner) and inner pair across the bumper, the other side sensor.
+ULTRASONIC_SENSORS = tuple(f"us_{end}_{where}" for end in "fr"
+                           for where in ("side_l", "outer_l", "inner_l", "inner_r", "outer_r", "side_r"))
 # The MJCF gives a camera's orientation as axes written to 6 digits: xyaxes="0 -1 0 0.173648 0 0.984808"
 # is a 10 degree tilt to within 2e-7 rad. The pitch is read to this many decimals of a degree, so it comes
 # out as the tilt the file means (exactly math.radians(10.0)), not as its 6-digit rounding.
@@ -159,7 +164,10 @@ CABIN_SHIFT = -0.15 / 4.6  # cabin centre behind the body centre / body length
 CABIN_INSET = 0.1  # [m] body side to the cabin side
 GLASS_INSET = 0.05  # [m] cabin edge to the window edge
 LIGHT_INSET = 0.35  # [m] body side to a headlight's centre
-CAMERA_SETBACK = 0.05  # [m] front bumper to the front camera
+CAMERA_SETBACK = 0.05  # [m] bumper to the camera looking out over it (front and rear)
+ULTRASONIC_INNER_Y = 0.25  # [m] centre line to each of a bumper's inner pair of ultrasonic sensors
+ULTRASONIC_CORNER_INSET = 0.2  # [m] body side to a bumper's outer (corner) ultrasonic sensor
+ULTRASONIC_SIDE_SETBACK = 0.4  # [m] bumper to a side ultrasonic sensor, along the body side
 STEER_RANGE = 0.9  # [rad] the steering joints' range in models/car; widened for a class whose inner wheel needs more
 STEER_HEADROOM = 0.05  # [rad] beyond the inner wheel's angle at full lock, where a class needs a wider range
 
@@ -175,13 +183,40 @@ def inner_wheel_angle(wheelbase: float, track: float, max_steer: float) -> float
     return math.atan(wheelbase * t / (wheelbase - track / 2 * t))
 
 
+def ultrasonic_positions(length: float, width: float) -> dict[str, tuple[float, float]]:
+    """Where each of :data:`ULTRASONIC_SENSORS` sits on a car body ``length`` x ``width`` [m]: (x, y) [m] in the car
+    frame, on the body's surface (bumpers at x = +-length / 2, sides at y = +-width / 2). The inner pair stands
+    :data:`ULTRASONIC_INNER_Y` either side of the centre line, the outer pair :data:`ULTRASONIC_CORNER_INSET` in
+    from the body sides, the side ones :data:`ULTRASONIC_SIDE_SETBACK` back from the bumper. Their height and the
+    directions they look in are ``models/car``'s for every class."""
+    half, hw = length / 2, width / 2
+    across = {"side": (_r(half - ULTRASONIC_SIDE_SETBACK), _r(hw)), "outer": (_r(half), _r(hw - ULTRASONIC_CORNER_INSET)),
+              "inner": (_r(half), ULTRASONIC_INNER_Y)}
+    out = {}
+    for n in ULTRASONIC_SENSORS:
+        _, end, where, side = n.split("_")
+        x, y = across[where]
+        out[n] = (x if end == "f" else -x, y if side == "l" else -y)
+    return out
+
+
+def drop_rangefinders(root: mjcf.RootElement) -> None:
+    """Remove the ultrasonic rangefinders (:data:`ULTRASONIC_SENSORS`) from a car's ``dm_control.mjcf`` model; their
+    sites stay. A model that does not read them saves a ray cast per sensor and physics step."""
+    for n in ULTRASONIC_SENSORS:
+        sensor = root.find("sensor", n)
+        if sensor is not None:
+            sensor.remove()
+
+
 def car_model(vehicle: VehicleClass | None = None, name: str = CAR_MODEL) -> mjcf.RootElement:
     """The MuJoCo car of ``vehicle`` (a :class:`~garage_mj.scene.vehicles.VehicleClass`; None: ``models/car`` as
     it is) as a ``dm_control.mjcf`` model named ``name``, with its free joint ``root``.
 
     ``models/car`` resized to the class: the collision and visual boxes to its length, width and height (the
     cabin on the lower body, up to the roof), the axles to its wheelbase and overhangs, the track to its
-    width less :data:`WHEEL_INSET` on each side, the front camera :data:`CAMERA_SETBACK` behind the bumper, the
+    width less :data:`WHEEL_INSET` on each side, the front and rear cameras :data:`CAMERA_SETBACK` inside their
+    bumpers, the ultrasonic sensors on the bumpers and sides (:func:`ultrasonic_positions`), the
     steering joints' range wide enough for the inner wheel at the class's full lock. Wheels, masses,
     actuators and sensors stay the model's. The car frame's origin stays at the outline's centre (as
     :meth:`~garage_mj.scene.vehicles.VehicleClass.geometry` has it). Sedan gives ``models/car`` exactly.
@@ -219,8 +254,12 @@ def car_model(vehicle: VehicleClass | None = None, name: str = CAR_MODEL) -> mjc
         geom(n).pos = [_r(x), 0.0, cabin_z]
     for n, side in (("headlight_l", 1), ("headlight_r", -1)):
         geom(n).pos = [_r(half), _r(side * (hw - LIGHT_INSET)), geom(n).pos[2]]
-    cam = root.find("camera", "front")
-    cam.pos = [_r(half - CAMERA_SETBACK), 0.0, cam.pos[2]]
+    for n, end in ((FRONT_CAMERA, 1), (REAR_CAMERA, -1)):
+        cam = root.find("camera", n)
+        cam.pos = [_r(end * (half - CAMERA_SETBACK)), 0.0, cam.pos[2]]
+    for n, (x, y) in ultrasonic_positions(vehicle.length, vehicle.width).items():
+        site = root.find("site", n)
+        site.pos = [x, y, site.pos[2]]
     for n, x, side in (("steer_fl", front_axle, 1), ("steer_fr", front_axle, -1), ("wheel_rl", rear_axle, 1),
                        ("wheel_rr", rear_axle, -1)):
         root.find("body", n).pos = [x, _r(side * track / 2), 0.0]

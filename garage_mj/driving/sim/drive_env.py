@@ -64,6 +64,13 @@ from garage_mj.driving.sim.outcomes import (
     ego_contacts,
 )
 from garage_mj.driving.sim.park_outcomes import ParkMonitor, ParkOutcomeConfig
+from garage_mj.driving.sim.park_sensors import (
+    NO_SENSORS,
+    SensorConfig,
+    Ultrasonic,
+    sensor_config,
+    slot_rng,
+)
 from garage_mj.driving.sim.park_task import (
     MANEUVER_CHOICES,
     TASKS,
@@ -90,7 +97,7 @@ from garage_mj.driving.sim.vehicle import (
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies
 from garage_mj.scene.actor_spec import ActorSpec
-from garage_mj.scene.car import FRONT_CAMERA, CarConfig, car_camera, car_geometry
+from garage_mj.scene.car import FRONT_CAMERA, REAR_CAMERA, CarConfig, car_camera, car_geometry
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
@@ -241,9 +248,21 @@ class GarageDriveEnv(gym.Env):
             the parked cars' geoms in the compiled model (no recompiling): cameras, collisions and the park planner
             see them where they stand (``parked_bodies``). Park and AVP tests plan around the parked cars' bodies with
             any fleet; cruise tests' drivability checks keep the stall outlines.
+        sensors: the parking sensors to observe besides the front camera, in any task
+            (:mod:`~garage_mj.driving.sim.park_sensors`): a :class:`~garage_mj.driving.sim.park_sensors.SensorConfig`,
+            a dict of its fields, or sensor names (``"rear_camera,ultrasonic,slot"``, ``"all"``); None (the default):
+            none, and the observation, the model and every result stay what they are without them. ``rear_camera``
+            adds ``rear_depth`` and ``rear_segmentation`` (the front camera's config, looking back), ``ultrasonic``
+            the 12 bumper ranges, ``slot`` the target stall's pose and size in the car frame (its noise drawn from a
+            generator of its own, seeded by the test's seed).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    # the parking sensors' defaults: none (a subclass that builds its own scene, CaseDriveEnv, has these)
+    sensor_config: SensorConfig = NO_SENSORS
+    rear_camera: Camera | None = None
+    ultrasonic: Ultrasonic | None = None
+    slot_rng: np.random.Generator | None = None
 
     def __init__(
         self,
@@ -270,6 +289,7 @@ class GarageDriveEnv(gym.Env):
         world: WorldConfig | dict[str, Any] | None = None,
         parked_fleet: str = "uniform",
         parked_jitter: float = 0.0,
+        sensors: SensorConfig | dict[str, Any] | str | None = None,
     ) -> None:
         if not isinstance(garage, Garage):
             raise ValueError("GarageDriveEnv needs garage= (a garage_mj.Garage; for a pack: load_pack(folder).garage)")
@@ -299,6 +319,7 @@ class GarageDriveEnv(gym.Env):
         if rgb and not cam.rgb:
             cam = CameraConfig(**{**cam.__dict__, "rgb": True})
         self.camera_config = cam
+        self.sensor_config = sensor_config(sensors)
         self.vehicle = None if vehicle is None else vehicle_class(vehicle)
         self.parked_fleet = ParkedFleet(parked_fleet, parked_jitter)
         self.car_config = _as(CarConfig, car)
@@ -327,7 +348,7 @@ class GarageDriveEnv(gym.Env):
         if not self.targets:
             raise ValueError(f"garage {garage.name!r}: no stall can be reached by a feasible route from the entrance")
 
-        setup = ObservationSetup(cam, self.image_obs, self.scenario_config.count, task)
+        setup = ObservationSetup(cam, self.image_obs, self.scenario_config.count, task, self.sensor_config)
         self.observation_space = spaces.Dict(observation_spaces(setup))
         self._observed = observed_entries(setup)  # the observation table's entries this env has
         if task != "cruise":
@@ -347,7 +368,8 @@ class GarageDriveEnv(gym.Env):
         root = build_scene(self.scene, fuse_static=True)  # parked cars and pillars: geoms of the world body
         _plane_floor(root)
         self._entrance = self.scene.entrance_pose
-        _add_hit_sensors(root, attach_car(root, *self._entrance, vehicle=self.vehicle))
+        _add_hit_sensors(root, attach_car(root, *self._entrance, vehicle=self.vehicle,
+                                          ultrasonic=self.sensor_config.ultrasonic))
         if self.scenario_config.count:
             add_actor_bodies(root, self.scenario_config)
         self.model = compile_mjcf(root)
@@ -359,6 +381,11 @@ class GarageDriveEnv(gym.Env):
         self._hit_counts = _hit_sensors(self.model, self.car.geom_mask, self._hittable)
         self._sensor_values = memoryview(self.data.sensordata)  # the same buffer, read as floats
         self.camera = Camera(self.model, self.camera_config)
+        self.rear_camera: Camera | None = None
+        if self.sensor_config.rear_camera:  # the front camera's twin looking back, through the same GL context
+            rear = CameraConfig(**{**self.camera_config.__dict__, "camera": f"{EGO_NAME}/{REAR_CAMERA}"})
+            self.rear_camera = Camera(self.model, rear, share=self.camera)
+        self.ultrasonic = Ultrasonic(self.model, f"{EGO_NAME}/") if self.sensor_config.ultrasonic else None
         self._top: Camera | None = None
         self.n_substeps = max(1, round(self.dt / self.model.opt.timestep))
         self.planner = drive_planner(self.scene, self.car_geometry, self.drive_config)
@@ -385,6 +412,8 @@ class GarageDriveEnv(gym.Env):
         # the parked fleet's draws: a generator of their own (none for the scene's own cars)
         self._fleet_rng = None if self.parked_fleet.default else fleet_rng(seed) if seed is not None else rng
         self.parked_bodies: dict[int, ParkedBody] = {}
+        # the slot detector's noise: a generator of its own, drawn from only when it adds noise
+        self.slot_rng = None if not self.sensor_config.noisy_slot else slot_rng(seed) if seed is not None else rng
         if self.task != "cruise":
             return self._reset_park(rng, options, seed)
         if "target" in options:
@@ -597,8 +626,9 @@ class GarageDriveEnv(gym.Env):
         """The observation of the current state (``pose`` and ``speed``: the car's, when the caller has them)."""
         x, y, yaw = pose or self.car.pose(self.data)
         frame = self.camera.render(self.data)
+        rear = None if self.rear_camera is None else self.rear_camera.render(self.data)
         speed = self.car.speed(self.data) if speed is None else speed
-        return observe(self._observed, Snapshot(self, x, y, yaw, speed, frame))
+        return observe(self._observed, Snapshot(self, x, y, yaw, speed, frame, rear))
 
     def _info(self, pose: tuple[float, float, float] | None = None) -> dict[str, Any]:
         x, y, yaw = pose or self.car.pose(self.data)
@@ -670,7 +700,7 @@ class GarageDriveEnv(gym.Env):
         return self._top.render(self.data)["rgb"]
 
     def close(self) -> None:
-        for cam in (self.camera, self._top):
+        for cam in (self.rear_camera, self.camera, self._top):  # the rear camera borrows the front one's context
             if cam is not None:
                 cam.close()
         self._top = None

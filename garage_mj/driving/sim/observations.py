@@ -22,8 +22,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
+from garage_mj.driving.sim.park_sensors import (
+    ALL_SENSORS,
+    MAX_SLOT_SIZE,
+    NO_SENSORS,
+    ULTRASONIC_MAX,
+    ULTRASONIC_MIN,
+    SensorConfig,
+    slot_pose,
+)
 from garage_mj.driving.sim.sensors import CameraConfig
 from garage_mj.scene.actor_bodies import states
+from garage_mj.scene.car import ULTRASONIC_SENSORS
 from garage_mj.scene.route_line import to_car_frame
 from garage_mj.scene.semantics import Semantic
 
@@ -43,6 +53,7 @@ class ObservationSetup:
     image_obs: bool = False  # depth and segmentation as (H, W, 1) uint8 images (GarageDriveEnv(image_obs=True))
     actors: int = 0  # actor slots: the scenario's actor count
     task: str = "cruise"  # the drive env's task: "park" and "avp" tests observe the stall and the gear too
+    sensors: SensorConfig = NO_SENSORS  # the parking sensors asked for (GarageDriveEnv(sensors=...)): all off
 
 
 @dataclass(slots=True)  # not frozen: one is made per step, and a frozen init costs more
@@ -55,6 +66,7 @@ class Snapshot:
     yaw: float  # [rad]
     speed: float  # [m/s] forward
     frame: dict[str, np.ndarray]  # the camera's images of this step (Camera.render: the ones it is set to render)
+    rear: dict[str, np.ndarray] | None = None  # the rear camera's, when the env observes it
 
 
 @dataclass(frozen=True)
@@ -85,21 +97,29 @@ def _depth_space(setup: ObservationSetup) -> spaces.Box:
     return spaces.Box(0.0, setup.camera.far, (setup.camera.height, setup.camera.width), np.float32)
 
 
-def _depth(s: Snapshot) -> np.ndarray | None:
-    depth = s.frame.get("depth")
+def _depth_of(frame: dict[str, np.ndarray] | None, s: Snapshot) -> np.ndarray | None:
+    depth = None if frame is None else frame.get("depth")
     if depth is None or not s.env.image_obs:
         return depth
     far = s.env.camera_config.far
     return np.rint(np.clip(depth, 0.0, far) * (255.0 / far)).astype(np.uint8)[..., None]
 
 
+def _depth(s: Snapshot) -> np.ndarray | None:
+    return _depth_of(s.frame, s)
+
+
 def _segmentation_space(setup: ObservationSetup) -> spaces.Box:
     return _image(setup, 1, 255, np.uint8) if setup.image_obs else _image(setup, None, max(Semantic), np.uint8)
 
 
-def _segmentation(s: Snapshot) -> np.ndarray | None:
-    seg = s.frame.get("segmentation")
+def _segmentation_of(frame: dict[str, np.ndarray] | None, s: Snapshot) -> np.ndarray | None:
+    seg = None if frame is None else frame.get("segmentation")
     return seg if seg is None or not s.env.image_obs else seg[..., None]
+
+
+def _segmentation(s: Snapshot) -> np.ndarray | None:
+    return _segmentation_of(s.frame, s)
 
 
 # -- the car and its route ---------------------------------------------------------------------------
@@ -152,6 +172,27 @@ def _gear(s: Snapshot) -> np.ndarray:
     return np.array([s.env.car.gear.value], dtype=np.float32)
 
 
+# -- the parking sensors (garage_mj.driving.sim.park_sensors; each on only when asked for) -------------------
+def _sensor(on: Callable[[SensorConfig], bool], space: Callable[[ObservationSetup], spaces.Box | None]
+            ) -> Callable[[ObservationSetup], spaces.Box | None]:
+    """``space`` where the env's :class:`SensorConfig` has the sensor ``on``; no such entry otherwise."""
+    return lambda setup: space(setup) if on(setup.sensors) else None
+
+
+def _ultrasonic(s: Snapshot) -> np.ndarray:
+    return s.env.ultrasonic.read(s.env.data)
+
+
+def _slot(s: Snapshot) -> np.ndarray:
+    env = s.env
+    return slot_pose(env.stalls[env.target], s.x, s.y, s.yaw, env.sensor_config, env.slot_rng)
+
+
+_SLOT_SPACE = spaces.Box(np.array([-MAX_EXTENT, -MAX_EXTENT, -np.pi, 0.0, 0.0], np.float32),
+                         np.array([MAX_EXTENT, MAX_EXTENT, np.pi, MAX_SLOT_SIZE, MAX_SLOT_SIZE], np.float32),
+                         dtype=np.float32)
+
+
 # -- the other road users ----------------------------------------------------------------------------
 def _actors_space(setup: ObservationSetup) -> spaces.Box | None:
     n = setup.actors
@@ -200,6 +241,20 @@ OBSERVATIONS: tuple[ObservationEntry, ...] = (
                      "yaw relative to the car's; park and AVP tests only", _stall),
     ObservationEntry("gear", _parking(spaces.Box(-1.0, 1.0, (1,), np.float32)), False,
                      "the gear: +1 drive, -1 reverse; park and AVP tests only", _gear),
+    ObservationEntry("rear_depth", _sensor(lambda c: c.rear_camera, _depth_space), False,
+                     "rear camera depth, as the front camera's (same image, planes and tilt, looking back); "
+                     "sensor `rear_camera` only", lambda s: _depth_of(s.rear, s)),
+    ObservationEntry("rear_segmentation", _sensor(lambda c: c.rear_camera, _segmentation_space), False,
+                     "rear camera semantic class per pixel; sensor `rear_camera` only", lambda s: _segmentation_of(s.rear, s)),
+    ObservationEntry("ultrasonic", _sensor(lambda c: c.ultrasonic, _vector(len(ULTRASONIC_SENSORS), ULTRASONIC_MIN,
+                                                                           ULTRASONIC_MAX)), False,
+                     f"bumper ultrasonic ranges [m], front then rear, each left to right: side, outer, inner, inner, "
+                     f"outer, side (`garage_mj.scene.car.ULTRASONIC_SENSORS`); no echo reads {ULTRASONIC_MAX:g}, "
+                     f"nearer than {ULTRASONIC_MIN:g} reads {ULTRASONIC_MIN:g}; sensor `ultrasonic` only", _ultrasonic),
+    ObservationEntry("slot", _sensor(lambda c: c.slot, lambda setup: _SLOT_SPACE), False,
+                     "the target stall as a slot detector reports it, car frame: centre x forward, y left [m], the "
+                     "direction it opens to relative to the car's heading [rad], width across its opening and depth "
+                     "[m]; seeded noise on position and yaw if set; sensor `slot` only", _slot),
     ObservationEntry("pose", _pose_space, True, "the car's pose, world frame: x, y [m], yaw [rad] in [-pi, pi]",
                      _pose),
     ObservationEntry("actors", _actors_space, True,
@@ -230,7 +285,8 @@ def observe(entries: Iterable[ObservationEntry], snapshot: Snapshot) -> dict[str
 
 
 # -- the docs table ----------------------------------------------------------------------------------
-DOC_SETUP = ObservationSetup(CameraConfig(rgb=True), image_obs=False, actors=2, task="park")  # docs/observations.md
+# docs/observations.md: every entry on
+DOC_SETUP = ObservationSetup(CameraConfig(rgb=True), image_obs=False, actors=2, task="park", sensors=ALL_SENSORS)
 
 
 def _number(v: float) -> str:
@@ -256,7 +312,8 @@ def space_text(space: spaces.Box) -> str:
 
 def observations_markdown(setup: ObservationSetup = DOC_SETUP) -> str:
     """``docs/observations.md``: the table of :data:`OBSERVATIONS` (name, space, privileged, description)."""
-    images = observation_spaces(ObservationSetup(setup.camera, image_obs=True, actors=setup.actors))
+    images = observation_spaces(ObservationSetup(setup.camera, image_obs=True, actors=setup.actors,
+                                                 sensors=setup.sensors))
     cam = setup.camera
     lines = [
         "# Observations of `GarageDrive-v0`",
@@ -266,8 +323,11 @@ def observations_markdown(setup: ObservationSetup = DOC_SETUP) -> str:
         "this file is what it renders. The observation is a dict with these keys, in this order.",
         f"Spaces as built for a {cam.width} x {cam.height} camera with a {cam.far:g} m far plane, colour "
         f"{'on' if cam.rgb else 'off'},",
-        f"and {setup.actors} actor slots; where `image_obs=True` changes a space, it is given after the default.",
+        f"{setup.actors} actor slots{' and every parking sensor on' if setup.sensors == ALL_SENSORS else ''}; "
+        "where `image_obs=True` changes a space, it is given after the default.",
         "A cruise test (`task=\"cruise\"`, the default) has no `stall` and no `gear`: they are a park or AVP test's.",
+        "The parking sensors (`rear_depth`, `rear_segmentation`, `ultrasonic`, `slot`) are opt-in, in any task:",
+        "`GarageDriveEnv(sensors=...)` (`garage_mj/driving/sim/park_sensors.py`, `SensorConfig`).",
         "Privileged entries are for reference drivers (the `oracle`); a learned driver never reads them",
         "(`garage_mj/driving/learning/observation.py`).",
         "",

@@ -155,7 +155,8 @@ class Camera:
     :class:`garage_mj.scene.semantics.Semantic` ids. Sets the model's clipping planes to ``near``/``far``.
     """
 
-    def __init__(self, model: mujoco.MjModel, config: CameraConfig | None = None, cull: bool = True):
+    def __init__(self, model: mujoco.MjModel, config: CameraConfig | None = None, cull: bool = True,
+                 share: Camera | None = None):
         self.config = cfg = config or CameraConfig()
         self.model = model
         self.camera_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, cfg.camera)
@@ -165,11 +166,20 @@ class Camera:
         extent = float(model.stat.extent)
         model.vis.map.znear = cfg.near / extent
         model.vis.map.zfar = cfg.far / extent
-        self._gl, self._ctx = open_context(model, cfg.height, cfg.width, lean=not cfg.rgb)
+        # ``share``: another camera of the same model rendering images of the same size and kind (a car's rear
+        # camera beside its front one) lends its GL context; one context saves its memory and a context switch
+        # per frame. The lender frees it; it must outlive this camera.
+        self._owner = share is None or share.model is not model or share._ctx is None or (
+            (share.config.width, share.config.height, share.config.rgb) != (cfg.width, cfg.height, cfg.rgb))
+        if self._owner:
+            self._gl, self._ctx = open_context(model, cfg.height, cfg.width, lean=not cfg.rgb)
+        else:
+            self._gl, self._ctx = share._gl, share._ctx
         self._rect = mujoco.MjrRect(0, 0, cfg.width, cfg.height)
         self._scene = mujoco.MjvScene(model, maxgeom=model.ngeom + model.nsite + 100)
         self._option = mujoco.MjvOption()
         self._option.geomgroup[_HIDDEN_GROUP] = 0
+        self._option.flags[mujoco.mjtVisFlag.mjVIS_RANGEFINDER] = 0  # a rangefinder's ray is no part of the world
         if not cfg.rgb:  # a sensor's images: the marker spheres are no part of the world it sees
             self._option.sitegroup[:] = 0
         self._perturb = mujoco.MjvPerturb()
@@ -298,7 +308,10 @@ class Camera:
         return self._depth_and_segmentation()[1]
 
     def close(self) -> None:
-        """Free the GL context (also done when garbage-collected)."""
+        """Free the GL context (also done when garbage-collected); a borrowed one is its lender's to free."""
+        if not self._owner:
+            self._ctx = self._gl = None
+            return
         if self._ctx is not None:
             self._gl.make_current()
             self._ctx.free()

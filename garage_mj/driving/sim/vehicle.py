@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
-from garage_mj.scene.car import CarConfig, car_model
+from garage_mj.scene.car import CarConfig, car_model, drop_rangefinders
 
 if TYPE_CHECKING:
     from garage_mj.scene.vehicles import VehicleClass
@@ -175,24 +175,29 @@ def park_action_space(action_type: str):
     raise ValueError(f"park action type {action_type!r} is not 'discrete' or 'continuous'")
 
 
-def car_mjcf(name: str = EGO_NAME, vehicle: VehicleClass | None = None):
+def car_mjcf(name: str = EGO_NAME, vehicle: VehicleClass | None = None, ultrasonic: bool = False):
     """The car as a ``dm_control.mjcf`` model named ``name``, without its free joint (for attaching).
 
-    ``vehicle``: a class of the fleet (:func:`garage_mj.scene.car.car_model`); None: ``models/car`` as it is."""
+    ``vehicle``: a class of the fleet (:func:`garage_mj.scene.car.car_model`); None: ``models/car`` as it is.
+    ``ultrasonic``: keep its bumper rangefinders (by default they are dropped: rays cast at every physics step
+    that a scene without a reader of them would pay for; their sites stay)."""
     model = car_model(vehicle, name)
     model.find("joint", "root").remove()
+    if not ultrasonic:
+        drop_rangefinders(model)
     return model
 
 
-def attach_car(arena, x: float, y: float, yaw: float, name: str = EGO_NAME, vehicle: VehicleClass | None = None):
+def attach_car(arena, x: float, y: float, yaw: float, name: str = EGO_NAME, vehicle: VehicleClass | None = None,
+               ultrasonic: bool = False):
     """Attach a free car to ``arena`` (an ``mjcf.RootElement``) at ground pose (x [m], y [m], yaw [rad]).
 
     Returns the attachment frame. The arena must use radians (``<compiler angle="radian"/>``), as
-    the car model does. ``vehicle``: the class of car (:func:`car_mjcf`).
+    the car model does. ``vehicle``: the class of car; ``ultrasonic``: with its rangefinders (:func:`car_mjcf`).
     """
     if arena.compiler.angle == "degree":
         raise ValueError("the arena uses angle=\"degree\"; the car needs <compiler angle=\"radian\"/>")
-    frame = arena.attach(car_mjcf(name, vehicle))
+    frame = arena.attach(car_mjcf(name, vehicle, ultrasonic))
     frame.pos = [x, y, 0.0]
     frame.quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
     frame.add("freejoint", name=f"{name}_root")
