@@ -368,8 +368,7 @@ class GarageDriveEnv(gym.Env):
         root = build_scene(self.scene, fuse_static=True)  # parked cars and pillars: geoms of the world body
         _plane_floor(root)
         self._entrance = self.scene.entrance_pose
-        _add_hit_sensors(root, attach_car(root, *self._entrance, vehicle=self.vehicle,
-                                          ultrasonic=self.sensor_config.ultrasonic))
+        _add_hit_sensors(root, attach_car(root, *self._entrance, vehicle=self.vehicle))
         if self.scenario_config.count:
             add_actor_bodies(root, self.scenario_config)
         self.model = compile_mjcf(root)

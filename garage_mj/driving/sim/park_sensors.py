@@ -12,9 +12,10 @@ compiled model and the results it had before them:
   A rangefinder leaves out its site's own body (the chassis: the car never sees itself) and transparent geoms
   (empty stalls' parked cars, unused actor slots); level at 0.5 m it never meets the floor. Readings are
   [:data:`ULTRASONIC_MIN`, :data:`ULTRASONIC_MAX`] m: no echo (MuJoCo's -1) or one beyond reads the maximum, a
-  nearer one the minimum. Without ``ultrasonic`` the env drops the rangefinders from its model (a ray cast per
-  physics step nobody reads: ``attach_car(..., ultrasonic=False)``). MuJoCo computes them at each physics step, so the observation holds the last
-  step's (at most one physics step, a few millimetres, behind the pose).
+  nearer one the minimum. The drive env's model keeps the sensor sites but not the rangefinder sensors, which
+  MuJoCo would compute at every physics step (12 ray casts each, more than doubling a step's time in a garage);
+  :class:`Ultrasonic` casts their rays once per observation, the values MuJoCo's rangefinders give (a test
+  compares them), at the state the camera renders.
 - **slot detector** (``slot``): the target stall as a slot detector reports it, in the car frame: its centre
   (x forward, y left) [m], the direction it opens to relative to the car's heading [rad], its width (across its
   opening; a parallel slot's length along the aisle) and depth [m]. Optional Gaussian noise on the position and
@@ -94,18 +95,36 @@ def sensor_config(value: SensorConfig | dict | str | list | tuple | None) -> Sen
 
 
 class Ultrasonic:
-    """Reads the car's :data:`~garage_mj.scene.car.ULTRASONIC_SENSORS` from a compiled model's ``sensordata``."""
+    """The car's :data:`~garage_mj.scene.car.ULTRASONIC_SENSORS` in a compiled model: what its MuJoCo rangefinders read.
+
+    Each reading is MuJoCo's rangefinder on that site, cast when asked (:meth:`read`): ``mj_ray`` from the site along
+    its z axis, leaving out the site's body, static geoms included, every geom group, transparent geoms left out;
+    -1 without an echo. A model that carries the rangefinder sensors themselves (``attach_car(..., ultrasonic=True)``)
+    computes them at every physics step; casting the same rays once per observation gives the same values at a
+    twentieth of the cost at the drive env's 20 physics steps per control step (``eval/bench_park_sensors.py``).
+    """
 
     def __init__(self, model: mujoco.MjModel, prefix: str = "ego/"):
-        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, prefix + n) for n in ULTRASONIC_SENSORS]
+        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, prefix + n) for n in ULTRASONIC_SENSORS]
         if min(ids) < 0:
             missing = [prefix + n for n, i in zip(ULTRASONIC_SENSORS, ids, strict=True) if i < 0]
-            raise ValueError(f"the model has no ultrasonic rangefinder {missing[0]!r} (models/car has them)")
-        self._adr = np.array([model.sensor_adr[i] for i in ids], dtype=np.intp)
+            raise ValueError(f"the model has no ultrasonic sensor site {missing[0]!r} (models/car has them)")
+        self.model = model
+        self._rays = [(i, int(model.site_bodyid[i])) for i in ids]
+        self._geom = np.zeros(1, dtype=np.int32)
+        self._raw = np.empty(len(ids), dtype=np.float64)
+
+    def raw(self, data: mujoco.MjData) -> np.ndarray:
+        """(12,) float64: what MuJoCo's rangefinders read at ``data``'s kinematics [m], -1 where nothing echoes."""
+        m, geom, out = self.model, self._geom, self._raw
+        for k, (site, body) in enumerate(self._rays):
+            axis = np.ascontiguousarray(data.site_xmat[site, 2::3])  # the site's z axis: the rangefinder's ray
+            out[k] = mujoco.mj_ray(m, data, data.site_xpos[site], axis, None, 1, body, geom)
+        return out.copy()
 
     def read(self, data: mujoco.MjData) -> np.ndarray:
         """(12,) float32 ranges [m] in [:data:`ULTRASONIC_MIN`, :data:`ULTRASONIC_MAX`] (no echo: the maximum)."""
-        raw = data.sensordata[self._adr]
+        raw = self.raw(data)
         return np.clip(np.where(raw < 0.0, ULTRASONIC_MAX, raw), ULTRASONIC_MIN, ULTRASONIC_MAX).astype(np.float32)
 
 
