@@ -247,3 +247,26 @@ def test_cruise_env_observes_the_rear_camera_and_ranges(painted_tiny):
     assert obs["ultrasonic"].shape == (12,) and "slot" not in obs
     assert env.observation_space.contains(obs)
     env.close()
+
+
+def test_cruise_cli_observes_the_sensors_it_is_given(painted_tiny, tmp_path, capsys):
+    import json
+
+    from garage_mj.cli import main
+    from garage_mj.export.pack import export_pack
+
+    packs = tmp_path / "packs"
+    export_pack(painted_tiny, packs)
+    out = tmp_path / "run"
+    assert main(["cruise", "--packs", str(packs), "--tests", "1", "--driver", "oracle", "--task", "park",
+                 "--sensors", "rear_camera,ultrasonic,slot", "--slot-noise", "0.1", "0.02", "--out", str(out),
+                 "--quiet"]) == 0
+    assert json.loads((out / "run.json").read_text())["env"] == {"sensors": {
+        "rear_camera": True, "ultrasonic": True, "slot": True, "slot_position_sigma": 0.1, "slot_yaw_sigma": 0.02}}
+    capsys.readouterr()
+    assert main(["cruise", "--packs", str(packs), "--tests", "1", "--sensors", "ultrasonic", "--slot-noise", "0.1",
+                 "0", "--out", str(tmp_path / "refused"), "--quiet"]) != 0
+    assert "add slot to --sensors" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["cruise", "--packs", str(packs), "--sensors", "lidar", "--out", str(tmp_path / "bad")])
+    assert "unknown sensor 'lidar'" in capsys.readouterr().err

@@ -130,6 +130,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_task_args(p, stall=True)
     add_geometry_args(p)
     add_vehicle_args(p)
+    add_sensor_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=user_errors(run))
 
@@ -189,6 +190,50 @@ def vehicle_env(args: argparse.Namespace) -> dict:
     if args.parked_jitter > 0:
         env["parked_jitter"] = args.parked_jitter
     return env
+
+
+def add_sensor_args(p: argparse.ArgumentParser) -> None:
+    """``--sensors`` and ``--slot-noise``: the parking sensors a driver observes (docs/observations.md)."""
+    g = p.add_argument_group("parking sensors (docs/observations.md; stored in run.json)")
+    g.add_argument("--sensors", type=sensor_names, metavar="NAMES",
+                   help="observe these sensors too, comma-separated: rear_camera (rear_depth, rear_segmentation), "
+                        "ultrasonic (12 bumper ranges), slot (the target stall in the car frame), or all; for your "
+                        "own driver (module:Class): the built-in drivers do not read them (default: none)")
+    g.add_argument("--slot-noise", type=float, nargs=2, metavar=("M", "RAD"),
+                   help="the slot detector's noise: standard deviations of its position (each of x, y) and its yaw, "
+                        "drawn per observation from the test's seed (needs --sensors with slot; default 0 0)")
+
+
+def sensor_names(text: str) -> list[str]:
+    """argparse type of --sensors: sensor names (:func:`~garage_mj.driving.sim.park_sensors.sensor_config` reads them)."""
+    from garage_mj.driving.sim.park_sensors import sensor_config
+
+    try:
+        sensor_config(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return [n.strip() for n in text.split(",") if n.strip()]
+
+
+def sensor_env(args: argparse.Namespace) -> dict:
+    """The ``GarageDriveEnv`` keyword argument of the sensor options (``sensors``: a dict of
+    :class:`~garage_mj.driving.sim.park_sensors.SensorConfig` fields), none when no sensor is asked for."""
+    from garage_mj.driving.sim.park_sensors import sensor_config
+
+    if not args.sensors:
+        if args.slot_noise is not None:
+            raise UserError("--slot-noise is the slot detector's: give --sensors slot (or all) too")
+        return {}
+    cfg = {k: v for k, v in vars(sensor_config(args.sensors)).items() if v is True}
+    if args.slot_noise is not None:
+        if not cfg.get("slot"):
+            raise UserError("--slot-noise is the slot detector's: add slot to --sensors")
+        cfg["slot_position_sigma"], cfg["slot_yaw_sigma"] = args.slot_noise
+        try:
+            sensor_config(cfg)
+        except ValueError as exc:
+            raise UserError(f"--slot-noise: {exc}") from None
+    return {"sensors": cfg}
 
 
 def add_task_args(p: argparse.ArgumentParser, stall: bool = False) -> None:
@@ -417,6 +462,9 @@ def run(args: argparse.Namespace) -> int:
             "--cases tests the car and the obstacles each case file gives"
         raise UserError(f"--vehicle, --parked-fleet and --parked-jitter choose the cars of a --packs or --library run; "
                         f"{given}: leave them out")
+    if (args.scenario_file is not None or args.cases is not None) and sensor_env(args):
+        raise UserError("--sensors adds observations to a --packs or --library run; a --scenario-file or --cases run "
+                        "drives with the default ones: leave it out")
     if args.scenario_file is not None:
         return replay(args)
     if args.cases is not None:
@@ -433,6 +481,7 @@ def run(args: argparse.Namespace) -> int:
     if scen is not None:
         env["scenario"] = scen
     env.update(vehicle_env(args))
+    env.update(sensor_env(args))
     with action_warnings("cruise"):
         settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
                                   test_timeout=args.test_timeout, task=args.task, maneuver=args.maneuver,
