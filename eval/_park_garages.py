@@ -35,6 +35,7 @@ GEOMETRIES = {g.name: g for g in (
     Geometry("angled45", {"stall_angle": 45.0}),
     Geometry("parallel", {"stall_angle": 0.0}),
     Geometry("parallel_mixed", {"stall_angle": 0.0}, "mixed", 0.15),
+    Geometry("parallel_short", {"stall_angle": 0.0, "slot_length": 5.2}, "mixed", 0.15),  # extreme: < 4.6 + 0.9 m
 )}
 
 

@@ -80,6 +80,8 @@ STALL_LINES = ("left side line", "right side line", "back line", "aisle-side lim
 #: [m] a parallel slot's sampled plans start where a turn out of the slot has taken the car's centre this far past its
 #: open edge (:meth:`ParkPlanner._slot_exit`)
 SLOT_EXIT_PAST = 0.5
+#: the curvatures of those turns, as shares of the plan's tightest (a gentler turn clears what the tightest swings into)
+SLOT_EXIT_TURNS = (1.0, 0.7, 0.4)
 #: [m] how far ahead of a parallel slot's stall pose (behind it, nose-in) the analytic attempt's pre-park poses lie
 PRE_PARK_AHEAD = (1.5, 2.5, 3.5, 4.5, 5.5, 6.5)
 HEADING_TOLERANCE = 10.0  # [deg] the car's axis to the stall's, in the maneuver's direction
@@ -959,9 +961,10 @@ class ParkPlanner:
     def _slot_exit(self, checker: _Checker, g: np.ndarray, m: Maneuver, stall: Stall, d_ok: float
                    ) -> np.ndarray | None:
         """Rear-axle poses from the stall pose of parallel slot ``stall`` out of it in the exit gear: a run along the
-        slot (in either gear, at most ``d_ok`` in the exit gear), then one turn at the plan's tightest curvature, either
-        way, in the exit gear until the car's centre is :data:`SLOT_EXIT_PAST` past the slot's open edge; the shortest
-        clear one, or None. Driven the other way it enters the slot in the maneuver's gear."""
+        slot (in either gear, at most ``d_ok`` in the exit gear), then one turn at a share of the plan's tightest
+        curvature (:data:`SLOT_EXIT_TURNS`), either way, in the exit gear until the car's centre is
+        :data:`SLOT_EXIT_PAST` past the slot's open edge; the shortest clear one, or None. Driven the other way it
+        enters the slot in the maneuver's gear."""
         cfg = self.config
         ux, uy = math.cos(stall.yaw), math.sin(stall.yaw)
         off = checker.off
@@ -971,7 +974,7 @@ class ParkPlanner:
             start = _straight(g, gear, abs(run), cfg.step) if run else g[None]
             if not checker.clear(start).all():
                 continue
-            for turn in (1.0, -1.0):
+            for turn in (k * side for k in SLOT_EXIT_TURNS for side in (1.0, -1.0)):
                 arc = _arc(start[-1], m.exit_gear, turn / self.radius, cfg.step, math.pi / 2)
                 cx, cy = arc[:, 0] + off * np.cos(arc[:, 2]), arc[:, 1] + off * np.sin(arc[:, 2])
                 past = np.flatnonzero((cx - stall.x) * ux + (cy - stall.y) * uy > stall.length / 2 + SLOT_EXIT_PAST)
