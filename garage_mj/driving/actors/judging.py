@@ -30,11 +30,14 @@ def judge(actors: list[ActorSpec], plan: TestPlan, planner: DrivePlanner, config
     return judge_path(actors, Corridor(plan, planner.car), config, margin, planner.car.max_speed)
 
 
-def judge_path(actors: list[ActorSpec], corr: Corridor, config: ScenarioConfig, margin: float, v: float
-               ) -> tuple[bool, str]:
-    """:func:`judge` on the car's swept path ``corr`` driven at up to ``v`` [m/s] (a park plan's: ``park_speed``)."""
+def judge_path(actors: list[ActorSpec], corr: Corridor, config: ScenarioConfig, margin: float, v: float,
+               rest_start: bool = False) -> tuple[bool, str]:
+    """:func:`judge` on the car's swept path ``corr`` driven at up to ``v`` [m/s] (a park plan's: ``park_speed``).
+
+    ``rest_start``: the car starts at rest (a park test), so an actor it starts within reach of needs no stopping
+    distance, only to keep off the car where it stands.
+    """
     car = corr.car
-    d_stop = config.stopping_distance(v)
     for a in actors:
         noun = a.name.replace("_", " ")
         if a.static:
@@ -57,6 +60,7 @@ def judge_path(actors: list[ActorSpec], corr: Corridor, config: ScenarioConfig, 
             fire = corr.s[corr.i0]  # the car starts within reach of the trigger
         else:
             fire = corr.s[int(np.argmin(d))]
+        d_stop = 0.0 if rest_start and fire <= corr.s[corr.i0] else config.stopping_distance(v)
         fire = max(fire, corr.s[corr.i0]) + v * CONTROL_LAG  # one control step late
         cols = np.flatnonzero(hit.any(axis=0))
         body = car.front - car.rear + a.trigger_radius

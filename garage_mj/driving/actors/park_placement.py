@@ -37,7 +37,7 @@ from garage_mj.driving.actors.scenario import (
     shape_circles,
 )
 from garage_mj.scene.actor_spec import KINDS, PARK_BEHAVIOURS, SHAPE_SIZE, SHAPES, ActorSpec
-from garage_mj.scene.drivable import TestPlan
+from garage_mj.scene.drivable import START_OFFSET, TestPlan
 from garage_mj.scene.park_planning import centre_to_rear
 
 if TYPE_CHECKING:
@@ -49,8 +49,14 @@ if TYPE_CHECKING:
 ACTOR_STREAM = 0x61637472  # seeds a test's actor generator apart from its other draws ("actr")
 PLACEMENT_TRIES = 20  # draws per actor before it is left out
 MIN_SPACING = 2.0  # [m] between the start poses of two actors
-NEIGHBOURS = 2.6  # [stall widths] a stall this close along the row to the target is a neighbour (two each side)
+NEIGHBOURS = 3.6  # [stall widths] a stall this close along the row to the target is a neighbour (three each side)
 CLUTTER_GAP = (0.1, 0.8)  # [m] clutter stands this much beyond the margin from the plan's swept path
+# Timing a pedestrian behind the car (adverse, not feasibility: the judge decides that): a parking car stands about
+# REVERSE_SETTLE at a cusp (gear, wheels), then reverses at about REVERSE_SPEED; the pedestrian waits after its
+# trigger so as to reach the reverse path about when the car does, give or take MEET_JITTER.
+REVERSE_SETTLE = 2.0  # [s]
+REVERSE_SPEED = 0.8  # [m/s]
+MEET_JITTER = 1.0  # [s]
 
 
 def actor_rng(seed: int) -> np.random.Generator:
@@ -58,25 +64,41 @@ def actor_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng([ACTOR_STREAM, int(seed)])
 
 
-def park_corridor(poses: np.ndarray, car: CarGeometry) -> Corridor:
-    """The swept path of a park plan's car-centre poses ``(N, 3)``, stations from the plan's start."""
+def park_corridor(poses: np.ndarray, car: CarGeometry, start: float = 0.0) -> Corridor:
+    """The swept path of car-centre poses ``(N, 3)`` (a park plan's), the car starting ``start`` metres along."""
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     rear = centre_to_rear(poses, car)
     plan = TestPlan(0, True, "", centre=poses[:, :2], rear=rear[:, :2], heading=poses[:, 2],
                     curvature=np.zeros(len(poses)))
-    return Corridor(plan, car, start=0.0)
+    return Corridor(plan, car, start=start)
+
+
+def test_path(env: GarageDriveEnv, test: ParkTest) -> tuple[np.ndarray, np.ndarray, float]:
+    """The car-centre poses ``(N, 3)`` a feasible ``test`` drives, their directions (+1/-1) and the station it starts
+    at: a park test's plan from its start; an AVP test's cruise route (from :data:`START_OFFSET`), then its plan."""
+    plan = test.plan
+    if test.task == "park":
+        return plan.poses, np.asarray(plan.directions), 0.0
+    centre = np.asarray(test.cruise.centre, dtype=float)
+    head = np.asarray(test.cruise.heading, dtype=float)
+    poses = np.vstack([np.column_stack([centre, head]), plan.poses])
+    directions = np.concatenate([np.ones(len(centre), dtype=np.int8), np.asarray(plan.directions)])
+    return poses, directions, START_OFFSET
 
 
 class _ParkPlacer:
     """Draws actor trajectories around one park test's stall and plan."""
 
-    def __init__(self, config: ScenarioConfig, poses: np.ndarray, directions: np.ndarray, stall: Stall,
-                 stalls: list[Stall], occupied: list[int], env: GarageDriveEnv, rng: np.random.Generator,
-                 margin: float) -> None:
-        self.cfg, self.rng, self.margin = config, rng, margin
+    def __init__(self, config: ScenarioConfig, env: GarageDriveEnv, test: ParkTest, rng: np.random.Generator
+                 ) -> None:
+        self.cfg, self.rng, self.margin = config, rng, env.park_planner.config.margin
         self.car = env.car_geometry
-        self.corr = park_corridor(poses, self.car)
+        poses, directions, start = test_path(env, test)
+        self.corr = park_corridor(poses, self.car, start)
+        self.rest_start = test.task == "park"  # a park test starts at rest; an AVP test reaches its plan moving
         self.directions = np.asarray(directions).reshape(-1)
+        self.plan_from = len(self.directions) - len(test.plan.poses)  # the first index of the park plan
+        stall, stalls, occupied = env.stalls[test.stall], env.stalls, test.occupied
         self.stall, self.stalls, self.occupied = stall, stalls, set(occupied)
         self.d_stop = config.stopping_distance(config.park_speed)
         obs = env.planner.obstacles()
@@ -129,11 +151,12 @@ class _ParkPlacer:
             lead = float(self.rng.uniform(*cfg.lead))
             s_conflict = corr.s[cols[0]] if len(cols) else corr.s[int(np.argmin(
                 np.linalg.norm(corr.centre - w[0, 1:3], axis=1)))]
-            s_trig = max(s_conflict - self.d_stop - lead - cfg.park_speed * CONTROL_LAG, 0.0)
+            s_trig = max(s_conflict - self.d_stop - lead - cfg.park_speed * CONTROL_LAG, corr.s[corr.i0])
             at = max(int(np.searchsorted(corr.s, s_trig, side="right")) - 1, 0)
         p = corr.centre[at]
         spec = ActorSpec(name, kind, behaviour, w, (float(p[0]), float(p[1])), cfg.trigger_radius, stall)
-        return spec if judge_path([spec], corr, cfg, self.margin, cfg.park_speed)[0] else None  # else drawn again
+        ok = judge_path([spec], corr, cfg, self.margin, cfg.park_speed, self.rest_start)[0]
+        return spec if ok else None  # else drawn again
 
     # pedestrians
     def pedestrian(self, name: str, behaviour: str) -> ActorSpec | None:
@@ -155,14 +178,33 @@ class _ParkPlacer:
         rows = [[0.0, a[0], a[1], yaw], [float(np.linalg.norm(b - a)) / v, b[0], b[1], yaw]]
         if not self._free("pedestrian", np.asarray(rows)[:, 1:]) or not self._spaced(a):
             return None
+        if at is not None:
+            rows = self._meet(rows, at)
         return self._trigger(name, "pedestrian", behaviour, rows, at=at)
+
+    def _meet(self, rows: list[list[float]], at: int) -> list[list[float]]:
+        """``rows`` delayed so that the walker reaches the path beyond plan index ``at`` (a cusp) about when the
+        car, reversing from there, does (:data:`REVERSE_SETTLE`, :data:`REVERSE_SPEED`, :data:`MEET_JITTER`)."""
+        w = np.asarray(rows, dtype=float)
+        proto = ActorSpec("p", "pedestrian", "behind_stall", w, (0.0, 0.0), 0.0)
+        times = sample_times(proto)
+        hit = self.corr.conflicts("pedestrian", actor_poses(proto, times), 0.0)[:, at:]
+        if not hit.any():
+            return rows
+        k = int(np.flatnonzero(hit.any(axis=1))[0])  # when it first reaches the reverse path
+        j = at + int(np.flatnonzero(hit.any(axis=0))[0])  # where the car first meets its line
+        car_t = REVERSE_SETTLE + (self.corr.s[j] - self.corr.s[at]) / REVERSE_SPEED
+        wait = max(0.0, car_t - float(times[k]) + float(self.rng.uniform(-MEET_JITTER, MEET_JITTER)))
+        if wait <= 0.0:
+            return rows
+        return [rows[0], [wait, *rows[0][1:]], *[[t + wait, *r] for t, *r in rows[1:]]]
 
     # moving cars
     def _neighbours(self) -> list[Stall]:
         """Occupied stalls of the target's row within :data:`NEIGHBOURS` stall widths (perpendicular or angled)."""
         out = []
         for st in self.stalls:
-            if st.id == self.stall.id or st.id not in self.occupied or st.id in self.taken or st.obstructed \
+            if st.id == self.stall.id or st.id not in self.occupied or st.id in self.taken \
                     or st.angle == 0.0 or abs(math.remainder(st.yaw - self.stall.yaw, math.tau)) > 0.1:
                 continue
             d = np.array([st.x - self.stall.x, st.y - self.stall.y])
@@ -178,17 +220,28 @@ class _ParkPlacer:
         v = float(self.rng.uniform(*self.cfg.moving_car_speed))
         c = np.array([st.x, st.y])
         away = np.sign(float((c - np.array([self.stall.x, self.stall.y])) @ self.t)) * self.t  # along the row
+        if self.rng.random() < 0.25:  # now and then it leaves the other way, past the target
+            away = -away
         hx = SHAPE_SIZE["car"][0]
         out = np.array(st.entry) + self.o * (hx + float(self.rng.uniform(0.3, 1.2)))  # its nose clear of the row
         yaw_in, yaw_away = st.yaw + math.pi, math.atan2(away[1], away[0])
         turn = out + away * 1.5 + self.o * 0.5  # a short turn onto the aisle
-        far = turn + away * float(self.rng.uniform(6.0, 12.0))
         t1 = float(np.linalg.norm(out - c)) / max(0.6 * v, 0.3)  # reversing is slower
         t2 = t1 + float(self.rng.uniform(*self.cfg.dwell))
         t3 = t2 + float(np.linalg.norm(turn - out)) / max(0.6 * v, 0.3)
         rows = [[0.0, c[0], c[1], yaw_in], [t1, out[0], out[1], yaw_in], [t2, out[0], out[1], yaw_in],
-                [t3, turn[0], turn[1], yaw_away], [t3 + float(np.linalg.norm(far - turn)) / v, far[0], far[1], yaw_away]]
-        if not self._free("car", np.asarray(rows)[1:, 1:]) or not self._spaced(c):
+                [t3, turn[0], turn[1], yaw_away]]
+        way = np.asarray(rows)[:, 1:]
+        way[0, :2] += self.o * 1.0  # a pillar beside its stall is no obstacle where it stands, parked
+        if not self._free("car", way) or not self._spaced(c):
+            return None
+        # it drives off as far along the aisle as it is free, up to a drawn length (a wall ends a short aisle)
+        for length in np.arange(float(self.rng.uniform(6.0, 12.0)), 2.9, -1.5):
+            far = turn + away * length
+            if self._free("car", np.array([[*turn, yaw_away], [*far, yaw_away]])):
+                rows.append([t3 + float(length) / v, far[0], far[1], yaw_away])
+                break
+        else:
             return None
         spec = self._trigger(name, "moving_car", behaviour, rows, stall=st.id)
         if spec is not None:
@@ -199,7 +252,7 @@ class _ParkPlacer:
     def clutter(self, name: str, behaviour: str) -> ActorSpec | None:
         shape = SHAPES[behaviour]
         corr = self.corr
-        i = int(self.rng.integers(len(corr.s)))
+        i = int(self.rng.integers(self.plan_from, len(corr.s)))  # beside the park plan (an AVP test's too)
         p, h = corr.pose(i)
         n = np.array([-math.sin(h), math.cos(h)]) * (1.0 if self.rng.random() < 0.5 else -1.0)
         _, r = shape_circles(shape)
@@ -232,10 +285,7 @@ def draw_park_scenario(config: ScenarioConfig, env: GarageDriveEnv, test: ParkTe
     out = Scenario()
     if config.count == 0 or not test.feasible:
         return out
-    plan = test.plan
-    margin = env.park_planner.config.margin
-    placer = _ParkPlacer(config, plan.poses, plan.directions, env.stalls[test.stall], env.stalls, test.occupied, env,
-                         rng, margin)
+    placer = _ParkPlacer(config, env, test, rng)
     todo = ([("pedestrian", config.pedestrian_behaviours)] * config.pedestrians
             + [("moving_car", config.moving_car_behaviours)] * config.moving_cars
             + [("clutter", config.clutter_behaviours)] * config.clutter)
@@ -263,11 +313,12 @@ def draw_park_scenario(config: ScenarioConfig, env: GarageDriveEnv, test: ParkTe
 def judge_park(actors: list[ActorSpec], env: GarageDriveEnv, test: ParkTest, config: ScenarioConfig
                ) -> tuple[bool, str]:
     """Whether a driver can avoid every actor of a park or AVP ``test`` (and why not): on the park plan's swept path,
-    with the park planner's margin, at ``park_speed``."""
+    with the park planner's margin, at ``park_speed`` (a park test's car starts at rest)."""
     if not actors or not test.feasible:
         return True, ""
-    corr = park_corridor(test.plan.poses, env.car_geometry)
-    return judge_path(actors, corr, config, env.park_planner.config.margin, config.park_speed)
+    poses, _, start = test_path(env, test)
+    corr = park_corridor(poses, env.car_geometry, start)
+    return judge_path(actors, corr, config, env.park_planner.config.margin, config.park_speed, test.task == "park")
 
 
 def park_scenario(env: GarageDriveEnv, test: ParkTest, seed: int | None, rng: np.random.Generator,

@@ -1,0 +1,191 @@
+"""Actors in park and AVP tests: placed around the target stall and the park plan from the test's seed, judged on the
+plan's swept path, yielded to by the oracle, hit as collisions, exported and replayed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from garage_mj.core.backends import Compute
+from garage_mj.driving.actors.config import SCENARIOS, load_scenario_config
+from garage_mj.driving.actors.park_placement import park_corridor
+from garage_mj.driving.actors.scenario import actor_poses, sample_times
+from garage_mj.driving.cruise import read_tests, run_cruise
+from garage_mj.driving.drivers import load_driver
+from garage_mj.driving.replay import replay_xosc
+from garage_mj.driving.sim.drive_env import GarageDriveEnv
+from garage_mj.driving.sources import CruiseSettings
+from garage_mj.grid.painters import paint_garage
+from garage_mj.scene.actor_spec import PARK_BEHAVIOURS
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    return paint_garage("tiny_7x11", seed=1)
+
+
+def _drive(env, obs, seed: int, blind: bool = False):
+    """The oracle to the end of the test; ``blind``: it is not told of the actors. Returns the last info and how
+    many steps it stood still while an actor moved."""
+    drv = load_driver("oracle")
+    info = env.driver_info(seed)
+    if blind:
+        info["actors"] = []
+    drv.reset(info)
+    held = 0
+    while True:
+        obs, _, term, trunc, info = env.step(drv.act(obs))
+        moving = [0.0 <= t < a.duration for t, a in zip(env._actor_tau, env.scenario.actors, strict=True)
+                  if not a.static and t is not None]
+        held += abs(float(obs["speed"][0])) < 0.02 and any(moving)
+        if term or trunc:
+            return info, held
+
+
+def test_named_scenarios_load_and_a_cruise_test_draws_none_of_their_behaviours():
+    cfg = load_scenario_config("park_mixed")
+    assert (cfg.pedestrians, cfg.moving_cars, cfg.clutter) == (1, 1, 1)
+    assert set(cfg.pedestrian_behaviours) == set(PARK_BEHAVIOURS["pedestrian"])
+    assert load_scenario_config("park_car_pulling_out").moving_car_behaviours == ("pull_out",)
+    assert all(name.startswith("park_") for name in SCENARIOS)
+    # a cruise test asked only for park behaviours places nothing, and says so
+    env = GarageDriveEnv(paint_garage("tiny_7x11", seed=1), scenario="park_pedestrian_behind")
+    try:
+        _, info = env.reset(seed=0)
+        assert info["actors"]["pedestrian"] == 0 and info["actors_missing"] == {"pedestrian": 1}
+    finally:
+        env.close()
+
+
+def test_placement_is_seeded_and_leaves_the_other_draws_alone(tiny):
+    env = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_mixed")
+    bare = GarageDriveEnv(tiny, action_type="continuous", task="park")
+    try:
+        for seed in (1, 4):
+            _, info = env.reset(seed=seed)
+            first = [a.as_dict() for a in env.scenario.actors]
+            assert first and info["feasible"]
+            _, again = env.reset(seed=seed)
+            assert [a.as_dict() for a in env.scenario.actors] == first
+            _, plain = bare.reset(seed=seed)
+            # the same stall, start, plan and parked cars (less the stall a pulling-out car takes) as without actors
+            assert (env.target, env.start_pose) == (bare.target, bare.start_pose)
+            assert np.array_equal(env._park.plan.poses, bare._park.plan.poses)
+            assert sorted(env.occupied) == sorted(set(bare.occupied) - env.scenario.free_stalls)
+    finally:
+        env.close()
+        bare.close()
+
+
+def test_the_pedestrian_behind_crosses_the_reverse_path(tiny):
+    env = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_pedestrian_behind")
+    try:
+        crossed = 0
+        for seed in range(4):
+            _, info = env.reset(seed=seed)
+            (ped,) = env.scenario.actors
+            plan = env._park.plan
+            rev = np.flatnonzero(np.asarray(plan.directions) < 0)
+            assert ped.behaviour == "behind_stall" and len(rev)
+            # it starts as the car reaches the first reverse stretch
+            assert np.allclose(ped.trigger, plan.poses[rev[0], :2])
+            corr = park_corridor(plan.poses[rev[0]:], env.car_geometry)
+            hit = corr.conflicts(ped.shape, actor_poses(ped, sample_times(ped)), 0.0)
+            assert not hit[0].any() and not hit[-1].any()  # it waits and ends clear of the path
+            crossed += bool(hit.any())
+        assert crossed == 4
+    finally:
+        env.close()
+
+
+def test_the_pulling_out_car_starts_in_an_occupied_neighbour_stall(tiny):
+    env = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_car_pulling_out")
+    bare = GarageDriveEnv(tiny, action_type="continuous", task="park")
+    try:
+        seen = 0
+        for seed in range(1, 5):
+            env.reset(seed=seed)
+            bare.reset(seed=seed)
+            if not env.scenario.actors:
+                continue
+            (car,) = env.scenario.actors
+            st, target = env.stalls[car.stall], env.stalls[env.target]
+            assert car.behaviour == "pull_out" and car.stall in bare.occupied and car.stall not in env.occupied
+            assert np.allclose(car.waypoints[0, 1:3], (st.x, st.y))  # where its parked car stood
+            assert abs(math.remainder(st.yaw - target.yaw, math.tau)) < 0.1  # the target's row
+            assert math.hypot(st.x - target.x, st.y - target.y) <= 3.6 * target.width
+            out = np.array([math.cos(st.yaw), math.sin(st.yaw)])
+            assert float((car.waypoints[-1, 1:3] - np.array(st.entry)) @ out) > 2.0  # it ends in the aisle
+            seen += 1
+        assert seen >= 3
+    finally:
+        env.close()
+        bare.close()
+
+
+def test_the_oracle_parks_and_waits_for_the_actors(tiny):
+    env = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_mixed")
+    try:
+        outcomes, held = [], 0
+        for seed in range(3):
+            obs, info = env.reset(seed=seed)
+            assert info["feasible"] and sum(info["actors"].values()) >= 2
+            info, h = _drive(env, obs, seed)
+            outcomes.append(info["outcome"])
+            held += h
+        assert outcomes == ["success"] * 3
+        assert held > 0  # it stood while an actor crossed its way
+    finally:
+        env.close()
+
+
+def test_contact_with_an_actor_is_a_collision(tiny):
+    """A pedestrian that stops behind the reversing car for 15 s: avoidable, so the oracle waits and parks; told
+    nothing of it, the oracle reverses into it (a collision with a pedestrian)."""
+    env = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_pedestrian_behind")
+    try:
+        obs, info = env.reset(seed=2)
+        (ped,) = env.scenario.actors
+        plan = env._park.plan
+        rev = int(np.flatnonzero(np.asarray(plan.directions) < 0)[0])
+        corr = park_corridor(plan.poses[rev:], env.car_geometry)
+        times = sample_times(ped)
+        k = int(np.flatnonzero(corr.conflicts(ped.shape, actor_poses(ped, times), 0.0).any(axis=1))[0])
+        stop = ped.pose_at(float(times[k]) + 0.5)  # well inside the reverse path
+        w = ped.waypoints
+        d = ped.as_dict()
+        d["waypoints"] = [w[0].tolist(), [times[k] + 0.5, *stop], [times[k] + 15.5, *stop],
+                          [w[-1, 0] + 15.0, *w[-1, 1:]]]
+        opts = {"target": env.target, "occupied": env.occupied, "start": env.start_pose, "actors": [d]}
+        obs, info = env.reset(seed=2, options=opts)
+        assert info["feasible"], info.get("reason")
+        info, held = _drive(env, obs, 2)
+        assert info["outcome"] == "success" and held * env.dt > 5.0
+        obs, info = env.reset(seed=2, options=opts)
+        info, _ = _drive(env, obs, 2, blind=True)
+        assert info["outcome"] == "collision" and info["hit"] == "pedestrian", info["reason"]
+    finally:
+        env.close()
+
+
+@pytest.mark.slow
+def test_park_actors_export_replay_and_any_worker_count(tmp_path, tiny):
+    settings = CruiseSettings("oracle", action_type="continuous", task="park", env={"scenario": "park_mixed"})
+    one = run_cruise([tiny], 3, settings, tmp_path / "w1", xosc=True, compute=Compute(workers=1, progress=False))
+    two = run_cruise([tiny], 3, settings, tmp_path / "w2", compute=Compute(workers=2, progress=False))
+
+    def key(rows):
+        return sorted(tuple(v for k, v in r.items() if k != "wall_s") for r in rows)
+
+    assert key(one.rows) == key(two.rows)  # the same actors and outcomes whatever the worker count
+    rows = sorted(read_tests(tmp_path / "w1" / "tests.csv"), key=lambda r: int(r["test"]))
+    assert all(int(r["pedestrians"]) + int(r["moving_cars"]) + int(r["clutter"]) >= 2 for r in rows)
+    assert any(int(r["moving_cars"]) for r in rows)  # a pulling-out car's stall is freed in the replay too
+    files = sorted((tmp_path / "w1" / "xosc").glob("*.xosc"))
+    assert len(files) == 3
+    for f, r in zip(files, rows, strict=True):
+        again = replay_xosc(f)
+        assert (again["outcome"], again["time"], again["hit"], again["path_length"]) == (
+            r["outcome"], float(r["time"]), r["hit"], float(r["path_length"]))
