@@ -5,7 +5,8 @@ Each case file (``Case1.csv`` ... ``Case20.csv`` of github.com/libai1943/TPCAP_b
 default the folder ``GARAGE_MJ_TPCAP_CASES`` names; this repository holds no copy) becomes one park test exactly as
 ``garage-mj cruise --cases`` runs it (:mod:`garage_mj.driving.cases`): the MuJoCo scene of its obstacle polygons,
 TPCAP's car, the stall drawn at its goal, the reference planner's verdict before the drive
-(:data:`~garage_mj.scene.case_scene.CASE_PARK`; its CPU time by ``time.process_time``), then one drive per driver
+(``DEFAULT_PARK``, or ``CASE_PARK`` for a start more than 15 m from the goal; its CPU time by
+``time.process_time``), then one drive per driver
 from the case's start. Per case and driver it records the verdict, the outcome, the final position and heading
 errors, the plan's cusps and the direction changes driven, the planning CPU seconds, and why where it fails (the
 planner's or the outcome's reason). Target: the oracle parks >= 18 of the 20.
@@ -27,7 +28,7 @@ from _provenance import provenance  # eval/_provenance.py: command, date, machin
 
 from garage_mj.driving.cases import case_settings, plan_case, read_case, run_case
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN
-from garage_mj.scene.case_scene import CASE_PARK
+from garage_mj.scene.case_scene import CASE_PARK, FAR_START, CaseScene
 from garage_mj.scene.vehicles import TPCAP_VEHICLE
 
 DRIVERS = ("oracle", "park_assist")
@@ -38,8 +39,8 @@ def _num(v: str) -> float | None:
     return float(v) if v not in ("", None) else None
 
 
-def _case_row(path: Path, plan, cpu: float) -> dict:
-    return {"case": path.name, "verdict": plan.verdict, "method": plan.method, "attempt": plan.attempt,
+def _case_row(path: Path, plan, cpu: float, far: bool) -> dict:
+    return {"case": path.name, "planner_settings": "CASE_PARK" if far else "DEFAULT_PARK", "verdict": plan.verdict, "method": plan.method, "attempt": plan.attempt,
             "plan_cusps": plan.cusps if plan.found else None,
             "plan_length_m": round(plan.length, 2) if plan.found else None,
             "planning_cpu_s": round(cpu, 2), "planner_reason": plan.reason}
@@ -60,7 +61,8 @@ def run(cases: list[Path], drivers: tuple[str, ...], rows_path: Path) -> list[di
         case = read_case(path)
         t0 = time.process_time()
         plan = plan_case(case)
-        row = {**_case_row(path, plan, time.process_time() - t0), "drives": {}}
+        far = CaseScene(case).park_config is CASE_PARK
+        row = {**_case_row(path, plan, time.process_time() - t0, far), "drives": {}}
         for driver in drivers:
             test = run_case(case, case_settings(driver).resolved("continuous"), plan)
             row["drives"][driver] = {
@@ -118,7 +120,7 @@ def main() -> None:
                                                       "width": TPCAP_VEHICLE.width, "wheelbase": TPCAP_VEHICLE.wheelbase,
                                                       "max_steer": TPCAP_VEHICLE.max_steer},
               "planner": {"margin": CASE_PARK.margin, "curvature_margin": CASE_PARK.curvature_margin,
-                          "escalation_stages": len(CASE_PARK.escalation)},
+                          "CASE_PARK_from_m": FAR_START, "CASE_PARK_escalation_stages": len(CASE_PARK.escalation)},
               "summary": summary(rows, drivers), "cases": rows}
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps(result["summary"], indent=2))

@@ -19,7 +19,8 @@ that a re-run resumes; ``run.json`` (the settings; a re-run with others is refus
 counts: feasible, infeasible by proof and unproven, success over the feasible ones with the unproven share beside
 it, the failures and the park metrics, as a park run's). A case's verdict is the reference planner's, as a garage
 park test's: ``feasible`` (a plan), ``infeasible`` (a proof: the start or the goal is not clear of the obstacles,
-or the goal is closed at the car's width) or ``unproven`` (no plan within the escalated budget, no proof).
+or the goal is closed at the car's width) or ``unproven`` (no plan within the escalated budget, no proof); a case
+that starts far from its goal escalates further (:data:`~garage_mj.scene.case_scene.CASE_PARK`).
 """
 
 from __future__ import annotations
@@ -207,7 +208,8 @@ def case_env(case: ParkCase, settings: CruiseSettings, plan: ParkPlan | None = N
 
 
 def plan_case(case: ParkCase) -> ParkPlan:
-    """The reference plan of ``case`` (:data:`~garage_mj.scene.case_scene.CASE_PARK`): its verdict before the drive."""
+    """The reference plan of ``case`` (:attr:`~garage_mj.scene.case_scene.CaseScene.park_config`): its verdict before
+    the drive."""
     return CaseScene(case).planner().plan_case()
 
 

@@ -61,10 +61,13 @@ SEMANTICS = {"wall": Semantic.WALL, "pillar": Semantic.PILLAR, "obstacle": Seman
 CAR_LENGTHS, CAR_WIDTHS = (3.5, 6.0), (1.4, 2.5)
 SMALL = 3.0  # [m] a TPCAP polygon less than this across (in x and in y) is an obstacle, not a wall
 _EPS = 1e-9
-#: The reference planner's settings for a case: :data:`~garage_mj.scene.park_planning.DEFAULT_PARK`'s, its escalation
-#: ending with two longer BIT* runs from the straight exit (20,000 and 60,000 iterations). A case's start may lie tens
-#: of metres from its goal, round obstacles (TPCAP's cases 19 and 20), where a garage's park test starts on the lane
-#: beside its stall; eval/bench_tpcap.py measured the short RRT-Connect restarts find none there and BIT* find them.
+#: The reference planner's settings for a case whose start lies more than :data:`FAR_START` from its goal:
+#: :data:`~garage_mj.scene.park_planning.DEFAULT_PARK`'s, its escalation ending with two longer BIT* runs from the
+#: straight exit (20,000 and 60,000 iterations). A garage's park test starts on the lane beside its stall; a case may
+#: start tens of metres away round obstacles (TPCAP's cases 19 and 20), where eval/bench_tpcap.py measured the short
+#: RRT-Connect restarts find no path and BIT* find one. A near case keeps DEFAULT_PARK: in a cramped scene without a
+#: path BIT*'s cost grows much faster than its iterations (TPCAP's case 7: 16 CPU-s for 1,000, 176 for 4,000).
+FAR_START = 15.0  # [m] rear axle to rear axle: docs/spec.md section 9's far start
 CASE_PARK = ParkConfig(escalation=(*ESCALATION, ("bitstar", 20_000, "out"), ("bitstar", 60_000, "out")))
 
 
@@ -322,7 +325,15 @@ class CaseScene:
         """The start pose of the car's centre (the drive env's ``Car.pose``)."""
         return tuple(float(v) for v in rear_to_centre(self.case.start, self.car))
 
-    def planner(self, config: ParkConfig = CASE_PARK) -> CasePlanner:
+    @property
+    def park_config(self) -> ParkConfig:
+        """The reference planner's settings for this case: :data:`CASE_PARK` for a start farther than
+        :data:`FAR_START` from the goal, else :data:`~garage_mj.scene.park_planning.DEFAULT_PARK`."""
+        far = math.dist(self.case.start[:2], self.case.goal[:2]) > FAR_START
+        return CASE_PARK if far else DEFAULT_PARK
+
+    def planner(self, config: ParkConfig | None = None) -> CasePlanner:
+        """The reference planner of this case (``config``: default :attr:`park_config`)."""
         return CasePlanner(self, config)
 
 
@@ -330,10 +341,10 @@ class CasePlanner(ParkPlanner):
     """The reference park planner (:class:`~garage_mj.scene.park_planning.ParkPlanner`) of one case: its obstacles,
     its stall (id 0) and its extent instead of a garage's. ``plan(start, 0, scene.maneuver)`` plans it."""
 
-    def __init__(self, scene: CaseScene, config: ParkConfig = CASE_PARK) -> None:
+    def __init__(self, scene: CaseScene, config: ParkConfig | None = None) -> None:
         self.scene = scene  # what ParkPlanner reads of a scene: .stalls.stalls
         self.car = scene.car
-        self.config = config
+        self.config = config = scene.park_config if config is None else config
         self._obstacles = scene.obstacles
         self.extent = scene.extent
         far = max(self.car.front - self.car.rear_axle, self.car.rear_axle - self.car.rear)
@@ -409,5 +420,6 @@ def build_case_scene(scene: CaseScene):
     return root
 
 
-__all__ = ["CASE_MARGIN", "CASE_PARK", "HEIGHTS", "STALL_END_GAP", "STALL_SIDE_GAP", "CaseObstacle", "CasePlanner", "CaseScene",
+__all__ = ["CASE_MARGIN", "CASE_PARK", "FAR_START", "HEIGHTS", "STALL_END_GAP", "STALL_SIDE_GAP", "CaseObstacle",
+           "CasePlanner", "CaseScene",
            "ParkCase", "build_case_scene", "convex_pieces", "tpcap_class"]

@@ -39,7 +39,7 @@ from garage_mj.driving.sim.park_task import ParkTest
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
 from garage_mj.driving.sim.vehicle import Car, attach_car, compile_mjcf, park_action_space
 from garage_mj.scene.car import CarConfig
-from garage_mj.scene.case_scene import CASE_PARK, CaseScene, build_case_scene
+from garage_mj.scene.case_scene import CaseScene, build_case_scene
 from garage_mj.scene.drivable import TestPlan
 from garage_mj.scene.mjcf_scene import ParkedCars
 from garage_mj.scene.park_planning import ParkConfig, ParkPlan
@@ -55,7 +55,8 @@ class CaseDriveEnv(GarageDriveEnv):
         case: the :class:`~garage_mj.scene.case_scene.CaseScene` to drive.
         action_type, camera, car, outcome, rgb, render_mode, render_size, image_obs, park_config, park_outcome:
             as :class:`~garage_mj.driving.sim.drive_env.GarageDriveEnv`'s (``car``: the limits; its full lock is
-            the case vehicle's; ``park_config``: default :data:`~garage_mj.scene.case_scene.CASE_PARK`).
+            the case vehicle's; ``park_config``: default the case's own, :attr:`CaseScene.park_config
+            <garage_mj.scene.case_scene.CaseScene.park_config>`).
         plan: the case's reference plan when planned already (:meth:`CasePlanner.plan_case
             <garage_mj.scene.case_scene.CasePlanner.plan_case>` with ``park_config``); None: planned on the first reset.
     """
@@ -97,7 +98,7 @@ class CaseDriveEnv(GarageDriveEnv):
         self.car_geometry = self.vehicle.geometry(self.car_config)
         self.outcome_config = _as(OutcomeConfig, outcome)
         self.scenario_config = NO_ACTORS
-        self.park_config = CASE_PARK if park_config is None else _as(ParkConfig, park_config)
+        self.park_config = case.park_config if park_config is None else _as(ParkConfig, park_config)
         self.park_outcome_config = _as(ParkOutcomeConfig, park_outcome)
         self.render_mode, self.render_size = render_mode, render_size
         self.dt = cam.period  # [s] control period
