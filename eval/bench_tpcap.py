@@ -12,7 +12,7 @@ errors, the plan's cusps and the direction changes driven, the planning CPU seco
 planner's or the outcome's reason). Target: the oracle parks >= 18 of the 20.
 
     GARAGE_MJ_TPCAP_CASES=path/to/TPCAP_benchmarks .venv/bin/python eval/bench_tpcap.py
-        # writes docs/bench_tpcap.json (resumable: rows so far in docs/bench_tpcap.rows.jsonl)
+        # writes docs/bench_tpcap.json (resumable: rows so far in docs/bench_tpcap.rows.jsonl, removed at the end)
 """
 
 from __future__ import annotations
@@ -123,6 +123,7 @@ def main() -> None:
                           "CASE_PARK_from_m": FAR_START, "CASE_PARK_escalation_stages": len(CASE_PARK.escalation)},
               "summary": summary(rows, drivers), "cases": rows}
     args.out.write_text(json.dumps(result, indent=2) + "\n")
+    args.out.with_suffix(".rows.jsonl").unlink()  # every case is in the JSON: nothing left to resume
     print(json.dumps(result["summary"], indent=2))
 
 
