@@ -19,9 +19,10 @@ project's problems the stall outline and the maneuver. Coordinates are the file'
 - ``extent``: the floor and the planning area, the box around the case's points grown by :data:`CASE_MARGIN`.
 
 :class:`CasePlanner` is the reference planner (:class:`~garage_mj.scene.park_planning.ParkPlanner`: the same
-search, margins, escalation and verdicts) over these obstacles instead of a garage's. :func:`build_case_scene` is
-the MuJoCo scene: a floor, each convex piece extruded to a mesh geom of its class's height (walls and parked cars
-as bodies a car can hit), the stall outline painted, an overview camera.
+search, margins, escalation and verdicts) over these obstacles instead of a garage's; a case that starts farther
+than :data:`FAR_START` from its goal escalates further (:data:`CASE_PARK`). :func:`build_case_scene` is the MuJoCo
+scene: a floor, each convex piece extruded to its class's height (a rectangle as a box geom, any other piece as a
+convex mesh geom: walls and parked cars as bodies a car can hit), the stall outline painted, an overview camera.
 """
 
 from __future__ import annotations
