@@ -132,6 +132,31 @@ def test_rangefinders_see_parked_cars_and_kerbs_not_hidden_ones_and_clip_to_thei
     assert ((got >= ULTRASONIC_MIN) & (got <= ULTRASONIC_MAX)).all()
 
 
+def test_rangefinders_see_actors_while_they_are_in_the_scene():
+    from garage_mj.driving.actors.config import ScenarioConfig
+    from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies
+
+    cfg = ScenarioConfig(pedestrians=1, moving_cars=1)
+    root = arena()
+    add_actor_bodies(root, cfg)
+    attach_car(root, 0.0, 0.0, 0.0, ultrasonic=True)
+    model = compile_mjcf(root)
+    data = mujoco.MjData(model)
+    Car(model).reset(data, 0.0, 0.0, 0.0)
+    bodies, sonar = ActorBodies(model, cfg), Ultrasonic(model)
+    for name in bodies.mocap:  # in the scene (a placed actor is opaque; an unused slot transparent)
+        model.geom_rgba[bodies.geoms[name], 3] = 1.0
+    ActorBodies.set_pose(data, bodies.mocap["pedestrian_0"], (2.3 + 1.5, 0.0, 0.0))  # 1.5 m ahead of the bumper
+    ActorBodies.set_pose(data, bodies.mocap["movingcar_0"], (-2.3 - 2.0 - 2.5, 0.0, 0.0))  # about 2 m behind
+    mujoco.mj_forward(model, data)
+    got = sonar.read(data)
+    assert 1.0 < min(got[_index("us_f_inner_l")], got[_index("us_f_inner_r")]) < 1.55
+    assert 1.0 < min(got[_index("us_r_inner_l")], got[_index("us_r_inner_r")]) < 2.6
+    for name in bodies.mocap:  # unused slots: transparent, never seen
+        model.geom_rgba[bodies.geoms[name], 3] = 0.0
+    assert (sonar.read(data) == ULTRASONIC_MAX).all()
+
+
 def test_the_rays_cast_per_observation_are_mujocos_rangefinders(painted_tiny):
     scene = GarageScene(painted_tiny)
     root = build_scene(scene, fuse_static=True)
