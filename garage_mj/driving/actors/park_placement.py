@@ -50,7 +50,10 @@ ACTOR_STREAM = 0x61637472  # seeds a test's actor generator apart from its other
 PLACEMENT_TRIES = 20  # draws per actor before it is left out
 MIN_SPACING = 2.0  # [m] between the start poses of two actors
 NEIGHBOURS = 3.6  # [stall widths] a stall this close along the row to the target is a neighbour (three each side)
-CLUTTER_GAP = (0.1, 0.8)  # [m] clutter stands this much beyond the margin from the plan's swept path
+CLUTTER_GAP = (0.3, 1.0)  # [m] clutter stands this much beyond the margin from the plan's swept path
+# [m] clutter keeps at least this beyond the margin: a driven path strays centimetres from the plan, and a round
+# body's outline (its box, which the parking metrics measure to) reaches past its circle
+CLUTTER_SLACK = 0.2
 # Timing a pedestrian behind the car (adverse, not feasibility: the judge decides that): a parking car stands about
 # REVERSE_SETTLE at a cusp (gear, wheels), then reverses at about REVERSE_SPEED; the pedestrian waits after its
 # trigger so as to reach the reverse path about when the car does, give or take MEET_JITTER.
@@ -260,7 +263,7 @@ class _ParkPlacer:
         c = p + n * (self.car.half_width + r + gap)
         pose = np.array([[c[0], c[1], float(self.rng.uniform(-math.pi, math.pi))]])
         # clear of the whole swept path by the margin: the reference plan stays a feasible way past it
-        if corr.clearance(shape, pose) < self.margin or not self._free(shape, pose, stalls_too=True) \
+        if corr.clearance(shape, pose) < self.margin + CLUTTER_SLACK or not self._free(shape, pose, stalls_too=True) \
                 or not self._spaced(c):
             return None
         return ActorSpec(name, "clutter", behaviour, np.array([[0.0, *pose[0]]]))

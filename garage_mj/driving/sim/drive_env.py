@@ -104,7 +104,7 @@ from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
 from garage_mj.scene.park_planning import ParkConfig, ParkPlanner
 from garage_mj.scene.parked_fleet import ParkedBody, ParkedFleet, draw_parked, fleet_rng
 from garage_mj.scene.route_line import Route
-from garage_mj.scene.semantics import COLLIDABLE, geom_classes
+from garage_mj.scene.semantics import COLLIDABLE, Semantic, geom_classes
 from garage_mj.scene.vehicles import VehicleClass, vehicle_class
 from garage_mj.scene.world import WorldConfig, world_with
 
@@ -509,7 +509,9 @@ class GarageDriveEnv(gym.Env):
             self._parked_cars.place(self.model, None, test.bodies)
         self._place_actors()
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward; in D, at rest
-        self._bodies = solid_bodies(self.model, self.data, self.car.geom_mask, self.classes)  # as they stand
+        # the solid bodies as they stand (clutter included; a walking or driving actor is nowhere for long)
+        moving = np.isin(self.classes, [int(Semantic.PEDESTRIAN), int(Semantic.MOVING_CAR)])
+        self._bodies = solid_bodies(self.model, self.data, self.car.geom_mask | moving, self.classes)
         self._park_level = test_level(self, test, self._bodies)
         self.path_length = 0.0  # [m] driven
         self._last_xy = (x, y)
