@@ -190,3 +190,17 @@ def test_park_actors_export_replay_and_any_worker_count(tmp_path, tiny):
         again = replay_xosc(f)
         assert (again["outcome"], again["time"], again["hit"], again["path_length"]) == (
             r["outcome"], float(r["time"]), r["hit"], float(r["path_length"]))
+
+
+def test_cli_park_scenarios_are_named_and_refused_in_cruise_tests(tmp_path, capsys, tiny):
+    from garage_mj.cli import main
+    from garage_mj.export.pack import export_pack
+
+    export_pack(tiny, tmp_path)
+    assert main(["cruise", "--packs", str(tmp_path), "--scenario", "park_mixed", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--task park" in err[0]
+    assert main(["cruise", "--packs", str(tmp_path), "--task", "park", "--scenario", "park_nosuch",
+                 "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "park_car_pulling_out" in err[0]
