@@ -15,13 +15,14 @@ Fixtures:
   ``tiny_7x11`` garages.
 - ``garage_packs`` (session): a folder of the asset packs of those 3 garages (shared: copy it to change it).
 - ``garage_cruise``: ``garage_cruise(MyDriver)`` runs cruise tests (``task="park"`` or ``"avp"``: park or
-  AVP tests, with ``maneuver`` and ``stall``; ``vehicle``: the car under test's class) of a driver class and returns
+  AVP tests, with ``maneuver`` and ``stall``; ``vehicle``: the car under test's class; ``sensors``: the parking
+  sensors its driver observes too, ``"rear_camera,ultrasonic,slot"`` or ``"all"``) of a driver class and returns
   :class:`garage_mj.testing.DriverTests` (the results table; ``.assert_success()`` fails listing each
   failed test with how it failed, its MP4 and its ``.xosc``). Output in the test's ``tmp_path``.
 
 What ``garage_cruise`` tests, from the command line (``pytest --garage-tests 20``), else the marker
 ``@pytest.mark.garage_mj(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS, task=..., maneuver=...,
-stall=ID, vehicle=...)``, else the
+stall=ID, vehicle=..., sensors=...)``, else the
 defaults; an argument given to ``garage_cruise(...)`` in the test itself wins over both. A test that runs
 past ``test_timeout`` (default 120 s) fails as ``driver_timeout`` and the others still run.
 """
@@ -39,17 +40,18 @@ import pytest
 MARKER = "garage_mj"
 #: What the options and the marker choose, with the defaults: maps to paint garages of, garages per map,
 #: cruise tests per garage, worker processes, wall time a test may take [s] (garage_mj's DEFAULT_TEST_TIMEOUT),
-#: the task (cruise, park, avp), the park maneuver (reverse, forward, any), the target stall (None: drawn) and the
-#: car under test's class (docs/spec.md section 9).
+#: the task (cruise, park, avp), the park maneuver (reverse, forward, any), the target stall (None: drawn), the
+#: car under test's class (docs/spec.md section 9) and the parking sensors observed (None: none; docs/observations.md).
 DEFAULTS: dict[str, Any] = {"maps": ["tiny_7x11"], "per_map": 1, "tests": 3, "workers": 1, "test_timeout": 120.0,
-                            "task": "cruise", "maneuver": "reverse", "stall": None, "vehicle": "sedan"}
+                            "task": "cruise", "maneuver": "reverse", "stall": None, "vehicle": "sedan", "sensors": None}
 TASKS = ("cruise", "park", "avp")  # garage_mj's TASKS, MANEUVER_CHOICES and FLEET (not imported: see above)
 MANEUVERS = ("reverse", "forward", "any")
 VEHICLES = ("compact", "sedan", "suv", "van")
+SENSORS = ("rear_camera", "ultrasonic", "slot")  # garage_mj.driving.sim.park_sensors.SensorConfig's switches
 _CLI_HINT = " (put --debug before the command for its traceback)"  # the command line's advice; the traceback follows here
 _OPTIONS = {"maps": "garage_maps", "per_map": "garage_per_map", "tests": "garage_tests", "workers": "garage_workers",
             "test_timeout": "garage_test_timeout", "task": "garage_task", "maneuver": "garage_maneuver",
-            "stall": "garage_stall", "vehicle": "garage_vehicle"}
+            "stall": "garage_stall", "vehicle": "garage_vehicle", "sensors": "garage_sensors"}
 
 
 def _number(text: str, convert: Callable[[str], Any], valid: Callable[[Any], bool], hint: str):
@@ -83,6 +85,20 @@ def _maps(text: str) -> list[str]:
     return maps
 
 
+def _sensors(text: str) -> str:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names or (names != ["all"] and not set(names) <= set(SENSORS)):
+        raise argparse.ArgumentTypeError(f"{text!r}: give sensor names, comma-separated ({', '.join(SENSORS)}), "
+                                         "or all")
+    return ",".join(names)
+
+
+def _sensor_env(sensors: str | list[str] | tuple[str, ...]) -> dict[str, bool]:
+    """The drive env's ``sensors`` (a dict of switches, as ``garage-mj cruise --sensors`` stores it) of names."""
+    names = [n.strip() for n in (sensors.split(",") if isinstance(sensors, str) else sensors) if n.strip()]
+    return dict.fromkeys(SENSORS if names == ["all"] else names, True)
+
+
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("garage-mj", "garage-mj cruise tests (the garage_cruise fixture)")
     group.addoption("--garage-maps", type=_maps, metavar="MAPS",
@@ -98,11 +114,14 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--garage-stall", type=_stall, metavar="ID",
                     help="the stall every test targets (default: drawn per test)")
     group.addoption("--garage-vehicle", choices=VEHICLES, help="the car under test's class (default sedan)")
+    group.addoption("--garage-sensors", type=_sensors, metavar="NAMES",
+                    help="parking sensors the driver observes too: rear_camera, ultrasonic, slot, comma-separated, "
+                         "or all (default none)")
 
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", f"{MARKER}(maps=[...], per_map=N, tests=N, workers=N, test_timeout=SECONDS, task=..., "
-                                       "maneuver=..., stall=ID, vehicle=...): what the "
+                                       "maneuver=..., stall=ID, vehicle=..., sensors=...): what the "
                                        "garage_cruise fixture tests by default (--garage-* options override it)")
 
 
@@ -178,7 +197,7 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
                       per_map: int | None = None, seed: int = 0, action_type: str | None = None,
                       occupancy: float = 0.5, driver_kwargs: dict[str, Any] | None = None,
                       env: dict[str, Any] | None = None, task: str | None = None, maneuver: str | None = None,
-                      stall: int | None = None, vehicle: str | None = None):
+                      stall: int | None = None, vehicle: str | None = None, sensors: str | None = None):
         from garage_mj.core.backends import Compute
         from garage_mj.core.errors import GarageMJError
         from garage_mj.driving.sources import CruiseSettings
@@ -187,11 +206,14 @@ def garage_cruise(request: pytest.FixtureRequest, tmp_path: Path):
         __tracebackhide__ = True
         k = next(runs)
         given = {"maps": garages, "tests": tests, "workers": workers, "test_timeout": test_timeout,
-                 "per_map": per_map, "task": task, "maneuver": maneuver, "stall": stall, "vehicle": vehicle}
+                 "per_map": per_map, "task": task, "maneuver": maneuver, "stall": stall, "vehicle": vehicle,
+                 "sensors": sensors}
         use = {key: chosen[key] if value is None else value for key, value in given.items()}  # the call's, else chosen
         env = dict(env or {})
         if use["vehicle"] != DEFAULTS["vehicle"]:  # the default car: run.json as without the option
             env.setdefault("vehicle", use["vehicle"])
+        if use["sensors"]:  # none: run.json as without the option
+            env.setdefault("sensors", _sensor_env(use["sensors"]))
         try:
             settings = CruiseSettings(seed=seed, action_type=action_type, occupancy=occupancy, env=env,
                                       driver_kwargs=dict(driver_kwargs or {}),  # the driver: run_driver_tests sets it

@@ -3,12 +3,14 @@ detector, on every vehicle class, opt-in so that an env without them observes ex
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import mujoco
 import numpy as np
 import pytest
 
+from garage_mj.driving.drivers.oracle import OracleDriver
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.driving.sim.observations import ObservationSetup, observation_spaces
 from garage_mj.driving.sim.park_sensors import (
@@ -35,6 +37,17 @@ from garage_mj.scene.mjcf_scene import build_scene
 from garage_mj.scene.semantics import Semantic
 from garage_mj.scene.vehicles import FLEET
 from tests._scenes import arena
+
+
+class SensorCheckingOracle(OracleDriver):
+    """The oracle, failing where an observation lacks a parking sensor (a driver the pytest plugin runs by name)."""
+
+    def act(self, obs):
+        missing = [k for k in ("rear_depth", "rear_segmentation", "ultrasonic", "slot") if k not in obs]
+        if missing:
+            raise AssertionError(f"no {', '.join(missing)} in the observation")
+        return super().act(obs)
+
 
 CLASSES = list(FLEET.values())
 BUMPER_HEIGHT = 0.5  # [m] above the ground: where the ultrasonic sensors sit
@@ -295,3 +308,11 @@ def test_cruise_cli_observes_the_sensors_it_is_given(painted_tiny, tmp_path, cap
     with pytest.raises(SystemExit):
         main(["cruise", "--packs", str(packs), "--sensors", "lidar", "--out", str(tmp_path / "bad")])
     assert "unknown sensor 'lidar'" in capsys.readouterr().err
+
+
+def test_the_pytest_plugin_hands_sensors_to_the_env(garage_cruise):
+    import pytest_garage_mj as plugin
+
+    assert set(plugin.SENSORS) == {f.name for f in dataclasses.fields(SensorConfig) if f.type in (bool, "bool")}
+    tests = garage_cruise(SensorCheckingOracle, tests=1, task="park", sensors="all")
+    assert [r["outcome"] for r in tests.rows] == ["success"]
