@@ -123,7 +123,8 @@ def car_camera(camera: str = FRONT_CAMERA, path: str | Path | None = None,
     of the optical axis (to :data:`PITCH_DECIMALS` decimals of a degree), ``fovy`` [deg] vertical
     field of view. ``path``: another car MJCF than ``models/car/car.xml``; ``vehicle``: the car of a fleet class
     (:func:`car_model`) instead. The camera must sit on the car's centre line and look straight ahead (what a
-    driver's camera geometry assumes).
+    driver's camera geometry assumes) or, as :data:`REAR_CAMERA` does, straight back (``x`` < 0 behind the centre;
+    ``pitch`` its downward tilt all the same).
     """
     return dict(_car_camera(camera, None if path is None else str(path), vehicle))
 
