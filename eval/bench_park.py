@@ -149,11 +149,15 @@ def _job(job: tuple) -> list[dict]:
     """The rows of one (geometry, vehicle, garage, kind) of the grid (run in a worker process)."""
     gname, vehicle, map_name, index, seed, kind_name, tests, occupancy, paint_seed, garages = job
     from garage_mj.driving.sources import painted_sources
+    from garage_mj.scene.world import GeometryError
 
     source = painted_sources(map_name, garages, seed=paint_seed)[index]  # as painted_garages paints them
     kind = next(k for k in KINDS if k.name == kind_name)
     label = {"geometry": gname, "vehicle": vehicle, "map": map_name, "garage": source.name}
-    return _garage_rows(source.garage, kind, tests, occupancy, seed, label, GEOMETRIES[gname], vehicle)
+    try:
+        return _garage_rows(source.garage, kind, tests, occupancy, seed, label, GEOMETRIES[gname], vehicle)
+    except GeometryError as exc:  # the garage cannot be built in this geometry: one row that says why, no tests
+        return [{**label, "kind": kind.name, "seed": None, "driver": None, "outcome": "not_built", "reason": str(exc)}]
 
 
 def _breakdown(rows: list[dict], key: str) -> dict:
@@ -182,18 +186,24 @@ def grid(args, maps: list[str], prov: dict) -> int:
             done[json.dumps(job)] = got
             sink.write(json.dumps({"job": json.dumps(job), "rows": got}) + "\n")
             sink.flush()
+            if got and got[0]["outcome"] == "not_built":
+                print(f"{job[0]:9s} {job[1]:7s} {job[2]:18s} #{job[3]} not built: {got[0]['reason']}", flush=True)
+                continue
             line = "  ".join(f"{d} {_stats(got, d)['success']}/{_stats(got, d)['feasible']}" for d in DRIVERS)
             print(f"{job[0]:9s} {job[1]:7s} {job[2]:18s} #{job[3]} {job[5]:13s} unproven "
                   f"{_stats(got, DRIVERS[0])['unproven']}/{args.tests}  {line}", flush=True)
     sections = []
     for g in args.geometries:
         for v in args.vehicles:
-            rows = [r for j in jobs if j[0] == g and j[1] == v for r in done[json.dumps(j)]]
+            every_row = [r for j in jobs if j[0] == g and j[1] == v for r in done[json.dumps(j)]]
+            rows = [r for r in every_row if r["outcome"] != "not_built"]
+            not_built = sorted({(r["map"], r["garage"], r["reason"]) for r in every_row if r["outcome"] == "not_built"})
             park = [r for r in rows if r["kind"] != "avp"]
             op, oa = _stats(park, "oracle"), _stats([r for r in rows if r["kind"] == "avp"], "oracle")
             every = _stats(rows, "oracle")
             sections.append({
                 "geometry": GEOMETRIES[g].__dict__, "vehicle": v,
+                "garages_not_built": [{"map": m, "garage": n, "reason": why} for m, n, why in not_built],
                 "oracle_park": op, "oracle_avp": oa,
                 "park_assist_park": _stats(park, "park_assist"),
                 "unproven_pct": every["unproven_pct"], "infeasible_pct": every["infeasible_pct"],
