@@ -186,6 +186,10 @@ def test_park_actors_export_replay_and_any_worker_count(tmp_path, tiny):
     assert any(int(r["moving_cars"]) for r in rows)  # a pulling-out car's stall is freed in the replay too
     files = sorted((tmp_path / "w1" / "xosc").glob("*.xosc"))
     assert len(files) == 3
+    from garage_mj.export.validate import check_xosc_batch
+
+    for rep in check_xosc_batch(files):  # ASAM's OpenSCENARIO XML checker: park files with actors are clean too
+        assert rep.ok and rep.completed >= 17 and not rep.skipped, (rep.path, rep.issues)
     for f, r in zip(files, rows, strict=True):
         again = replay_xosc(f)
         assert (again["outcome"], again["time"], again["hit"], again["path_length"]) == (
