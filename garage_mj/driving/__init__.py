@@ -8,9 +8,11 @@
   - ``sim.drive_env``: ``GarageDrive-v0``, one garage, one test per episode.
   - ``sim.case_env``: ``CaseDriveEnv``, the park test of one case from elsewhere (a problem file).
 - ``actors``: the adverse events of a test.
-  - ``actors.config``: ``ScenarioConfig``, how many adverse events (pedestrians, moving cars, clutter) a test gets.
+  - ``actors.config``: ``ScenarioConfig``, how many adverse events (pedestrians, moving cars, clutter) a test gets;
+    ``SCENARIOS``, the named ones.
   - ``actors.scenario``: a test's drawn ``Scenario`` and the car's swept path (``Corridor``) actors are checked on.
   - ``actors.placement``: ``draw_scenario``, the actors' trajectories and triggers around a test's route.
+  - ``actors.park_placement``: ``draw_park_scenario``, a park or AVP test's actors around its stall and park plan.
   - ``actors.judging``: ``judge``, whether every event stays avoidable (decided before the drive).
 - ``drivers``: the built-in drivers (``oracle``, ``waypoint``, ``vision``, ``learned``) and user drivers.
 - ``learning``: training a learned driver.

@@ -1,1 +1,1 @@
-"""The adverse events of a cruise test: their settings, the drawn scenario, placement and judging."""
+"""The adverse events of a cruise, park or AVP test: their settings, the drawn scenario, placement and judging."""
