@@ -62,8 +62,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from garage_mj.scene.clearance import (Obstacles, footprint, nearest_obstacle, polygon_axes, polygon_distance,
-                                       scene_obstacles)
+from garage_mj.scene.clearance import (
+    Obstacles,
+    footprint,
+    nearest_obstacle,
+    polygon_axes,
+    polygon_distance,
+    scene_obstacles,
+)
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.world import DEFAULT_WORLD
 
