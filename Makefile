@@ -59,12 +59,14 @@ browser:
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium chromium-driver >/dev/null; }
 
 # make test leaves out the tests marked slow (tests/conftest.py SLOW) to stay under 10 minutes on 2 cores;
-# make test-all runs every test.
+# make test-all runs every test. Both run the test files on TEST_WORKERS processes (pytest-xdist; one file's
+# tests stay in one process, so its module fixtures are built once): TEST_WORKERS=0 runs them in this process.
+TEST_WORKERS ?= 2
 test: install browser
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow" -n $(TEST_WORKERS) --dist loadfile
 
 test-all: install browser
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 demo: $(MAIN_STAMP)
 	$(VENV)/bin/garage-mj demo
