@@ -85,7 +85,7 @@ def independent(planner: ParkPlanner, obs: Obstacles, start, stall, maneuver: st
     gear = MANEUVERS[maneuver].exit_gear
     out = g[:2] + gear * d_out * np.array([math.cos(g[2]), math.sin(g[2])])
     region = planner._region(np.array([g, s, [*out, g[2]]]))
-    checker = _Checker(planner.near(obs, region).boxes, car, cfg.margin, region)
+    checker = _Checker(planner.near(obs, region), car, cfg.margin, region)
     if not (checker.pose_clear(*g) and checker.pose_clear(*s)):
         return {"found": False, "planner": "", "cusps": None, "cpu_s": 0.0}
     t0 = time.process_time()
@@ -149,23 +149,15 @@ def main(argv: list[str] | None = None) -> int:
             occupied = [i for i, o in zip(ids, rng.random(len(ids)) < args.occupancy, strict=True) if o and i != stall.id]
             if not test.feasible:
                 continue
-            base = park_obstacles(planner.obstacles(), stall.id, occupied)
-            if geo is not None:  # the geometry's own aisle
-                for name in MANEUVERS:
-                    plan = planner.plan(test.goal, stall.id, name, obstacles=base)
-                    row = {**plan.summary(), "map": pg.map, "garage": scene.name}
-                    if plan.verdict != "feasible":
-                        row["independent"] = independent(planner, base, test.goal, stall, name, args.independent_s,
-                                                         pg.seed)
-                    rows.append(row)
-                continue
-            wall = aisle_wall(stall, args.aisle, args.wall_span)
-            rear = centre_to_rear(test.goal, car)
-            if nearest_obstacle(Obstacles(wall[None], ["wall"], np.array([-1])), car, rear[None, :2],
-                                rear[None, 2])[0][0] < config.margin:
-                skipped += 1  # the start (on the lane beside the stall) stands in the wall: no test there
-                continue
-            obs = Obstacles(np.vstack([base.boxes, wall]), [*base.classes, "wall"], np.append(base.stall, -1))
+            obs = park_obstacles(planner.obstacles(), stall.id, occupied)
+            if geo is None:  # a wall narrows the 9 m aisle
+                wall = aisle_wall(stall, args.aisle, args.wall_span)
+                rear = centre_to_rear(test.goal, car)
+                if nearest_obstacle(Obstacles(wall[None], ["wall"], np.array([-1])), car, rear[None, :2],
+                                    rear[None, 2])[0][0] < config.margin:
+                    skipped += 1  # the start (on the lane beside the stall) stands in the wall: no test there
+                    continue
+                obs = obs.plus(Obstacles(wall[None], ["wall"], np.array([-1])))
             for name in MANEUVERS:
                 plan = planner.plan(test.goal, stall.id, name, obstacles=obs)
                 row = {**plan.summary(), "map": pg.map, "garage": scene.name}
