@@ -477,3 +477,30 @@ def test_a_read_only_park_problems_target_is_one_line_naming_it(painted_tiny, sh
         assert f"--park-problems {out}:" in err[0] and str(target) in err[0] and ".tmp" not in err[0], err[0]
         assert "read-only" in err[0] and "writable" in err[0], err[0]
         assert snapshot(shared_tmp) == before and not (shared_tmp / "packs").exists()  # refused before any pack
+
+
+def test_every_yaw_written_lies_in_minus_pi_to_pi(written):
+    """OMPL's SO2 bounds (and its Reeds-Shepp space's) are [-pi, pi): a yaw written as pi is refused there."""
+    out, index = written
+    yaws = []
+    for entry in index["problems"]:
+        data = json.loads((out / entry["json"]).read_text())
+        yaws += [data[key][2] for key in ("start", "goal", "start_centre", "goal_centre")]
+        fields = (out / entry["csv"]).read_text().split(",")
+        yaws += [float(fields[2]), float(fields[5])]
+    assert all(-math.pi <= y < math.pi for y in yaws)
+    assert -math.pi in yaws  # the tiny garage has stalls facing west: their yaw is pi, written as -pi
+
+
+@pytest.mark.parametrize(("yaw", "read"), [
+    (math.pi, -math.pi), (-math.pi, -math.pi), (3 * math.pi, -math.pi), (math.tau + 0.5, 0.5), (-4.0, math.tau - 4.0),
+    (1000.25, 1000.25 - 159 * math.tau),
+])
+def test_reader_takes_any_finite_yaw_and_wraps_it(written, tmp_path, yaw, read):
+    out, index = written
+    data = json.loads((out / index["problems"][0]["json"]).read_text())
+    data["goal_centre"][2] = yaw
+    path = tmp_path / "p.json"
+    path.write_text(json.dumps(data))
+    got = read_park_problem(path).goal_centre[2]
+    assert -math.pi <= got < math.pi and got == pytest.approx(read, abs=1e-12)

@@ -39,7 +39,8 @@ JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 2; lengths in 
     garage_grid, six_stall_axis  the garage's block codes, one string of digits per row, and its six-stall
                                axis: what garage_hash is the hash of, so a reader can check it
     stall, maneuver            the stall id and "reverse" or "forward"
-    start, goal                [x, y, yaw] of the rear-axle midpoint (TPCAP's reference point)
+    start, goal                [x, y, yaw] of the rear-axle midpoint (TPCAP's reference point); every yaw
+                               is written in [-pi, pi) (read: any finite yaw, wrapped into it)
     start_centre, goal_centre  [x, y, yaw] of the car's centre (the drive env's Car.pose)
     stall_outline              the stall's four corners [[x, y], ...], counter-clockwise
     region                     [xmin, ymin, xmax, ymax]: the planning area of the rear axle
@@ -105,6 +106,9 @@ CLASSES = ("wall", "obstacle", "pillar", "parked_car")
 MAX_BYTES = 16 << 20  # [bytes] of a file read: far above any problem (a 64x64 garage's is some 100 kB)
 MAX_COORD = 10_000.0  # [m] |x| and |y| of any point: a garage is at most 576 m across
 MAX_CAR = 100.0  # [m] any length of the car
+#: [rad] |yaw| of a pose a reader takes (then wraps into [-pi, pi)): any yaw a writer means, and small enough that
+#: wrapping it keeps it to 1e-9 rad (a float64 near 1e6 resolves 1.2e-10).
+MAX_YAW = 1e6
 _FIX = "write it again with garage-mj export --park-problems"
 #: The vehicle of TPCAP's own cases [m] (its demos' ``InitializeParams``): a case file has no place for it.
 TPCAP_CAR = {"wheelbase": 2.8, "front_overhang": 0.96, "rear_overhang": 0.929, "width": 1.942}
@@ -208,7 +212,14 @@ def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: Pa
 
 
 def _pose(p) -> tuple[float, float, float]:
-    return float(p[0]), float(p[1]), float(p[2])
+    return float(p[0]), float(p[1]), wrap_yaw(float(p[2]))
+
+
+def wrap_yaw(yaw: float) -> float:
+    """``yaw`` [rad] wrapped into [-pi, pi): the interval every angle of a problem file lies in, which OMPL's SO2
+    bounds (and its Reeds-Shepp space's) take; pi itself becomes -pi."""
+    a = (yaw + math.pi) % math.tau - math.pi
+    return -math.pi if a >= math.pi else a
 
 
 def _corners(outline) -> tuple[tuple[float, float], ...]:
@@ -500,7 +511,7 @@ def _read_pose(data: dict, key: str) -> tuple[float, float, float]:
     if not isinstance(v, list) or len(v) != 3:
         raise ValueError(f"{key} is not a list of 3 numbers")
     return _coord(v[0], f"{key} x"), _coord(v[1], f"{key} y"), \
-        _bounded(v[2], f"{key} yaw", -math.tau, math.tau, unit="radians")
+        wrap_yaw(_bounded(v[2], f"{key} yaw", -MAX_YAW, MAX_YAW, unit="radians"))
 
 
 def _polygon(v: Any, what: str) -> tuple[tuple[float, float], ...]:
