@@ -186,6 +186,16 @@ BAD_PROBLEMS = [
     ("start outside the region", lambda d: d["start"].__setitem__(0, d["region"][2] + 50), "start"),
     ("goal outside the region", lambda d: d["goal"].__setitem__(1, d["region"][1] - 50), "goal"),
     ("start yaw huge", _set("start", 2, v=1e300), "start"),
+    ("reference without poses", _del("reference", "poses"), "reference has no 'poses' key"),
+    ("reference found a string", _set("reference", "found", v="yes"), "reference.found"),
+    ("reference verdict unknown", _set("reference", "verdict", v="maybe"), "reference.verdict"),
+    ("reference verdict not its found", _set("reference", "verdict", v="unproven"), "reference.verdict"),
+    ("reference gear 0", _set("reference", "directions", 0, v=0), "reference.directions"),
+    ("reference poses one short", lambda d: d["reference"]["poses"].pop(), "reference.poses"),
+    ("reference pose far away", _set("reference", "poses", 1, 0, v=1e300), "reference pose"),
+    ("reference length negative", _set("reference", "length", v=-1.0), "reference.length"),
+    ("reference cusps a float", _set("reference", "cusps", v=1.5), "reference.cusps"),
+    ("reference settings unknown key", _set("reference", "settings", "colour", v=1), "reference.settings.colour"),
     ("obstacle vertex far away", _set("obstacles", 0, "vertices", 0, v=[1e300, 0.0]), "obstacle 0"),
     ("forged garage_hash", _set("garage_hash", v="0" * 64), "garage_hash"),
     ("garage_hash not hex", _set("garage_hash", v="xyz"), "garage_hash"),
@@ -504,3 +514,86 @@ def test_reader_takes_any_finite_yaw_and_wraps_it(written, tmp_path, yaw, read):
     path.write_text(json.dumps(data))
     got = read_park_problem(path).goal_centre[2]
     assert -math.pi <= got < math.pi and got == pytest.approx(read, abs=1e-12)
+
+
+def test_each_problem_carries_the_reference_plan(written):
+    """The reference: a path another planner can be scored against, from the start to the goal, every pose clear."""
+    out, index = written
+    for entry in index["problems"][:12]:
+        problem = read_park_problem(out / entry["json"])
+        ref = problem.reference
+        assert ref["found"] and ref["verdict"] == "feasible" and ref["reason"] == ""
+        poses = ref["poses"]
+        assert poses[0] == pytest.approx(list(problem.start), abs=1e-6)
+        assert poses[-1] == pytest.approx(list(problem.goal), abs=1e-6)
+        steps = [math.dist(a[:2], b[:2]) for a, b in zip(poses, poses[1:], strict=False)]
+        assert max(steps) <= ref["spacing"] + ref["settings"]["step"] + 1e-6  # subsampled, nothing skipped
+        assert sum(steps) <= ref["length"] + 1e-6 and ref["length"] >= math.dist(poses[0][:2], poses[-1][:2])
+        gears = ref["directions"]
+        assert set(gears) <= {-1, 1} and len(gears) == len(poses)
+        assert ref["cusps"] == sum(a != b for a, b in zip(gears[:-2], gears[1:-1], strict=True))  # every cusp kept
+        assert ref["min_clearance"] >= problem.planner["margin"] - 1e-6
+        assert ref["settings"]["margin"] == problem.planner["margin"]
+        assert ref["settings"]["turning_radius"] == problem.planner["turning_radius"]
+
+
+def test_version_2_files_still_read_and_version_3_needs_its_reference(written, tmp_path):
+    path, data = _good(written)
+    assert data["version"] == 3
+    old = {k: v for k, v in data.items() if k != "reference"} | {"version": 2}
+    (tmp_path / "v2.json").write_text(json.dumps(old))
+    problem = read_park_problem(tmp_path / "v2.json")
+    assert problem.reference is None and problem.to_json() == old
+    (tmp_path / "v3.json").write_text(json.dumps(old | {"version": 3}))
+    with pytest.raises(ParkProblemError, match="no 'reference' key"):
+        read_park_problem(tmp_path / "v3.json")
+    (tmp_path / "v2x.json").write_text(json.dumps(data | {"version": 2}))
+    with pytest.raises(ParkProblemError, match="unknown key 'reference'"):
+        read_park_problem(tmp_path / "v2x.json")
+
+
+def _schema_validator():
+    jsonschema = pytest.importorskip("jsonschema")
+    from garage_mj.export.park_problems import SCHEMA
+
+    schema = json.loads(SCHEMA.read_text())
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema)
+
+
+def _descriptions(node, at="") -> list[str]:
+    """Paths of the schema's properties that have no description."""
+    missing = []
+    for name, sub in node.get("properties", {}).items():
+        if "description" not in sub:
+            missing.append(f"{at}{name}")
+        missing += _descriptions(sub, f"{at}{name}.")
+        if isinstance(sub.get("items"), dict):
+            missing += _descriptions(sub["items"], f"{at}{name}[].")
+    return missing
+
+
+def test_every_problem_written_validates_against_the_shipped_schema(written):
+    validator = _schema_validator()
+    assert not _descriptions(validator.schema)  # every field says what it is, its unit and frame
+    out, index = written
+    for entry in index["problems"]:
+        errors = list(validator.iter_errors(json.loads((out / entry["json"]).read_text())))
+        assert not errors, (entry["json"], [e.message for e in errors[:3]])
+
+
+@pytest.mark.parametrize("edit", [
+    _set("start", 2, v=math.pi),  # OMPL's SO2 bounds refuse it
+    _set("maneuver", v="sideways"),
+    _del("reference"),
+    _set("planner", "seed", v=3),
+    _set("obstacles", 0, "class", v="tree"),
+    _set("reference", "directions", 0, v=0),
+    lambda d: d.update(version=2),  # a version 2 file has no reference
+])
+def test_a_broken_problem_does_not_validate(written, edit):
+    validator = _schema_validator()
+    _, data = _good(written)
+    assert validator.is_valid(data)
+    edit(data)
+    assert not validator.is_valid(data)

@@ -28,12 +28,14 @@ holds the lock of ``DIR`` (:class:`~garage_mj.core.fsutil.FolderLock`), so a sec
 stops in one line; a folder it cannot write is named in one line before anything is written.
 
 The obstacles are those of the reference planner (:mod:`garage_mj.scene.park_planning`) within reach
-of its planning area: walls, obstacle blocks, pillars, and a parked car in every other stall (the worst case
-of any occupancy), each written as its corners, counter-clockwise: a parked car is its body as a park test
+of its planning area: walls, obstacle blocks, pillars, and a parked car in every stall except the target one
+(every stall is occupied but the one to park in: the worst case of any occupancy), each written as its corners, counter-clockwise: a parked car is its body as a park test
 plans around it (``models/parked_car``, 4.3 x 1.9 m, centred and square in its stall: the default fleet of
 :mod:`garage_mj.scene.parked_fleet`), never the whole stall outline. The target stall is empty.
 
-JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 2; lengths in metres, angles in radians)::
+JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 3; lengths in metres, angles in radians; the
+world frame: x east, y north, z up, yaw counter-clockwise from +x; the machine-readable schema is
+``park_problem.schema.json`` beside this module, documented in docs/park-problems.md)::
 
     garage, garage_hash        the garage's name and canonical hash (Garage.canonical_hash)
     garage_grid, six_stall_axis  the garage's block codes, one string of digits per row, and its six-stall
@@ -52,6 +54,11 @@ JSON schema (``format`` ``"garage-mj park problem"``, ``version`` 2; lengths in 
     geometry                   the park geometry the garage was built in (docs/spec.md section 9):
                                stall_width, stall_depth, aisle_width [m], stall_angle [deg], slot_length
                                [m]; optional, a file without it was built in the defaults
+    reference                  the reference planner's plan of this problem (version 3; a version 2 file, still
+                               read, has none): found, verdict, reason, length [m of rear-axle path], cusps,
+                               min_clearance [m], method, attempt, spacing [m], poses ([x, y, yaw] of the
+                               rear axle every `spacing` metres of path, cusps and both ends kept), directions
+                               (+1 forward / -1 reverse from each pose to the next), settings (the planner's)
 """
 
 from __future__ import annotations
@@ -82,7 +89,9 @@ from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.park_planning import (
     DEFAULT_PARK,
     MANEUVERS,
+    VERDICTS,
     ParkConfig,
+    ParkPlan,
     ParkPlanner,
     centre_to_rear,
     park_pose,
@@ -91,8 +100,11 @@ from garage_mj.scene.parked_fleet import ParkedFleet, body_obstacles, draw_parke
 from garage_mj.scene.world import DEFAULT_WORLD, GeometryError, geometry, world_with
 
 FORMAT = "garage-mj park problem"
-VERSION = 2  # 2: the garage's grid and six-stall axis, so that garage_hash can be checked
+VERSION = 3  # 2: the garage's grid and six-stall axis, so that garage_hash can be checked; 3: the reference plan
+VERSIONS = (2, 3)  # read: a version 2 file has no reference plan
 INDEX = "park_problems.json"
+#: The JSON Schema (draft 2020-12) of a problem file, shipped beside this module (docs/park-problems.md).
+SCHEMA = Path(__file__).with_name("park_problem.schema.json")
 _POSE = ("x", "y", "yaw")
 #: The keys of a problem file, each required; any other key is refused.
 KEYS = ("format", "version", "garage", "garage_hash", "garage_grid", "six_stall_axis", "stall", "maneuver", "start",
@@ -103,6 +115,12 @@ OPTIONAL_KEYS = ("geometry",)
 CAR_KEYS = ("wheelbase", "length", "width", "front_overhang", "rear_overhang", "max_steer", "min_turning_radius")
 PLANNER_KEYS = ("margin", "turning_radius")
 CLASSES = ("wall", "obstacle", "pillar", "parked_car")
+REFERENCE_SPACING = 0.5  # [m] of rear-axle path between two poses of the reference plan (cusps and ends always kept)
+#: The keys of ``reference`` (version 3), each required.
+REFERENCE_KEYS = ("found", "verdict", "reason", "length", "cusps", "min_clearance", "method", "attempt", "spacing",
+                  "poses", "directions", "settings")
+#: The keys of ``reference.settings``: the reference planner's :class:`ParkConfig` and its turning radius.
+SETTINGS_KEYS = ("planner", "iterations", "seed", "step", "region", "margin", "curvature_margin", "turning_radius")
 MAX_BYTES = 16 << 20  # [bytes] of a file read: far above any problem (a 64x64 garage's is some 100 kB)
 MAX_COORD = 10_000.0  # [m] |x| and |y| of any point: a garage is at most 576 m across
 MAX_CAR = 100.0  # [m] any length of the car
@@ -143,6 +161,7 @@ class ParkProblem:
     planner: dict[str, float]
     obstacles: tuple[tuple[str, tuple[tuple[float, float], ...]], ...]  # (class, vertices)
     geometry: dict[str, float] = dataclass_field(default_factory=lambda: geometry(DEFAULT_WORLD))  # the park geometry
+    reference: dict[str, Any] | None = None  # the reference plan (version 3; None: a version 2 file)
 
     @property
     def name(self) -> str:
@@ -150,13 +169,16 @@ class ParkProblem:
         return f"stall{self.stall:03d}_{self.maneuver}"
 
     def to_json(self) -> dict[str, Any]:
-        return {"format": FORMAT, "version": VERSION, "garage": self.garage, "garage_hash": self.garage_hash,
+        out = {"format": FORMAT, "version": VERSION if self.reference is not None else 2, "garage": self.garage, "garage_hash": self.garage_hash,
                 "garage_grid": list(self.garage_grid), "six_stall_axis": self.six_stall_axis, "stall": self.stall, "maneuver": self.maneuver, "start": list(self.start), "goal": list(self.goal),
                 "start_centre": list(self.start_centre), "goal_centre": list(self.goal_centre),
                 "stall_outline": [list(p) for p in self.stall_outline], "region": list(self.region),
                 "car": dict(self.car), "planner": dict(self.planner),
                 "obstacles": [{"class": c, "vertices": [list(v) for v in vs]} for c, vs in self.obstacles],
                 "geometry": dict(self.geometry)}
+        if self.reference is not None:
+            out["reference"] = self.reference
+        return out
 
     def tpcap(self) -> str:
         """The problem as a TPCAP case file: one line of comma-separated numbers ended by CRLF, as TPCAP's
@@ -198,6 +220,7 @@ def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: Pa
             region = planner.area(test.goal, stall.id, name)
             near = planner.near(obs, region)
             goal = park_pose(stall, car, name)
+            plan = planner.plan(test.goal, stall.id, name, obstacles=obs)
             problems.append(ParkProblem(
                 garage=scene.name, garage_hash=garage.canonical_hash(), garage_grid=rows,
                 six_stall_axis=garage.six_stall_axis, stall=stall.id, maneuver=name,
@@ -207,8 +230,34 @@ def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: Pa
                 region=tuple(float(v) for v in region), car=_car(car),
                 planner={"margin": config.margin, "turning_radius": planner.radius},
                 obstacles=tuple((c, _corners(o)) for c, o in zip(near.classes, near.outlines, strict=True)),
-                geometry=geometry(scene.world)))
+                geometry=geometry(scene.world), reference=reference_plan(plan, planner)))
     return problems, skipped
+
+
+def reference_plan(plan: ParkPlan, planner: ParkPlanner, spacing: float = REFERENCE_SPACING) -> dict[str, Any]:
+    """The ``reference`` object of a problem file: the reference planner's verdict on the problem and, when it found
+    a plan, the rear-axle path subsampled every ``spacing`` metres (cusps and both ends kept), its length, cusps and
+    smallest clearance, with the planner's settings, so another planner can be scored against it."""
+    cfg = planner.config
+    found = bool(plan.found)
+    poses, gears = [], []
+    if found:
+        rear, d = plan.rear_poses, plan.directions
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(rear[:, :2], axis=0), axis=1))])
+        last = -math.inf
+        for i in range(len(rear)):
+            cusp = 0 < i < len(rear) - 1 and d[i] != d[i - 1]
+            if i in (0, len(rear) - 1) or cusp or s[i] - last >= spacing - 1e-9:
+                poses.append(list(_pose(rear[i])))
+                gears.append(int(d[i]))
+                last = s[i]
+    return {"found": found, "verdict": plan.verdict, "reason": plan.reason,
+            "length": float(plan.length) if found else None, "cusps": int(plan.cusps) if found else 0,
+            "min_clearance": float(plan.min_clearance) if found else None, "method": plan.method,
+            "attempt": int(plan.attempt), "spacing": spacing, "poses": poses, "directions": gears,
+            "settings": {"planner": cfg.planner, "iterations": cfg.iterations, "seed": cfg.seed, "step": cfg.step,
+                         "region": cfg.region, "margin": cfg.margin, "curvature_margin": cfg.curvature_margin,
+                         "turning_radius": planner.radius}}
 
 
 def _pose(p) -> tuple[float, float, float]:
@@ -391,16 +440,17 @@ def _problem(data: Any) -> ParkProblem:
     if not isinstance(data, dict):
         raise TypeError("the file holds no JSON object")
     version = data.get("version")
-    if data.get("format") != FORMAT or type(version) is not int or version != VERSION:
+    if data.get("format") != FORMAT or type(version) is not int or version not in VERSIONS:
         raise ValueError(f"format {repr(data.get('format'))[:40]} version {repr(version)[:20]}, "
-                         f"not {FORMAT!r} version {VERSION}")
-    for key in KEYS:
+                         f"not {FORMAT!r} version {' or '.join(map(str, VERSIONS))}")
+    keys = KEYS + (("reference",) if version >= 3 else ())
+    for key in keys:
         if key not in data:
             raise KeyError(key)
-    extra = [k for k in data if k not in KEYS + OPTIONAL_KEYS]
+    extra = [k for k in data if k not in keys + OPTIONAL_KEYS]
     if extra:
-        raise ValueError(f"unknown key {extra[0][:40]!r} (a park problem holds {', '.join(KEYS + OPTIONAL_KEYS)}); "
-                         "remove it")
+        raise ValueError(f"unknown key {extra[0][:40]!r} (a park problem of version {version} holds "
+                         f"{', '.join(keys + OPTIONAL_KEYS)}); remove it")
     if not isinstance(data["maneuver"], str) or data["maneuver"] not in MANEUVERS:
         raise ValueError(f"maneuver {str(data['maneuver'])[:40]!r} is not one of {', '.join(MANEUVERS)}")
     grid, stalls = _grid(data)
@@ -425,7 +475,56 @@ def _problem(data: Any) -> ParkProblem:
         stall_outline=_polygon(data["stall_outline"], "stall_outline"), region=region,
         car=_car_table(data["car"]), planner=_planner_table(data["planner"]),
         obstacles=tuple(_obstacle(o, k) for k, o in enumerate(obstacles)),
-        geometry=_geometry(data.get("geometry")))
+        geometry=_geometry(data.get("geometry")),
+        reference=_reference(data["reference"]) if version >= 3 else None)
+
+
+def _reference(v: Any) -> dict[str, Any]:
+    """The ``reference`` object, checked: its keys, types and ranges (the schema's)."""
+    ref = _keys(v, "reference", REFERENCE_KEYS)
+    found = ref["found"]
+    if type(found) is not bool:
+        raise TypeError("reference.found is not true or false")
+    if ref["verdict"] not in VERDICTS or (ref["verdict"] == "feasible") != found:
+        raise ValueError(f"reference.verdict {str(ref['verdict'])[:20]!r} is not one of {', '.join(VERDICTS)} "
+                         "(feasible exactly when found)")
+    for key in ("reason", "method"):
+        if not isinstance(ref[key], str):
+            raise TypeError(f"reference.{key} is not a string")
+    for key in ("cusps", "attempt"):
+        if type(ref[key]) is not int or ref[key] < 0:
+            raise ValueError(f"reference.{key} {str(ref[key])[:20]} is not an integer >= 0")
+    spacing = _bounded(ref["spacing"], "reference.spacing", 0.0, MAX_CAR, open_lo=True)
+    poses, gears = ref["poses"], ref["directions"]
+    if not isinstance(poses, list) or not isinstance(gears, list) or len(poses) != len(gears):
+        raise ValueError("reference.poses and reference.directions are not lists of one length")
+    if found != bool(poses) or (found and len(poses) < 2):
+        raise ValueError("reference.poses: a found plan has two poses or more, none found has none")
+    out_poses = [list(_read_pose({"reference pose": p}, "reference pose")) for p in poses]
+    if any(type(g) is not int or g not in (-1, 1) for g in gears):
+        raise ValueError("reference.directions holds a value that is not 1 or -1")
+    measures = {}
+    for key in ("length", "min_clearance"):
+        if found:
+            lo = 0.0 if key == "length" else -MAX_COORD
+            measures[key] = _bounded(ref[key], f"reference.{key}", lo, MAX_COORD)
+        elif ref[key] is not None:
+            raise ValueError(f"reference.{key} is not null, though no plan was found")
+        else:
+            measures[key] = None
+    s = _keys(ref["settings"], "reference.settings", SETTINGS_KEYS)
+    if not isinstance(s["planner"], str):
+        raise TypeError("reference.settings.planner is not a string")
+    for key in ("iterations", "seed"):
+        if type(s[key]) is not int:
+            raise TypeError(f"reference.settings.{key} is not an integer")
+    settings = {"planner": s["planner"], "iterations": s["iterations"], "seed": s["seed"]}
+    for key in ("step", "region", "margin", "curvature_margin", "turning_radius"):
+        settings[key] = _bounded(s[key], f"reference.settings.{key}", 0.0, MAX_COORD)
+    return {"found": found, "verdict": ref["verdict"], "reason": ref["reason"], "length": measures["length"],
+            "cusps": ref["cusps"], "min_clearance": measures["min_clearance"], "method": ref["method"],
+            "attempt": ref["attempt"], "spacing": spacing, "poses": out_poses, "directions": list(gears),
+            "settings": settings}
 
 
 def _geometry(v: Any) -> dict[str, float]:
