@@ -38,7 +38,10 @@ def _rows(path) -> list[dict[str, str]]:
 
 def test_demo_end_to_end_report_in_chromium(tmp_path):
     cfg = DemoConfig(timesteps=2500, train_seeds=(0, 1), garages=2, tests=1, workers=1, out=str(tmp_path / "demo"),
-                     drivers=("oracle", "vision", STILL), actor_drivers=("vision",), failure_videos=1)
+                     drivers=("oracle", "vision", STILL), actor_drivers=("vision",), failure_videos=1,
+                     # both tasks and both maneuvers with both parking drivers, one test each: 4 short runs
+                     park_drivers=("oracle", "park_assist"), park_maneuvers=("forward",), avp_maneuver="reverse",
+                     park_garages=1, park_tests=1)
     report = run_demo(cfg)
     out = tmp_path / "demo"
     assert report == out / "report.html"
@@ -50,7 +53,11 @@ def test_demo_end_to_end_report_in_chromium(tmp_path):
     packs = [link for link in facts["links"] if link.startswith("packs/")]
     garages = len(packs)
     assert garages >= 1
-    assert len(facts["imgs"]) == 2 + 2 * garages + 1
+    park_runs = [("oracle", "park", "forward"), ("oracle", "avp", "reverse"), ("park_assist", "park", "forward"),
+                 ("park_assist", "avp", "reverse")]
+    park_pictures = [i["src"] for i in facts["imgs"] if "/pictures/" in i["src"]]  # the park failures shown
+    # ... then each park or AVP run's park_success.png, and a top-down picture per park failure shown
+    assert len(facts["imgs"]) == 2 + 2 * garages + 1 + len(park_runs) + len(park_pictures)
     assert "no route difficulty (no shipped model was fitted on this driver with these actions)" in facts["text"]
     for link in packs:
         assert (out / link / "manifest.json").is_file()
@@ -104,6 +111,7 @@ def test_demo_end_to_end_report_in_chromium(tmp_path):
             assert row["outcome"] in ("collision", "timeout", "deadlock", "missed_goal")
             assert row["reason"] in text
     assert failed_runs >= 1  # the standing driver fails every test it drives
+    _assert_parking_section(facts, out, park_runs)
     index = json.loads((out / "packs" / "index.json").read_text())
     assert len(index["packs"]) == garages
     # a second run resumes every stage (tests, videos) and rewrites the same report
@@ -112,3 +120,35 @@ def test_demo_end_to_end_report_in_chromium(tmp_path):
     run_demo(cfg)
     assert (out / "cruise" / "vision" / "tests.csv").read_text() == before
     assert {p: p.stat().st_mtime_ns for p in out.glob("cruise/*/videos/*.mp4")} == mp4s
+
+
+def _assert_parking_section(facts: dict, out, runs: list[tuple[str, str, str]]) -> None:
+    """The report's park section: success by driver and task as each run's own files have it, each run's park table
+    and park_success.png, and a top-down picture of each park failure shown."""
+    text = facts["text"]
+    assert "\nPark tests\n" in text and "success by driver and task" in text
+    (summary,) = [t for t in facts["tables"] if t["id"] == "park-summary"]
+    assert summary["rows"] == len(runs) and summary["empty_cells"] == 0
+    head = summary["head"]
+    srcs = {i["src"] for i in facts["imgs"]}
+    for (driver, task, maneuver), row in zip(runs, summary["cells"], strict=True):
+        cell = dict(zip(head, row))
+        assert (cell["driver"], cell["task"], cell["maneuver"]) == (driver, {"avp": "AVP"}.get(task, task), maneuver)
+        run = out / "park" / f"{driver}_{task}_{maneuver}"
+        rows = _rows(run / "tests.csv")
+        stats = json.loads((run / "summary.json").read_text())
+        assert len(rows) == int(cell["tests"]) == 1 and {r["task"] for r in rows} == {task}
+        assert {r["maneuver"] for r in rows if r["maneuver"]} <= {maneuver}
+        wins = sum(r["outcome"] == "success" for r in rows)
+        assert int(cell["successes"]) == wins and int(cell["feasible"]) == stats["feasible"]
+        assert cell["success of feasible"] == (f"{stats['success_pct']:.1f}%" if stats["success_pct"] is not None
+                                               else "n/a")
+        assert f"park/{driver}_{task}_{maneuver}/park_success.png" in srcs
+        failures = [r for r in rows if r["outcome"] not in ("success", "infeasible", "unproven")]
+        pictures = [s for s in srcs if s.startswith(f"park/{driver}_{task}_{maneuver}/pictures/")]
+        assert len(pictures) == len(failures), (driver, task, pictures)
+        assert f"park/{driver}_{task}_{maneuver}/tests.csv" in facts["links"]
+    oracle = [dict(zip(head, r)) for r in summary["cells"] if r[0] == "oracle"]
+    assert sum(int(c["successes"]) for c in oracle) >= 1  # the oracle parks: the section has real numbers
+    assert len([t for t in facts["tables"] if t["id"].startswith("park-table-")]) == len(runs)
+    assert "success by level: " in text and "oracle park and AVP successes" in text

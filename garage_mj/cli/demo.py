@@ -18,9 +18,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             f"Train DQN on a map (short run, {len(_D.train_seeds)} seeds), fill a scenario library with every "
             "usable garage, export asset packs for a difficulty-stratified sample, run cruise tests with the "
-            "built-in drivers (oracle, waypoint, vision, and learned: the shipped DQN), each with the action type it is made for, and write "
-            "OUT/report.html: figures, garages, the cruise table, the failures' reasons per class with links to "
-            "each run's tests.csv and to an MP4 and a .xosc of the first failures. Stages resume: re-running "
+            "built-in drivers (oracle, waypoint, vision, and learned: the shipped DQN), each with the action type it is made for, "
+            f"then park tests ({' and '.join(_D.park_maneuvers)}) and AVP tests with the {' and '.join(_D.park_drivers)} "
+            f"drivers on {_D.park_garages} of the garages, and write "
+            "OUT/report.html: figures, garages, the cruise table, the park section (success by driver and task, by "
+            "level and maneuver), the failures' reasons per class with links to "
+            "each run's tests.csv and to an MP4 and a .xosc of the first failures (a park failure's top-down "
+            "picture). Stages resume: re-running "
             "reuses finished training, complete packs, finished tests and recorded videos."
         ),
     )

@@ -15,5 +15,6 @@
   collision's point, the line an ``outside_stall`` crosses), or of every driven test.
 - ``park_figure``: what a park or AVP run is judged by, as a figure: success by level and by maneuver, with counts.
 - ``run_report``: a cruise run's own HTML report (``garage-mj cruise --report``), titled with its task.
-- ``demo``: the main job end to end on a small garage (train, library, packs, cruise, report).
+- ``demo``: the main job end to end on a small garage (train, library, packs, cruise, park, report).
+- ``demo_park``: the demo's park and AVP runs with the parking drivers, as its report shows them.
 """

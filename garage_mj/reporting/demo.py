@@ -11,6 +11,7 @@ import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from garage_mj.core.backends import Compute
 from garage_mj.core.config import load_config
@@ -33,6 +34,9 @@ from garage_mj.reporting.report import (
     fmt_percent,
     write_report,
 )
+
+if TYPE_CHECKING:
+    from garage_mj.reporting.demo_park import ParkPart
 
 FIGURES = "figures"
 
@@ -58,6 +62,13 @@ class DemoConfig:
     actor_drivers: tuple[str, ...] = ("oracle", "vision")
     actors: dict = field(default_factory=lambda: {"pedestrians": 1, "moving_cars": 1, "clutter": 1})
     failure_videos: int = 3  # failures shown per driver run, each with an MP4 and its .xosc
+    # park and AVP tests (docs/spec.md section 9): per driver a park run per maneuver and an AVP run, on the first
+    # park_garages garages of the sample; each run's first failures_shown failures with a top-down picture
+    park_drivers: tuple[str, ...] = ("oracle", "park_assist")
+    park_maneuvers: tuple[str, ...] = ("reverse", "forward")  # a park run each
+    avp_maneuver: str = "any"  # the AVP run's ("": no AVP run)
+    park_garages: int = 2
+    park_tests: int = 1  # park or AVP tests per garage and run
     workers: int = 2
     seed: int = 0
     out: str = "out/demo"
@@ -143,18 +154,23 @@ def run_demo(cfg: DemoConfig) -> Path:
     write_index(packs_dir)
 
     cruise = _cruise(cfg, packs, out, figs)
+    park = _park(cfg, packs, out)
     data = ReportData(
         title=f"garage-mj demo: {map_name}",
         subtitle=f"DQN {cfg.timesteps:,} timesteps x {count_noun(len(cfg.train_seeds), 'seed')}, "
-        f"{count_noun(len(sample), 'garage')}, {count_noun(cfg.tests, 'cruise test')} per garage and driver",
-        kpis={"usable garages": str(total), "asset packs": str(len(packs)), **cruise.kpis},
+        f"{count_noun(len(sample), 'garage')}, {count_noun(cfg.tests, 'cruise test')} per garage and driver"
+        + (f"; {count_noun(cfg.park_tests, 'park or AVP test')} per garage and run on "
+           f"{count_noun(min(cfg.park_garages, len(sample)), 'garage')}" if park.summary is not None else ""),
+        kpis={"usable garages": str(total), "asset packs": str(len(packs)), **cruise.kpis, **park.kpis},
         convergence_png=convergence,
         heatmap_png=heatmap,
         gallery=gallery,
         cruise_columns=cruise.columns,
         cruise_rows=cruise.rows,
         cruise_note=cruise.note,
-        failures=cruise.failures,
+        park_summary=park.summary,
+        park_tables=park.tables,
+        failures=cruise.failures + park.failures,
         regression_png=cruise.regression_png,
         regression_route_png=cruise.regression_route_png,
         regression_text=cruise.regression_text,
@@ -164,6 +180,7 @@ def run_demo(cfg: DemoConfig) -> Path:
             f"asset packs: {packs_dir.relative_to(out).as_posix()}/ ({INDEX} lists them)",
             "cruise runs: cruise/<driver>/ (tests.csv, summary.csv, summary.json, xosc/ with every test "
             "as OpenSCENARIO, videos/ with the failures shown above)",
+            *park.notes,
             "paper (docs/spec.md section 5): r(difficulty, success) = -0.638 over 16 garages of the 13x13 aligned map",
             "route difficulty: the expected failure rate of a cruise test predicted from the planned routes "
             "(garage-mj difficulty), beside the paper's difficulty, under the shipped model fitted on the driver "
@@ -173,6 +190,8 @@ def run_demo(cfg: DemoConfig) -> Path:
     report = write_report(data, out)
     write_json(out / "demo.json", {"config": cfg.__dict__, "seconds": time.perf_counter() - t0}, indent=None,
                default=str, end="")
+    for line in park.lines:
+        _say(f"park and AVP: {line}")
     _say(f"report: {report}  ({time.perf_counter() - t0:.0f} s)")
     return report
 
@@ -273,6 +292,18 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
     route_fig = f"; route difficulty: the {drawn[0]} driver" if drawn and drawn[0] != main else ""
     text += f". Figures: the {main} driver{route_fig}. Paper: r = -0.638."
     return _CruisePart(columns, rows, _cruise_note(), failures, regression_png, regression_route_png, text, kpis)
+
+
+def _park(cfg: DemoConfig, packs: list[Path], out: Path) -> ParkPart:
+    """Park tests (each maneuver of ``cfg.park_maneuvers``) and AVP tests with each parking driver on the first
+    ``cfg.park_garages`` garages; nothing when ``cfg.park_drivers`` is empty."""
+    from garage_mj.reporting.demo_park import ParkPart, park_runs, run_park_part  # matplotlib: deferred
+
+    runs = park_runs(cfg.park_drivers, cfg.park_maneuvers, cfg.avp_maneuver)
+    sources = [CruiseSource.from_pack(p) for p in packs[: cfg.park_garages]]
+    if not runs or not sources:
+        return ParkPart()
+    return run_park_part(runs, sources, cfg.park_tests, out, cfg.seed, cfg.workers, cfg.failure_videos, _say)
 
 
 def _failure_cells(per_kind: dict[str, object], hit: object) -> list[object]:

@@ -53,6 +53,9 @@ def fmt_percent(value: float | None) -> str:
 TASK_NOUNS = {"cruise": "cruise", "park": "park", "avp": "AVP"}
 
 
+PARK_FIGURE_CAPTION = "Success of the feasible tests by level and by maneuver (each bar: successes/feasible)"
+
+
 #: The top-down pictures a park or AVP run may draw (``cruise --pictures``): the failures its report shows, or every
 #: driven test, successes too (:func:`garage_mj.reporting.park.record_park_pictures`).
 PICTURE_CHOICES = ("failures", "all")
@@ -109,6 +112,7 @@ class ParkTable:
     rows: list[list[object]]
     note: str = ""
     breakdown: list[str] = field(default_factory=list)  # success by level, maneuver and stall angle, one line each
+    figure_png: Path | None = None  # the run's success by level and maneuver (park_success.png), under its table
 
 
 @dataclass
@@ -135,6 +139,7 @@ class ReportData:
     cruise_columns: list[str] = field(default_factory=list)
     cruise_rows: list[list[object]] = field(default_factory=list)
     cruise_note: str = ""  # under the table: what the columns mean
+    park_summary: ParkTable | None = None  # several park and AVP runs: success by driver and task, a row per run
     park_tables: list[ParkTable] = field(default_factory=list)  # park and AVP runs only
     park_figure_png: Path | None = None  # a park or AVP run's success by level and maneuver (park_success.png)
     parked: list[FailureItem] = field(default_factory=list)  # successes with a top-down picture (cruise --pictures all)
@@ -177,10 +182,12 @@ def _thumb(path: Path | None, alt: str, out_dir: Path) -> str:
     return f'<a href="{src}"><img class=thumb src="{src}" alt="{html.escape(alt)}"></a>'
 
 
-def _park_table(table: ParkTable, index: int) -> str:
-    """One park or AVP run's table (``id=park-table-<index>``, from 1) and its note."""
+def _park_table(table: ParkTable, index: int | str, out_dir: Path) -> str:
+    """One park or AVP run's table (``id=park-table-<index>``, from 1; a str index is the id itself), its note and
+    its figure."""
     e = html.escape
-    parts = [f"<h3>{e(table.label)}</h3><div class=wide><table id=park-table-{index}><thead><tr>"]
+    table_id = index if isinstance(index, str) else f"park-table-{index}"
+    parts = [f"<h3>{e(table.label)}</h3><div class=wide><table id={table_id}><thead><tr>"]
     parts += [f"<th>{e(c)}</th>" for c in table.columns]
     parts.append("</tr></thead><tbody>")
     parts += ["<tr>" + "".join(f"<td>{_fmt(v)}</td>" for v in row) + "</tr>" for row in table.rows]
@@ -190,6 +197,8 @@ def _park_table(table: ParkTable, index: int) -> str:
                      + "</ul>")
     if table.note:
         parts.append(f"<p class=muted>{e(table.note)}</p>")
+    if table.figure_png is not None:
+        parts.append("<div class=figs>" + _figure(table.figure_png, PARK_FIGURE_CAPTION, out_dir) + "</div>")
     return "".join(parts)
 
 
@@ -285,12 +294,13 @@ def render_html(data: ReportData, out_dir: Path) -> str:
         parts.append("</tbody></table></div>")
         if data.cruise_note:
             parts.append(f"<p class=muted>{e(data.cruise_note)}</p>")
-    if data.park_tables:
+    if data.park_tables or data.park_summary is not None:
         parts.append("<h2 id=park>Park tests</h2>")
-        parts += [_park_table(t, k) for k, t in enumerate(data.park_tables, 1)]
+        if data.park_summary is not None:
+            parts.append(_park_table(data.park_summary, "park-summary", out_dir))
+        parts += [_park_table(t, k, out_dir) for k, t in enumerate(data.park_tables, 1)]
         if data.park_figure_png is not None:
-            parts.append("<div class=figs>" + _figure(data.park_figure_png, "Success of the feasible tests by level and "
-                                                      "by maneuver (each bar: successes/feasible)", out_dir) + "</div>")
+            parts.append("<div class=figs>" + _figure(data.park_figure_png, PARK_FIGURE_CAPTION, out_dir) + "</div>")
     if data.failures:
         parts.append("<h2 id=failures>Failures</h2>")
         parts += [_run_failures(f, out_dir) for f in data.failures]
@@ -319,6 +329,7 @@ def write_report(data: ReportData, out_dir: Path, name: str = "report.html") -> 
         p
         for p in [data.convergence_png, data.heatmap_png, data.regression_png, data.regression_route_png,
                   data.park_figure_png]
+        + [t.figure_png for t in data.park_tables]
         + [g.preview_png for g in data.gallery]
         + [g.render_png for g in data.gallery]
         if p is not None and not Path(p).is_file()
