@@ -1,4 +1,4 @@
-"""The main job end to end on one map: train -> library -> packs -> cruise tests -> report.
+"""The main job end to end on one map: train -> library -> packs -> cruise tests -> park and AVP tests -> report.
 
 Each stage resumes: a finished training run is reused, complete packs are skipped, cruise tests
 already in the CSV are not run again. ``garage-mj demo`` and ``make demo`` call :func:`run_demo`.
@@ -63,7 +63,7 @@ class DemoConfig:
     actors: dict = field(default_factory=lambda: {"pedestrians": 1, "moving_cars": 1, "clutter": 1})
     failure_videos: int = 3  # failures shown per driver run, each with an MP4 and its .xosc
     # park and AVP tests (docs/spec.md section 9): per driver a park run per maneuver and an AVP run, on the first
-    # park_garages garages of the sample; each run's first failures_shown failures with a top-down picture
+    # park_garages garages of the sample; each run shows its first failure_videos failures with a top-down picture
     park_drivers: tuple[str, ...] = ("oracle", "park_assist")
     park_maneuvers: tuple[str, ...] = ("reverse", "forward")  # a park run each
     avp_maneuver: str = "any"  # the AVP run's ("": no AVP run)
