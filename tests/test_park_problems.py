@@ -597,3 +597,37 @@ def test_a_broken_problem_does_not_validate(written, edit):
     assert validator.is_valid(data)
     edit(data)
     assert not validator.is_valid(data)
+
+
+def schema_table(schema: dict) -> str:
+    """The field table of docs/park-problems.md, made from the shipped schema: one row per field, nested ones dotted."""
+    def kind(node: dict) -> str:
+        if "const" in node:
+            return f"`{json.dumps(node['const'])}`"
+        if "enum" in node:
+            return " or ".join(f"`{json.dumps(v)}`" for v in node["enum"])
+        if "prefixItems" in node:
+            return f"array of {len(node['prefixItems'])} numbers"
+        t = node.get("type", "")
+        return " or ".join(t) if isinstance(t, list) else t
+
+    def rows(node: dict, at: str) -> list[str]:
+        out = []
+        for name, sub in node.get("properties", {}).items():
+            required = name in node.get("required", [])
+            out.append(f"| `{at}{name}` | {kind(sub)} | {'yes' if required else 'no'} | {sub['description']} |")
+            out += rows(sub, f"{at}{name}.")
+            if isinstance(sub.get("items"), dict):
+                out += rows(sub["items"], f"{at}{name}[].")
+        return out
+
+    head = ["| field | type | required | what |", "|---|---|---|---|"]
+    return "\n".join(head + rows(schema, "")) + "\n"
+
+
+def test_the_docs_field_table_is_the_schemas():
+    from garage_mj.export.park_problems import SCHEMA
+
+    table = schema_table(json.loads(SCHEMA.read_text()))
+    page = (Path(__file__).resolve().parents[1] / "docs" / "park-problems.md").read_text()
+    assert table in page, "docs/park-problems.md's field table differs from the schema; paste this:\n" + table
