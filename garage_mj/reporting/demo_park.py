@@ -74,6 +74,8 @@ def run_park_part(runs: Sequence[tuple[str, str, str]], sources: Sequence[Cruise
         table = park_table(folder, label)
         if table is not None:
             table.figure_png = figure
+            if part.tables:  # what success means is the same for every run: under the first table only
+                table.note = ""
             part.tables.append(table)
         drawn = record_park_pictures(folder, result.rows, sources, shown)
         part.failures.append(run_failures(label, folder, result.rows, sources, shown=shown, pictures=drawn))
