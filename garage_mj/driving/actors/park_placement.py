@@ -27,6 +27,7 @@ import numpy as np
 
 from garage_mj.driving.actors.config import NO_ACTORS, ScenarioConfig
 from garage_mj.driving.actors.judging import judge_path
+from garage_mj.driving.actors.placement import place_actors
 from garage_mj.driving.actors.scenario import (
     CONTROL_LAG,
     Corridor,
@@ -36,7 +37,7 @@ from garage_mj.driving.actors.scenario import (
     sample_times,
     shape_circles,
 )
-from garage_mj.scene.actor_spec import KINDS, PARK_BEHAVIOURS, SHAPE_SIZE, SHAPES, ActorSpec
+from garage_mj.scene.actor_spec import PARK_BEHAVIOURS, SHAPE_SIZE, SHAPES, ActorSpec
 from garage_mj.scene.drivable import START_OFFSET, TestPlan
 from garage_mj.scene.park_planning import centre_to_rear
 
@@ -47,7 +48,6 @@ if TYPE_CHECKING:
     from garage_mj.scene.stalls import Stall
 
 ACTOR_STREAM = 0x61637472  # seeds a test's actor generator apart from its other draws ("actr")
-PLACEMENT_TRIES = 20  # draws per actor before it is left out
 MIN_SPACING = 2.0  # [m] between the start poses of two actors
 NEIGHBOURS = 3.6  # [stall widths] a stall this close along the row to the target is a neighbour (three each side)
 CLUTTER_GAP = (0.3, 1.0)  # [m] clutter stands this much beyond the margin from the plan's swept path
@@ -283,32 +283,13 @@ def draw_park_scenario(config: ScenarioConfig, env: GarageDriveEnv, test: ParkTe
 
     A ``pull_out`` car takes an occupied stall (:attr:`Scenario.free_stalls`: its parked car gives way to it). A
     kind whose listed behaviours hold no park behaviour is left out (``missing``), as is an actor no valid place
-    was found for in :data:`PLACEMENT_TRIES` draws.
+    was found for in :data:`~garage_mj.driving.actors.placement.PLACEMENT_TRIES` draws.
     """
     out = Scenario()
     if config.count == 0 or not test.feasible:
         return out
     placer = _ParkPlacer(config, env, test, rng)
-    todo = ([("pedestrian", config.pedestrian_behaviours)] * config.pedestrians
-            + [("moving_car", config.moving_car_behaviours)] * config.moving_cars
-            + [("clutter", config.clutter_behaviours)] * config.clutter)
-    counters = {k: 0 for k in KINDS}
-    for kind, listed in todo:
-        behaviours = [b for b in listed if b in PARK_BEHAVIOURS[kind]]
-        name = f"{kind.replace('_', '')}_{counters[kind]}"
-        spec = None
-        for _ in range(PLACEMENT_TRIES if behaviours else 0):
-            spec = getattr(placer, kind)(name, behaviours[int(rng.integers(len(behaviours)))])
-            if spec is not None:
-                break
-        if spec is None:
-            out.missing[kind] = out.missing.get(kind, 0) + 1
-            continue
-        counters[kind] += 1
-        placer.starts.append(spec.waypoints[0, 1:3].copy())
-        out.actors.append(spec)
-        if spec.stall >= 0:
-            out.free_stalls.add(spec.stall)
+    place_actors(placer, config, PARK_BEHAVIOURS, rng, out)
     out.feasible, out.reason = judge_park(out.actors, env, test, config)
     return out
 

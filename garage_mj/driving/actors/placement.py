@@ -339,19 +339,11 @@ class _Placer:
         return ActorSpec(name, "clutter", behaviour, np.array([[0.0, *pose[0]]]))
 
 
-def draw_scenario(config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner, rng: np.random.Generator,
-                  margin: float | None = None) -> Scenario:
-    """Place ``config``'s actors around a feasible test ``plan`` with ``rng``, and judge avoidability.
-
-    Actors that take a stall (a car reversing out, a car parked badly) list it in
-    :attr:`Scenario.free_stalls`: no parked car stands there. The draws use ``rng`` only, so the
-    same seed gives the same actors.
-    """
-    out = Scenario()
-    if config.count == 0 or not plan.feasible:
-        return out
-    margin = planner.config.clearance_margin if margin is None else float(margin)
-    placer = _Placer(config, plan, planner, rng, margin)
+def place_actors(placer: Any, config: ScenarioConfig, table: dict[str, Any], rng: np.random.Generator,
+                 out: Scenario) -> None:
+    """Place ``config``'s actors, kind by kind, with ``placer`` (a method per kind: ``placer.pedestrian(name,
+    behaviour)`` ...) into ``out``: per actor up to :data:`PLACEMENT_TRIES` draws of a behaviour it lists that
+    ``table`` holds for its kind (cruise or park behaviours); one never placed counts in ``out.missing``."""
     todo = ([("pedestrian", config.pedestrian_behaviours)] * config.pedestrians
             + [("moving_car", config.moving_car_behaviours)] * config.moving_cars
             + [("clutter", config.clutter_behaviours)] * config.clutter)
@@ -359,7 +351,7 @@ def draw_scenario(config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner,
     for kind, listed in todo:
         spec = None
         name = f"{kind.replace('_', '')}_{counters[kind]}"
-        behaviours = [b for b in listed if b in CRUISE_BEHAVIOURS[kind]]  # a park behaviour is a park test's
+        behaviours = [b for b in listed if b in table[kind]]  # a park behaviour is a park test's, and back
         for _ in range(PLACEMENT_TRIES if behaviours else 0):
             behaviour = behaviours[int(rng.integers(len(behaviours)))]
             spec = getattr(placer, kind)(name, behaviour)
@@ -373,5 +365,21 @@ def draw_scenario(config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner,
         out.actors.append(spec)
         if spec.stall >= 0:
             out.free_stalls.add(spec.stall)
+
+
+def draw_scenario(config: ScenarioConfig, plan: TestPlan, planner: DrivePlanner, rng: np.random.Generator,
+                  margin: float | None = None) -> Scenario:
+    """Place ``config``'s actors around a feasible test ``plan`` with ``rng``, and judge avoidability.
+
+    Actors that take a stall (a car reversing out, a car parked badly) list it in
+    :attr:`Scenario.free_stalls`: no parked car stands there. The draws use ``rng`` only, so the
+    same seed gives the same actors.
+    """
+    out = Scenario()
+    if config.count == 0 or not plan.feasible:
+        return out
+    margin = planner.config.clearance_margin if margin is None else float(margin)
+    placer = _Placer(config, plan, planner, rng, margin)
+    place_actors(placer, config, CRUISE_BEHAVIOURS, rng, out)
     out.feasible, out.reason = judge(out.actors, plan, planner, config, margin)
     return out
