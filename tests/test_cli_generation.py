@@ -43,6 +43,24 @@ def test_train_writes_run_and_library(trained, capsys):
         assert lib.count() == manifest["garages_stored"] >= 1
 
 
+def test_train_bar_ends_on_the_summary_counts_and_says_what_was_learned(tmp_path, capsys):
+    import re
+
+    out = tmp_path / "run"
+    assert main(["train", "--map", "tiny_7x11", "--timesteps", "1500", "--seed", "0", "--out", str(out)]) == 0
+    printed = capsys.readouterr()
+    bar = printed.err.replace("\r", "\n").strip().splitlines()[-1]
+    got = re.search(r"episodes=(\d+), garages=(\d+)\]$", bar)
+    assert got, bar
+    summary = re.search(r"(\d+) episodes, (\d+) garages in ", printed.out)
+    assert summary and summary.groups() == got.groups(), (bar, printed.out)
+    manifest = json.loads((out / "run.json").read_text())
+    r = manifest["returns"]
+    assert r["episodes"] == manifest["episodes"] and r["window"] == max(1, round(r["episodes"] / 10))
+    assert (f"learning: mean episode return {r['first_mean']:.1f} over the first {r['window']} episodes, "
+            f"{r['last_mean']:.1f} over the last {r['window']}") in printed.out
+
+
 def test_library_commands(trained, capsys, tmp_path):
     lib = str(trained / "library.sqlite")
     assert main(["library", "ls", lib, "--map", "tiny_7x11", "--difficulty", "0", "1", "--limit", "5"]) == 0

@@ -69,4 +69,8 @@ def run(args: argparse.Namespace) -> int:
               f"episodes, {s['garages_stored']} new garages")
     else:
         print(f"{args.out} had already finished {m['timesteps']} timesteps; nothing to do")
+    r = m.get("returns")
+    if r:
+        print(f"learning: mean episode return {r['first_mean']:.1f} over the first {r['window']} episodes, "
+              f"{r['last_mean']:.1f} over the last {r['window']} (a tenth of {r['episodes']} each; higher is better)")
     return 0

@@ -8,7 +8,8 @@ was reported. Checkpoints (model + episode/timestep counters) are written atomic
 (the lifecycle of :class:`garage_mj.generation.runs.DQNRun`).
 
 A run folder holds ``run.json`` (the manifest: map, seed, config, progress, throughput),
-``monitor.csv``, ``checkpoints/`` and, at the end, ``final_model.zip``. The manifest's ``live``
+``monitor.csv``, ``checkpoints/`` and, at the end, ``final_model.zip`` (and the manifest's ``returns``: the
+mean episode return of the first and last tenth of the run's episodes). The manifest's ``live``
 (timesteps, episodes, timesteps/s, time) is refreshed every :data:`HEARTBEAT_S` and at each
 checkpoint, so a progress view can tell a running run from a stopped one.
 
@@ -50,6 +51,7 @@ FINAL_MODEL = "final_model.zip"
 LIBRARY = "library.sqlite"
 PROGRESS_EVERY = 256  # [timesteps] between progress-bar refreshes
 HEARTBEAT_S = 30.0  # [s] between refreshes of the manifest's ``live`` progress
+LEARNING_SHARE = 0.1  # of a run's episodes: the first and last this share are compared in its ``returns``
 
 
 MAX_BUFFER_SIZE = 10_000_000  # [transitions] ~40 GB at ~4 KB each: beyond that the run cannot fit in memory
@@ -324,11 +326,14 @@ class LibraryCallback(BaseCallback):
 
 
 class ProgressCallback(BaseCallback):
-    """A tqdm bar over the run's timesteps with episodes and garages stored."""
+    """A tqdm bar over the run's timesteps with its episodes and garages (the words of ``garage-mj train``'s
+    summary line); ``garages0``: the run's garages in the library when this process started (on resume)."""
 
-    def __init__(self, total: int, initial: int, library_cb: LibraryCallback, desc: str, enabled: bool) -> None:
+    def __init__(self, total: int, initial: int, library_cb: LibraryCallback, desc: str, enabled: bool,
+                 garages0: int = 0) -> None:
         super().__init__()
         self.total, self.initial, self.library_cb, self.desc, self.enabled = total, initial, library_cb, desc, enabled
+        self.garages0 = garages0
         self.bar = None
 
     def _on_training_start(self) -> None:
@@ -341,15 +346,19 @@ class ProgressCallback(BaseCallback):
     def _on_step(self) -> bool:
         if self.bar is not None and self.n_calls % PROGRESS_EVERY == 0:
             self.bar.update(self.num_timesteps - self.bar.n)
-            self.bar.set_postfix(episodes=self.library_cb.episodes, stored=self.library_cb.stored, refresh=False)
+            self.bar.set_postfix(episodes=self.library_cb.episodes, garages=self.garages0 + self.library_cb.stored,
+                                 refresh=False)
         return True
 
-    def _on_training_end(self) -> None:
-        self.close()
-
-    def close(self) -> None:
+    def close(self, episodes: int | None = None, garages: int | None = None) -> None:
+        """Bring the bar to the last timestep and close it, its postfix the run's final ``episodes`` and
+        ``garages`` when given (the manifest's, so the bar ends on the counts the summary line prints)."""
         if self.bar is not None:
+            self.bar.total = max(self.bar.total, self.num_timesteps)  # the last batch of envs may overshoot it
             self.bar.update(self.num_timesteps - self.bar.n)
+            self.bar.set_postfix(episodes=self.library_cb.episodes if episodes is None else episodes,
+                                 garages=self.garages0 + self.library_cb.stored if garages is None else garages,
+                                 refresh=False)
             self.bar.close()
             self.bar = None
 
@@ -449,7 +458,8 @@ def train(
     library = Library(library_path) if library_path is not None else None
     lib_cb = LibraryCallback(library or sink, map=map_name, run=manifest["run"], seed=seed,  # type: ignore[arg-type]
                              episodes=run.done_episodes)
-    bar = ProgressCallback(timesteps, run.done_steps, lib_cb, f"{map_name} seed {seed}", progress)
+    garages0 = _count_run(library_path, manifest["run"]) if resume and library_path is not None else 0
+    bar = ProgressCallback(timesteps, run.done_steps, lib_cb, f"{map_name} seed {seed}", progress, garages0)
     manifest["status"] = "running"
     live = _Live(model, lib_cb)
 
@@ -465,11 +475,17 @@ def train(
     if on_files is not None:  # where the run stands, before the first checkpoint
         run.write_manifest()
         on_files([run.manifest_path])
-    close = (bar.close, venv.close) + ((library.close,) if library is not None else ())
-    run.learn(timesteps, lib_cb, [bar, LiveCallback(beat), *(callbacks or [])],
-              checkpoint_every=config.checkpoint_every, close=close, on_interrupt=bar.close,
-              interrupted_status="interrupted", checkpoint_fields=live)
-    _finish(run, live, library_path, envs)
+    close = (venv.close,) + ((library.close,) if library is not None else ())
+    try:
+        run.learn(timesteps, lib_cb, [bar, LiveCallback(beat), *(callbacks or [])],
+                  checkpoint_every=config.checkpoint_every, close=close, on_interrupt=bar.close,
+                  interrupted_status="interrupted", checkpoint_fields=live)
+        _finish(run, live, library_path, envs)
+    finally:  # the bar ends on the manifest's counts (those the CLI prints), or where the run stopped
+        if manifest["status"] == "finished":
+            bar.close(manifest["episodes"], manifest["garages_stored"])
+        else:
+            bar.close()
     if on_files is not None:
         on_files([out / FINAL_MODEL, run.manifest_path])
     return manifest
@@ -538,5 +554,21 @@ def _finish(run: DQNRun, live: _Live, library_path: Path | None, envs: list[Step
             "env_share": round(sum(e.seconds for e in envs) / wall, 4) if wall > 0 else None,
             "usable_episodes": lib_cb.usable, "garages_stored": lib_cb.stored,
         },
+        returns=episode_returns(run.out / MONITOR),
     )
     run.write_manifest()
+
+
+def episode_returns(monitor: Path, share: float = LEARNING_SHARE) -> dict[str, Any] | None:
+    """What the run learned, from its episode log: the mean return of its first and last ``share`` of
+    episodes (at least one each) and how many episodes that is; None without a finished episode."""
+    try:
+        lines = [ln for ln in monitor.read_text().splitlines() if ln and not ln.startswith("#")]
+        returns = [float(ln.split(",")[0]) for ln in lines[1:]]
+    except (OSError, ValueError):
+        return None
+    if not returns:
+        return None
+    n = max(1, round(share * len(returns)))
+    return {"episodes": len(returns), "share": share, "window": n,
+            "first_mean": round(sum(returns[:n]) / n, 3), "last_mean": round(sum(returns[-n:]) / n, 3)}
