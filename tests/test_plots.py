@@ -73,3 +73,30 @@ def test_heatmap_and_garage_png(tmp_path, painted_tiny):
     rng = np.random.default_rng(0)
     assert _is_png(heatmap(rng.random((50, 2)), tmp_path / "h.png", title="tiny_7x11"))
     assert _is_png(garage_png(painted_tiny, tmp_path / "g.png"))
+
+
+def test_a_flat_success_rate_is_said_in_the_figure_not_drawn_as_a_fit(tmp_path, monkeypatch):
+    from garage_mj.reporting import analysis
+
+    figs = []
+    monkeypatch.setattr(analysis.plt, "close", figs.append)  # keep the figure to read it
+    diff = [0.55, 0.58, 0.70, 0.73, 0.77, 0.83, 0.88, 0.70]
+    assert analysis.regression_plot(diff, [100.0] * 8, tmp_path / "flat.png").read_bytes()[:8] == PNG_MAGIC
+    ax = figs[-1].axes[0]
+    assert len(ax.lines) == 1  # the paper's line only: no flat "fit" of this run
+    note = " ".join(t.get_text() for t in ax.texts)
+    assert "every garage at 100% (all its tests succeeded)" in note and "no line and no r" in note
+    assert "no r, no line" in ax.get_legend().get_texts()[1].get_text()
+    analysis.regression_plot(diff, [100.0, 80, 100, 60, 100, 40, 80, 100], tmp_path / "varies.png")
+    assert len(figs[-1].axes[0].lines) == 2 and not figs[-1].axes[0].texts  # the paper's line and this run's
+
+
+def test_the_demo_figure_shows_a_run_whose_success_varies():
+    from garage_mj.reporting.demo import figure_run
+
+    flat, varies = [100.0] * 8, [80.0, 40.0, 40.0, 80.0, 0.0, 20.0, 20.0, 40.0]
+    runs = {"oracle": flat, "vision": flat, "learned": [80.0, 100.0] * 4, "vision + actors": varies}
+    assert figure_run("vision", runs) == "vision + actors"  # the main driver with actors first
+    assert figure_run("vision", {**runs, "vision + actors": flat}) == "learned"
+    assert figure_run("vision", {"vision": varies, "learned": flat}) == "vision"
+    assert figure_run("vision", {"vision": flat, "oracle": flat}) == "vision"  # nothing varies: its honest figure

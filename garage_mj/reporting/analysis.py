@@ -21,7 +21,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from garage_mj.core.fsutil import atomic_write  # noqa: E402
-from garage_mj.driving.difficulty.regression import PAPER_TABLE, paper_regression, regression, too_few  # noqa: E402
+from garage_mj.driving.difficulty.regression import (  # noqa: E402
+    PAPER_TABLE,
+    flat_note,
+    paper_regression,
+    regression,
+    too_few,
+)
 
 #: The difficulties a figure can put on its x axis, and the axis label and default title of each.
 METRICS = {"paper": ("difficulty λ", "Success rate vs. garage difficulty"),
@@ -41,7 +47,9 @@ def regression_plot(
     ``metric``: ``"paper"`` (the paper's difficulty λ) or ``"route"`` (the route difficulty; then
     ``difficulty`` holds route difficulties). ``reference`` adds in grey the paper's 16 garages and line
     (paper), or the calibrated line success = 100 (1 - x) (route). Over fewer garages than
-    :data:`~garage_mj.driving.difficulty.regression.MIN_GARAGES` the points are drawn without r or a line.
+    :data:`~garage_mj.driving.difficulty.regression.MIN_GARAGES` the points are drawn without r or a line; when
+    every garage has the same success rate (a tiny garage whose tests all succeed) the figure says so
+    (:func:`~garage_mj.driving.difficulty.regression.flat_note`) instead of drawing a flat "fit" that looks like a finding.
     """
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {', '.join(METRICS)}, got {metric!r}")
@@ -55,14 +63,20 @@ def regression_plot(
         table = np.array(PAPER_TABLE)
         ax.scatter(table[:, 2], table[:, 3], s=18, c="0.65", marker="s", label=f"paper (r = {ref.r:.3f})")
         ax.plot(xs, ref.slope * xs + ref.intercept, c="0.65", lw=1, ls="--")
+    flat = flat_note(success)
     if not fit.reportable:  # no r and no line through 2-4 points: they would mislead
         label = f"this run: {too_few(fit.n)}"
+    elif flat:
+        label = f"this run (n = {fit.n}): no r, no line"
     elif math.isnan(fit.r):
         label = f"this run (n = {fit.n})"
     else:
         label = f"this run (r = {fit.r:.3f}, n = {fit.n})"
     ax.scatter(difficulty, success, s=22, c="tab:blue", label=label)
-    if fit.reportable and not math.isnan(fit.slope):
+    if flat and fit.reportable:
+        ax.text(0.98, 0.72, flat, transform=ax.transAxes, ha="right", va="center", fontsize=8,
+                bbox={"boxstyle": "round", "fc": "white", "ec": "tab:blue", "alpha": 0.9})
+    elif fit.reportable and not math.isnan(fit.slope):
         ax.plot(xs, fit.slope * xs + fit.intercept, c="tab:blue", lw=1.5,
                 label=f"y = {fit.slope:.1f} x + {fit.intercept:.1f}")
     xlabel, default_title = METRICS[metric]
@@ -75,3 +89,4 @@ def regression_plot(
     fig.savefig(buf, format="png", bbox_inches="tight")
     plt.close(fig)
     return atomic_write(out, buf.getvalue())
+

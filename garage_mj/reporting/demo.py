@@ -17,7 +17,7 @@ from garage_mj.core.backends import Compute
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import write_json
-from garage_mj.driving.difficulty.regression import too_few
+from garage_mj.driving.difficulty.regression import flat_note, too_few
 from garage_mj.driving.results import COUNT_COLUMNS, HIT_CLASSES, failed_tests
 from garage_mj.driving.sim.outcomes import HIT_KINDS, OUTCOMES, PAPER_CLASS, PAPER_CLASSES, OutcomeConfig
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
@@ -236,6 +236,7 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
     rows: list[list[object]] = []
     failures: list[RunFailures] = []
     fits: dict[str, dict] = {}
+    points: dict[str, tuple[Path, list[float], list[float]]] = {}  # per run: its folder, difficulties, success %
     kpis: dict[str, str] = {}
     actors = actors_text(cfg.actors)
     runs = [(d, d, {}) for d in cfg.drivers]
@@ -251,6 +252,8 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
         result = run_cruise(sources, cfg.tests, CruiseSettings(driver, cfg.seed, env=env), folder,
                             compute=Compute(workers=cfg.workers), choice=choice, xosc=True)
         fits[label] = result.stats
+        rated = [r for r in result.summary if r["success_pct"] is not None]
+        points[label] = (folder, [float(difficulty[r["garage"]]) for r in rated], [float(r["success_pct"]) for r in rated])
         kpis[f"{label} ({action} actions) success"] = (
             f"{fmt_percent(result.stats['success_pct'])} of {result.stats['feasible']} feasible"
             if result.stats["success_pct"] is not None else "no feasible test")
@@ -275,8 +278,15 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
                          *_failure_cells({k: int(r[c]) for k, c in COUNT_COLUMNS.items()}, hit or "-"),
                          fmt_percent(r["success_pct"])])
     main = "vision" if "vision" in fits else cfg.drivers[0]
+    shown = figure_run(main, {label: success for label, (_, _, success) in points.items()})
     regression_png = figs / "regression.png"
-    shutil.copyfile(out / "cruise" / run_folder(main) / "regression.png", regression_png)
+    if shown == main:
+        shutil.copyfile(out / "cruise" / run_folder(main) / "regression.png", regression_png)
+    else:  # the main driver's success is the same on every garage: the headline shows a run where it varies
+        from garage_mj.reporting.analysis import regression_plot
+
+        _, xs, ys = points[shown]
+        regression_plot(xs, ys, regression_png, title=f"Cruise success vs. difficulty ({shown})")
     regression_route_png: Path | None = figs / "regression_route.png"
     # drawn for a run with a route difficulty: a shipped model fitted on its driver and action type
     drawn = [d for d in (main, *cfg.drivers) if (out / "cruise" / run_folder(d) / "regression_route.png").is_file()]
@@ -289,9 +299,26 @@ def _cruise(cfg: DemoConfig, packs: list[Path], out: Path, figs: Path) -> _Cruis
         f"over {count_noun(f['garages'], 'garage')}, {count_noun(f['tests'], 'test')}"
         for d, f in fits.items()
     )
-    route_fig = f"; route difficulty: the {drawn[0]} driver" if drawn and drawn[0] != main else ""
-    text += f". Figures: the {main} driver{route_fig}. Paper: r = -0.638."
+    route_fig = f"; route difficulty: the {drawn[0]} driver" if drawn and drawn[0] != shown else ""
+    text += f". Figures: the {shown} driver{route_fig}"
+    success = points[main][2]
+    if flat_note(success) is not None:  # say why the figure is not the main driver's, or why it is flat
+        text += (f" (the {main} driver has {success[0]:.0f}% success on each of its {count_noun(len(success), 'garage')}"
+                 f" here, so its success does not vary with difficulty"
+                 + (f"; its figure is cruise/{run_folder(main)}/regression.png)" if shown != main else ")"))
+    text += ". Paper: r = -0.638."
     return _CruisePart(columns, rows, _cruise_note(), failures, regression_png, regression_route_png, text, kpis)
+
+
+def figure_run(main: str, success: dict[str, list[float]]) -> str:
+    """The run the report's regression figure shows: ``main`` unless its success rate is the same on every garage
+    (a tiny garage where every test succeeds: a flat line says nothing), then the first run of ``success`` (by
+    label, in run order; ``main`` with actors first) whose success varies; ``main`` when none does."""
+    if flat_note(success.get(main, [])) is None:
+        return main
+    order = [f"{main} + actors", *success]
+    return next((label for label in order if label in success and len(success[label]) > 1
+                 and flat_note(success[label]) is None), main)
 
 
 def _park(cfg: DemoConfig, packs: list[Path], out: Path) -> ParkPart:

@@ -31,6 +31,18 @@ def too_few(n: int) -> str | None:
     return f"too few garages ({n}) for a correlation" if n < MIN_GARAGES else None
 
 
+def flat_note(success: Sequence[float]) -> str | None:
+    """Why a run's success rates [%] give no line, when every garage has the same one (``every garage at 100%
+    (all its tests succeeded): success does not vary with difficulty here, so there is no line and no r``, in three
+    lines for a figure); None when they vary or there is none."""
+    values = {round(float(v), 6) for v in success}
+    if len(values) != 1:
+        return None
+    (v,) = values
+    return (f"every garage at {v:.0f}%{' (all its tests succeeded)' if v == 100 else ''}:\n"
+            "success does not vary with difficulty here,\nso there is no line and no r")
+
+
 def r_text(r: float | None, n: int) -> str:
     """Pearson r over ``n`` garages as a report prints it: 3 decimals, ``n/a`` when undefined (a constant
     success rate or difficulty), or "too few garages (N) for a correlation"."""
