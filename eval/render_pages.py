@@ -1,9 +1,19 @@
-"""Render docs/performance.md and docs/results.md from docs/data/*.toml and the result files they name.
+"""Render docs/performance.md, docs/results.md and README.md's results table from docs/data/*.toml and the
+result files they name.
 
 Every figure on the two pages is a record in its page's data file: what it measures, the figure's
 text, the command that made it, the result files under docs/ it comes from (``files``), the date,
 the machine and the commit. A number a result file holds is not copied into the text: a placeholder
 reads it from the file at render time, so a page cannot drift from its files.
+
+Each page leads with a short table, one row per record (a performance row, a results section): its
+``name`` (linking to the record's details, its heading), ``headline`` (the figure in a few words),
+``goal`` (the target or the paper's claim) and ``met`` (yes, no, partly or -, or comparisons of two
+numbers joined by " and ", e.g. ``{{bench_fbx.json:fbx_adds_ms}} <= {{bench_fbx.json:target_ms}}``,
+which render as yes when all hold, no when none, partly otherwise). A record's ``plot`` (a PNG under
+docs/, drawn by eval/plot_pages.py from result files) is embedded at the top of its details. README.md's
+table between ``<!-- results:begin`` and ``<!-- results:end -->`` is rendered from docs/data/readme.toml;
+the rest of the README is left as it is.
 
     {{FILE:PATH|OP|SPEC}}   e.g. {{bench_fbx.json:fbx_adds_ms|.1f}}, {{bench_park.json:per_kind.*.oracle.sim_s_per_wall_s|range|.0f}}
 
@@ -21,8 +31,8 @@ over the record's command, date, machine and commit. Records whose files do not 
 date and commit from git once, with ``--stamp`` (the commit that last changed the files' content),
 so that rendering needs neither git nor a full clone.
 
-    .venv/bin/python eval/render_pages.py           # write docs/performance.md and docs/results.md
-    .venv/bin/python eval/render_pages.py --check   # exit 1 if a committed page is not what its data renders
+    .venv/bin/python eval/render_pages.py           # write docs/performance.md, docs/results.md, README.md's table
+    .venv/bin/python eval/render_pages.py --check   # exit 1 if a committed page (or the README's table) is stale
     .venv/bin/python eval/render_pages.py --stamp   # then render: date and commit from git where files changed
 
 A new figure: its result file under docs/ (the benchmark's ``--json``), one record in
@@ -41,6 +51,7 @@ import re
 import statistics
 import subprocess
 import sys
+import unicodedata
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -322,9 +333,73 @@ def _format(value: Any, spec: str, where: str) -> str:
 
 # --- records and pages --------------------------------------------------------------------------
 
+MET = ("yes", "no", "partly", "-")
+COMPARE = re.compile(r"^\s*(?P<a>[-+]?[\d,]*\.?\d+(?:[eE][-+]?\d+)?)\s*(?P<op><=|>=|<|>|==)\s*"
+                     r"(?P<b>[-+]?[\d,]*\.?\d+(?:[eE][-+]?\d+)?)\s*$")
+OPS: dict[str, Callable[[float, float], bool]] = {
+    "<=": lambda a, b: a <= b, ">=": lambda a, b: a >= b, "<": lambda a, b: a < b, ">": lambda a, b: a > b,
+    "==": lambda a, b: a == b,
+}
+
+
 def _one_line(text: str) -> str:
     """A table cell: the data file's line breaks as spaces."""
     return " ".join(text.split())
+
+
+def slug(heading: str) -> str:
+    """A heading's anchor as MkDocs' toc (and GitHub, for plain words) writes it."""
+    text = unicodedata.normalize("NFKD", re.sub(r"<[^>]+>|`", "", heading)).encode("ascii", "ignore").decode()
+    return re.sub(r"[-\s]+", "-", re.sub(r"[^\w\s-]", "", text).strip().lower())
+
+
+def _met(record: dict, sources: Sources, label: str) -> str:
+    """Whether a figure meets its target: yes, no, partly or - as written, or computed from comparisons of two
+    numbers ("A <= B and C >= D", placeholders allowed): yes if all hold, no if none, partly otherwise."""
+    text = _one_line(sources.fill(str(record.get("met", "-"))))
+    if text in MET:
+        return text
+    held = []
+    for part in text.split(" and "):
+        m = COMPARE.match(part)
+        if not m:
+            raise PageError(f"{label}: met = {record.get('met')!r} is none of {', '.join(MET)} and no comparison "
+                            "\"A <= B\" of two numbers (placeholders allowed; several joined by \" and \"): "
+                            "write one of them")
+        a, b = (float(m.group(k).replace(",", "")) for k in ("a", "b"))
+        held.append(OPS[m.group("op")](a, b))
+    return "yes" if all(held) else "no" if not any(held) else "partly"
+
+
+def _summary(entries: list[tuple[str, str, dict]], sources: Sources) -> list[str]:
+    """The table a page leads with: (label, anchor, record with name, headline, goal, met) per row."""
+    lines = ["| what | figure | target | met? |", "|---|---|---|---|"]
+    for label, anchor, record in entries:
+        missing = [k for k in ("name", "headline") if not record.get(k)]
+        if missing:
+            raise PageError(f"{label} has no {' or '.join(missing)}: write the short fields the page's table shows")
+        cells = [f"[{_one_line(record['name'])}](#{anchor})", sources.fill(record["headline"]),
+                 sources.fill(record.get("goal", "")) or "-", _met(record, sources, label)]
+        lines.append("| " + " | ".join(_one_line(c) for c in cells) + " |")
+    return lines
+
+
+def _plot(record: dict, sources: Sources, label: str) -> list[str]:
+    """A record's picture (``plot``, a PNG under docs/ written by eval/plot_pages.py), as the page embeds it."""
+    if not record.get("plot"):
+        return []
+    name = record["plot"]
+    if not (sources.docs / name).is_file():
+        raise PageError(f"{label}: plot docs/{name} does not exist: run `.venv/bin/python eval/plot_pages.py`")
+    return [f"![{_one_line(record.get('plot_alt', name))}]({name})", ""]
+
+
+def _unique_anchors(entries: list[tuple[str, str, dict]], taken: set[str]) -> None:
+    """Every row's details heading must have an anchor of its own (or its link would land on another)."""
+    for label, anchor, _ in entries:
+        if anchor in taken:
+            raise PageError(f"{label}: its heading's anchor #{anchor} is taken by another heading: rename it")
+        taken.add(anchor)
 
 
 def _provenance(record: dict, sources: Sources, label: str) -> dict[str, str]:
@@ -361,22 +436,32 @@ def _header(name: str) -> list[str]:
 
 
 def render_performance(data: dict, sources: Sources) -> str:
-    """docs/performance.md: one table row per figure, then the prose sections."""
+    """docs/performance.md: a short table (what, figure, target, met?), then each row's details and the
+    command, files, date, commit and machine it comes from, then the prose sections."""
     machines, used = data.get("machines", {}), set()
-    rows = []
-    for i, row in enumerate(data["row"]):
-        label = f"docs/data/performance.toml row {i + 1} ({_one_line(row['what'])[:40]})"
+    entries = [(f"docs/data/performance.toml row {i + 1} ({_one_line(row.get('name') or row['what'])[:40]})",
+                slug(row.get("name", "")), row) for i, row in enumerate(data["row"])]
+    _unique_anchors(entries, {slug(data["title"]), "details", "machines"}
+                    | {slug(s["heading"]) for s in data.get("section", [])})
+    details = ["## Details", ""]
+    for label, _, row in entries:
         p = _provenance(row, sources, label)
         used.add(p["machine"])
-        made = (f"{_files_text(row)}; {p['date']}, `{p['commit']}`, {_machine(p['machine'], machines)}")
-        note = f" {row['command_note']}" if row.get("command_note") else ""
-        cells = [row["what"], row["figure"], row.get("target", ""), f"`{p['command']}`{note}", made]
-        rows.append("| " + " | ".join(_one_line(sources.fill(c)) for c in cells) + " |")
+        note = f" {_one_line(row['command_note'])}" if row.get("command_note") else ""
+        details += [f"### {_one_line(row['name'])}", "", *_plot(row, sources, label),
+                    f"- **measures**: {_one_line(sources.fill(row['what']))}",
+                    f"- **figure**: {_one_line(sources.fill(row['figure']))}"]
+        if row.get("target"):
+            details.append(f"- **target**: {_one_line(sources.fill(row['target']))}")
+        details += [f"- **command**: `{p['command']}`{note}",
+                    f"- **result**: {_files_text(row)}; {p['date']}, `{p['commit']}`, {_machine(p['machine'], machines)}",
+                    ""]
     lines = [*_header("performance"), f"# {data['title']}", "", sources.fill(data["intro"]).strip(), "",
-             *_legend(machines, used), "",
-             "| what | figure | target | command | result, date, commit, machine |", "|---|---|---|---|---|", *rows]
+             *_summary(entries, sources), "", *details[:-1]]
     for section in data.get("section", []):
-        lines += ["", f"## {section['heading']}", "", sources.fill(section["body"]).strip()]
+        lines += ["", f"## {section['heading']}", "", *_plot(section, sources, section["heading"]),
+                  sources.fill(section["body"]).strip()]
+    lines += ["", "## Machines", "", *_legend(machines, used)]
     return "\n".join(lines) + "\n"
 
 
@@ -412,11 +497,15 @@ def _figure_line(record: dict, sources: Sources, machines: dict[str, str], label
 
 
 def render_results(data: dict, sources: Sources) -> str:
-    """docs/results.md: the prose sections, protocol tables from their summary.json, each with its figures' origin."""
+    """docs/results.md: a short table (one row per section: what, figure, the paper's or our target, met?), then
+    the sections (prose, protocol tables from their summary.json), each with its figures' origin."""
     machines, used = data.get("machines", {}), set()
-    lines = [*_header("results"), f"# {data['title']}", "", sources.fill(data["intro"]).strip()]
-    for section in data["section"]:
-        lines += ["", f"## {section['heading']}", ""]
+    entries = [(f"docs/data/results.toml section {s['heading']!r}", slug(s["heading"]), s) for s in data["section"]]
+    _unique_anchors(entries, {slug(data["title"]), "machines"})
+    lines = [*_header("results"), f"# {data['title']}", "", sources.fill(data["intro"]).strip(), "",
+             *_summary(entries, sources)]
+    for label, _, section in entries:
+        lines += ["", f"## {section['heading']}", "", *_plot(section, sources, label)]
         if section.get("body"):
             lines += [sources.fill(section["body"]).strip(), ""]
         if section.get("protocol"):
@@ -427,35 +516,76 @@ def render_results(data: dict, sources: Sources) -> str:
         if figures:
             lines += ["Where the figures come from:", ""]
         for j, record in enumerate(figures):
-            label = f"docs/data/results.toml section {section['heading']!r}, figure {j + 1}"
-            lines.append(_figure_line(record, sources, machines, label))
-            used.add(_provenance(record, sources, label)["machine"])
+            figure_label = f"{label}, figure {j + 1}"
+            lines.append(_figure_line(record, sources, machines, figure_label))
+            used.add(_provenance(record, sources, figure_label)["machine"])
         while lines[-1] == "":
             lines.pop()
     lines += ["", "## Machines", "", *_legend(machines, used)]
     return "\n".join(lines) + "\n"
 
 
+README_BEGIN, README_END = "<!-- results:begin", "<!-- results:end -->"
+
+
+def render_readme_block(data: dict, sources: Sources) -> list[str]:
+    """The README's results table: one row per [[row]] of docs/data/readme.toml (what, paper, ours, source)."""
+    lines = [f"{README_BEGIN}: generated by `{RENDER}` from docs/data/readme.toml and the result files it "
+             "names; edit those, not this table -->",
+             "", "| | paper (CARLA) | garage-mj (MuJoCo) | where it comes from |", "|---|---|---|---|"]
+    for i, row in enumerate(data["row"]):
+        files = ", ".join(f"`docs/{f}`" for f in row.get("files", []))
+        for f in row.get("files", []):
+            sources.data(f)  # a named file must exist and read
+        source = "; ".join(x for x in (_one_line(row.get("source", "")), files) if x)
+        if not row.get("what") or not row.get("ours"):
+            raise PageError(f"docs/data/readme.toml row {i + 1} has no what or ours: write both")
+        cells = [row["what"], row.get("paper", ""), row["ours"], source]
+        lines.append("| " + " | ".join(_one_line(sources.fill(c)) for c in cells) + " |")
+    return [*lines, "", README_END]
+
+
+def splice_readme(readme: str, data: dict, sources: Sources) -> str:
+    """README.md with the text between its results markers replaced by the rendered table."""
+    begin, end = readme.find(README_BEGIN), readme.find(README_END)
+    if begin < 0 or end < begin:
+        raise PageError(f"README.md has no {README_BEGIN} ... {README_END} block: put the two markers "
+                        "where the results table goes")
+    return readme[:begin] + "\n".join(render_readme_block(data, sources)) + readme[end + len(README_END):]
+
+
 @dataclass(frozen=True)
 class Page:
-    """A rendered page: docs/NAME.md from docs/data/NAME.toml."""
+    """A rendered page: OUT (under the root) from docs/data/DATA.toml; a spliced page keeps its text outside
+    the rendered block."""
 
-    name: str
-    render: Callable[[dict, Sources], str]
+    data: str
+    out: str
+    render: Callable[[dict, Sources], str] | None
     records: tuple[str, ...]  # the data file's tables whose entries carry files and provenance
+    splice: Callable[[str, dict, Sources], str] | None = None  # (page text, data, sources) -> page text
 
 
-PAGES = (Page("performance", render_performance, ("row",)), Page("results", render_results, ("section.figure",)))
+PAGES = (Page("performance", "docs/performance.md", render_performance, ("row",)),
+         Page("results", "docs/results.md", render_results, ("section.figure",)),
+         Page("readme", "README.md", None, (), splice=splice_readme))
 
 
 def render(root: Path, page: Page) -> str:
     """The page as its data file and result files render it."""
-    data_file = root / "docs" / "data" / f"{page.name}.toml"
+    data_file = root / "docs" / "data" / f"{page.data}.toml"
     try:
         data = tomllib.loads(data_file.read_text())
     except (OSError, ValueError) as exc:  # TOMLDecodeError, UnicodeDecodeError
-        raise PageError(f"docs/data/{page.name}.toml cannot be read ({exc})") from None
-    return page.render(data, Sources(root / "docs"))
+        raise PageError(f"docs/data/{page.data}.toml cannot be read ({exc})") from None
+    sources = Sources(root / "docs")
+    if page.splice:
+        try:
+            text = (root / page.out).read_text()
+        except OSError as exc:
+            raise PageError(f"{page.out} cannot be read ({exc})") from None
+        return page.splice(text, data, sources)
+    return page.render(data, sources)
 
 
 # --- stamping from git ------------------------------------------------------------------------------
@@ -491,7 +621,7 @@ def stamp(root: Path, page: Page) -> list[str]:
     """Write date and commit from git into the data file's records whose files changed since; what changed."""
     if _git(root, "rev-parse", "--is-shallow-repository") == "true":  # its oldest commit "adds" every file
         raise PageError("--stamp needs the full history, and this is a shallow clone: `git fetch --unshallow`")
-    data_file = root / "docs" / "data" / f"{page.name}.toml"
+    data_file = root / "docs" / "data" / f"{page.data}.toml"
     text = data_file.read_text()
     sources, changed = Sources(root / "docs"), []
     # A record's text runs from its [[table]] line to the next [[...]] line; files = [...] is on one line.
@@ -507,7 +637,7 @@ def stamp(root: Path, page: Page) -> list[str]:
         _, date, commit = max(_last_change(root, f) for f in files)
         if (record.get("date"), record.get("commit")) != (date, commit):
             blocks[i] = _set_field(_set_field(block, "date", date), "commit", commit)
-            changed.append(f"docs/data/{page.name}.toml: {', '.join(files)} -> {date} {commit}")
+            changed.append(f"docs/data/{page.data}.toml: {', '.join(files)} -> {date} {commit}")
     data_file.write_text("".join(blocks))
     return changed
 
@@ -526,23 +656,22 @@ def main(argv: list[str] | None = None) -> int:
         if args.stamp:
             for line in (c for page in PAGES for c in stamp(args.root, page)):
                 print(f"stamped {line}")
-        pages = {page.name: render(args.root, page) for page in PAGES}
+        pages = {page.out: render(args.root, page) for page in PAGES}
     except PageError as exc:
         print(f"render_pages: {exc}", file=sys.stderr)
         return 1
-    stale = [name for name, text in pages.items()
-             if not (args.root / "docs" / f"{name}.md").is_file()
-             or (args.root / "docs" / f"{name}.md").read_text() != text]
+    stale = [out for out, text in pages.items()
+             if not (args.root / out).is_file() or (args.root / out).read_text() != text]
     if args.check:
         if stale:
-            print(f"render_pages: {', '.join(f'docs/{n}.md' for n in stale)} "
+            print(f"render_pages: {', '.join(stale)} "
                   f"{'is' if len(stale) == 1 else 'are'} stale (not what docs/data/*.toml and the result files "
                   f"render): run `{RENDER}` and commit the result", file=sys.stderr)
             return 1
         return 0
-    for name in stale:
-        (args.root / "docs" / f"{name}.md").write_text(pages[name])
-        print(f"wrote docs/{name}.md")
+    for out in stale:
+        (args.root / out).write_text(pages[out])
+        print(f"wrote {out}")
     return 0
 
 

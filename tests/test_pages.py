@@ -35,8 +35,9 @@ def test_the_committed_pages_are_what_the_renderer_writes(capsys):
 
 @pytest.fixture
 def repo(tmp_path: Path) -> Path:
-    """A copy of docs/ (pages, data files, result files) to change without touching the checkout."""
+    """A copy of docs/ (pages, data files, result files) and README.md to change without touching the checkout."""
     shutil.copytree(ROOT / "docs", tmp_path / "docs")
+    shutil.copy(ROOT / "README.md", tmp_path / "README.md")
     return tmp_path
 
 
@@ -62,8 +63,10 @@ def test_a_result_files_own_provenance_is_what_the_page_says(repo):
             "date": "2031-01-02", "machine": "a 64-core test machine", "commit": "abcdef1"}
     _edit_json(repo / "docs" / "bench_fbx.json", lambda d: d.update(provenance=prov))
     assert render_pages.main(["--root", str(repo)]) == 0
-    row = next(line for line in (repo / "docs" / "performance.md").read_text().splitlines() if "garage.fbx" in line)
-    assert all(v in row for v in prov.values()), row
+    page = (repo / "docs" / "performance.md").read_text()
+    details = page[page.index("### FBX export"):]
+    details = details[:details.index("\n#")]
+    assert all(v in details for v in prov.values()), details
 
 
 def test_a_new_protocol_summary_adds_its_section(repo):
@@ -75,6 +78,7 @@ def test_a_new_protocol_summary_adds_its_section(repo):
     (repo / "docs" / "protocol_new" / "summary.json").write_text(json.dumps(summary))
     with (repo / "docs" / "data" / "results.toml").open("a") as f:
         f.write('\n[[section]]\nheading = "The full protocol"\nprotocol = "protocol_new"\n'
+                'name = "Full protocol"\nheadline = "{{protocol_new/summary.json:*.garages|sum|,}} garages"\n'
                 'body = "{{protocol_new/summary.json:timesteps_per_run|,}} timesteps per run."\n'
                 '[[section.figure]]\nfiles = ["protocol_new/summary.json"]\n'
                 'command = "eval/protocol_summary.py runs/paper"\ndate = "2031-01-02"\ncommit = "abcdef1"\n'
@@ -86,6 +90,65 @@ def test_a_new_protocol_summary_adds_its_section(repo):
     assert re.search(r"^\| m5_13x13_aligned \| 123,456 \| 0\.33-0\.91 \(7\) \| 33% / 60% \| 255\.3 \(19\.8\) \|$",
                      section, re.M), section
     assert len(re.findall(r"^\| (tiny|m\d)_", section, re.M)) == 5  # "runs" and the run length are no map
+    assert re.search(r"^\| \[Full protocol\]\(#the-full-protocol\) \| [\d,]+ garages \| - \| - \|$", page, re.M)
+
+
+def test_each_page_leads_with_a_short_table_that_links_to_its_details():
+    for name in ("performance", "results"):
+        page = (ROOT / "docs" / f"{name}.md").read_text()
+        body = page[page.index("\n# "):]
+        first_table = body[body.index("\n|") + 1:].split("\n\n")[0]
+        assert first_table.splitlines()[1] == "|---|---|---|---|", first_table
+        assert body.index("\n|") < body.index("\n## ")  # before the first section
+        anchors = set(re.findall(r"^#+ (.+)$", page, re.M))
+        for row in first_table.splitlines()[2:]:
+            what, figure, target, met = (c.strip() for c in row.strip("|").split(" | "))
+            anchor = re.fullmatch(r"\[.+\]\(#(.+)\)", what).group(1)
+            assert anchor in {render_pages.slug(a) for a in anchors}, row
+            assert met in ("yes", "no", "partly", "-") and len(figure.split()) <= 40, row
+
+
+def test_met_is_computed_from_the_comparisons_it_names(repo):
+    path = repo / "docs" / "data" / "performance.toml"
+    text = path.read_text()
+    met = 'met = "{{bench_fbx.json:fbx_adds_ms}} <= {{bench_fbx.json:target_ms}}"'
+    assert met in text
+    row = next(line for line in (repo / "docs" / "performance.md").read_text().splitlines()
+               if line.startswith("| [FBX export]"))
+    assert row.endswith(" | yes |")
+    _edit_json(repo / "docs" / "bench_fbx.json", lambda d: d.update(fbx_adds_ms=999.0))
+    path.write_text(text.replace(met, met[:-1] + ' and 1 < 2"'))
+    assert render_pages.main(["--root", str(repo)]) == 0
+    row = next(line for line in (repo / "docs" / "performance.md").read_text().splitlines()
+               if line.startswith("| [FBX export]"))
+    assert "**999.0 ms**" in row and row.endswith(" | partly |")
+
+
+def test_a_met_that_is_no_verdict_is_one_line(repo, capsys):
+    path = repo / "docs" / "data" / "performance.toml"
+    path.write_text(path.read_text().replace('met = "{{bench_fbx.json:fbx_adds_ms}} <=', 'met = "mostly {{bench_fbx.json:fbx_adds_ms}} <='))
+    assert "none of yes, no, partly, -" in _one_error_line(repo, capsys)
+
+
+def test_the_readme_results_table_reads_its_numbers_from_the_result_files(repo, capsys):
+    readme = (ROOT / "README.md").read_text()
+    block = readme[readme.index("<!-- results:begin"):readme.index("<!-- results:end -->")]
+    summary = json.loads((ROOT / "docs" / "paper_validation_summary.json").read_text())
+    assert f"**{summary['r']:.3f}**" in block
+    assert block.index("protocol_100pct") < block.index("paper_validation_summary.json")  # full scale first
+    _edit_json(repo / "docs" / "paper_validation_summary.json", lambda d: d.update(r=-0.123))
+    assert render_pages.main(["--check", "--root", str(repo)]) == 1
+    assert "README.md" in capsys.readouterr().err
+    assert render_pages.main(["--root", str(repo)]) == 0
+    text = (repo / "README.md").read_text()
+    assert "**-0.123**" in text and text[:text.index("<!-- results:begin")] == readme[:readme.index("<!-- results:begin")]
+    assert text[text.index("<!-- results:end -->"):] == readme[readme.index("<!-- results:end -->"):]
+
+
+def test_a_readme_without_its_markers_is_one_line(repo, capsys):
+    path = repo / "README.md"
+    path.write_text(path.read_text().replace("<!-- results:end -->", ""))
+    assert "README.md has no <!-- results:begin" in _one_error_line(repo, capsys)
 
 
 def test_a_placeholder_naming_a_missing_key_says_which(repo, capsys):
