@@ -54,3 +54,20 @@ def test_preview_png(painted_tiny, tmp_path):
     assert len(np.unique(img.reshape(-1, 3), axis=0)) >= 6  # blocks, roads, stalls, cars, pillars...
     path = write_preview(painted_tiny, tmp_path / "preview.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_preview_has_a_legend_naming_the_entrance_and_the_exit(painted_tiny):
+    from garage_mj.export.preview import _bgr, legend_entries
+    from garage_mj.scene.semantics import Semantic
+
+    bare, img = render_preview(painted_tiny, legend=False), render_preview(painted_tiny)
+    assert img.shape[1] == bare.shape[1] and img.shape[0] > bare.shape[0]
+    assert np.array_equal(img[: bare.shape[0]], bare)  # the garage keeps its pixels; the legend is a strip under it
+    labels = [label for label, _ in legend_entries()]
+    assert labels[:2] == ["entrance", "exit"]
+    strip = {tuple(c) for c in img[bare.shape[0]:].reshape(-1, 3)}
+    for cls in (Semantic.ENTRANCE, Semantic.EXIT):  # each colour's square is in the strip (RGB)
+        assert tuple(reversed(_bgr(cls))) in strip
+    narrow = render_preview(painted_tiny, pixels_per_metre=2.0)  # a small picture wraps the legend into more rows
+    assert narrow.shape[0] - render_preview(painted_tiny, pixels_per_metre=2.0, legend=False).shape[0] > \
+        img.shape[0] - bare.shape[0]

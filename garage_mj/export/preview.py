@@ -2,7 +2,8 @@
 
 Drawn from the same scene layout as the MJCF scene and the meshes, plus the road cells of the
 road network: blocks (obstacles, walls), roads (darker asphalt with centre lines), stall outlines,
-parked cars and pillars, entrance and exit, in the class colours of the meshes.
+parked cars and pillars, entrance and exit, in the class colours of the meshes; a legend strip under
+the garage names the entrance, the exit and the other colours.
 """
 
 from __future__ import annotations
@@ -25,6 +26,9 @@ MARGIN = 1.0  # [m] around the outer walls
 ROAD_RGB = (70, 72, 76)
 BACKGROUND_RGB = (25, 25, 28)
 CAR_LENGTH, CAR_WIDTH = 4.3, 1.9  # [m] models/parked_car footprint (inside a 4.5 m x 2.5 m stall)
+LEGEND_ROW_PX = 22  # [px] height of one row of the legend strip under the garage
+LEGEND_SWATCH_PX = 12  # [px] side of a legend's colour square
+LEGEND_FONT_SCALE = 0.42  # of cv2's Hershey simplex font (about 9 px capitals)
 _ORDER = (
     Semantic.FLOOR, Semantic.ENTRANCE, Semantic.EXIT, Semantic.ROAD_MARKING, Semantic.STALL_MARKING,
     Semantic.OBSTACLE, Semantic.WALL,
@@ -55,11 +59,45 @@ class _Canvas:
         cv2.fillPoly(self.img, [pts.round().astype(np.int32)], color, cv2.LINE_AA, shift=4)
 
 
+def legend_entries() -> list[tuple[str, tuple[int, int, int]]]:
+    """The preview's legend: each label with its BGR colour, the entrance and the exit first."""
+    return [("entrance", _bgr(Semantic.ENTRANCE)), ("exit", _bgr(Semantic.EXIT)), ("road", ROAD_RGB[::-1]),
+            ("floor", _bgr(Semantic.FLOOR)), ("stall line", _bgr(Semantic.STALL_MARKING)),
+            ("parked car", _bgr(Semantic.PARKED_CAR)), ("pillar", _bgr(Semantic.PILLAR)),
+            ("obstacle", _bgr(Semantic.OBSTACLE)), ("wall", _bgr(Semantic.WALL))]
+
+
+def _with_legend(img: np.ndarray) -> np.ndarray:
+    """``img`` (BGR) with the legend strip under it: a colour square and a label per entry, in as many rows as
+    the picture's width needs."""
+    font, pad = cv2.FONT_HERSHEY_SIMPLEX, 8
+    items = [(label, colour, cv2.getTextSize(label, font, LEGEND_FONT_SCALE, 1)[0][0] + LEGEND_SWATCH_PX + 2 * pad)
+             for label, colour in legend_entries()]
+    rows: list[list[tuple[str, tuple[int, int, int], int]]] = [[]]
+    for item in items:
+        if rows[-1] and pad + sum(w for *_, w in rows[-1]) + item[2] > img.shape[1]:
+            rows.append([])
+        rows[-1].append(item)
+    strip = np.empty((LEGEND_ROW_PX * len(rows) + pad // 2, img.shape[1], 3), np.uint8)
+    strip[:] = BACKGROUND_RGB[::-1]
+    for k, row in enumerate(rows):
+        x, mid = pad, k * LEGEND_ROW_PX + LEGEND_ROW_PX // 2
+        for label, colour, width in row:
+            top = mid - LEGEND_SWATCH_PX // 2
+            cv2.rectangle(strip, (x, top), (x + LEGEND_SWATCH_PX - 1, top + LEGEND_SWATCH_PX - 1), colour, -1)
+            cv2.rectangle(strip, (x, top), (x + LEGEND_SWATCH_PX - 1, top + LEGEND_SWATCH_PX - 1), (200, 200, 200), 1)
+            cv2.putText(strip, label, (x + LEGEND_SWATCH_PX + 5, mid + 4), font, LEGEND_FONT_SCALE, (235, 235, 235), 1,
+                        cv2.LINE_AA)
+            x += width
+    return np.concatenate([img, strip])
+
+
 def render_preview(
     garage: Garage | GarageScene, *, world: WorldConfig = DEFAULT_WORLD, parked: Iterable[int] | None = None,
-    pixels_per_metre: float = PIXELS_PER_METRE,
+    pixels_per_metre: float = PIXELS_PER_METRE, legend: bool = True,
 ) -> np.ndarray:
-    """The top-down picture as an (H, W, 3) RGB uint8 array."""
+    """The top-down picture as an (H, W, 3) RGB uint8 array, north up; ``legend``: with the legend strip under
+    the garage (the garage keeps its pixels: the strip only adds rows at the bottom)."""
     scene = as_scene(garage, world)
     layout, world = scene.layout, scene.world
     canvas = _Canvas(layout, pixels_per_metre)
@@ -89,7 +127,8 @@ def render_preview(
     s = world.pillar_size / 2
     for p in layout.pillars:
         canvas.rect(p.x - s, p.y - s, p.x + s, p.y + s, _bgr(Semantic.PILLAR))
-    return canvas.img[..., ::-1].copy()
+    img = _with_legend(canvas.img) if legend else canvas.img
+    return img[..., ::-1].copy()
 
 
 def write_preview(garage: Garage | GarageScene, path: str | Path, **kwargs) -> Path:
