@@ -138,3 +138,18 @@ def test_load_config_coerces_lists_to_tuples_and_a_built_config_can_be_held_to_i
 
     with pytest.raises(ConfigError, match="Checked: n = -1 is not allowed"):
         Checked(n=-1)
+
+
+def test_messages_put_an_before_a_vowel_sound():
+    from garage_mj.core.words import a_noun
+    from garage_mj.reporting.demo import _cruise_note
+
+    said = {w: a_noun(w) for w in ("obstacle", "outside_stall", "infeasible", "unproven", "entrance", "exit",
+                                   "parked_car", "wall", "unique", "one-way", 84, 64, 8, 11, 18, 110)}
+    assert said == {"obstacle": "an obstacle", "outside_stall": "an outside stall", "infeasible": "an infeasible",
+                    "unproven": "an unproven", "entrance": "an entrance", "exit": "an exit",
+                    "parked_car": "a parked car", "wall": "a wall", "unique": "a unique", "one-way": "a one-way",
+                    84: "an 84", 64: "a 64", 8: "an 8", 11: "an 11", 18: "an 18", 110: "a 110"}
+    note = _cruise_note()  # the demo's cruise table note names each failure kind the paper's classes hold
+    assert "an outside stall counts as a deadlock" in note and "a missed goal counts as a deadlock" in note
+    assert " a outside" not in note and " a o" not in note

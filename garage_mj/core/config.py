@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
+from garage_mj.core.words import a_noun
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # Python 3.10: the same parser from PyPI
@@ -249,7 +251,7 @@ def read_toml(path: str | Path, what: str = "config file") -> dict[str, Any]:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path} is not valid TOML: {exc}") from None
     except RecursionError:
-        raise ConfigError(f"{path} is not a {what}: TOML nested too deeply") from None
+        raise ConfigError(f"{path} is not {a_noun(what)}: TOML nested too deeply") from None
     except OSError as exc:
         raise ConfigError(f"cannot read {what} {path}: {exc.strerror}") from None
 

@@ -80,6 +80,7 @@ import numpy as np
 
 from garage_mj.core.errors import GarageMJError, control_character
 from garage_mj.core.fsutil import FolderLock, atomic_write, clean_temp
+from garage_mj.core.words import a_noun
 from garage_mj.export.pack import pack_name
 from garage_mj.grid.blocks import AXES, STALL_TABLE
 from garage_mj.grid.garage import MAX_NAME, MAX_SIDE, Garage, grid_hash
@@ -380,7 +381,7 @@ def _write_error(out_dir: Path, target: Path, exc: OSError) -> ParkProblemError:
 # -- reading ------------------------------------------------------------------------------------------
 def _read(path: Path, what: str) -> bytes:
     """The bytes of the file ``path`` (a ``what``), at most :data:`MAX_BYTES`; ParkProblemError otherwise."""
-    fix = f"give the path of a {what} file (garage-mj export --park-problems writes them)"
+    fix = f"give the path of {a_noun(what)} file (garage-mj export --park-problems writes them)"
     try:
         if not stat.S_ISREG(os.stat(path).st_mode):  # a folder, or a pipe that would block the read for ever
             raise ParkProblemError(f"{what} {path} is not a file; {fix}")

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
+from garage_mj.core.words import a_noun
 from garage_mj.export.pack import load_pack
 from garage_mj.export.xosc import EGO, FORMAT, PARKED_PREFIX, XoscError
 from garage_mj.scene.actor_spec import BEHAVIOURS, KINDS, ActorSpec
@@ -396,7 +397,7 @@ def _actor(name: str, ents: dict[str, str], poses: dict[str, tuple[float, float,
     if kind not in KINDS or behaviour not in BEHAVIOURS[kind]:
         raise _Bad(f"actor {name}: unknown kind/behaviour {kind!r}/{behaviour!r}")
     if ents[name] != _ENTITY_TAG[kind]:
-        raise _Bad(f"actor {name} ({kind}) is a {ents[name]}, expected a {_ENTITY_TAG[kind]}")
+        raise _Bad(f"actor {name} ({kind}) is {a_noun(ents[name])}, expected {a_noun(_ENTITY_TAG[kind])}")
     ev = events.get(name)
     if ev is None:
         return ActorSpec(name, kind, behaviour, np.array([[0.0, *poses[name]]]), None, 0.0, stall)

@@ -17,6 +17,7 @@ from garage_mj.core.backends import Compute
 from garage_mj.core.config import load_config
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import write_json
+from garage_mj.core.words import a_noun
 from garage_mj.driving.difficulty.regression import flat_note, too_few
 from garage_mj.driving.results import COUNT_COLUMNS, HIT_CLASSES, failed_tests
 from garage_mj.driving.sim.outcomes import HIT_KINDS, OUTCOMES, PAPER_CLASS, PAPER_CLASSES, OutcomeConfig
@@ -347,7 +348,7 @@ def _cruise_note() -> str:
     and how they map onto the paper's three classes."""
     values = asdict(OutcomeConfig())
     notes = "; ".join(f"{s.column.replace('_', ' ')}: {s.note.format(**values)}" for s in OUTCOMES if s.note)
-    mapped = ", ".join(f"a {k.replace('_', ' ')} counts as a {v}" for k, v in PAPER_CLASS.items() if k != v)
+    mapped = ", ".join(f"{a_noun(k)} counts as {a_noun(v)}" for k, v in PAPER_CLASS.items() if k != v)
     return (f"{notes[:1].upper()}{notes[1:]}. In the paper's three failure classes ({', '.join(PAPER_CLASSES)}) "
             f"{mapped}. Success is over feasible tests; an infeasible test (no driver of this car can reach the "
             "stall) is never driven.")

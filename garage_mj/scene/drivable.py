@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from garage_mj.core.geometry import OPPOSITE
+from garage_mj.core.words import a_noun
 from garage_mj.scene.clearance import Obstacles, footprint, nearest_obstacle, nearest_two, scene_obstacles
 from garage_mj.scene.cruise_routes import START_OFFSET, LaneRoutes, Node, sample
 from garage_mj.scene.garage_scene import GarageScene
@@ -341,7 +342,7 @@ class DrivePlanner:
             pull = float(s[int(np.argmin(dist))] - s[g])
             if g <= 0 or pull > cfg.max_pullback or s[g] < START_OFFSET + MIN_DRIVE:
                 return TestPlan(stall.id, False, f"no clear place to stop beside the stall within {cfg.max_pullback:.0f} m "
-                                f"(a {first[1]} {first[0]:.2f} m from the car; margin {cfg.clearance_margin:.2f} m)",
+                                f"({a_noun(first[1])} {first[0]:.2f} m from the car; margin {cfg.clearance_margin:.2f} m)",
                                 stall_side=cand.side)
             clear_g, _ = self._route_clearance(route, g, g + 1, stall.id)
         goal = (float(centre[g, 0]), float(centre[g, 1]), float(hdg[g]))
@@ -360,7 +361,7 @@ class DrivePlanner:
                             **common)
         if clear[k] < cfg.clearance_margin:
             x, y = rear[i0 + k]
-            return TestPlan(stall.id, False, f"the car passes {clear[k]:.2f} m from a {names[k]} at "
+            return TestPlan(stall.id, False, f"the car passes {clear[k]:.2f} m from {a_noun(names[k])} at "
                             f"({x:.1f}, {y:.1f}) (margin {cfg.clearance_margin:.2f} m)", **common)
         if offset > cfg.lane_tolerance:
             return TestPlan(stall.id, False, f"the goal lies {offset:.2f} m off the lane centre", **common)

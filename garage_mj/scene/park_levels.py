@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from garage_mj.core.words import a_noun
 from garage_mj.scene.body_outlines import BodyOutlines, segment_crosses
 from garage_mj.scene.stalls import Stall
 
@@ -82,7 +83,7 @@ def park_level(stall: Stall, length: float, width: float, aisle: float, start, b
         complex_.append(f"start {far:.1f} m > {FAR:g} m away")
     hit = segment_crosses(bodies, start, (stall.x, stall.y)) if bodies is not None else []
     if hit:
-        complex_.append(f"the straight way to the stall crosses a {bodies.classes[hit[0]]}")
+        complex_.append(f"the straight way to the stall crosses {a_noun(bodies.classes[hit[0]])}")
     return ParkLevel("complex", tuple(complex_)) if complex_ else ParkLevel("normal")
 
 

@@ -62,6 +62,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from garage_mj.core.words import a_noun
 from garage_mj.scene.clearance import (
     Obstacles,
     footprint,
@@ -905,7 +906,7 @@ class ParkPlanner:
         if near[0] < 0 or dist[0] >= self.config.margin:
             return f"{what} lies outside the planning area"
         x, y = rear[:2]
-        return (f"{what} ({x:.1f}, {y:.1f}) is not clear: a {obs.classes[int(near[0])]} {dist[0]:.2f} m from the car "
+        return (f"{what} ({x:.1f}, {y:.1f}) is not clear: {a_noun(obs.classes[int(near[0])])} {dist[0]:.2f} m from the car "
                 f"(margin {self.config.margin:.2f} m)")
 
     def _analytic(self, curves: _Curves, checker: _Checker, g: np.ndarray, s: np.ndarray, m: Maneuver,

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from garage_mj.core.geometry import DELTAS, EAST, NORTH, SOUTH, WEST
+from garage_mj.core.words import a_noun
 from garage_mj.grid.blocks import Block
 from garage_mj.grid.garage import Garage
 from garage_mj.grid.road_segments import Tile, analyse
@@ -67,7 +68,7 @@ def tile_rotation(tile: RoadTile, openings: frozenset[int]) -> int:
     for k in range(4):
         if _rotate_set(_CANONICAL[tile], k) == openings:
             return 90 * k
-    raise ValueError(f"openings {sorted(openings)} do not fit a {tile.value} tile")
+    raise ValueError(f"openings {sorted(openings)} do not fit {a_noun(tile.value)} tile")
 
 
 def tile_openings(tile: RoadTile, rotation: int) -> frozenset[int]:

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
+from garage_mj.core.words import a_noun
 from garage_mj.driving.sim.park_sensors import (
     ALL_SENSORS,
     MAX_SLOT_SIZE,
@@ -321,7 +322,7 @@ def observations_markdown(setup: ObservationSetup = DOC_SETUP) -> str:
         "Generated from `garage_mj/driving/sim/observations.py` (`OBSERVATIONS`) by",
         "`python -m garage_mj.driving.sim.observations > docs/observations.md`; a test checks that",
         "this file is what it renders. The observation is a dict with these keys, in this order.",
-        f"Spaces as built for a {cam.width} x {cam.height} camera with a {cam.far:g} m far plane, colour "
+        f"Spaces as built for {a_noun(cam.width)} x {cam.height} camera with {a_noun(f'{cam.far:g}')} m far plane, colour "
         f"{'on' if cam.rgb else 'off'},",
         f"{setup.actors} actor slots{' and every parking sensor on' if setup.sensors == ALL_SENSORS else ''}; "
         "where `image_obs=True` changes a space, it is given after the default.",
