@@ -235,3 +235,18 @@ def test_a_bad_placeholder_operation_is_one_line(repo, capsys):
                       ("{{bench_drivable.json:rows.driver|max}}", "driver")):
         path.write_text(text.replace("{{bench_fbx.json:fbx_adds_ms|.1f}}", bad))
         assert said in _one_error_line(repo, capsys)
+
+
+def test_the_plots_are_drawn_from_the_result_files_the_same_each_time(tmp_path):
+    """eval/plot_pages.py draws every plot a page embeds, the same bytes from the same files (a committed PNG
+    matches byte for byte only under the matplotlib that drew it, so that is not asserted here)."""
+    plot_pages = _module("plot_pages")
+    embedded = set(re.findall(r"\]\((plots/[^)]+\.png)\)", (ROOT / "docs" / "results.md").read_text()
+                              + (ROOT / "docs" / "performance.md").read_text()))
+    assert embedded == {f"{plot_pages.OUT}/{name}" for name in plot_pages.PLOTS}
+    shutil.copytree(ROOT / "docs", tmp_path / "docs")
+    assert plot_pages.main(["--root", str(tmp_path)]) == 0
+    first = {p.name: p.read_bytes() for p in (tmp_path / "docs" / "plots").glob("*.png")}
+    assert set(first) == set(plot_pages.PLOTS)
+    assert plot_pages.main(["--check", "--root", str(tmp_path)]) == 0
+    assert all(png.startswith(b"\x89PNG") and b"matplotlib" not in png for png in first.values())
