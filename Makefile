@@ -75,7 +75,8 @@ bench: $(MAIN_STAMP)
 	$(PY) eval/bench_env.py
 
 # The documentation site (mkdocs.yml, sources in docs/) into site/; tests/test_docs.py builds it with --strict.
-# results.md and performance.md are rendered (eval/render_pages.py): a stale one stops the build.
+# results.md, performance.md and README.md's results table are rendered (eval/render_pages.py): a stale one
+# stops the build.
 docs: $(STAMP)
 	$(PY) eval/render_pages.py --check
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
