@@ -8,6 +8,7 @@
 - ``lazy``: ``lazy_exports``, the lazy re-exports of a stage's public names (``scene``, ``export``).
 - ``model_file``: the one door through which every model, checkpoint, replay buffer and generator file is
   read, as weights and plain fields (nothing in a file is run).
+- ``words``: ``a_noun``, the article of a word a message fills in ("an obstacle", "a parked car").
 """
 
 __version__ = "0.2.0"
