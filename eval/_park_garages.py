@@ -10,33 +10,16 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from garage_mj import list_maps
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES, ParkGeometry
 from garage_mj.driving.sources import CruiseSource, painted_sources
 
-
-@dataclass(frozen=True)
-class Geometry:
-    """One garage geometry of the grid: WorldConfig fields, the parked fleet and its jitter [m]."""
-
-    name: str
-    world: dict = field(default_factory=dict)
-    parked_fleet: str = "uniform"
-    parked_jitter: float = 0.0
-
-
-#: The garage geometries a park benchmark may run on by name (docs/spec.md section 9).
-GEOMETRIES = {g.name: g for g in (
-    Geometry("default"),
-    Geometry("tight", {"stall_width": 2.3, "aisle_width": 6.5}, "mixed", 0.15),
-    Geometry("angled60", {"stall_angle": 60.0}),
-    Geometry("angled45", {"stall_angle": 45.0}),
-    Geometry("parallel", {"stall_angle": 0.0}),
-    Geometry("parallel_mixed", {"stall_angle": 0.0}, "mixed", 0.15),
-    Geometry("parallel_short", {"stall_angle": 0.0, "slot_length": 5.2}, "mixed", 0.15),  # extreme: < 4.6 + 0.9 m
-)}
+#: The garage geometries a park benchmark may run on by name (docs/spec.md section 9; the product's table).
+Geometry = ParkGeometry
+GEOMETRIES = PARK_GEOMETRIES
 
 
 def park_parser(description: str, garages: int, out: Path) -> argparse.ArgumentParser:

@@ -430,6 +430,7 @@ def test_a_model_whose_plain_fields_lie_is_refused(tmp_path, dqn_zip):
         data = json.loads(z.read("data"))
     data["observation_space"]["spaces"] = "{'image': Box(0, 255, (3, 64, 64), uint8)}"
     path = rewrite_zip(dqn_zip, tmp_path / "lies.zip", data=json.dumps(data).encode())
-    with pytest.raises(DriverError, match=r"its observation space .* is not a learned driver's \(learned_space\)\): "
+    with pytest.raises(DriverError, match=r"its observation space .* is not a learned driver's \(learned_space or "
+                                          r"park_space\)\): "
                                           r"train one with `garage-mj train-driver`"):
         load_driver(f"learned:{path}")

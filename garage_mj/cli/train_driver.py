@@ -1,4 +1,5 @@
-"""``garage-mj train-driver``: train a learned cruise driver (SB3 DQN, DAgger warm start) over garages."""
+"""``garage-mj train-driver``: train a learned cruise driver (SB3 DQN, DAgger warm start) or a parking / AVP driver
+(an SB3 PPO policy trained by DAgger) over garages."""
 
 from __future__ import annotations
 
@@ -23,12 +24,24 @@ from garage_mj.core.config import load_config
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.learning.train import CURRICULA, DriverTrainConfig, train_driver
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES
+from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
+
+
+def geometry_list(text: str) -> tuple[str, ...]:
+    """argparse type of --geometries: comma-separated park geometry names."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    bad = [n for n in names if n not in PARK_GEOMETRIES]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"{', '.join(bad) or repr(text)}: give park geometry names, comma-separated, "
+                                         f"from {', '.join(PARK_GEOMETRIES)}")
+    return names
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "train-driver",
-        help="train a learned cruise driver (DQN on camera depth + segmentation) over many garages",
+        help="train a learned cruise, parking or AVP driver (imitation of the oracle, DAgger) over many garages",
         description=(
             "Train a stable-baselines3 DQN (MultiInputPolicy: a CNN over the front camera's depth and "
             "segmentation, an MLP over the next route waypoint, speed, route left and steering angle; the "
@@ -37,7 +50,12 @@ def register(sub: argparse._SubParsersAction) -> None:
             "then optionally fine-tunes with DQN on the env's reward (--rl-timesteps). The model never "
             "sees the route plan, its pose or the goal in the world frame. The run folder gets run.json, "
             "curve.csv (validation success per iteration), garages.json, checkpoints/ and model.zip; an "
-            "interrupted run continues with --resume. Drive with it: --driver learned:OUT/model.zip."
+            "interrupted run continues with --resume. Drive with it: --driver learned:OUT/model.zip.\n\n"
+            "--task park or avp trains a parking driver instead: an SB3 PPO policy (MultiInputPolicy) over both "
+            "cameras (front and rear depth + segmentation), the 12 ultrasonic ranges, the slot detector, speed, "
+            "steering and gear (and in AVP tests the route ahead), sending the continuous park action [pedal, steer, "
+            "gear]; trained by DAgger on the oracle's park command (squared error), on park (AVP) tests of the "
+            "garages built in --geometries. Drive it with --task park (avp) --driver learned:OUT/model.zip."
         ),
         epilog=("GARAGES is a library file (.sqlite, with --map/--difficulty/--run-seeds/-n), a garages JSON "
                 "(library export-json, or a run's garages.json), a folder of asset packs, or a shipped map name "
@@ -64,6 +82,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--curriculum", choices=CURRICULA, help="how garages are drawn: uniform (default), difficulty (easy to hard), adversarial (failure-prioritised replay), hunt (garages hunt finds the model failing on)")
     p.add_argument("--rl-timesteps", type=non_negative_int, help="DQN fine-tuning timesteps after imitation (default 0)")
     p.add_argument("--workers", type=int_in(1, MAX_WORKERS), help=f"worker processes driving, 1 to {MAX_WORKERS:,} (default 2)")
+    park = p.add_argument_group("a parking or AVP driver")
+    park.add_argument("--task", choices=TASKS, help="what it learns: cruise tests (default), park tests or AVP tests")
+    park.add_argument("--maneuver", choices=MANEUVER_CHOICES,
+                      help="park and AVP tests: reverse, forward or any (drawn per test; the default)")
+    park.add_argument("--geometries", type=geometry_list, metavar="NAME,NAME",
+                      help=f"park geometries the garages are built in, garage k in the (k mod n)th: "
+                           f"{', '.join(PARK_GEOMETRIES)} (default: default)")
+    park.add_argument("--scenarios", type=lambda t: tuple(n.strip() for n in t.split(",") if n.strip()),
+                      metavar="NAME,NAME", help="park actor scenarios drawn with each geometry (every pair of "
+                      "geometry and scenario gets its share of the garages): none or park_* names of --scenario")
     act = p.add_argument_group("adverse events while training (the oracle yields to them, the model sees them "
                                "only in its camera)")
     act.add_argument("--pedestrians", type=non_negative_int, metavar="N", help="pedestrians per episode, as cruise")
@@ -79,7 +107,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     flags = {key: value for key, value in (("iterations", args.iterations), ("steps_per_iteration", args.steps),
                                            ("curriculum", args.curriculum), ("rl_timesteps", args.rl_timesteps),
-                                           ("n_envs", args.workers)) if value is not None}
+                                           ("n_envs", args.workers), ("task", args.task),
+                                           ("maneuver", args.maneuver), ("geometries", args.geometries), ("scenarios", args.scenarios))
+             if value is not None}
     try:
         config = load_config(DriverTrainConfig, args.config, **flags)  # a bad value: the file (or flag), key, range
     except ValueError as exc:

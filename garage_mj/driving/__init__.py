@@ -14,18 +14,22 @@
   - ``actors.placement``: ``draw_scenario``, the actors' trajectories and triggers around a test's route.
   - ``actors.park_placement``: ``draw_park_scenario``, a park or AVP test's actors around its stall and park plan.
   - ``actors.judging``: ``judge``, whether every event stays avoidable (decided before the drive).
-- ``drivers``: the built-in drivers (``oracle``, ``waypoint``, ``vision``, ``learned``) and user drivers.
+- ``drivers``: the built-in drivers (``oracle``, ``waypoint``, ``vision``, ``park_assist``, ``learned``: the cruise,
+  parking and AVP models) and user drivers.
 - ``learning``: training a learned driver.
-  - ``learning.observation``: what a learned driver sees (camera, waypoint, speed, route left, steering; nothing privileged).
+  - ``learning.observation``: what a learned driver sees (camera, waypoint, speed, route left, steering; a parking
+    driver both cameras, the ultrasonic ranges and the slot detector; nothing privileged).
   - ``learning.network``: the learned driver's network body (NatureCNN-shaped convolutions over the camera, joined with the route vector).
   - ``learning.fleet_env``: ``FleetDriveEnv``, one garage of a set per episode, with the oracle's action as a label.
-  - ``learning.train``: ``train-driver``, DQN on the unprivileged observation, warm-started by DAgger.
+  - ``learning.train``: ``train-driver``, DQN (cruise) or a PPO policy (park, AVP) on the unprivileged observation,
+    trained by DAgger.
 - ``difficulty``: relating outcomes to difficulty.
   - ``difficulty.regression``: Pearson r and the regression of success on difficulty, the paper's table; bootstrap r, AUC.
   - ``difficulty.fit``: fit and score the route-aware difficulty on recorded cruise outcomes.
   - ``difficulty.rating``: the route difficulty of many garages, computed once each and kept (a library's, a cruise run's).
 - The test runner, at the top level:
   - ``sources``: what a cruise run tests (``CruiseSource``), its settings and each test's seed.
+  - ``park_geometries``: ``PARK_GEOMETRIES``, park geometries by name (stalls, aisle, parked fleet).
   - ``garage_set``: ``GarageSet``, the garages a learned driver trains or is tested on, and where they came from.
   - ``episode``: one cruise test driven to its row, with the scene and driver a process keeps.
   - ``results``: a cruise run's folder: ``run.json``, ``tests.csv`` read back and repaired, the summaries.

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -137,11 +138,29 @@ class CruiseSettings:
             kwargs["stall"] = self.stall
         return kwargs
 
+    def with_sensors(self, names: Sequence[str]) -> CruiseSettings:
+        """These settings with the parking sensors ``names`` (:class:`~garage_mj.driving.sim.park_sensors.SensorConfig`
+        fields) on as well as those ``env`` asks for (its slot noise kept): what a driver that declares ``sensors``
+        observes (:func:`~garage_mj.driving.drivers.sensors_of`)."""
+        if not names:
+            return self
+        env = dict(self.env or {})
+        asked = env.get("sensors") or {}
+        if isinstance(asked, str):  # "all" or comma-separated names, as GarageDriveEnv reads them
+            from garage_mj.driving.sim.park_sensors import sensor_config
+
+            asked = {k: v for k, v in vars(sensor_config(asked)).items() if v}
+        env["sensors"] = {**dict(asked), **{name: True for name in names}}
+        return dataclasses.replace(self, env=env)
+
     def resolved(self, action_type: str) -> CruiseSettings:
-        """These settings as a run uses and stores them: ``action_type`` the one chosen, plain numbers and dicts."""
+        """These settings as a run uses and stores them: ``action_type`` the one chosen, plain numbers and dicts, and
+        the parking sensors the driver declares turned on (:meth:`with_sensors`)."""
+        from garage_mj.driving.drivers import sensors_of
+
         return CruiseSettings(self.driver, int(self.seed), action_type, float(self.occupancy), dict(self.env or {}),
                               dict(self.driver_kwargs or {}), float(self.test_timeout), self.task, self.maneuver,
-                              None if self.stall is None else int(self.stall))
+                              None if self.stall is None else int(self.stall)).with_sensors(sensors_of(self.driver))
 
 
 def painted_sources(map: str, n: int, seed: int = 0, oversample: int = 4) -> list[CruiseSource]:

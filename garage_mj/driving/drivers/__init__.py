@@ -52,6 +52,8 @@ USER_FILE_MODULE = "garage_mj_user_driver_"
 #: The learned built-in: ``learned`` (the shipped model) or ``learned:PATH`` (a model zip).
 LEARNED = "learned"
 LEARNED_DRIVER = "garage_mj.driving.drivers.learned:LearnedDriver"
+#: The learned parking driver (park and AVP tests): ``learned:park``, ``learned:avp`` or a parking model's path.
+LEARNED_PARK_DRIVER = "garage_mj.driving.drivers.learned:LearnedParkDriver"
 
 __all__ = [
     "DRIVERS",
@@ -73,6 +75,7 @@ __all__ = [
     "learned_model",
     "load_driver",
     "resolve_driver",
+    "sensors_of",
     "tasks_of",
 ]
 
@@ -147,8 +150,15 @@ def _import_module(spec: str, name: str) -> ModuleType:
 
 def resolve_driver(spec: str) -> type:
     """The driver class for a built-in name, ``learned[:PATH]``, ``module:Class`` (a module on the Python
-    path or in the current folder) or ``path/to/file.py:Class``."""
-    target = LEARNED_DRIVER if learned_model(spec) is not None else DRIVERS.get(spec, spec)
+    path or in the current folder) or ``path/to/file.py:Class``; ``learned:park``, ``learned:avp`` and a parking
+    model's ``learned:PATH`` give the learned parking driver's class."""
+    model = learned_model(spec)
+    if model is not None:
+        from garage_mj.driving.drivers.learned import is_parking_model
+
+        target = LEARNED_PARK_DRIVER if is_parking_model(model) else LEARNED_DRIVER
+    else:
+        target = DRIVERS.get(spec, spec)
     module_name, sep, class_name = target.rpartition(":")
     if not sep or not module_name or not class_name:
         raise DriverError(
@@ -180,6 +190,13 @@ def load_driver(spec: str, **kwargs: Any) -> Driver:
         return cls(**kwargs)
     except TypeError as exc:
         raise DriverError(f"driver {spec!r}: cannot construct {cls.__name__} ({exc})") from None
+
+
+def sensors_of(spec: str) -> tuple[str, ...]:
+    """The parking sensors driver ``spec`` observes besides the front camera: its class's ``sensors`` attribute
+    (:class:`~garage_mj.driving.sim.park_sensors.SensorConfig` field names; none when it has none). A run turns
+    them on for it (:meth:`~garage_mj.driving.sources.CruiseSettings.with_sensors`)."""
+    return tuple(map(str, getattr(resolve_driver(spec), "sensors", ())))
 
 
 #: The tasks of a driver class that does not declare ``tasks``: a cruise driver (docs/own-driver.md).

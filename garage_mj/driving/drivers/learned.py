@@ -24,12 +24,20 @@ import numpy as np
 
 from garage_mj.core.model_file import ModelFileError
 from garage_mj.driving.drivers import DriverError
-from garage_mj.driving.learning.observation import learned_observation, learned_space
+from garage_mj.driving.learning.observation import (
+    PARK_SENSORS,
+    learned_observation,
+    learned_space,
+    park_observation,
+    park_space,
+)
 from garage_mj.driving.learning.saved_model import load_driver_model
-from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction
+from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, PARK_CONTINUOUS_SIZE, DiscreteAction
 
 DRIVER_MODELS = "drivers"  # the folder of models/ that holds the shipped driver models
 DEFAULT_MODEL = "cruise_m5"  # models/drivers/<DEFAULT_MODEL>.zip: what ``--driver learned`` runs
+#: The shipped parking models by the name ``learned:NAME`` runs: models/drivers/<model>.zip.
+PARKING_MODELS = {"park": "park_m5", "avp": "avp_m5"}
 N_ACTIONS = len(DiscreteAction)  # the paper's 4 actions
 #: The SB3 algorithm that loads a zip, by the module of the policy class its ``data`` records.
 ALGORITHMS = {"stable_baselines3.dqn.policies": "DQN", "stable_baselines3.common.policies": "PPO"}
@@ -49,9 +57,35 @@ _MODEL_CACHE_SIZE = 4  # models a process keeps loaded (a retrained file is a ne
 _MODELS: dict[tuple[str, int, int], Any] = {}
 
 
-def default_model() -> Path:
-    """The shipped model ``--driver learned`` runs: ``models/drivers/<DEFAULT_MODEL>.zip`` in the package."""
-    return Path(str(resources.files("garage_mj.models").joinpath(DRIVER_MODELS, f"{DEFAULT_MODEL}.zip")))
+def default_model(name: str = DEFAULT_MODEL) -> Path:
+    """A shipped model: ``models/drivers/<name>.zip`` in the package (by default what ``--driver learned`` runs)."""
+    return Path(str(resources.files("garage_mj.models").joinpath(DRIVER_MODELS, f"{name}.zip")))
+
+
+def model_path(model: str | Path | None) -> Path:
+    """The file of a learned driver's model: None or ``""`` the shipped cruise model, ``park`` and ``avp`` the shipped
+    parking models (:data:`PARKING_MODELS`), anything else a path."""
+    if model is None or str(model) == "":
+        return default_model()
+    if str(model) in PARKING_MODELS:
+        return default_model(PARKING_MODELS[str(model)])
+    return Path(model).expanduser()
+
+
+def is_parking_model(model: str | Path | None) -> bool:
+    """Whether ``model`` (:func:`model_path`'s argument) is a parking driver's: ``park``, ``avp``, or a zip whose
+    action space is the continuous park action (read from its plain ``data``, nothing loaded). A file that cannot be
+    read says no: the cruise driver's loader then names what is wrong with it."""
+    if model is not None and str(model) in PARKING_MODELS:
+        return True
+    if model is None or str(model) == "":
+        return False
+    try:
+        with zipfile.ZipFile(model_path(model)) as z:
+            data = json.loads(z.read("data"))
+        return "box.Box" in str(data["action_space"][":type:"])
+    except (OSError, zipfile.BadZipFile, KeyError, TypeError, ValueError):
+        return False
 
 
 def _no_model(path: Path, why: str = "") -> DriverError:
@@ -79,13 +113,13 @@ def _algorithm(path: Path) -> str:
     return ALGORITHMS[module]
 
 
-def load_model(path: str | Path) -> Any:
+def load_model(path: str | Path, parking: bool = False) -> Any:
     """The SB3 model at ``path`` on the CPU, loaded once per process and file version.
 
     The file is read as data (:func:`~garage_mj.driving.learning.saved_model.load_driver_model`): weights and plain
-    settings, nothing in it unpickled or run. Checks that it acts with the paper's 4 actions; a missing,
-    unreadable, corrupt or code-carrying file, or another action space, is a one-line :class:`DriverError`
-    naming the file, what is wrong and the fix.
+    settings, nothing in it unpickled or run. Checks that it acts with the paper's 4 actions (``parking``: with the
+    continuous park action); a missing, unreadable, corrupt or code-carrying file, or another action space, is a
+    one-line :class:`DriverError` naming the file, what is wrong and the fix.
     """
     path = Path(path).expanduser()
     try:
@@ -107,7 +141,11 @@ def load_model(path: str | Path) -> Any:
     except Exception as exc:  # torch/zip errors of a damaged file: name the file, keep one short line
         raise _no_model(path, f" (cannot load it as {algo}: {_one_line(exc)})") from None
     space = model.action_space
-    if type(space).__name__ != "Discrete" or int(space.n) != N_ACTIONS or int(getattr(space, "start", 0)) != 0:
+    if parking:
+        if type(space).__name__ != "Box" or space.shape != (PARK_CONTINUOUS_SIZE,):
+            raise DriverError(f"learned parking driver model {path}: its actions are {space}, the park action is "
+                              f"Box(-1, 1, ({PARK_CONTINUOUS_SIZE},)); train it with garage-mj train-driver --task park")
+    elif type(space).__name__ != "Discrete" or int(space.n) != N_ACTIONS or int(getattr(space, "start", 0)) != 0:
         raise DriverError(f"learned driver model {path}: its actions are {space}, the paper's are Discrete({N_ACTIONS}); "
                           "train it on a discrete GarageDriveEnv (garage-mj train-driver)")
     _check_finite_weights(model, path)
@@ -146,7 +184,7 @@ class LearnedDriver:
     action_type = "discrete"  # the paper's actions (see garage_mj.driving.drivers)
 
     def __init__(self, model: str | Path | None = None) -> None:
-        self.path = default_model() if model is None else Path(model).expanduser()
+        self.path = model_path(model)
         self.model = load_model(self.path)
         self.discrete = True
         self._checked: tuple[int, ...] | None = None  # the camera shape the model was checked against
@@ -185,3 +223,59 @@ class LearnedDriver:
         if self.discrete:
             return action
         return np.array(DISCRETE_COMMANDS[DiscreteAction(action)], dtype=np.float32)
+
+
+class LearnedParkDriver:
+    """A trained parking policy (``train-driver --task park`` or ``avp``) sending the continuous park action.
+
+    It sees :func:`~garage_mj.driving.learning.observation.park_observation`: both cameras, the 12 ultrasonic
+    ranges, the slot detector, speed, steering and gear, and in an AVP test the cruise route's waypoint (nothing
+    privileged); a run turns on the sensors it declares (:data:`sensors`). The command is the policy's mean action
+    (deterministic): ``[pedal, steer, gear]``. ``learned:park`` and ``learned:avp`` run the shipped models.
+    """
+
+    action_type = "continuous"  # [pedal, steer, gear] (garage_mj.driving.sim.vehicle.park_command_from_action)
+    tasks = ("park", "avp")
+    sensors = PARK_SENSORS  # the parking sensors it observes (CruiseSettings.with_sensors turns them on)
+
+    def __init__(self, model: str | Path | None = None) -> None:
+        self.path = model_path("park" if model is None else model)
+        self.model = load_model(self.path, parking=True)
+        self.route = False
+        self._checked: tuple[int, ...] | None = None
+
+    def reset(self, info: dict[str, Any]) -> None:
+        """Start a test: an AVP test's route is observed, a park test's (the reference plan) is not."""
+        if info.get("action_type", "continuous") != "continuous":
+            raise DriverError(f"learned parking driver {self.path} sends the continuous park action [pedal, steer, "
+                              "gear]; leave out --action-type (or give continuous)")
+        self.route = info.get("task") == "avp"
+
+    def _check(self, shape: tuple[int, ...]) -> None:
+        why = _space_difference(self.model.observation_space, park_space(*shape))
+        if why:
+            raise DriverError(f"learned parking driver model {self.path} does not fit this camera ({shape[0]}x"
+                              f"{shape[1]}): {why}; drive with the camera it was trained on")
+        self._checked = shape
+
+    def act(self, obs: dict[str, Any]) -> np.ndarray:
+        """The policy's park command for ``obs`` (a park or AVP test's observation, depth in metres)."""
+        try:
+            o = park_observation(obs, route=self.route)
+        except ValueError as exc:
+            raise DriverError(f"learned parking driver: {exc}") from None
+        if self._checked != o["image"].shape[1:]:
+            self._check(o["image"].shape[1:])
+        import torch
+
+        threads, mkldnn = torch.get_num_threads(), torch.backends.mkldnn.enabled
+        torch.set_num_threads(TORCH_THREADS)
+        torch.backends.mkldnn.enabled = MKLDNN_IN_ACT
+        try:
+            with torch.inference_mode():
+                batch = {k: torch.from_numpy(v).unsqueeze(0) for k, v in o.items()}
+                action = self.model.policy._predict(batch, deterministic=True).reshape(-1).numpy()
+        finally:
+            torch.set_num_threads(threads)
+            torch.backends.mkldnn.enabled = mkldnn
+        return np.clip(action.astype(np.float32), -1.0, 1.0)

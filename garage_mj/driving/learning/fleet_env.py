@@ -14,6 +14,13 @@ angle. With ``expert=True`` each ``info`` also carries ``expert_action``: what t
 ``oracle`` (:class:`~garage_mj.driving.drivers.oracle.OracleDriver`, with the paper's actions) would
 do in the state just observed, the label that imitation learning (DAgger) trains on. The expert
 reads the privileged state, the learner never does.
+
+Park and AVP tests (``env_kwargs`` with ``task`` "park" or "avp"): the continuous park action ``[pedal, steer,
+gear]`` (the oracle's park tracker labels it), the parking sensors on
+(:data:`~garage_mj.driving.learning.observation.PARK_SENSORS`) and the parking driver's observation
+(:func:`~garage_mj.driving.learning.observation.park_observation`). ``variants`` gives garages their own env
+settings (a park geometry, a parked fleet): garage ``k`` is built with ``variants[k % len(variants)]`` over
+``env_kwargs``.
 """
 
 from __future__ import annotations
@@ -27,10 +34,16 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.driving.learning.observation import learned_observation, learned_space
+from garage_mj.driving.learning.observation import (
+    PARK_SENSORS,
+    learned_observation,
+    learned_space,
+    park_observation,
+    park_space,
+)
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.driving.sim.sensors import CameraConfig
-from garage_mj.driving.sim.vehicle import DiscreteAction
+from garage_mj.driving.sim.vehicle import DiscreteAction, park_action_space
 from garage_mj.driving.sources import CruiseSource
 
 DRAWS = 20  # test draws per reset before a garage is taken as one without a drivable test
@@ -46,13 +59,16 @@ class FleetDriveEnv(gym.Env):
         cache_size: how many garages' scenes are kept compiled.
         expert: put the oracle's action for each observed state in ``info["expert_action"]``.
         env_kwargs: more :class:`GarageDriveEnv` keyword arguments (``occupancy``, ``camera``,
-            ``scenario``, ...); ``action_type`` is always discrete and ``image_obs`` off.
+            ``scenario``, ``task``, ...); ``action_type`` is discrete in cruise tests and continuous in park and
+            AVP tests, ``image_obs`` off.
+        variants: env settings per garage (garage ``k``: ``variants[k % len(variants)]`` over ``env_kwargs``).
     """
 
     metadata = {"render_modes": []}
 
     def __init__(self, garages: Sequence[CruiseSource], weights: Sequence[float] | None = None,
-                 cache_size: int = 8, expert: bool = False, env_kwargs: dict[str, Any] | None = None) -> None:
+                 cache_size: int = 8, expert: bool = False, env_kwargs: dict[str, Any] | None = None,
+                 variants: Sequence[dict[str, Any]] | None = None) -> None:
         self.sources = list(garages)
         if not self.sources:
             raise ValueError("FleetDriveEnv needs at least one garage")
@@ -62,10 +78,19 @@ class FleetDriveEnv(gym.Env):
         for key in ("action_type", "image_obs", "infeasible", "garage"):
             if key in self.env_kwargs:
                 raise ValueError(f"FleetDriveEnv sets {key!r} itself; leave it out of env_kwargs")
+        self.variants = [dict(v) for v in variants] if variants else [{}]
+        self.task = str(self.env_kwargs.get("task", "cruise"))
         camera = self.env_kwargs.get("camera")
         cam = camera if isinstance(camera, CameraConfig) else CameraConfig(**(camera or {}))
-        self.observation_space = learned_space(cam.height, cam.width)
-        self.action_space = spaces.Discrete(len(DiscreteAction))
+        if self.task == "cruise":
+            self.action_type = "discrete"
+            self.observation_space = learned_space(cam.height, cam.width)
+            self.action_space = spaces.Discrete(len(DiscreteAction))
+        else:
+            self.action_type = "continuous"
+            self.env_kwargs.setdefault("sensors", {name: True for name in PARK_SENSORS})
+            self.observation_space = park_space(cam.height, cam.width)
+            self.action_space = park_action_space("continuous")
         self.cache_size = int(cache_size)
         self.expert = bool(expert)
         self._envs: collections.OrderedDict[int, GarageDriveEnv] = collections.OrderedDict()
@@ -93,7 +118,8 @@ class FleetDriveEnv(gym.Env):
         src = self.sources[k]
         try:
             # "report": stalls are planned when drawn, not all at build (a 200-stall garage: 0.2 s, not 9 s)
-            env = GarageDriveEnv(garage=src.garage, action_type="discrete", infeasible="report", **self.env_kwargs)
+            env = GarageDriveEnv(garage=src.garage, action_type=self.action_type, infeasible="report",
+                                 **{**self.env_kwargs, **self.variants[k % len(self.variants)]})
         except ValueError as exc:
             warnings.warn(f"{src.name}: left out of the draw ({exc})", stacklevel=3)
             self._dead.add(k)
@@ -142,14 +168,19 @@ class FleetDriveEnv(gym.Env):
 
     def _out(self, obs: dict[str, Any], info: dict[str, Any]):
         info = dict(info, garage=self.sources[self.index].name, garage_index=self.index, test_seed=self.test_seed)
+        if self.task == "cruise":
+            if self.expert:
+                info["expert_action"] = int(self._oracle.act(obs))
+            return learned_observation(obs), info
         if self.expert:
-            info["expert_action"] = int(self._oracle.act(obs))
-        return learned_observation(obs), info
+            info["expert_action"] = np.asarray(self._oracle.act(obs), dtype=np.float32)
+        return park_observation(obs, route=self.task == "avp"), info
 
     def step(self, action):
         if self.env is None:
             raise RuntimeError("call reset() before step()")
-        obs, reward, terminated, truncated, info = self.env.step(int(action))
+        obs, reward, terminated, truncated, info = self.env.step(
+            int(action) if self.task == "cruise" else np.asarray(action, dtype=np.float32))
         out, info = self._out(obs, info)
         return out, reward, terminated, truncated, info
 

@@ -25,6 +25,7 @@ model sees at test time exactly what it saw in training.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -72,4 +73,74 @@ def learned_observation(obs: dict[str, Any]) -> dict[str, np.ndarray]:
     vector = np.array([wx / LOOKAHEAD, wy / LOOKAHEAD, speed / SPEED_RANGE,
                        min(remaining / REMAINING_RANGE, 1.0), steer, min(remaining / NEAR_RANGE, 1.0),
                        _unit(gx / NEAR_RANGE), _unit(gy / NEAR_RANGE)], dtype=np.float32)
+    return {"image": image, "vector": vector}
+
+
+# -- the parking driver's observation (park and AVP tests) -----------------------------------------------------
+#: The parking sensors a learned parking driver observes (:class:`~garage_mj.driving.sim.park_sensors.SensorConfig`
+#: fields): both cameras, the 12 ultrasonic rangefinders and the slot detector.
+PARK_SENSORS = ("rear_camera", "ultrasonic", "slot")
+SLOT_RANGE = 10.0  # [m] the slot detector's position, read up to this ...
+SLOT_NEAR = 2.0  # [m] ... and again at a finer scale, for the last metres into the stall
+ULTRASONIC_RANGE = 5.0  # [m] the rangefinders' farthest reading (park_sensors.ULTRASONIC_MAX)
+PARK_VECTOR_KEYS = ("slot_x", "slot_y", "slot_cos", "slot_sin", "slot_near_x", "slot_near_y", "slot_width",
+                    "slot_depth", "speed", "steer", "gear", *(f"ultrasonic_{i}" for i in range(12)),
+                    "route_x", "route_y", "route_left")
+PARK_IMAGE_CHANNELS = 4  # front depth, front segmentation, rear depth, rear segmentation
+
+
+def park_space(height: int, width: int) -> spaces.Dict:
+    """The observation space of :func:`park_observation` for ``height`` x ``width`` cameras."""
+    return spaces.Dict({
+        "image": spaces.Box(0, 255, (PARK_IMAGE_CHANNELS, height, width), np.uint8),
+        "vector": spaces.Box(-np.inf, np.inf, (len(PARK_VECTOR_KEYS),), np.float32),
+    })
+
+
+def _camera_planes(depth: Any, segmentation: Any, out: np.ndarray) -> None:
+    """Depth (metres) and segmentation ids into two uint8 planes of ``out`` (as :func:`learned_observation`)."""
+    out[0] = np.rint(np.clip(np.asarray(depth, dtype=np.float32), 0.0, DEPTH_RANGE) * (255.0 / DEPTH_RANGE))
+    np.multiply(np.asarray(segmentation, dtype=np.uint8), SEG_SCALE, out=out[1])
+
+
+def park_observation(obs: dict[str, Any], route: bool) -> dict[str, np.ndarray]:
+    """What a learned parking driver sees, from a park or AVP test's drive env observation with the
+    :data:`PARK_SENSORS` on (depth in metres, ``image_obs=False``):
+
+    - ``image``: (4, H, W) uint8: the front and the rear camera, each as depth and segmentation (as
+      :func:`learned_observation`'s two planes);
+    - ``vector``: (26,) float32 (:data:`PARK_VECTOR_KEYS`): the slot detector's stall centre in the car frame
+      (over :data:`SLOT_RANGE`, and again over :data:`SLOT_NEAR`, clipped to [-1, 1]), the cosine and sine of
+      the direction it opens to, its width and depth (over 5 m and 6 m), the speed, the road-wheel angle, the
+      gear (+1 D, -1 R), the 12 ultrasonic ranges over 5 m, and with ``route`` (an AVP test: the cruise to the
+      stall) the route waypoint ahead (over its lookahead) and the route left (over :data:`REMAINING_RANGE`);
+      without it (a park test, whose route is the reference plan the driver must not read) those three are 0.
+
+    Nothing privileged: no pose, no plan, no other road user's state (:data:`UNPRIVILEGED` only)."""
+    obs = {k: obs[k] for k in UNPRIVILEGED if k in obs}
+    missing = [k for k in ("rear_depth", "ultrasonic", "slot", "gear") if k not in obs]
+    if missing:
+        raise ValueError(f"a learned parking driver observes {', '.join(missing)}: run park or AVP tests with the "
+                         f"sensors {', '.join(PARK_SENSORS)} on (--sensors {','.join(PARK_SENSORS)})")
+    depth = np.asarray(obs["depth"])
+    if depth.ndim != 2:
+        raise ValueError(f"park_observation needs depth as (H, W) metres (GarageDriveEnv(image_obs=False)), "
+                         f"got shape {depth.shape}")
+    image = np.empty((PARK_IMAGE_CHANNELS, *depth.shape), dtype=np.uint8)
+    _camera_planes(depth, obs["segmentation"], image[0:2])
+    _camera_planes(obs["rear_depth"], obs["rear_segmentation"], image[2:4])
+    sx, sy, syaw, swidth, sdepth = (float(v) for v in np.asarray(obs["slot"]).reshape(-1)[:5])
+    speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
+    steer = float(np.asarray(obs["steer"]).reshape(-1)[0]) if "steer" in obs else 0.0
+    gear = float(np.asarray(obs["gear"]).reshape(-1)[0])
+    sonar = np.asarray(obs["ultrasonic"], dtype=np.float32).reshape(-1) / ULTRASONIC_RANGE
+    if route:
+        wx, wy = (float(v) for v in np.asarray(obs["waypoint"]).reshape(-1)[:2])
+        left = min(float(np.asarray(obs["remaining"]).reshape(-1)[0]) / REMAINING_RANGE, 1.0)
+        way = [wx / LOOKAHEAD, wy / LOOKAHEAD, left]
+    else:
+        way = [0.0, 0.0, 0.0]
+    vector = np.array([_unit(sx / SLOT_RANGE), _unit(sy / SLOT_RANGE), math.cos(syaw), math.sin(syaw),
+                       _unit(sx / SLOT_NEAR), _unit(sy / SLOT_NEAR), swidth / 5.0, sdepth / 6.0,
+                       speed / SPEED_RANGE, steer, gear, *sonar.tolist(), *way], dtype=np.float32)
     return {"image": image, "vector": vector}

@@ -3,7 +3,8 @@
 :data:`DRIVER_REBUILDS` makes each pickled entry a ``train-driver`` model holds from its plain fields:
 the policy class (the algorithm's ``MultiInputPolicy``), the network (``CameraRouteExtractor``), the
 observation space (:func:`~garage_mj.driving.learning.observation.learned_space` at the recorded camera
-size), the action space and schedules (:data:`~garage_mj.core.model_file.COMMON`). Any other pickled
+size; :func:`~garage_mj.driving.learning.observation.park_space` for a parking driver), the action space (the
+paper's ``Discrete`` or the continuous park action) and schedules (:data:`~garage_mj.core.model_file.COMMON`). Any other pickled
 entry refuses the file. Imported by the learned driver and by ``train-driver``'s resume.
 """
 
@@ -14,7 +15,14 @@ import re
 from pathlib import Path
 from typing import Any
 
-from garage_mj.core.model_file import ModelFileError, Rebuild, load_sb3, policy_class, rebuilds
+from garage_mj.core.model_file import (
+    ModelFileError,
+    Rebuild,
+    discrete_space,
+    load_sb3,
+    policy_class,
+    rebuilds,
+)
 
 
 def _policy_kwargs(entry: dict, data: dict, algo: type, env: Any) -> Any:
@@ -27,14 +35,32 @@ def _policy_kwargs(entry: dict, data: dict, algo: type, env: Any) -> Any:
 
 
 def _observation_space(entry: dict, data: dict, algo: type, env: Any) -> Any:
-    """:func:`learned_space` for the camera size the entry records, if the entry's plain fields are that space."""
-    from garage_mj.driving.learning.observation import learned_space
+    """:func:`learned_space` (a cruise driver's) or :func:`park_space` (a parking driver's) for the camera size the
+    entry records, if the entry's plain fields are that space."""
+    from garage_mj.driving.learning.observation import PARK_IMAGE_CHANNELS, learned_space, park_space
 
     text = str(entry.get("spaces"))
-    size = re.search(r"'image': Box\(0, 255, \(2, (\d+), (\d+)\), uint8\)", text)
-    space = learned_space(int(size.group(1)), int(size.group(2))) if size else None
+    size = re.search(r"'image': Box\(0, 255, \((\d+), (\d+), (\d+)\), uint8\)", text)
+    make = {2: learned_space, PARK_IMAGE_CHANNELS: park_space}.get(int(size.group(1))) if size else None
+    space = make(int(size.group(2)), int(size.group(3))) if make else None
     if space is None or str(dict(space.spaces)) != text:
-        raise ModelFileError(f"its observation space {text[:120]} is not a learned driver's (learned_space)")
+        raise ModelFileError(f"its observation space {text[:120]} is not a learned driver's (learned_space or "
+                             "park_space)")
+    return space
+
+
+def _action_space(entry: dict, data: dict, algo: type, env: Any) -> Any:
+    """The paper's discrete actions (a cruise driver's ``Discrete``) or the continuous park action ``[pedal, steer,
+    gear]`` (a parking driver's ``Box(-1, 1, (3,))``), from the entry's plain fields."""
+    if "Discrete" in str(entry.get(":type:")):
+        return discrete_space(entry, data, algo, env)
+    from garage_mj.driving.sim.vehicle import park_action_space
+
+    space = park_action_space("continuous")
+    plain = {"dtype": "float32", "_shape": f"[{space.shape[0]}]", "low": str(space.low), "high": str(space.high)}
+    if "box.Box" not in str(entry.get(":type:")) or any(str(entry.get(k)) != v for k, v in plain.items()):
+        raise ModelFileError(f"its action space is {str(entry.get(':type:'))[:60]} {str(entry.get('_shape'))[:20]}, "
+                             "neither Discrete(n) nor the continuous park action Box(-1, 1, (3,))")
     return space
 
 
@@ -48,6 +74,7 @@ DRIVER_REBUILDS: dict[str, Rebuild] = rebuilds(
                                          "the algorithm's MultiInputPolicy (the learned driver's)")),
     Rebuild("policy_kwargs", _policy_kwargs),
     Rebuild("observation_space", _observation_space),
+    Rebuild("action_space", _action_space),
     Rebuild("train_freq", _train_freq),
 )
 

@@ -67,9 +67,13 @@ from garage_mj.core.model_file import ModelFileError
 from garage_mj.driving.cruise import run_test
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
+from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.hunt import HuntConfig, hunt
+from garage_mj.driving.learning.observation import PARK_SENSORS
 from garage_mj.driving.learning.saved_model import load_driver_model
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sim.outcomes import OutcomeKind
+from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 
 MANIFEST = "run.json"
@@ -120,9 +124,41 @@ class DriverTrainConfig:
     # at weight 1, all of the shipped model's held-out failures (stops 1 m short of or past the goal)
     stop_weight: float = bounded(4.0, gt=0.0, le=1e6)
     net_arch: tuple[int, ...] = bounded((128, 128), ge=1, le=65_536)  # hidden layer widths after the features
+    # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions), park tests or AVP tests (a PPO
+    # policy over the continuous park action, from both cameras, the ultrasonic ranges and the slot detector)
+    task: str = bounded("cruise", choices=TASKS)
+    maneuver: str = bounded("any", choices=MANEUVER_CHOICES)  # park and AVP tests: reverse, forward or any (drawn)
+    # park and AVP tests: the park geometries the garages are built in (garage k: the (k mod n)th), by name
+    # (garage_mj.driving.park_geometries); none: the default geometry
+    geometries: tuple[str, ...] = bounded((), choices=tuple(PARK_GEOMETRIES))
+    # park and AVP tests: the actor scenarios drawn with each geometry, by name (garage_mj.driving.actors.config
+    # SCENARIOS; "none": no actors): garage k gets the (k mod n)th of every geometry x scenario pair
+    scenarios: tuple[str, ...] = bounded((), choices=("none", *(n for n in SCENARIOS if n.startswith("park_"))))
 
     def __post_init__(self) -> None:
         check_bounds(self)  # built in code, held to the ranges a loaded config is (load_config checks them first)
+        if self.task != "cruise" and self.rl_timesteps:
+            raise ValueError("rl_timesteps: the RL stage fine-tunes cruise drivers only; a park or AVP driver is "
+                             "trained by imitation (leave rl_timesteps at 0)")
+        if self.task != "cruise" and self.curriculum == "hunt":
+            raise ValueError("curriculum: the hunt curriculum searches cruise tests; give uniform, difficulty or "
+                             "adversarial for a park or AVP driver")
+        if self.task == "cruise" and (self.geometries or self.scenarios):
+            raise ValueError("geometries, scenarios: park geometries and actor scenarios are for park and AVP drivers "
+                             "(task = \"park\" or \"avp\"); a cruise driver's actors: --scenario")
+
+    @property
+    def parking(self) -> bool:
+        """Whether this trains a parking (park or AVP) driver: a PPO policy over the continuous park action."""
+        return self.task != "cruise"
+
+    def variants(self) -> list[dict[str, Any]]:
+        """The env settings of each garage's geometry and actors (:class:`FleetDriveEnv`'s ``variants``): every
+        pair of :attr:`geometries` and :attr:`scenarios`, the scenarios varying fastest."""
+        geometries = [PARK_GEOMETRIES[name].env_kwargs() for name in self.geometries] or [{}]
+        scenarios = [{} if name == "none" else {"scenario": name} for name in self.scenarios] or [{}]
+        pairs = [{**g, **a} for g in geometries for a in scenarios]
+        return [] if pairs == [{}] else pairs
 
 
 def _weights(cfg: DriverTrainConfig, sources: list[CruiseSource], iteration: int,
@@ -182,13 +218,14 @@ def _hunted(out: Path, it: int, sources: list[CruiseSource], cfg: DriverTrainCon
     return [s.source for s in result.ranked if s.failures][: cfg.hunt_keep]
 
 
-def _make_venv(sources: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any], expert: bool):
+def _make_venv(sources: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any], expert: bool,
+               variants: list[dict[str, Any]] | None = None):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from garage_mj.driving.learning.fleet_env import FleetDriveEnv
 
     def make():
-        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs)
+        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs, variants=variants)
 
     if n_envs == 1:
         return DummyVecEnv([make])
@@ -217,7 +254,7 @@ def _collect(model, venv, steps: int, beta: float, seed: int, weights: np.ndarra
         actions = labels
         if use_model.any():  # one forward pass on one thread: the workers have the cores
             mine, _ = model.predict(obs, deterministic=True)
-            actions = np.where(use_model, mine, labels)
+            actions = np.where(use_model.reshape(-1, *([1] * (labels.ndim - 1))), mine, labels)
         obs, _, dones, infos = venv.step(actions)
         labels = np.array([i["expert_action"] for i in infos])
         for e in np.flatnonzero(dones):
@@ -228,18 +265,36 @@ def _collect(model, venv, steps: int, beta: float, seed: int, weights: np.ndarra
                 failures[k] += infos[e]["outcome"] != "success"
             labels[e] = venv.reset_infos[e]["expert_action"]
             own[e] = False
-    return (np.concatenate(images), np.concatenate(vectors), np.concatenate(acts).astype(np.int64),
+    acts = np.concatenate(acts)
+    return (np.concatenate(images), np.concatenate(vectors), acts.astype(np.int64 if acts.ndim == 1 else np.float32),
             drives, failures, outcomes)
+
+
+#: Weights of the park command's parts in a parking driver's imitation loss: pedal, steer, gear.
+PARK_LOSS_WEIGHTS = (1.0, 2.0, 1.0)
+
+
+def _near(cfg: DriverTrainConfig, vectors: np.ndarray) -> np.ndarray:
+    """Which states are the last metres of the test, where the stop (or the stall) is close: a cruise driver's
+    within :data:`~garage_mj.driving.learning.observation.NEAR_RANGE` of the goal, a parking driver's with the stall
+    centre within :data:`~garage_mj.driving.learning.observation.SLOT_NEAR` ahead and aside."""
+    from garage_mj.driving.learning.observation import PARK_VECTOR_KEYS, VECTOR_KEYS
+
+    if cfg.parking:
+        x, y = PARK_VECTOR_KEYS.index("slot_near_x"), PARK_VECTOR_KEYS.index("slot_near_y")
+        return (np.abs(vectors[:, x]) < 1.0) & (np.abs(vectors[:, y]) < 1.0)
+    return vectors[:, VECTOR_KEYS.index("near_goal")] < 1.0
 
 
 def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg: DriverTrainConfig,
          seed: int) -> tuple[float, float]:
-    """``epochs`` passes of cross-entropy on the Q-network over the states (those within
-    :data:`~garage_mj.driving.learning.observation.NEAR_RANGE` of the goal weighted ``stop_weight``); (mean loss,
-    agreement) of the last."""
+    """``epochs`` passes over the states (the last metres, :func:`_near`, weighted ``stop_weight``): a cruise
+    driver's cross-entropy on the Q-network, a parking driver's weighted squared error of the policy's mean park
+    command (:data:`PARK_LOSS_WEIGHTS`); (mean loss, agreement) of the last (a parking driver agrees when its gear
+    and the sign of its pedal are the oracle's and its steer is within 0.1 of it)."""
+    if cfg.parking:
+        return _fit_park(model, images, vectors, labels, cfg, seed)
     import torch
-
-    from garage_mj.driving.learning.observation import VECTOR_KEYS
 
     torch.manual_seed(seed)
     q_net = model.policy.q_net
@@ -247,8 +302,7 @@ def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg
     opt = torch.optim.Adam(q_net.parameters(), lr=cfg.learning_rate)
     rng = np.random.default_rng(seed)
     n = len(labels)
-    near = VECTOR_KEYS.index("near_goal")
-    weights = np.where(vectors[:, near] < 1.0, cfg.stop_weight, 1.0).astype(np.float32)
+    weights = np.where(_near(cfg, vectors), cfg.stop_weight, 1.0).astype(np.float32)
     loss_sum = agree = 0.0
     for _ in range(cfg.epochs):
         order = rng.permutation(n)
@@ -270,17 +324,59 @@ def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg
     return loss_sum / n, agree / n
 
 
+def _fit_park(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg: DriverTrainConfig,
+              seed: int) -> tuple[float, float]:
+    """:func:`_fit` of a parking driver: the PPO policy's mean action regressed on the oracle's park command."""
+    import torch
+
+    torch.manual_seed(seed)
+    policy = model.policy
+    policy.set_training_mode(True)
+    opt = torch.optim.Adam(policy.parameters(), lr=cfg.learning_rate)
+    rng = np.random.default_rng(seed)
+    n = len(labels)
+    weights = np.where(_near(cfg, vectors), cfg.stop_weight, 1.0).astype(np.float32)
+    part = torch.as_tensor(PARK_LOSS_WEIGHTS, dtype=torch.float32)
+    loss_sum = agree = 0.0
+    for _ in range(cfg.epochs):
+        order = rng.permutation(n)
+        loss_sum = agree = 0.0
+        for lo in range(0, n, cfg.batch_size):
+            idx = np.sort(order[lo: lo + cfg.batch_size])
+            obs = {"image": torch.as_tensor(images[idx]), "vector": torch.as_tensor(vectors[idx])}
+            y = torch.as_tensor(labels[idx])
+            mean = policy.get_distribution(obs).distribution.mean
+            w = torch.as_tensor(weights[idx])
+            loss = ((((mean - y) ** 2) * part).sum(1) * w).sum() / w.sum()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            loss_sum += loss.item() * len(idx)
+            with torch.no_grad():
+                same = ((mean[:, 2] >= 0) == (y[:, 2] >= 0)) & ((mean[:, 0] >= 0) == (y[:, 0] >= 0)) \
+                    & ((mean[:, 1].clamp(-1, 1) - y[:, 1]).abs() <= 0.1)
+                agree += float(same.sum())
+    policy.set_training_mode(False)
+    return loss_sum / n, agree / n
+
+
 def validate(model_path: str | Path, sources: list[CruiseSource], tests: int, seed: int,
-             env_kwargs: dict[str, Any] | None = None) -> dict[str, int]:
-    """Outcome counts of ``tests`` cruise tests of the model saved at ``model_path`` on ``sources``, dealt
-    round-robin over the garages: test ``k`` of a garage is cruise test ``k`` (:func:`~garage_mj.driving.cruise.run_test`
-    with the driver ``learned:PATH``, as ``garage-mj cruise`` would drive it; ``infeasible`` counts the
-    tests no driver could do, which are not driven)."""
-    settings = CruiseSettings.from_env_kwargs(f"learned:{Path(model_path).resolve()}", env_kwargs, seed=seed,
-                                              action_type="discrete")
+             env_kwargs: dict[str, Any] | None = None, variants: list[dict[str, Any]] | None = None) -> dict[str, int]:
+    """Outcome counts of ``tests`` tests of the model saved at ``model_path`` on ``sources``, dealt
+    round-robin over the garages: test ``k`` of a garage is its cruise (park, AVP: ``env_kwargs``' ``task``) test
+    ``k`` (:func:`~garage_mj.driving.cruise.run_test` with the driver ``learned:PATH``, as ``garage-mj cruise``
+    would drive it; garage ``g`` with ``variants[g % len(variants)]`` over ``env_kwargs``; ``infeasible`` and
+    ``unproven`` count the tests that are not driven)."""
+    env = dict(env_kwargs or {})
+    task = {k: env.pop(k) for k in ("task", "maneuver") if k in env}
+    parking = task.get("task", "cruise") != "cruise"
     counts: dict[str, int] = {}
     try:
         for g, src in enumerate(sources[:tests]):
+            variant = variants[g % len(variants)] if variants else {}
+            settings = CruiseSettings.from_env_kwargs(f"learned:{Path(model_path).resolve()}", {**env, **variant},
+                                                      seed=seed, action_type="continuous" if parking else "discrete",
+                                                      **task).with_sensors(PARK_SENSORS if parking else ())
             for index in range(len(range(g, tests, len(sources)))):  # this garage's share of the tests
                 outcome = run_test(src, index, settings)["outcome"]
                 counts[outcome] = counts.get(outcome, 0) + 1
@@ -291,18 +387,24 @@ def validate(model_path: str | Path, sources: list[CruiseSource], tests: int, se
 
 def _success(counts: dict[str, int]) -> float | None:
     """Success over the feasible tests of ``validate``'s counts (None: no feasible test)."""
-    feasible = sum(v for k, v in counts.items() if k != "infeasible")
+    feasible = sum(v for k, v in counts.items() if k not in ("infeasible", "unproven"))
     return round(counts.get("success", 0) / feasible, 4) if feasible else None
 
 
-def _load_checkpoint(path: Path, venv, **kwargs: Any):
+def _algorithm(cfg: DriverTrainConfig) -> type:
+    """The SB3 class of the model a run trains: DQN for a cruise driver, PPO (its policy, trained by imitation)
+    for a parking one."""
+    from stable_baselines3 import DQN, PPO
+
+    return PPO if cfg.parking else DQN
+
+
+def _load_checkpoint(path: Path, venv, cfg: DriverTrainConfig, **kwargs: Any):
     """A checkpoint saved by :func:`_save` on ``venv`` (None: none), ``kwargs`` set on the model, read as data
     (:func:`~garage_mj.driving.learning.saved_model.load_driver_model`: weights and plain settings, nothing in
     it unpickled or run)."""
-    from stable_baselines3 import DQN
-
     try:
-        return load_driver_model(path, DQN, env=venv, **kwargs)
+        return load_driver_model(path, _algorithm(cfg), env=venv, **kwargs)
     except ModelFileError as exc:
         raise TrainDriverError(f"checkpoint {path} cannot be resumed: {exc}; "
                                "run garage-mj train-driver again with another --out") from None
@@ -331,10 +433,11 @@ class _Workers:
     """The worker envs a run drives, made again when the garages they draw from change; closed once at the end.
     A worker process that dies under the run (``kill -9``, the OOM killer, a segfault) is :meth:`lost`: one line."""
 
-    def __init__(self, pool: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any]) -> None:
-        self.pool, self.n_envs, self.env_kwargs = pool, n_envs, env_kwargs
+    def __init__(self, pool: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any],
+                 variants: list[dict[str, Any]] | None = None) -> None:
+        self.pool, self.n_envs, self.env_kwargs, self.variants = pool, n_envs, env_kwargs, variants
         self.venv = None
-        self.venv = self._open(lambda: _make_venv(pool, n_envs, env_kwargs, expert=True))
+        self.venv = self._open(lambda: _make_venv(pool, n_envs, env_kwargs, expert=True, variants=variants))
 
     def _open(self, make: Callable[[], Any]) -> Any:
         try:
@@ -347,7 +450,8 @@ class _Workers:
         if pool is not self.pool:  # the workers hold other garages than this iteration draws from
             self.pool = pool
             self.close()
-            self.venv = self._open(lambda: _make_venv(pool, self.n_envs, self.env_kwargs, expert=True))
+            self.venv = self._open(lambda: _make_venv(pool, self.n_envs, self.env_kwargs, expert=True,
+                                                      variants=self.variants))
 
     def remake(self, make: Callable[[], Any]) -> Any:
         """Close the workers, then run on those ``make()`` returns."""
@@ -400,12 +504,14 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
         raise TrainDriverError("no garages to train on: check the garage set's filters")
     env_kwargs = dict(env_kwargs or {})
     env_kwargs.setdefault("occupancy", cfg.occupancy)
+    if cfg.parking:
+        env_kwargs.update(task=cfg.task, maneuver=cfg.maneuver)
     manifest = _new_manifest(garages, validation, sources, cfg, seed, env_kwargs)
     state = _resumed_state(out, manifest, cfg, resume)
     with _undone_if_no_run(out):
         _prepare_folder(out, garages, validation)
         torch.set_num_threads(cfg.torch_threads)
-        workers = _Workers(sources, cfg.n_envs, env_kwargs)  # the garages the worker envs draw from (the hunt adds some)
+        workers = _Workers(sources, cfg.n_envs, env_kwargs, cfg.variants())  # the garages the worker envs draw from (the hunt adds some)
         try:
             model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed)
             state = _dagger(model, workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs,
@@ -423,7 +529,9 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
 def _new_manifest(garages, validation, sources: list[CruiseSource], cfg: DriverTrainConfig, seed: int,
                   env_kwargs: dict[str, Any]) -> dict[str, Any]:
     """The run's ``run.json`` without its ``state``: what it trains, on what, with which settings."""
-    return {"kind": "garage-mj driver", "algorithm": "DQN (MultiInputPolicy), DAgger warm start",
+    algorithm = ("PPO (MultiInputPolicy) policy, trained by DAgger on the continuous park action" if cfg.parking
+                 else "DQN (MultiInputPolicy), DAgger warm start")
+    return {"kind": "garage-mj driver", "algorithm": algorithm, "task": cfg.task,
             "seed": seed, "config": dataclasses.asdict(cfg), "env": env_kwargs,
             "garages": getattr(garages, "origin", f"{len(sources)} garages"),
             "garage_hashes": [s.hash for s in sources],
@@ -505,16 +613,19 @@ def _undone_if_no_run(out: Path):
 
 def _start_model(out: Path, done: int, venv, cfg: DriverTrainConfig, seed: int):
     """The model after ``done`` iterations: the last checkpoint's, or a new one seeded with ``seed``."""
-    from stable_baselines3 import DQN
+    from stable_baselines3 import DQN, PPO
 
     if done:
-        return _load_checkpoint(out / "checkpoints" / f"iter_{done - 1:03d}.zip", venv)
+        return _load_checkpoint(out / "checkpoints" / f"iter_{done - 1:03d}.zip", venv, cfg)
     from garage_mj.driving.learning.network import CameraRouteExtractor
 
     policy_kwargs = {"net_arch": list(cfg.net_arch), "features_extractor_class": CameraRouteExtractor,
                      "normalize_images": False,  # the extractor scales the image itself
                      "features_extractor_kwargs": {"channels": tuple(cfg.cnn_channels),
                                                    "cnn_features": cfg.cnn_features}}
+    if cfg.parking:  # the policy is trained by imitation (:func:`_fit_park`); PPO holds it and could fine-tune it
+        return PPO("MultiInputPolicy", venv, seed=seed, device="cpu", verbose=0, n_steps=64, batch_size=64,
+                   policy_kwargs=policy_kwargs)
     return DQN("MultiInputPolicy", venv, seed=seed, device="cpu", verbose=0, buffer_size=1,
                learning_starts=0, policy_kwargs=policy_kwargs)
 
@@ -564,7 +675,8 @@ def _dagger(model, workers: _Workers, out: Path, manifest: dict[str, Any], state
                                cfg, seed * 1_000 + it)
         ckpt = out / "checkpoints" / f"iter_{it:03d}.zip"
         _save(model, ckpt)
-        val = validate(ckpt, val_sources, cfg.val_tests, seed + 7_919, env_kwargs) if cfg.val_tests else {}
+        val = (validate(ckpt, val_sources, cfg.val_tests, seed + 7_919, env_kwargs, cfg.variants())
+               if cfg.val_tests else {})
         row = _curve_row(it, sum(len(x) for x in labels), beta, loss, agreement, outcomes, val, t0)
         state = {"iterations_done": it + 1, "curve": [*state["curve"], row],
                  "wall_s": state["wall_s"] + row["wall_s"], "failures": failures.tolist(),
@@ -581,7 +693,7 @@ def _dagger(model, workers: _Workers, out: Path, manifest: dict[str, Any], state
 
 
 #: The arrays of a data shard (``data/iter_NNN.npz``) and how many axes each has.
-_SHARD_ARRAYS = {"image": 4, "vector": 2, "label": 1}
+_SHARD_ARRAYS = {"image": (4,), "vector": (2,), "label": (1, 2)}  # a label: an action index or a park command
 
 
 def _load_shard(path: Path, out: Path) -> dict[str, np.ndarray]:
@@ -590,7 +702,7 @@ def _load_shard(path: Path, out: Path) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: np.asarray(z[k]) for k in _SHARD_ARRAYS}
-        if any(a.ndim != _SHARD_ARRAYS[k] or a.dtype.kind not in "biuf" for k, a in arrays.items()):
+        if any(a.ndim not in _SHARD_ARRAYS[k] or a.dtype.kind not in "biuf" for k, a in arrays.items()):
             raise ValueError("arrays of other shapes or types")
         if len({len(a) for a in arrays.values()}) != 1:
             raise ValueError("arrays of unequal lengths")
@@ -631,7 +743,7 @@ def _final_model(workers: _Workers, out: Path, manifest: dict[str, Any], state: 
                                                  str(out / RL_MONITOR)))
         venv.seed(seed * 1_000 + cfg.iterations)
         torch.set_num_threads(cfg.torch_threads)
-        model = _load_checkpoint(last, venv, exploration_initial_eps=0.05, exploration_final_eps=0.05,
+        model = _load_checkpoint(last, venv, cfg, exploration_initial_eps=0.05, exploration_final_eps=0.05,
                          exploration_fraction=1.0, learning_starts=min(1_000, cfg.rl_timesteps // 2),
                          buffer_size=50_000, batch_size=64, learning_rate=1e-4, target_update_interval=1_000)
         model.set_random_seed(seed + cfg.iterations)
@@ -642,6 +754,6 @@ def _final_model(workers: _Workers, out: Path, manifest: dict[str, Any], state: 
         state["rl"] = {"timesteps": cfg.rl_timesteps, "val": val, "val_success": _success(val)}
         _write_manifest(out, manifest, state)
     elif not (out / MODEL).exists():
-        _save(_load_checkpoint(last, None), out / MODEL, exclude=["replay_buffer"])
+        _save(_load_checkpoint(last, None, cfg), out / MODEL, exclude=["replay_buffer"])
         if state.pop("rl", None) is not None:  # a DQN stage asked for before and not now
             _write_manifest(out, manifest, state)
