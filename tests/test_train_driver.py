@@ -340,3 +340,90 @@ def test_a_killed_env_worker_is_one_line_that_says_resume(tmp_path):
     assert lines[0].endswith("run the same command with --resume to continue")
     if "(worker " in lines[0]:  # killed while the envs stepped (not while they started): it is named
         assert "was killed by signal SIGKILL" in lines[0]
+
+
+# -- the parking driver (train-driver --task park|avp) ------------------------------------------------------------
+def _park_obs(rng, **over):
+    obs = {"depth": rng.uniform(0, 30, (64, 64)).astype(np.float32),
+           "segmentation": rng.integers(0, 14, (64, 64)).astype(np.uint8),
+           "rear_depth": rng.uniform(0, 30, (64, 64)).astype(np.float32),
+           "rear_segmentation": rng.integers(0, 14, (64, 64)).astype(np.uint8),
+           "waypoint": np.array([4.0, -1.0], np.float32), "speed": np.array([-0.5], np.float32),
+           "remaining": np.array([5.0], np.float32), "steer": np.array([0.5], np.float32),
+           "goal": np.array([3.0, 3.0], np.float32), "stall": np.array([3.0, -4.0, 0.0, 1.0], np.float32),
+           "gear": np.array([-1.0], np.float32), "ultrasonic": np.full(12, 5.0, np.float32),
+           "slot": np.array([3.0, -4.2, 1.57, 2.5, 4.5], np.float32),
+           "pose": np.array([1.0, 2.0, 0.3], np.float32), "park_plan": np.zeros((5, 3), np.float32)}
+    obs.update(over)
+    return obs
+
+
+def test_park_observation_reads_the_parking_sensors_and_nothing_privileged():
+    from garage_mj.driving.learning.observation import PARK_VECTOR_KEYS, park_observation, park_space
+
+    rng = np.random.default_rng(0)
+    obs = _park_obs(rng)
+    out = park_observation(obs, route=False)
+    assert park_space(64, 64).contains(out)
+    vec = dict(zip(PARK_VECTOR_KEYS, out["vector"].tolist()))
+    # a park test's route is its reference plan: not read; an AVP test's (the cruise to the stall) is
+    assert vec["route_x"] == vec["route_y"] == vec["route_left"] == 0.0
+    assert park_observation(obs, route=True)["vector"][PARK_VECTOR_KEYS.index("route_x")] == 1.0
+    assert vec["gear"] == -1.0 and vec["slot_near_x"] == 1.0 and vec["slot_near_y"] == -1.0
+    # the rear camera is the image's second half; privileged entries change nothing
+    assert not np.array_equal(park_observation(_park_obs(rng), route=False)["image"][2:], out["image"][2:])
+    moved = park_observation(dict(obs, pose=np.array([9.0, 9.0, 1.0], np.float32)), route=False)
+    for key in out:
+        np.testing.assert_array_equal(out[key], moved[key])
+    with pytest.raises(ValueError, match="rear_depth, ultrasonic, slot.*--sensors rear_camera,ultrasonic,slot"):
+        park_observation({k: v for k, v in obs.items() if k not in ("rear_depth", "ultrasonic", "slot")}, route=False)
+
+
+def test_a_parking_config_refuses_what_only_a_cruise_driver_does():
+    from garage_mj.driving.learning.train import DriverTrainConfig
+
+    with pytest.raises(ValueError, match="rl_timesteps"):
+        DriverTrainConfig(task="park", rl_timesteps=10)
+    with pytest.raises(ValueError, match="curriculum"):
+        DriverTrainConfig(task="avp", curriculum="hunt")
+    with pytest.raises(ValueError, match="geometries, scenarios"):
+        DriverTrainConfig(geometries=("tight",))
+    pairs = DriverTrainConfig(task="park", geometries=("default", "parallel"), scenarios=("none", "park_clutter"))
+    assert pairs.variants() == [{}, {"scenario": "park_clutter"}, {"world": {"stall_angle": 0.0}},
+                                {"world": {"stall_angle": 0.0}, "scenario": "park_clutter"}]
+
+
+def test_train_driver_task_park_trains_a_parking_model_that_parks_with_its_sensors(tmp_path, capsys):
+    import csv
+
+    from garage_mj.cli import main
+    from garage_mj.core.backends import Compute
+    from garage_mj.driving.cruise import run_cruise
+    from garage_mj.driving.drivers import load_driver, tasks_of
+    from garage_mj.driving.drivers.learned import LearnedParkDriver
+    from garage_mj.driving.sources import CruiseSettings
+
+    config = tmp_path / "park.toml"
+    config.write_text("epochs = 1\nbatch_size = 32\nval_tests = 1\ncnn_channels = [8, 16, 16]\n")
+    out = tmp_path / "run"
+    argv = ["train-driver", "tiny_7x11", "-n", "2", "--task", "park", "--geometries", "default,tight",
+            "--iterations", "1", "--steps", "30", "--workers", "1", "--config", str(config), "--out", str(out),
+            "--no-progress"]
+    assert main(argv) == 0
+    assert "drive it with --driver learned:" in capsys.readouterr().out
+    run = json.loads((out / "run.json").read_text())
+    assert run["task"] == "park" and run["config"]["geometries"] == ["default", "tight"]
+    shard = np.load(out / "data" / "iter_000.npz")
+    assert shard["image"].shape[1:] == (4, 64, 64) and shard["label"].shape[1:] == (3,)  # the park command
+    spec = f"learned:{out / 'model.zip'}"
+    driver = load_driver(spec)
+    assert isinstance(driver, LearnedParkDriver) and tasks_of(spec) == ("park", "avp")
+    # a run turns on the sensors the driver observes, and stores them
+    result = run_cruise(painted_sources("tiny_7x11", 1, seed=0), 1, CruiseSettings(driver=spec, task="park"),
+                        tmp_path / "cruise", compute=Compute(workers=1, progress=False))
+    stored = json.loads((tmp_path / "cruise" / "run.json").read_text())
+    assert stored["action_type"] == "continuous"
+    assert stored["env"]["sensors"] == {"rear_camera": True, "ultrasonic": True, "slot": True}
+    rows = list(csv.DictReader((tmp_path / "cruise" / "tests.csv").open()))
+    assert len(rows) == 1 and rows[0]["task"] == "park" and rows[0]["outcome"]
+    assert result is not None

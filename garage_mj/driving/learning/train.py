@@ -64,10 +64,10 @@ from garage_mj.core.config import bounded, check_bounds, load_config, refuse_oth
 from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.core.model_file import ModelFileError
+from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.cruise import run_test
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
-from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.hunt import HuntConfig, hunt
 from garage_mj.driving.learning.observation import PARK_SENSORS
 from garage_mj.driving.learning.saved_model import load_driver_model
@@ -75,12 +75,15 @@ from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sim.outcomes import OutcomeKind
 from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
+from garage_mj.scene.world import GeometryError
 
 MANIFEST = "run.json"
 CURVE = "curve.csv"
 MODEL = "model.zip"
 RL_MONITOR = "rl_monitor.csv"
 CURRICULA = ("uniform", "difficulty", "adversarial", "hunt")
+#: ``validate``'s count of the tests of a garage that cannot be built in its park geometry (not driven, not counted).
+UNBUILDABLE = "unbuildable"
 #: The outcomes the training curve counts apart (``val_<kind>``); the other failures are ``val_other``.
 CURVE_KINDS = (OutcomeKind.COLLISION.value, OutcomeKind.TIMEOUT.value)
 CURVE_FIELDS = ("iteration", "states", "beta", "loss", "agreement", "own_drive_success", "val_success",
@@ -366,7 +369,8 @@ def validate(model_path: str | Path, sources: list[CruiseSource], tests: int, se
     round-robin over the garages: test ``k`` of a garage is its cruise (park, AVP: ``env_kwargs``' ``task``) test
     ``k`` (:func:`~garage_mj.driving.cruise.run_test` with the driver ``learned:PATH``, as ``garage-mj cruise``
     would drive it; garage ``g`` with ``variants[g % len(variants)]`` over ``env_kwargs``; ``infeasible`` and
-    ``unproven`` count the tests that are not driven)."""
+    ``unproven`` count the tests that are not driven, :data:`UNBUILDABLE` those of a garage that cannot be built in
+    its geometry)."""
     env = dict(env_kwargs or {})
     task = {k: env.pop(k) for k in ("task", "maneuver") if k in env}
     parking = task.get("task", "cruise") != "cruise"
@@ -378,7 +382,10 @@ def validate(model_path: str | Path, sources: list[CruiseSource], tests: int, se
                                                       seed=seed, action_type="continuous" if parking else "discrete",
                                                       **task).with_sensors(PARK_SENSORS if parking else ())
             for index in range(len(range(g, tests, len(sources)))):  # this garage's share of the tests
-                outcome = run_test(src, index, settings)["outcome"]
+                try:
+                    outcome = run_test(src, index, settings)["outcome"]
+                except GeometryError:  # the garage cannot be built in its variant's geometry (the draw leaves it out)
+                    outcome = UNBUILDABLE
                 counts[outcome] = counts.get(outcome, 0) + 1
     finally:
         close_cached_env()
@@ -387,7 +394,7 @@ def validate(model_path: str | Path, sources: list[CruiseSource], tests: int, se
 
 def _success(counts: dict[str, int]) -> float | None:
     """Success over the feasible tests of ``validate``'s counts (None: no feasible test)."""
-    feasible = sum(v for k, v in counts.items() if k not in ("infeasible", "unproven"))
+    feasible = sum(v for k, v in counts.items() if k not in ("infeasible", "unproven", UNBUILDABLE))
     return round(counts.get("success", 0) / feasible, 4) if feasible else None
 
 
@@ -724,7 +731,8 @@ def _curve_row(it: int, states: int, beta: float, loss: float, agreement: float,
             "own_drive_success": round(own.count("success") / len(own), 4) if own else "",
             "val_success": "" if success is None else success,
             **{f"val_{k}": val.get(k, 0) for k in CURVE_KINDS},
-            "val_other": sum(v for k, v in val.items() if k not in ("success", *CURVE_KINDS, "infeasible")),
+            "val_other": sum(v for k, v in val.items()
+                             if k not in ("success", *CURVE_KINDS, "infeasible", "unproven", UNBUILDABLE)),
             "wall_s": round(time.perf_counter() - t0, 1)}
 
 
