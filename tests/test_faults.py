@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import gc
 import hashlib
 import io
 import json
@@ -812,6 +813,34 @@ def test_a_time_limit_running_out_in_a_finalizer_is_not_lost(monkeypatch):
     monkeypatch.setattr(sys, "unraisablehook", lost.append)
     start = time.monotonic()
     res = backends._limited(_finalizes_then_sleeps, None, 0.3)
+    assert isinstance(res, backends.LostJob) and res.kind == "timeout"
+    assert time.monotonic() - start < 3 and lost == []
+
+
+def _slow_gc_callback(phase, info):  # noqa: ARG001
+    end = time.monotonic() + 0.6
+    while time.monotonic() < end:  # the time limit's alarm lands in here (hypothesis registers such a callback)
+        pass
+
+
+def _collects_then_sleeps(_job):
+    gc.collect()  # runs the gc callbacks: one of them slow
+    time.sleep(10)
+
+
+def test_a_time_limit_running_out_in_a_gc_callback_is_not_lost(monkeypatch):
+    """The same for a callback of the garbage collector (``gc.callbacks``: hypothesis's pytest plugin keeps one),
+    where a raise is swallowed too: the warning a full ``make test`` showed now and then."""
+    from garage_mj.core import backends
+
+    lost = []
+    monkeypatch.setattr(sys, "unraisablehook", lost.append)
+    gc.callbacks.append(_slow_gc_callback)
+    try:
+        start = time.monotonic()
+        res = backends._limited(_collects_then_sleeps, None, 0.3)
+    finally:
+        gc.callbacks.remove(_slow_gc_callback)
     assert isinstance(res, backends.LostJob) and res.kind == "timeout"
     assert time.monotonic() - start < 3 and lost == []
 

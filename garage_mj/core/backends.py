@@ -45,6 +45,7 @@ holds), so a lost node costs the work since that checkpoint, not the batch.
 from __future__ import annotations
 
 import contextlib
+import gc
 import logging
 import multiprocessing as mp
 import numbers
@@ -182,11 +183,13 @@ def timeout_reason(seconds: float) -> str:
 
 
 def _in_finalizer(frame) -> bool:
-    """Whether ``frame`` runs inside a finalizer (``__del__``, a ``weakref.finalize`` callback): Python swallows what
-    is raised there and reports it as unraisable, so a time limit must wait for its next alarm."""
+    """Whether ``frame`` runs inside a finalizer (``__del__``, a ``weakref.finalize`` callback) or a callback of the
+    garbage collector (``gc.callbacks``; hypothesis's pytest plugin keeps one): Python swallows what is raised there
+    and reports it as unraisable, so a time limit must wait for its next alarm."""
+    gc_codes = {getattr(getattr(cb, "__func__", cb), "__code__", None) for cb in gc.callbacks}
     while frame is not None:
         code = frame.f_code
-        if code.co_name == "__del__" or code.co_filename.endswith("weakref.py"):
+        if code.co_name == "__del__" or code.co_filename.endswith("weakref.py") or code in gc_codes:
             return True
         frame = frame.f_back
     return False
@@ -198,7 +201,7 @@ def _time_limit(seconds: float | None) -> Iterator[None]:
     only on the main thread of a POSIX process; elsewhere no limit). Interrupts Python code and waits
     (``time.sleep``, locks, sockets), not a C call that never returns: a pool worker is killed for that.
     The timer repeats every :data:`_REPEAT_S` until the block ends, since a raise that lands in a
-    ``__del__`` or a callback is swallowed there."""
+    ``__del__``, a weakref or a gc callback is swallowed there (:func:`_in_finalizer`)."""
     usable = (seconds is not None and hasattr(signal, "setitimer")
               and threading.current_thread() is threading.main_thread())
     if not usable:
