@@ -84,7 +84,7 @@ SLOT_RANGE = 10.0  # [m] the slot detector's position, read up to this ...
 SLOT_NEAR = 2.0  # [m] ... and again at a finer scale, for the last metres into the stall
 ULTRASONIC_RANGE = 5.0  # [m] the rangefinders' farthest reading (park_sensors.ULTRASONIC_MAX)
 PARK_VECTOR_KEYS = ("slot_x", "slot_y", "slot_cos", "slot_sin", "slot_near_x", "slot_near_y", "slot_width",
-                    "slot_depth", "speed", "steer", "gear", *(f"ultrasonic_{i}" for i in range(12)),
+                    "slot_depth", "facing_cos", "facing_sin", "speed", "steer", "gear", *(f"ultrasonic_{i}" for i in range(12)),
                     "route_x", "route_y", "route_left")
 PARK_IMAGE_CHANNELS = 4  # front depth, front segmentation, rear depth, rear segmentation
 
@@ -109,16 +109,18 @@ def park_observation(obs: dict[str, Any], route: bool) -> dict[str, np.ndarray]:
 
     - ``image``: (4, H, W) uint8: the front and the rear camera, each as depth and segmentation (as
       :func:`learned_observation`'s two planes);
-    - ``vector``: (26,) float32 (:data:`PARK_VECTOR_KEYS`): the slot detector's stall centre in the car frame
+    - ``vector``: (28,) float32 (:data:`PARK_VECTOR_KEYS`): the slot detector's stall centre in the car frame
       (over :data:`SLOT_RANGE`, and again over :data:`SLOT_NEAR`, clipped to [-1, 1]), the cosine and sine of
-      the direction it opens to, its width and depth (over 5 m and 6 m), the speed, the road-wheel angle, the
+      the direction it opens to, its width and depth (over 5 m and 6 m), the cosine and sine of the heading the
+      car must end in, relative to its own (the test's instruction: reverse-in or nose-in, from the ``stall``
+      entry; its position is not read), the speed, the road-wheel angle, the
       gear (+1 D, -1 R), the 12 ultrasonic ranges over 5 m, and with ``route`` (an AVP test: the cruise to the
       stall) the route waypoint ahead (over its lookahead) and the route left (over :data:`REMAINING_RANGE`);
       without it (a park test, whose route is the reference plan the driver must not read) those three are 0.
 
     Nothing privileged: no pose, no plan, no other road user's state (:data:`UNPRIVILEGED` only)."""
     obs = {k: obs[k] for k in UNPRIVILEGED if k in obs}
-    missing = [k for k in ("rear_depth", "ultrasonic", "slot", "gear") if k not in obs]
+    missing = [k for k in ("rear_depth", "ultrasonic", "slot", "gear", "stall") if k not in obs]
     if missing:
         raise ValueError(f"a learned parking driver observes {', '.join(missing)}: run park or AVP tests with the "
                          f"sensors {', '.join(PARK_SENSORS)} on (--sensors {','.join(PARK_SENSORS)})")
@@ -130,6 +132,7 @@ def park_observation(obs: dict[str, Any], route: bool) -> dict[str, np.ndarray]:
     _camera_planes(depth, obs["segmentation"], image[0:2])
     _camera_planes(obs["rear_depth"], obs["rear_segmentation"], image[2:4])
     sx, sy, syaw, swidth, sdepth = (float(v) for v in np.asarray(obs["slot"]).reshape(-1)[:5])
+    fcos, fsin = (float(v) for v in np.asarray(obs["stall"]).reshape(-1)[2:4])
     speed = float(np.asarray(obs["speed"]).reshape(-1)[0])
     steer = float(np.asarray(obs["steer"]).reshape(-1)[0]) if "steer" in obs else 0.0
     gear = float(np.asarray(obs["gear"]).reshape(-1)[0])
@@ -141,6 +144,6 @@ def park_observation(obs: dict[str, Any], route: bool) -> dict[str, np.ndarray]:
     else:
         way = [0.0, 0.0, 0.0]
     vector = np.array([_unit(sx / SLOT_RANGE), _unit(sy / SLOT_RANGE), math.cos(syaw), math.sin(syaw),
-                       _unit(sx / SLOT_NEAR), _unit(sy / SLOT_NEAR), swidth / 5.0, sdepth / 6.0,
+                       _unit(sx / SLOT_NEAR), _unit(sy / SLOT_NEAR), swidth / 5.0, sdepth / 6.0, fcos, fsin,
                        speed / SPEED_RANGE, steer, gear, *sonar.tolist(), *way], dtype=np.float32)
     return {"image": image, "vector": vector}
