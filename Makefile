@@ -82,7 +82,7 @@ docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check garage_mj tests eval generation pytest_garage_mj.py docs/pytest_example
+	$(VENV)/bin/ruff check garage_mj tests eval generation pytest_garage_mj.py docs/pytest_example docs/parking_example
 
 clean:
 	rm -rf $(VENV) $(QC_VENV) $(BLENDER_VENV) build site *.egg-info .pytest_cache

@@ -95,3 +95,42 @@ def test_a_newcomer_follows_the_docs_to_their_own_driver(tmp_path):
     out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_my_driver.py"],
                          capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
     assert out.returncode == 0 and "1 passed" in out.stdout, out.stdout + out.stderr
+
+
+def test_a_newcomer_brings_their_own_parking_stack(tmp_path):
+    """docs/own-parking-stack.md as a newcomer follows it: its parker is docs/parking_example/my_parker.py word for
+    word, the test file's heart is in test_my_parker.py, and the page's commands run on those files in an empty
+    folder (`garage-mj` as `python -m garage_mj`): park tests from the CLI and under pytest (every one parked),
+    then a problem file exported and planned with docs/park_problem_example.py, clear of the obstacles and scored
+    against the reference plan. About 30 s on 2 busy cores: one garage, 3 park tests twice, 116 problems planned."""
+    import glob
+    import json
+
+    example = ROOT / "docs" / "parking_example"
+    assert _page_block("own-parking-stack.md", "python", "class MyParker") == (example / "my_parker.py").read_text()
+    heart = _page_block("own-parking-stack.md", "python", "def test_my_parker_parks")
+    assert all(line in (example / "test_my_parker.py").read_text() for line in heart.splitlines() if line.strip())
+    for name in ("my_parker.py", "test_my_parker.py"):
+        (tmp_path / name).write_text((example / name).read_text())
+    (tmp_path / "park_problem_example.py").write_text((ROOT / "docs" / "park_problem_example.py").read_text())
+    env = {**os.environ, "MUJOCO_GL": "egl", "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    program = {"garage-mj": ["-m", "garage_mj"], "python": [], "pytest": ["-m", "pytest", "-p", "no:cacheprovider"]}
+    commands = (_page_block("own-parking-stack.md", "sh", "--driver my_parker.py:MyParker").splitlines()
+                + _page_block("own-parking-stack.md", "sh", "--park-problems").splitlines()
+                + _page_block("own-parking-stack.md", "sh", "pytest test_my_parker.py").splitlines()[:1])
+    printed = {}
+    for line in commands:
+        args = shlex.split(line, comments=True)
+        if not args:  # a comment line: what the command before it prints
+            continue
+        args = [hit for a in args for hit in (sorted(glob.glob(a, root_dir=tmp_path)) if "*" in a else [a])]
+        assert args[0] in program, line
+        out = subprocess.run([sys.executable, *program[args[0]], *args[1:]], capture_output=True, text=True,
+                             cwd=tmp_path, env=env, timeout=120)
+        assert out.returncode == 0, line + "\n" + out.stdout + out.stderr
+        printed[args[0]] = out.stdout
+    summary = json.loads((tmp_path / "runs" / "park" / "summary.json").read_text())
+    assert summary["task"] == "park" and summary["feasible"] == 3 and summary["success_pct"] == 100.0, summary
+    scored = json.loads(printed["python"].strip().splitlines()[-1])
+    assert scored["found"] and scored["clear"] and 0.5 < scored["length_ratio"] < 3, scored
+    assert "1 passed" in printed["pytest"], printed["pytest"]
