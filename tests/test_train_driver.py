@@ -363,20 +363,20 @@ def test_park_observation_reads_the_parking_sensors_and_nothing_privileged():
 
     rng = np.random.default_rng(0)
     obs = _park_obs(rng)
-    out = park_observation(obs, route=False)
+    out = park_observation(obs)
     assert park_space(64, 64).contains(out)
     vec = dict(zip(PARK_VECTOR_KEYS, out["vector"].tolist()))
-    # a park test's route is its reference plan: not read; an AVP test's (the cruise to the stall) is
-    assert vec["route_x"] == vec["route_y"] == vec["route_left"] == 0.0
-    assert park_observation(obs, route=True)["vector"][PARK_VECTOR_KEYS.index("route_x")] == 1.0
     assert vec["gear"] == -1.0 and vec["slot_near_x"] == 1.0 and vec["slot_near_y"] == -1.0
-    # the rear camera is the image's second half; privileged entries change nothing
-    assert not np.array_equal(park_observation(_park_obs(rng), route=False)["image"][2:], out["image"][2:])
-    moved = park_observation(dict(obs, pose=np.array([9.0, 9.0, 1.0], np.float32)), route=False)
+    assert (vec["facing_cos"], vec["facing_sin"]) == (0.0, 1.0)  # the heading to end in: the stall entry's yaw
+    # the rear camera is the image's second half; privileged entries and the route (a park test's is its reference
+    # plan) change nothing
+    assert not np.array_equal(park_observation(_park_obs(rng))["image"][2:], out["image"][2:])
+    moved = park_observation(dict(obs, pose=np.array([9.0, 9.0, 1.0], np.float32),
+                                  waypoint=np.array([-3.0, 2.0], np.float32), remaining=np.array([1.0], np.float32)))
     for key in out:
         np.testing.assert_array_equal(out[key], moved[key])
     with pytest.raises(ValueError, match="rear_depth, ultrasonic, slot.*--sensors rear_camera,ultrasonic,slot"):
-        park_observation({k: v for k, v in obs.items() if k not in ("rear_depth", "ultrasonic", "slot")}, route=False)
+        park_observation({k: v for k, v in obs.items() if k not in ("rear_depth", "ultrasonic", "slot")})
 
 
 def test_a_parking_config_refuses_what_only_a_cruise_driver_does():
@@ -385,7 +385,7 @@ def test_a_parking_config_refuses_what_only_a_cruise_driver_does():
     with pytest.raises(ValueError, match="rl_timesteps"):
         DriverTrainConfig(task="park", rl_timesteps=10)
     with pytest.raises(ValueError, match="curriculum"):
-        DriverTrainConfig(task="avp", curriculum="hunt")
+        DriverTrainConfig(task="park", curriculum="hunt")
     with pytest.raises(ValueError, match="geometries, scenarios"):
         DriverTrainConfig(geometries=("tight",))
     pairs = DriverTrainConfig(task="park", geometries=("default", "parallel"), scenarios=("none", "park_clutter"))
@@ -417,7 +417,7 @@ def test_train_driver_task_park_trains_a_parking_model_that_parks_with_its_senso
     assert shard["image"].shape[1:] == (4, 64, 64) and shard["label"].shape[1:] == (3,)  # the park command
     spec = f"learned:{out / 'model.zip'}"
     driver = load_driver(spec)
-    assert isinstance(driver, LearnedParkDriver) and tasks_of(spec) == ("park", "avp")
+    assert isinstance(driver, LearnedParkDriver) and tasks_of(spec) == ("park",)
     # a run turns on the sensors the driver observes, and stores them
     result = run_cruise(painted_sources("tiny_7x11", 1, seed=0), 1, CruiseSettings(driver=spec, task="park"),
                         tmp_path / "cruise", compute=Compute(workers=1, progress=False))
@@ -427,3 +427,32 @@ def test_train_driver_task_park_trains_a_parking_model_that_parks_with_its_senso
     rows = list(csv.DictReader((tmp_path / "cruise" / "tests.csv").open()))
     assert len(rows) == 1 and rows[0]["task"] == "park" and rows[0]["outcome"]
     assert result is not None
+
+
+def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_parks():
+    from garage_mj.driving.drivers import resolve_driver
+    from garage_mj.driving.drivers.learned import LearnedAVPDriver
+
+    assert resolve_driver("learned:avp") is LearnedAVPDriver and LearnedAVPDriver.tasks == ("avp",)
+
+    class Cruise:
+        def act(self, obs):
+            return np.array([0.5, -0.2], np.float32)
+
+    class Park:
+        def act(self, obs):
+            return np.array([0.3, 1.0, -1.0], np.float32)
+
+    driver = LearnedAVPDriver.__new__(LearnedAVPDriver)
+    driver.cruise, driver.park, driver.phase = Cruise(), Park(), "cruise"
+
+    def step(slot_x, slot_y, speed):
+        return driver.act({"slot": np.array([slot_x, slot_y, 1.57, 2.5, 4.5], np.float32),
+                           "speed": np.array([speed], np.float32)}).tolist()
+
+    assert step(12.0, -5.0, 3.0) == [0.5, pytest.approx(-0.2), 1.0] and driver.phase == "cruise"  # stall ahead
+    assert step(0.5, -9.0, 3.0)[2] == 1.0 and driver.phase == "cruise"  # alongside but too far aside
+    assert step(0.5, -5.0, 3.0) == [-1.0, 0.0, 1.0] and driver.phase == "stop"  # alongside: brake
+    assert step(-0.5, -5.0, 1.0) == [-1.0, 0.0, 1.0] and driver.phase == "stop"
+    assert step(-0.7, -5.0, 0.0) == [pytest.approx(0.3), 1.0, -1.0] and driver.phase == "park"  # at rest: it parks
+    assert step(20.0, 0.0, 2.0)[2] == -1.0 and driver.phase == "park"  # and keeps parking

@@ -1,5 +1,5 @@
-"""``garage-mj train-driver``: train a learned cruise driver (SB3 DQN, DAgger warm start) or a parking / AVP driver
-(an SB3 PPO policy trained by DAgger) over garages."""
+"""``garage-mj train-driver``: train a learned cruise driver (SB3 DQN, DAgger warm start) or a parking driver (an
+SB3 PPO policy trained by DAgger) over garages."""
 
 from __future__ import annotations
 
@@ -23,9 +23,9 @@ from garage_mj.cli.cruise import scenario
 from garage_mj.core.config import load_config
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
-from garage_mj.driving.learning.train import CURRICULA, DriverTrainConfig, train_driver
+from garage_mj.driving.learning.train import CURRICULA, TRAIN_TASKS, DriverTrainConfig, train_driver
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
-from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
+from garage_mj.driving.sim.park_task import MANEUVER_CHOICES
 
 
 def geometry_list(text: str) -> tuple[str, ...]:
@@ -41,7 +41,7 @@ def geometry_list(text: str) -> tuple[str, ...]:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "train-driver",
-        help="train a learned cruise, parking or AVP driver (imitation of the oracle, DAgger) over many garages",
+        help="train a learned cruise or parking driver (imitation of the oracle, DAgger) over many garages",
         description=(
             "Train a stable-baselines3 DQN (MultiInputPolicy: a CNN over the front camera's depth and "
             "segmentation, an MLP over the next route waypoint, speed, route left and steering angle; the "
@@ -51,11 +51,12 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sees the route plan, its pose or the goal in the world frame. The run folder gets run.json, "
             "curve.csv (validation success per iteration), garages.json, checkpoints/ and model.zip; an "
             "interrupted run continues with --resume. Drive with it: --driver learned:OUT/model.zip.\n\n"
-            "--task park or avp trains a parking driver instead: an SB3 PPO policy (MultiInputPolicy) over both "
-            "cameras (front and rear depth + segmentation), the 12 ultrasonic ranges, the slot detector, speed, "
-            "steering and gear (and in AVP tests the route ahead), sending the continuous park action [pedal, steer, "
-            "gear]; trained by DAgger on the oracle's park command (squared error), on park (AVP) tests of the "
-            "garages built in --geometries. Drive it with --task park (avp) --driver learned:OUT/model.zip."
+            "--task park trains a parking driver instead: an SB3 PPO policy (MultiInputPolicy) over both cameras "
+            "(front and rear depth + segmentation), the 12 ultrasonic ranges, the slot detector, the heading to end "
+            "in, speed, steering and gear, sending the continuous park action [pedal, steer, gear]; trained by DAgger "
+            "on the oracle's park command (squared error), on park tests of the garages built in --geometries, with "
+            "the actors of --scenarios. Drive it with --task park --driver learned:OUT/model.zip; an AVP test is "
+            "driven by a cruise model and a parking model together (--driver learned:avp)."
         ),
         epilog=("GARAGES is a library file (.sqlite, with --map/--difficulty/--run-seeds/-n), a garages JSON "
                 "(library export-json, or a run's garages.json), a folder of asset packs, or a shipped map name "
@@ -82,10 +83,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--curriculum", choices=CURRICULA, help="how garages are drawn: uniform (default), difficulty (easy to hard), adversarial (failure-prioritised replay), hunt (garages hunt finds the model failing on)")
     p.add_argument("--rl-timesteps", type=non_negative_int, help="DQN fine-tuning timesteps after imitation (default 0)")
     p.add_argument("--workers", type=int_in(1, MAX_WORKERS), help=f"worker processes driving, 1 to {MAX_WORKERS:,} (default 2)")
-    park = p.add_argument_group("a parking or AVP driver")
-    park.add_argument("--task", choices=TASKS, help="what it learns: cruise tests (default), park tests or AVP tests")
+    park = p.add_argument_group("a parking driver")
+    park.add_argument("--task", choices=TRAIN_TASKS, help="what it learns: cruise tests (default) or park tests")
     park.add_argument("--maneuver", choices=MANEUVER_CHOICES,
-                      help="park and AVP tests: reverse, forward or any (drawn per test; the default)")
+                      help="park tests: reverse, forward or any (drawn per test; the default)")
     park.add_argument("--geometries", type=geometry_list, metavar="NAME,NAME",
                       help=f"park geometries the garages are built in, garage k in the (k mod n)th: "
                            f"{', '.join(PARK_GEOMETRIES)} (default: default)")

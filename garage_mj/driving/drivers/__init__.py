@@ -52,8 +52,10 @@ USER_FILE_MODULE = "garage_mj_user_driver_"
 #: The learned built-in: ``learned`` (the shipped model) or ``learned:PATH`` (a model zip).
 LEARNED = "learned"
 LEARNED_DRIVER = "garage_mj.driving.drivers.learned:LearnedDriver"
-#: The learned parking driver (park and AVP tests): ``learned:park``, ``learned:avp`` or a parking model's path.
+#: The learned parking driver (park tests): ``learned:park`` or a parking model's path; the learned AVP driver
+#: (AVP tests: the cruise and parking models together): ``learned:avp``.
 LEARNED_PARK_DRIVER = "garage_mj.driving.drivers.learned:LearnedParkDriver"
+LEARNED_AVP_DRIVER = "garage_mj.driving.drivers.learned:LearnedAVPDriver"
 
 __all__ = [
     "DRIVERS",
@@ -150,13 +152,13 @@ def _import_module(spec: str, name: str) -> ModuleType:
 
 def resolve_driver(spec: str) -> type:
     """The driver class for a built-in name, ``learned[:PATH]``, ``module:Class`` (a module on the Python
-    path or in the current folder) or ``path/to/file.py:Class``; ``learned:park``, ``learned:avp`` and a parking
-    model's ``learned:PATH`` give the learned parking driver's class."""
+    path or in the current folder) or ``path/to/file.py:Class``; ``learned:park`` and a parking model's
+    ``learned:PATH`` give the learned parking driver's class, ``learned:avp`` the learned AVP driver's."""
     model = learned_model(spec)
     if model is not None:
-        from garage_mj.driving.drivers.learned import is_parking_model
+        from garage_mj.driving.drivers.learned import learned_kind
 
-        target = LEARNED_PARK_DRIVER if is_parking_model(model) else LEARNED_DRIVER
+        target = {"cruise": LEARNED_DRIVER, "park": LEARNED_PARK_DRIVER, "avp": LEARNED_AVP_DRIVER}[learned_kind(model)]
     else:
         target = DRIVERS.get(spec, spec)
     module_name, sep, class_name = target.rpartition(":")

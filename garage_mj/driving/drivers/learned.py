@@ -15,6 +15,7 @@ so a cruise worker that drives many tests reads the zip and imports torch once.
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 from importlib import resources
 from pathlib import Path
@@ -36,8 +37,11 @@ from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, PARK_CONTINUOUS_SIZ
 
 DRIVER_MODELS = "drivers"  # the folder of models/ that holds the shipped driver models
 DEFAULT_MODEL = "cruise_m5"  # models/drivers/<DEFAULT_MODEL>.zip: what ``--driver learned`` runs
-#: The shipped parking models by the name ``learned:NAME`` runs: models/drivers/<model>.zip.
-PARKING_MODELS = {"park": "park_m5", "avp": "avp_m5"}
+#: The shipped parking model ``learned:park`` runs: models/drivers/<PARK_MODEL>.zip.
+PARK_MODEL = "park_m5"
+#: The learned drivers a ``learned:NAME`` spec names: the parking model, and the AVP driver (the shipped cruise and
+#: parking models together, :class:`LearnedAVPDriver`).
+NAMED = ("park", "avp")
 N_ACTIONS = len(DiscreteAction)  # the paper's 4 actions
 #: The SB3 algorithm that loads a zip, by the module of the policy class its ``data`` records.
 ALGORITHMS = {"stable_baselines3.dqn.policies": "DQN", "stable_baselines3.common.policies": "PPO"}
@@ -63,29 +67,30 @@ def default_model(name: str = DEFAULT_MODEL) -> Path:
 
 
 def model_path(model: str | Path | None) -> Path:
-    """The file of a learned driver's model: None or ``""`` the shipped cruise model, ``park`` and ``avp`` the shipped
-    parking models (:data:`PARKING_MODELS`), anything else a path."""
+    """The file of a learned driver's model: None or ``""`` the shipped cruise model, ``park`` the shipped parking
+    model (:data:`PARK_MODEL`), anything else a path."""
     if model is None or str(model) == "":
         return default_model()
-    if str(model) in PARKING_MODELS:
-        return default_model(PARKING_MODELS[str(model)])
+    if str(model) == "park":
+        return default_model(PARK_MODEL)
     return Path(model).expanduser()
 
 
-def is_parking_model(model: str | Path | None) -> bool:
-    """Whether ``model`` (:func:`model_path`'s argument) is a parking driver's: ``park``, ``avp``, or a zip whose
-    action space is the continuous park action (read from its plain ``data``, nothing loaded). A file that cannot be
-    read says no: the cruise driver's loader then names what is wrong with it."""
-    if model is not None and str(model) in PARKING_MODELS:
-        return True
+def learned_kind(model: str | Path | None) -> str:
+    """Which learned driver runs ``model`` (a ``learned:`` spec's model part): ``"avp"`` for ``avp``
+    (:class:`LearnedAVPDriver`), ``"park"`` for ``park`` or a zip whose action space is the continuous park action
+    (:class:`LearnedParkDriver`; read from its plain ``data``, nothing loaded), else ``"cruise"``
+    (:class:`LearnedDriver`; a file that cannot be read too: its loader then names what is wrong with it)."""
+    if model is not None and str(model) in NAMED:
+        return str(model)
     if model is None or str(model) == "":
-        return False
+        return "cruise"
     try:
         with zipfile.ZipFile(model_path(model)) as z:
             data = json.loads(z.read("data"))
-        return "box.Box" in str(data["action_space"][":type:"])
+        return "park" if "box.Box" in str(data["action_space"][":type:"]) else "cruise"
     except (OSError, zipfile.BadZipFile, KeyError, TypeError, ValueError):
-        return False
+        return "cruise"
 
 
 def _no_model(path: Path, why: str = "") -> DriverError:
@@ -226,30 +231,28 @@ class LearnedDriver:
 
 
 class LearnedParkDriver:
-    """A trained parking policy (``train-driver --task park`` or ``avp``) sending the continuous park action.
+    """A trained parking policy (``train-driver --task park``) sending the continuous park action.
 
     It sees :func:`~garage_mj.driving.learning.observation.park_observation`: both cameras, the 12 ultrasonic
-    ranges, the slot detector, speed, steering and gear, and in an AVP test the cruise route's waypoint (nothing
-    privileged); a run turns on the sensors it declares (:data:`sensors`). The command is the policy's mean action
-    (deterministic): ``[pedal, steer, gear]``. ``learned:park`` and ``learned:avp`` run the shipped models.
+    ranges, the slot detector, the heading to end in, speed, steering and gear (nothing privileged, no route); a
+    run turns on the sensors it declares (:data:`sensors`). The command is the policy's mean action
+    (deterministic): ``[pedal, steer, gear]``. ``learned:park`` runs the shipped model.
     """
 
     action_type = "continuous"  # [pedal, steer, gear] (garage_mj.driving.sim.vehicle.park_command_from_action)
-    tasks = ("park", "avp")
+    tasks = ("park",)
     sensors = PARK_SENSORS  # the parking sensors it observes (CruiseSettings.with_sensors turns them on)
 
     def __init__(self, model: str | Path | None = None) -> None:
         self.path = model_path("park" if model is None else model)
         self.model = load_model(self.path, parking=True)
-        self.route = False
         self._checked: tuple[int, ...] | None = None
 
     def reset(self, info: dict[str, Any]) -> None:
-        """Start a test: an AVP test's route is observed, a park test's (the reference plan) is not."""
+        """Start a test (nothing is random: the policy's mean action)."""
         if info.get("action_type", "continuous") != "continuous":
             raise DriverError(f"learned parking driver {self.path} sends the continuous park action [pedal, steer, "
                               "gear]; leave out --action-type (or give continuous)")
-        self.route = info.get("task") == "avp"
 
     def _check(self, shape: tuple[int, ...]) -> None:
         why = _space_difference(self.model.observation_space, park_space(*shape))
@@ -261,7 +264,7 @@ class LearnedParkDriver:
     def act(self, obs: dict[str, Any]) -> np.ndarray:
         """The policy's park command for ``obs`` (a park or AVP test's observation, depth in metres)."""
         try:
-            o = park_observation(obs, route=self.route)
+            o = park_observation(obs)
         except ValueError as exc:
             raise DriverError(f"learned parking driver: {exc}") from None
         if self._checked != o["image"].shape[1:]:
@@ -279,3 +282,48 @@ class LearnedParkDriver:
             torch.set_num_threads(threads)
             torch.backends.mkldnn.enabled = mkldnn
         return np.clip(action.astype(np.float32), -1.0, 1.0)
+
+
+class LearnedAVPDriver:
+    """An AVP test driven by two learned models: the cruise model to the stall, then the parking model into it.
+
+    ``learned:avp``: the shipped cruise model (:class:`LearnedDriver`, the paper's 4 actions sent as their
+    ``[throttle, steer]`` commands in drive) follows the route from the entrance. When the slot detector reports the
+    target stall alongside (its centre within :data:`HANDOVER_AHEAD` ahead or behind and :data:`HANDOVER_RANGE`
+    away: where a park test starts), the car brakes to rest and the parking model (:class:`LearnedParkDriver`)
+    parks it. Both see only their own unprivileged observations; the handover is the one rule between them.
+    """
+
+    action_type = "continuous"
+    tasks = ("avp",)
+    sensors = PARK_SENSORS
+    HANDOVER_AHEAD = 1.0  # [m] |slot x| (car frame) at most this: the stall is alongside
+    HANDOVER_RANGE = 8.0  # [m] and its centre at most this far away
+    AT_REST = 0.05  # [m/s] the parking model takes over below this speed
+
+    def __init__(self, model: str | Path | None = None, cruise_model: str | Path | None = None) -> None:
+        self.cruise = LearnedDriver(cruise_model)
+        self.park = LearnedParkDriver(None if model is None or str(model) == "avp" else model)
+        self.phase = "cruise"
+
+    def reset(self, info: dict[str, Any]) -> None:
+        """Start a test: cruise first."""
+        self.park.reset(info)
+        self.cruise.reset({**info, "action_type": "continuous"})
+        self.phase = "cruise"
+
+    def act(self, obs: dict[str, Any]) -> np.ndarray:
+        """The cruise model's command until the stall is alongside, a stop, then the parking model's."""
+        if self.phase == "cruise":
+            slot = np.asarray(obs["slot"], dtype=float).reshape(-1) if "slot" in obs else None
+            if slot is not None and abs(slot[0]) <= self.HANDOVER_AHEAD and math.hypot(slot[0], slot[1]) <= \
+                    self.HANDOVER_RANGE:
+                self.phase = "stop"
+            else:
+                throttle, steer = (float(v) for v in self.cruise.act(obs))
+                return np.array([throttle, steer, 1.0], dtype=np.float32)
+        if self.phase == "stop":
+            if abs(float(np.asarray(obs["speed"]).reshape(-1)[0])) > self.AT_REST:
+                return np.array([-1.0, 0.0, 1.0], dtype=np.float32)
+            self.phase = "park"
+        return self.park.act(obs)

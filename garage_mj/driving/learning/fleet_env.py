@@ -15,7 +15,7 @@ angle. With ``expert=True`` each ``info`` also carries ``expert_action``: what t
 do in the state just observed, the label that imitation learning (DAgger) trains on. The expert
 reads the privileged state, the learner never does.
 
-Park and AVP tests (``env_kwargs`` with ``task`` "park" or "avp"): the continuous park action ``[pedal, steer,
+Park tests (``env_kwargs`` with ``task`` "park"): the continuous park action ``[pedal, steer,
 gear]`` (the oracle's park tracker labels it), the parking sensors on
 (:data:`~garage_mj.driving.learning.observation.PARK_SENSORS`) and the parking driver's observation
 (:func:`~garage_mj.driving.learning.observation.park_observation`). ``variants`` gives garages their own env
@@ -59,8 +59,8 @@ class FleetDriveEnv(gym.Env):
         cache_size: how many garages' scenes are kept compiled.
         expert: put the oracle's action for each observed state in ``info["expert_action"]``.
         env_kwargs: more :class:`GarageDriveEnv` keyword arguments (``occupancy``, ``camera``,
-            ``scenario``, ``task``, ...); ``action_type`` is discrete in cruise tests and continuous in park and
-            AVP tests, ``image_obs`` off.
+            ``scenario``, ``task``, ...); ``action_type`` is discrete in cruise tests and continuous in park tests,
+            ``image_obs`` off.
         variants: env settings per garage (garage ``k``: ``variants[k % len(variants)]`` over ``env_kwargs``).
     """
 
@@ -174,7 +174,7 @@ class FleetDriveEnv(gym.Env):
             return learned_observation(obs), info
         if self.expert:
             info["expert_action"] = np.asarray(self._oracle.act(obs), dtype=np.float32)
-        return park_observation(obs, route=self.task == "avp"), info
+        return park_observation(obs), info
 
     def step(self, action):
         if self.env is None:

@@ -84,8 +84,7 @@ SLOT_RANGE = 10.0  # [m] the slot detector's position, read up to this ...
 SLOT_NEAR = 2.0  # [m] ... and again at a finer scale, for the last metres into the stall
 ULTRASONIC_RANGE = 5.0  # [m] the rangefinders' farthest reading (park_sensors.ULTRASONIC_MAX)
 PARK_VECTOR_KEYS = ("slot_x", "slot_y", "slot_cos", "slot_sin", "slot_near_x", "slot_near_y", "slot_width",
-                    "slot_depth", "facing_cos", "facing_sin", "speed", "steer", "gear", *(f"ultrasonic_{i}" for i in range(12)),
-                    "route_x", "route_y", "route_left")
+                    "slot_depth", "facing_cos", "facing_sin", "speed", "steer", "gear", *(f"ultrasonic_{i}" for i in range(12)))
 PARK_IMAGE_CHANNELS = 4  # front depth, front segmentation, rear depth, rear segmentation
 
 
@@ -103,22 +102,21 @@ def _camera_planes(depth: Any, segmentation: Any, out: np.ndarray) -> None:
     np.multiply(np.asarray(segmentation, dtype=np.uint8), SEG_SCALE, out=out[1])
 
 
-def park_observation(obs: dict[str, Any], route: bool) -> dict[str, np.ndarray]:
+def park_observation(obs: dict[str, Any]) -> dict[str, np.ndarray]:
     """What a learned parking driver sees, from a park or AVP test's drive env observation with the
     :data:`PARK_SENSORS` on (depth in metres, ``image_obs=False``):
 
     - ``image``: (4, H, W) uint8: the front and the rear camera, each as depth and segmentation (as
       :func:`learned_observation`'s two planes);
-    - ``vector``: (28,) float32 (:data:`PARK_VECTOR_KEYS`): the slot detector's stall centre in the car frame
+    - ``vector``: (25,) float32 (:data:`PARK_VECTOR_KEYS`): the slot detector's stall centre in the car frame
       (over :data:`SLOT_RANGE`, and again over :data:`SLOT_NEAR`, clipped to [-1, 1]), the cosine and sine of
       the direction it opens to, its width and depth (over 5 m and 6 m), the cosine and sine of the heading the
       car must end in, relative to its own (the test's instruction: reverse-in or nose-in, from the ``stall``
       entry; its position is not read), the speed, the road-wheel angle, the
-      gear (+1 D, -1 R), the 12 ultrasonic ranges over 5 m, and with ``route`` (an AVP test: the cruise to the
-      stall) the route waypoint ahead (over its lookahead) and the route left (over :data:`REMAINING_RANGE`);
-      without it (a park test, whose route is the reference plan the driver must not read) those three are 0.
+      gear (+1 D, -1 R) and the 12 ultrasonic ranges over 5 m.
 
-    Nothing privileged: no pose, no plan, no other road user's state (:data:`UNPRIVILEGED` only)."""
+    Nothing privileged: no pose, no plan, no other road user's state (:data:`UNPRIVILEGED` only), and no route:
+    a park test's route is its reference plan, which the driver finds for itself."""
     obs = {k: obs[k] for k in UNPRIVILEGED if k in obs}
     missing = [k for k in ("rear_depth", "ultrasonic", "slot", "gear", "stall") if k not in obs]
     if missing:
@@ -137,13 +135,7 @@ def park_observation(obs: dict[str, Any], route: bool) -> dict[str, np.ndarray]:
     steer = float(np.asarray(obs["steer"]).reshape(-1)[0]) if "steer" in obs else 0.0
     gear = float(np.asarray(obs["gear"]).reshape(-1)[0])
     sonar = np.asarray(obs["ultrasonic"], dtype=np.float32).reshape(-1) / ULTRASONIC_RANGE
-    if route:
-        wx, wy = (float(v) for v in np.asarray(obs["waypoint"]).reshape(-1)[:2])
-        left = min(float(np.asarray(obs["remaining"]).reshape(-1)[0]) / REMAINING_RANGE, 1.0)
-        way = [wx / LOOKAHEAD, wy / LOOKAHEAD, left]
-    else:
-        way = [0.0, 0.0, 0.0]
     vector = np.array([_unit(sx / SLOT_RANGE), _unit(sy / SLOT_RANGE), math.cos(syaw), math.sin(syaw),
                        _unit(sx / SLOT_NEAR), _unit(sy / SLOT_NEAR), swidth / 5.0, sdepth / 6.0, fcos, fsin,
-                       speed / SPEED_RANGE, steer, gear, *sonar.tolist(), *way], dtype=np.float32)
+                       speed / SPEED_RANGE, steer, gear, *sonar.tolist()], dtype=np.float32)
     return {"image": image, "vector": vector}

@@ -73,7 +73,7 @@ from garage_mj.driving.learning.observation import PARK_SENSORS
 from garage_mj.driving.learning.saved_model import load_driver_model
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sim.outcomes import OutcomeKind
-from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, TASKS
+from garage_mj.driving.sim.park_task import MANEUVER_CHOICES
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.scene.world import GeometryError
 
@@ -82,6 +82,7 @@ CURVE = "curve.csv"
 MODEL = "model.zip"
 RL_MONITOR = "rl_monitor.csv"
 CURRICULA = ("uniform", "difficulty", "adversarial", "hunt")
+TRAIN_TASKS = ("cruise", "park")  # what train-driver trains: a cruise driver or a parking driver
 #: ``validate``'s count of the tests of a garage that cannot be built in its park geometry (not driven, not counted).
 UNBUILDABLE = "unbuildable"
 #: The outcomes the training curve counts apart (``val_<kind>``); the other failures are ``val_other``.
@@ -127,32 +128,33 @@ class DriverTrainConfig:
     # at weight 1, all of the shipped model's held-out failures (stops 1 m short of or past the goal)
     stop_weight: float = bounded(4.0, gt=0.0, le=1e6)
     net_arch: tuple[int, ...] = bounded((128, 128), ge=1, le=65_536)  # hidden layer widths after the features
-    # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions), park tests or AVP tests (a PPO
-    # policy over the continuous park action, from both cameras, the ultrasonic ranges and the slot detector)
-    task: str = bounded("cruise", choices=TASKS)
-    maneuver: str = bounded("any", choices=MANEUVER_CHOICES)  # park and AVP tests: reverse, forward or any (drawn)
-    # park and AVP tests: the park geometries the garages are built in (garage k: the (k mod n)th), by name
+    # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a PPO policy over
+    # the continuous park action, from both cameras, the ultrasonic ranges and the slot detector); an AVP test is
+    # driven by the two together (learned:avp)
+    task: str = bounded("cruise", choices=TRAIN_TASKS)
+    maneuver: str = bounded("any", choices=MANEUVER_CHOICES)  # park tests: reverse, forward or any (drawn per test)
+    # park tests: the park geometries the garages are built in (garage k: the (k mod n)th), by name
     # (garage_mj.driving.park_geometries); none: the default geometry
     geometries: tuple[str, ...] = bounded((), choices=tuple(PARK_GEOMETRIES))
-    # park and AVP tests: the actor scenarios drawn with each geometry, by name (garage_mj.driving.actors.config
+    # park tests: the actor scenarios drawn with each geometry, by name (garage_mj.driving.actors.config
     # SCENARIOS; "none": no actors): garage k gets the (k mod n)th of every geometry x scenario pair
     scenarios: tuple[str, ...] = bounded((), choices=("none", *(n for n in SCENARIOS if n.startswith("park_"))))
 
     def __post_init__(self) -> None:
         check_bounds(self)  # built in code, held to the ranges a loaded config is (load_config checks them first)
         if self.task != "cruise" and self.rl_timesteps:
-            raise ValueError("rl_timesteps: the RL stage fine-tunes cruise drivers only; a park or AVP driver is "
-                             "trained by imitation (leave rl_timesteps at 0)")
+            raise ValueError("rl_timesteps: the RL stage fine-tunes cruise drivers only; a parking driver is trained "
+                             "by imitation (leave rl_timesteps at 0)")
         if self.task != "cruise" and self.curriculum == "hunt":
             raise ValueError("curriculum: the hunt curriculum searches cruise tests; give uniform, difficulty or "
-                             "adversarial for a park or AVP driver")
+                             "adversarial for a parking driver")
         if self.task == "cruise" and (self.geometries or self.scenarios):
-            raise ValueError("geometries, scenarios: park geometries and actor scenarios are for park and AVP drivers "
-                             "(task = \"park\" or \"avp\"); a cruise driver's actors: --scenario")
+            raise ValueError("geometries, scenarios: park geometries and actor scenarios are for a parking driver "
+                             "(task = \"park\"); a cruise driver's actors: --scenario")
 
     @property
     def parking(self) -> bool:
-        """Whether this trains a parking (park or AVP) driver: a PPO policy over the continuous park action."""
+        """Whether this trains a parking driver: a PPO policy over the continuous park action."""
         return self.task != "cruise"
 
     def variants(self) -> list[dict[str, Any]]:
@@ -366,7 +368,7 @@ def _fit_park(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray
 def validate(model_path: str | Path, sources: list[CruiseSource], tests: int, seed: int,
              env_kwargs: dict[str, Any] | None = None, variants: list[dict[str, Any]] | None = None) -> dict[str, int]:
     """Outcome counts of ``tests`` tests of the model saved at ``model_path`` on ``sources``, dealt
-    round-robin over the garages: test ``k`` of a garage is its cruise (park, AVP: ``env_kwargs``' ``task``) test
+    round-robin over the garages: test ``k`` of a garage is its cruise (park: ``env_kwargs``' ``task``) test
     ``k`` (:func:`~garage_mj.driving.cruise.run_test` with the driver ``learned:PATH``, as ``garage-mj cruise``
     would drive it; garage ``g`` with ``variants[g % len(variants)]`` over ``env_kwargs``; ``infeasible`` and
     ``unproven`` count the tests that are not driven, :data:`UNBUILDABLE` those of a garage that cannot be built in
