@@ -47,6 +47,7 @@ from garage_mj.driving.sources import (
 from garage_mj.export.artefacts import MANIFEST
 from garage_mj.generation.library import Library, LibraryError
 from garage_mj.reporting.report import PICTURE_CHOICES, count_noun, task_noun
+from garage_mj.scene.park_difficulty import SHIPPED_PARK_MODELS
 from garage_mj.scene.world import geometry
 
 
@@ -128,6 +129,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also write every test as OpenSCENARIO 1.2 into OUT/xosc/ (garages without an asset "
                         "pack get one in OUT/packs/); replay one with --scenario-file")
     add_task_args(p, stall=True)
+    p.add_argument("--park-model", metavar="FILE",
+                   help="park and avp: the park difficulty model of tests.csv's park_difficulty column (default: the "
+                        "driver's shipped one, else the one fitted on park_assist; a shipped one by name: "
+                        f"{', '.join(SHIPPED_PARK_MODELS)}; 'garage-mj difficulty fit --task park' writes others)")
     add_geometry_args(p)
     add_vehicle_args(p)
     add_sensor_args(p)
@@ -474,6 +479,8 @@ def run(args: argparse.Namespace) -> int:
     if args.pictures is not None and args.task == "cruise":
         raise UserError("--pictures draws park and AVP tests from above (--task park or avp); watch a cruise run's "
                         "tests with --videos N")
+    if args.park_model is not None and args.task == "cruise":
+        raise UserError("--park-model rates park and AVP tests; give --task park or avp, or leave it out")
     args.driver = args.driver or "vision"
     srcs = sources(args)
     env = geometry_env(args, srcs)
@@ -490,7 +497,7 @@ def run(args: argparse.Namespace) -> int:
         check_stall(srcs, settings.stall, run_world(settings))
         task_warning("cruise", args.driver, args.task)
         res = run_cruise(srcs, args.tests, settings, args.out, compute=compute(args), xosc=args.xosc,
-                         route_model=args.route_model or True)
+                         route_model=args.route_model or True, park_model=args.park_model or True)
     s = res.stats
     for line in closing_lines(s, res.tests_run, res.action_label, res.out_dir):
         print(line)

@@ -16,7 +16,8 @@ from garage_mj.scene.vehicles import DEFAULT_VEHICLE
 #: Options of ``cruise`` that choose garages or shape a garage's tests: a run of cases has neither.
 _NOT_FOR_CASES = (("sample", "--sample"), ("ids", "--ids"), ("map", "--map"), ("difficulty", "--difficulty"),
                   ("coverage", "--coverage"), ("route_difficulty", "--route-difficulty"), ("feasible", "--feasible"),
-                  ("limit", "--limit"), ("route_model", "--route-model"), ("stall", "--stall"),
+                  ("limit", "--limit"), ("route_model", "--route-model"), ("park_model", "--park-model"),
+                  ("stall", "--stall"),
                   ("pedestrians", "--pedestrians"), ("moving_cars", "--moving-cars"), ("clutter", "--clutter"),
                   ("scenario", "--scenario"))
 

@@ -27,6 +27,9 @@
   - ``difficulty.regression``: Pearson r and the regression of success on difficulty, the paper's table; bootstrap r, AUC.
   - ``difficulty.fit``: fit and score the route-aware difficulty on recorded cruise outcomes.
   - ``difficulty.rating``: the route difficulty of many garages, computed once each and kept (a library's, a cruise run's).
+  - ``difficulty.park``: fit and score the park difficulty on park and AVP runs, beside HOPE's levels.
+  - ``difficulty.park_rating``: a park or AVP run's park model (the driver's shipped one, else the default) and its
+    tests' ``park_difficulty`` cells.
 - The test runner, at the top level:
   - ``sources``: what a cruise run tests (``CruiseSource``), its settings and each test's seed.
   - ``park_geometries``: ``PARK_GEOMETRIES``, park geometries by name (stalls, aisle, parked fleet).

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, LostJob, check_backend, map_unordered
 from garage_mj.core.fsutil import FolderLock, clean_temp, ensure_dir
+from garage_mj.driving.difficulty.park_rating import ParkModelChoice, choose_park_model, park_difficulty_cell
 from garage_mj.driving.difficulty.rating import RouteModelChoice, choose_route_model, cruise_route_difficulty
 from garage_mj.driving.episode import cached_env, check_driver, close_cached_env, drive_test, forget_cached
 from garage_mj.driving.garage_set import GarageSet, GarageSetError
@@ -62,6 +63,7 @@ GARAGES_FILE = "garages.json"  # the run's garages (GarageSet.to_json), for read
 
 if TYPE_CHECKING:
     from garage_mj.driving.drivers import ActionChoice
+    from garage_mj.scene.park_difficulty import ParkDifficulty
     from garage_mj.scene.route_difficulty import RouteDifficulty
 
 
@@ -163,6 +165,7 @@ def run_cruise(
     max_tests: int | None = None,
     xosc: bool = False,
     route_model: RouteDifficulty | str | Path | bool = True,
+    park_model: ParkDifficulty | str | Path | bool = True,
 ) -> CruiseResult:
     """Run ``tests`` tests on every source with ``settings`` (default :class:`CruiseSettings`: the
     ``vision`` driver); resumable (see the module docstring).
@@ -184,7 +187,10 @@ def run_cruise(
     :func:`~garage_mj.driving.difficulty.rating.choose_route_model`, or none where no shipped model was:
     the column stays empty and ``summary.json``'s ``route_note`` says why; a ``RouteDifficulty``, a model
     file or a shipped model's name; False: none), planned for the
-    default car and world as the model was fitted, whatever ``settings.env`` changes. Raises
+    default car and world as the model was fitted, whatever ``settings.env`` changes. ``park_model``: the park
+    difficulty model of a park or AVP run's ``park_difficulty`` column (True: the driver's shipped one, else the
+    default, :func:`~garage_mj.driving.difficulty.park.choose_park_model`; a ``ParkDifficulty``, a model file or a
+    shipped model's name; False: none; a cruise run has none). Raises
     :class:`CruiseError`, ``DriverError`` (bad driver), ``BackendError`` (Ray missing),
     ``RouteModelError`` (a bad model file) before any test.
     """
@@ -197,6 +203,7 @@ def run_cruise(
     choice = choice if choice is not None else choose_action_type(settings.driver, settings.action_type)
     check_backend(compute, reach=True)  # Ray missing or its cluster unreachable: before any write
     route = choose_route_model(route_model, settings.driver, choice.action_type, settings.driver_kwargs)
+    park = choose_park_model(park_model, settings.driver, settings.driver_kwargs) if settings.task != "cruise" else None
     srcs = [s if isinstance(s, CruiseSource) else CruiseSource.from_garage(s) for s in sources]
     hashes = [s.hash for s in srcs]
     if len(set(hashes)) != len(hashes):
@@ -207,7 +214,7 @@ def run_cruise(
     check_driver(settings)  # a driver that cannot be built stops the run before anything is written
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise", remove=True):  # a second run into `out` is refused, naming this one
-        return _run_locked(srcs, tests, out, settings, choice, compute, max_tests, xosc, route)
+        return _run_locked(srcs, tests, out, settings, choice, compute, max_tests, xosc, route, park)
 
 
 def check_task(settings: CruiseSettings) -> None:
@@ -277,7 +284,7 @@ def _write_garages(out: Path, srcs: Sequence[CruiseSource]) -> None:
 
 def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: CruiseSettings, choice: ActionChoice,
                 compute: Compute, max_tests: int | None, xosc: bool = False,
-                route_choice: RouteModelChoice | None = None) -> CruiseResult:
+                route_choice: RouteModelChoice | None = None, park: ParkModelChoice | None = None) -> CruiseResult:
     """The body of :func:`run_cruise`, holding the lock of ``out``."""
     csv_path = out / "tests.csv"
     # refused before anything is written: a run of other settings, then a resumed row that is not one of this run
@@ -311,6 +318,8 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: C
                 if row is None:  # an export-only job
                     bar.update()
                     continue
+                if park is not None and park.model is not None:
+                    row["park_difficulty"] = park_difficulty_cell(park.model, row)
                 writer.writerow(row)
                 f.flush()
                 os.fsync(f.fileno())  # a kill -9 or power cut after this line keeps the row
@@ -322,6 +331,7 @@ def _run_locked(srcs: Sequence[CruiseSource], tests: int, out: Path, settings: C
     tested = {r["garage_hash"] for r in mine}
     model = route_choice.model if route_choice else None
     route = None if model is None else cruise_route_difficulty(out, [s for s in srcs if s.hash in tested], model)
+    info = {**(route_choice.record(bool(route)) if route_choice else {}), **(park.record() if park else {})}
     summary, stats = write_outputs(out, mine, srcs, settings, choice.source, route, model.key if model else None,
-                                   route_choice.record(bool(route)) if route_choice else None)
+                                   info or None)
     return CruiseResult(out, new, mine, summary, stats, choice.label)

@@ -17,7 +17,7 @@ import traceback
 from typing import Any
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.driving.results import PARK_COLUMNS, vehicle_cells
+from garage_mj.driving.results import PARK_COLUMNS, ROOM_COLUMNS, vehicle_cells
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
@@ -122,9 +122,11 @@ def _cell(value: Any, digits: int = 3) -> Any:
 
 
 def park_cells(info: dict[str, Any]) -> dict[str, Any]:
-    """The park columns of a test's row (:data:`~garage_mj.driving.results.PARK_COLUMNS`) from the env's last info:
-    for a cruise test its task only; the parking metrics where the test was driven, the plan's where one was found."""
-    cells: dict[str, Any] = dict.fromkeys(PARK_COLUMNS, "")
+    """The park columns of a test's row (:data:`~garage_mj.driving.results.PARK_COLUMNS` and the room of
+    :data:`~garage_mj.driving.results.ROOM_COLUMNS` but ``park_difficulty``, which the runner fills) from the env's
+    last info: for a cruise test its task only; the parking metrics where the test was driven, the plan's where one
+    was found."""
+    cells: dict[str, Any] = dict.fromkeys((*PARK_COLUMNS, *ROOM_COLUMNS), "")
     if "task" not in info:
         return {**cells, "task": "cruise"}
     found = info["plan_cusps"] >= 0
@@ -132,7 +134,9 @@ def park_cells(info: dict[str, Any]) -> dict[str, Any]:
              "plan_length_m": _cell(info["plan_length"]) if found else "",
              "plan_cusps": info["plan_cusps"] if found else "",
              "plan_clearance_m": _cell(info["plan_clearance"]) if found else "",
-             "park_level": info["park_level"], "stall_angle_deg": _cell(info["stall_angle"])}
+             "park_level": info["park_level"], "stall_angle_deg": _cell(info["stall_angle"]),
+             "bay_margin_m": _cell(info["bay_margin"]), "aisle_width_m": _cell(info["aisle_width"]),
+             "start_distance_m": _cell(info["start_distance"])}
     if "position_error" in info:  # driven: the metrics at its end
         cells.update(position_error_m=_cell(info["position_error"]), heading_error_deg=_cell(info["heading_error"], 2),
                      lateral_offset_m=_cell(info["lateral_offset"]), direction_changes=info["direction_changes"],

@@ -69,7 +69,13 @@ PARK_COLUMNS = ("task", "maneuver", "position_error_m", "heading_error_deg", "la
 #: ``mixed``) and the parked cars' jitter bound [m]; a row from before them holds the defaults (:data:`VEHICLE_DEFAULTS`).
 VEHICLE_COLUMNS = ("vehicle", "parked_fleet", "parked_jitter_m")
 VEHICLE_DEFAULTS = {"vehicle": "sedan", "parked_fleet": "uniform", "parked_jitter_m": "0"}
-TEST_COLUMNS = (*LEGACY_TEST_COLUMNS, *PARK_COLUMNS, *VEHICLE_COLUMNS)
+#: What a park or AVP test's row says before its drive of the room it leaves (empty in a cruise row): the stall's
+#: width less the car's (a parallel slot: its length less the car's), the aisle's width, the start's straight-line
+#: distance to the stall's centre [m] (:func:`~garage_mj.driving.sim.park_task.test_room`); and the test's park
+#: difficulty, its failure probability under the run's park model (:mod:`garage_mj.scene.park_difficulty`; empty
+#: for a test that is not driven, or a run without a park model).
+ROOM_COLUMNS = ("bay_margin_m", "aisle_width_m", "start_distance_m", "park_difficulty")
+TEST_COLUMNS = (*LEGACY_TEST_COLUMNS, *PARK_COLUMNS, *VEHICLE_COLUMNS, *ROOM_COLUMNS)
 #: What a collision can hit (``hit`` column): the summary counts collisions per class.
 HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
 #: The failure outcomes, as ``tests.csv`` writes them, in display order.
@@ -188,7 +194,7 @@ _COUNT_CELLS = ("target_stall", "pedestrians", "moving_cars", "clutter", "direct
 _NUMBER_CELLS = ("time", "path_length", "route_length", "difficulty", "mean_road_length", "mean_intersection_degree",
                  "wall_s", "position_error_m", "heading_error_deg", "lateral_offset_m", "park_time_s",
                  "min_clearance_m", "plan_length_m", "plan_clearance_m", "inner_margin_m", "outline_clearance_m",
-                 "stall_angle_deg")
+                 "stall_angle_deg", "bay_margin_m", "aisle_width_m", "start_distance_m", "park_difficulty")
 #: Cells every row of a test holds (the rest are empty where a test was not driven or its process died).
 _REQUIRED_CELLS = ("garage", "garage_hash", "test", "seed", "driver", "outcome", "difficulty", "mean_road_length",
                    "mean_intersection_degree", "wall_s", "task")
@@ -234,7 +240,7 @@ def row_problem(row: dict[str, str], settings: CruiseSettings) -> tuple[str, str
     if settings.stall is not None and row["target_stall"] not in ("", str(settings.stall)):
         return "target_stall", f"is not this run's stall ({settings.stall})"
     if settings.task == "cruise":
-        extra = next((c for c in PARK_COLUMNS if c != "task" and row[c] != ""), None)
+        extra = next((c for c in (*PARK_COLUMNS, *ROOM_COLUMNS) if c != "task" and row[c] != ""), None)
         if extra is not None:
             return extra, "is filled in a cruise test's row (park columns are empty there)"
     elif row["maneuver"] not in ("", "reverse", "forward") or (

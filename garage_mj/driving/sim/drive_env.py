@@ -80,6 +80,7 @@ from garage_mj.driving.sim.park_task import (
     park_info,
     park_monitor,
     test_level,
+    test_room,
 )
 from garage_mj.driving.sim.sensors import Camera, CameraConfig
 from garage_mj.driving.sim.solid_bodies import solid_bodies
@@ -647,7 +648,7 @@ class GarageDriveEnv(gym.Env):
                 self._info_test["actors_missing"] = dict(self.scenario.missing)
             if self._park is not None:
                 stall = self.stalls[self._park.stall]
-                self._info_test.update(park_info(self._park, self._park_level, stall),
+                self._info_test.update(park_info(self._park, self._park_level, stall), **test_room(self, self._park),
                                        feasible=self._park.feasible and self.scenario.feasible)
         info: dict[str, Any] = {"time": float(self.data.time), "path_length": self.path_length,
                                 "progress": self.monitor.progress, "pose": (x, y, yaw), **self._info_test}

@@ -180,6 +180,18 @@ def test_level(env: GarageDriveEnv, test: ParkTest, bodies: BodyOutlines) -> Par
                       test.start, bodies)
 
 
+def test_room(env: GarageDriveEnv, test: ParkTest) -> dict[str, Any]:
+    """The room a park test leaves, known before the drive (``tests.csv``'s ``bay_margin_m``, ``aisle_width_m``,
+    ``start_distance_m``): the stall's width less the car's width (a parallel slot's length along its aisle, which
+    is its width, less the car's length), the scene's aisle width, and the straight-line distance from the start
+    to the stall's centre [m] (the distance the level measures, :func:`test_level`)."""
+    car = env.car_geometry
+    stall = env.stalls[test.stall]
+    across = car.front - car.rear if float(stall.angle) == 0.0 else 2 * car.half_width
+    return {"bay_margin": float(stall.width) - across, "aisle_width": float(env.scene.world.aisle_width),
+            "start_distance": math.hypot(test.start[0] - stall.x, test.start[1] - stall.y)}
+
+
 def park_info(test: ParkTest, level: ParkLevel, stall: Stall) -> dict[str, Any]:
     """What the env's info says of a park test for all of it (with the cruise entries); ``stall``: its target."""
     plan = test.plan
@@ -210,4 +222,4 @@ def end_info(env: GarageDriveEnv, test: ParkTest, monitor: ParkMonitor, bodies: 
 
 
 __all__ = ["MANEUVER_CHOICES", "TASKS", "ParkTest", "draw_park_test", "end_info", "park_info", "park_monitor",
-           "test_level"]
+           "test_level", "test_room"]
