@@ -77,7 +77,12 @@ def _run_sources(run: Path, library: Path | None, hashes: set[str]) -> dict[str,
 def _run_tests(run: Path) -> list[dict[str, str]]:
     if not (run / "tests.csv").is_file():
         raise DifficultyFitError(f"{run} holds no tests.csv; pass cruise run folders (garage-mj cruise --out)")
-    return read_tests(run / "tests.csv")
+    rows = read_tests(run / "tests.csv")
+    park = next((r["task"] for r in rows if r["task"] != "cruise"), None)
+    if park is not None:
+        raise DifficultyFitError(f"{run} is a {park} run, not a cruise run; its tests have a park difficulty "
+                                 "(--task park), not a route difficulty")
+    return rows
 
 
 def test_records(runs: Sequence[str | Path], library: str | Path | None = None, progress: bool = False
