@@ -288,3 +288,23 @@ def test_success_breaks_down_by_level_maneuver_and_stall_angle(painted_tiny):
     lines = breakdown_lines(out)
     assert lines[0] == "success by level: normal 1/1 (100.0%); complex 1/2 (50.0%); extreme 0/0, 1 unproven"
     assert lines[2] == "success by stall angle [deg]: 60 1/1 (100.0%); 90 1/2 (50.0%), 1 unproven"
+
+
+def test_success_by_park_difficulty_band_leaves_out_tests_without_one():
+    from garage_mj.driving.results import breakdown_lines, park_breakdown
+
+    def row(outcome, difficulty):
+        return {"outcome": outcome, "park_level": "normal", "maneuver": "reverse", "stall_angle_deg": "90",
+                "park_difficulty": difficulty}
+
+    rows = [row("success", "0.05"), row("success", "0.19"), row("collision", "0.2"), row("success", "0.55"),
+            row("timeout", "1.0"), row("unproven", "0.9"), row("success", "")]
+    bands = park_breakdown(rows)["by_park_difficulty"]
+    assert list(bands) == ["0.0-0.2", "0.2-0.4", "0.4-0.6", "0.8-1.0"]  # a band per 0.2, 1 in the top one
+    assert (bands["0.0-0.2"]["successes"], bands["0.0-0.2"]["feasible"]) == (2, 2)
+    assert bands["0.8-1.0"] == {"tests": 2, "infeasible": 0, "unproven": 1, "feasible": 1, "successes": 0,
+                                "success_pct": 0.0}
+    assert sum(b["tests"] for b in bands.values()) == 6  # the test without a park difficulty is in no band
+    line = breakdown_lines({"by_park_difficulty": bands})[0]
+    assert line.startswith("success by park difficulty: 0.0-0.2 2/2 (100.0%); 0.2-0.4 0/1 (0.0%)")
+    assert park_breakdown([row("success", "")])["by_park_difficulty"] == {}

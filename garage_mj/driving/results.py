@@ -396,13 +396,20 @@ def park_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 #: The breakdowns of a park or AVP run's success (docs/spec.md section 9): summary.json key -> the tests.csv column
 #: whose value groups the tests.
-BREAKDOWNS = {"by_level": "park_level", "by_maneuver": "maneuver", "by_stall_angle": "stall_angle_deg"}
+BREAKDOWNS = {"by_level": "park_level", "by_maneuver": "maneuver", "by_stall_angle": "stall_angle_deg",
+              "by_park_difficulty": "park_difficulty"}
+PARK_DIFFICULTY_BAND = 0.2  # width of the park difficulty bands of ``by_park_difficulty`` ("0.2-0.4")
 
 
 def _group_key(column: str, value: str) -> str:
-    """The group a cell puts its test in: a stall angle as a plain number (``90``), anything else as written."""
+    """The group a cell puts its test in: a stall angle as a plain number (``90``), a park difficulty as its band of
+    :data:`PARK_DIFFICULTY_BAND` (``0.2-0.4``; the top band holds 1), anything else as written."""
     if column == "stall_angle_deg" and _finite(value):
         return f"{float(value):g}"
+    if column == "park_difficulty" and _finite(value):
+        n = round(1 / PARK_DIFFICULTY_BAND)
+        k = min(int(float(value) * n), n - 1)
+        return f"{k / n:.1f}-{(k + 1) / n:.1f}"
     return value
 
 
@@ -415,15 +422,19 @@ def _group_order(column: str, keys: Iterable[str]) -> list[str]:
 
 
 def park_breakdown(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
-    """Success of a park or AVP run's tests per level, per maneuver and per stall angle (:data:`BREAKDOWNS`): for each
+    """Success of a park or AVP run's tests per level, per maneuver, per stall angle and per park difficulty band
+    (:data:`BREAKDOWNS`): for each
     group its ``tests``, ``infeasible``, ``unproven``, ``feasible`` (driven), ``successes`` and ``success_pct`` (over the
     feasible ones; None without any). A test whose cell is empty (not drawn: an infeasible test's maneuver is still
-    written) is grouped under ``""``."""
+    written) is grouped under ``""``, except in the park difficulty bands, which leave it out (a run without a park
+    model has none)."""
     out: dict[str, dict[str, dict[str, Any]]] = {}
     for key, column in BREAKDOWNS.items():
         groups: dict[str, list[dict[str, Any]]] = {}
         for r in rows:
             groups.setdefault(_group_key(column, str(r.get(column, ""))), []).append(r)
+        if column == "park_difficulty":  # tests without one (no park model, or not drawn) are in no band
+            groups.pop("", None)
         out[key] = {}
         for name in _group_order(column, groups):
             mine = groups[name]
