@@ -17,7 +17,7 @@ from garage_mj.cli.cruise import (
     task_warning,
     test_seconds,
 )
-from garage_mj.driving.hunt import MAX_BUDGET, MAX_POPULATION, HuntConfig, HuntResult
+from garage_mj.driving.hunt import MAX_BUDGET, MAX_POPULATION, PARK_HUNT_GEOMETRIES, HuntConfig, HuntResult
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, MAX_TEST_TIMEOUT, MAX_TESTS, CruiseSettings
 from garage_mj.reporting.report import task_noun
 
@@ -72,6 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--address", metavar="HOST:PORT", help="with --backend ray: a running Ray cluster")
     p.add_argument("--out", type=Path, default=Path("hunt"), help="output folder (default ./hunt)")
     add_task_args(p)
+    p.add_argument("--geometries", metavar="NAMES", type=lambda v: [n.strip() for n in v.split(",") if n.strip()],
+                   help="park and avp hunts: the park geometries searched, comma-separated names (docs/spec.md "
+                        f"section 9; default {','.join(PARK_HUNT_GEOMETRIES)}); a failure counts when the oracle "
+                        "parks that test")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -95,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
         check_task(settings)  # refused before the warning below, as hunt would
         task_warning("hunt", args.driver, args.task)
         res = hunt(settings, args.out, map=args.map if args.library is None else args.library_map,
-                   library=args.library, config=cfg, compute=compute(args), videos=not args.no_videos)
+                   library=args.library, config=cfg, compute=compute(args), videos=not args.no_videos,
+                   geometries=args.geometries)
     print(failure_summary(res, task=args.task))
     print(f"ranking: {res.files['failures']}; report: {res.files['report']}")
     return 0
@@ -107,17 +112,20 @@ def _n(count: int, noun: str) -> str:
 
 def failure_summary(res: HuntResult, show: int = 5, task: str = "cruise") -> str:
     """The closing lines: tests (a park or AVP hunt's named so: ``40 park tests``), garages, the action type, how
-    many garages failed, and the worst of those."""
-    failing = [s for s in res.ranked if s.failures]  # ranked worst first
+    many garages failed, and the worst of those (a park or AVP hunt's: with its geometry, counting the failures the
+    oracle parks)."""
+    failing = [s for s in res.ranked if s.confirmed]  # ranked worst first
     test = "test" if task == "cruise" else f"{task_noun(task)} test"
-    head = (f"{_n(res.tests, test)} on {_n(len(res.ranked), 'garage')} in {_n(res.generations, 'generation')} "
-            f"({res.action_label}); {_n(len(failing), 'garage')} with a failure")
+    park = any(s.geometry for s in res.ranked)
+    head = (f"{_n(res.tests, test)} on {_n(len(res.ranked), 'garage' if not park else 'garage-geometry pair')} in "
+            f"{_n(res.generations, 'generation')} ({res.action_label}); {_n(len(failing), 'garage')} with a failure"
+            + (" the oracle parks" if park else ""))
     if len(failing) > show:
         head += f", the {show} worst:"
     elif failing:
         head += ":"
-    lines = [head] + [f"  {s.source.name}: {len(s.failures)} of {len(s.feasible)} feasible tests failed "
-                      f"({100 * s.rate:.0f}%)" for s in failing[:show]]
+    lines = [head] + [f"  {s.source.name}{' (' + s.geometry + ')' if s.geometry else ''}: {len(s.confirmed)} of "
+                      f"{len(s.feasible)} feasible tests failed ({100 * s.rate:.0f}%)" for s in failing[:show]]
     kinds = [r["outcome"] for s in res.ranked for r in s.failures]
     lost = runner_failures({k: kinds.count(k) for k in set(kinds)})
     if lost:

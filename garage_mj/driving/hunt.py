@@ -26,6 +26,24 @@ as OpenSCENARIO: ``garage-mj cruise --scenario-file`` replays it). What a person
 ``report.html``, ``videos/`` (an MP4 of the first failing test of each) and
 ``OUT/cruise/regression.png``, is the reporting stage's: :func:`garage_mj.reporting.hunt.hunt`
 (what ``garage-mj hunt`` runs) adds them.
+
+**Park and AVP hunts** (``settings.task`` ``park`` or ``avp``) search the park geometry too, and count only the
+failures the reference driver would not make:
+
+- A candidate is a (garage, park geometry) pair, the geometry one of ``geometries`` (names of
+  :data:`~garage_mj.driving.park_geometries.PARK_GEOMETRIES`; default :data:`PARK_HUNT_GEOMETRIES`). The start
+  pairs each starting garage with a geometry drawn uniformly from those that can build it; a child is, with
+  probability :data:`GEOMETRY_SWITCH`, its parent's garage in another geometry, else a mutation of its parent's
+  garage in the parent's geometry. A garage a geometry cannot build (a :class:`~garage_mj.scene.world.GeometryError`
+  from its stall layout) is never drawn, so never tested. A candidate's tests run in its geometry (the geometry's
+  env keyword arguments over ``settings.env``), each geometry a resumable cruise run of its own in
+  ``OUT/cruise/<geometry>``.
+- Every failing test is driven again by ``oracle`` (the same garage, geometry and test seed: the same stall,
+  parked cars, start and actors); ``OUT/oracle.csv`` keeps those outcomes, so a resumed hunt drives none twice. A
+  failure counts (ranking, fitness, the worst garages) only when the oracle parks that test: the driver fails
+  where parking was shown possible. ``failures.csv`` gains ``geometry``, ``oracle_parks`` (the failing tests the
+  oracle parks) and ``confirmed_pct`` (those, as % of the feasible tests); packs, ``.xosc`` files and videos go
+  into a folder per geometry.
 """
 
 from __future__ import annotations
@@ -37,6 +55,8 @@ import io
 import json
 import math
 import numbers
+import os
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -49,11 +69,14 @@ from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir, write_json
 from garage_mj.driving.cruise import check_task, run_cruise, run_test, xosc_name
 from garage_mj.driving.episode import check_driver, close_cached_env
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests, failure_counts, read_tests
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, MAX_TESTS, CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library, LibraryError
 from garage_mj.generation.search import mutate, replay
 from garage_mj.grid.garage import Garage
+from garage_mj.scene.stalls import stall_layout
+from garage_mj.scene.world import GeometryError, world_with
 
 if TYPE_CHECKING:
     from garage_mj.driving.drivers import ActionChoice
@@ -62,6 +85,20 @@ if TYPE_CHECKING:
 _COUNTS = tuple(sorted(COUNT_COLUMNS.values()))
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
                    "failure_pct", *_COUNTS, "hit", "failure_progress", "failing_tests", "failing_seeds", "parent")
+#: ``failures.csv`` of a park or AVP hunt: the candidate's geometry, and the failures the oracle parks.
+PARK_FAILURE_COLUMNS = (*FAILURE_COLUMNS[:3], "geometry", *FAILURE_COLUMNS[3:8], "oracle_parks", "confirmed_pct",
+                        *FAILURE_COLUMNS[8:])
+
+#: The park geometries a park or AVP hunt searches when none are given (``--geometries``): bays at 90 and 60
+#: degrees, a narrow aisle with a mixed fleet, parallel slots with and without it.
+PARK_HUNT_GEOMETRIES = ("default", "tight", "angled60", "parallel", "parallel_mixed")
+#: A park hunt's child: the chance that it is its parent's garage in another geometry (else a mutated garage).
+GEOMETRY_SWITCH = 0.5
+#: The driver that confirms a park hunt's failures (a failure counts when it parks that test).
+ORACLE = "oracle"
+_ORACLE_COLUMNS = ("geometry", "garage_hash", "test", "seed", "outcome")
+#: Keys of ``settings.env`` that a park hunt's geometries set (given as well, they are refused).
+_GEOMETRY_KEYS = ("world", "parked_fleet", "parked_jitter")
 
 
 #: The most cruise tests a hunt may spend (``--budget``), and the most garages of a generation (``--population``).
@@ -103,8 +140,15 @@ class Scored:
     """A garage and what the tests so far say of it."""
 
     source: CruiseSource
-    parent: str = ""  # hash of the garage it was mutated from ("" for a starting garage)
+    parent: str = ""  # key of the candidate it was made from ("" for a starting one)
     rows: list[dict[str, str]] = field(default_factory=list)
+    geometry: str = ""  # a park or AVP hunt's park geometry ("" in a cruise hunt)
+    oracle_parks: set[int] | None = None  # failing tests (indices) the oracle parks; None: not confirmed (cruise)
+
+    @property
+    def key(self) -> str:
+        """The candidate: its garage's hash, and ``:<geometry>`` in a park or AVP hunt."""
+        return candidate_key(self.source.hash, self.geometry)
 
     @property
     def feasible(self) -> list[dict[str, str]]:
@@ -115,14 +159,64 @@ class Scored:
         return failed_tests(self.rows)
 
     @property
+    def confirmed(self) -> list[dict[str, str]]:
+        """The failures that count: in a park or AVP hunt those the oracle parks, in a cruise hunt all."""
+        fails = self.failures
+        return fails if self.oracle_parks is None else [r for r in fails if int(r["test"]) in self.oracle_parks]
+
+    @property
     def score(self) -> float:
-        """Laplace-smoothed failure rate on feasible tests."""
-        return (len(self.failures) + 1) / (len(self.feasible) + 2)
+        """Laplace-smoothed failure rate (counted failures) on feasible tests."""
+        return (len(self.confirmed) + 1) / (len(self.feasible) + 2)
 
     @property
     def rate(self) -> float:
         f = len(self.feasible)
-        return len(self.failures) / f if f else math.nan
+        return len(self.confirmed) / f if f else math.nan
+
+
+def candidate_key(garage_hash: str, geometry: str = "") -> str:
+    """A hunt candidate's key: the garage's hash, with ``:<geometry>`` in a park or AVP hunt."""
+    return f"{garage_hash}:{geometry}" if geometry else garage_hash
+
+
+def hunt_geometries(task: str, geometries: Sequence[str] | None) -> tuple[str, ...]:
+    """The park geometries a hunt of ``task`` searches: ``geometries`` checked (None: :data:`PARK_HUNT_GEOMETRIES`);
+    a cruise hunt has none (given some, a :class:`HuntError` line)."""
+    if task == "cruise":
+        if geometries:
+            raise HuntError("hunt: --geometries is for park and AVP hunts (give --task park or avp); a cruise hunt's "
+                            "garages keep the default geometry")
+        return ()
+    names = tuple(PARK_HUNT_GEOMETRIES if geometries is None else geometries)
+    unknown = [n for n in names if n not in PARK_GEOMETRIES]
+    if unknown or not names:
+        raise HuntError(f"hunt: --geometries {','.join(unknown) or '(none)'}: give names from "
+                        f"{', '.join(PARK_GEOMETRIES)}, separated by commas")
+    if len(set(names)) != len(names):
+        raise HuntError(f"hunt: --geometries {','.join(names)} names a geometry twice; give each once")
+    return names
+
+
+def candidate_settings(settings: CruiseSettings, geometry: str) -> CruiseSettings:
+    """``settings`` with the park geometry ``geometry``'s env keyword arguments over its env ("": as they are)."""
+    if not geometry:
+        return settings
+    return dataclasses.replace(settings, env={**(settings.env or {}), **PARK_GEOMETRIES[geometry].env_kwargs()})
+
+
+def cruise_dir(out: Path, geometry: str = "") -> Path:
+    """The cruise run of a hunt's candidates in ``geometry``: ``OUT/cruise`` (cruise hunt), ``OUT/cruise/<geometry>``."""
+    return out / "cruise" / geometry if geometry else out / "cruise"
+
+
+def buildable(garage: Garage, geometry: str) -> bool:
+    """Whether the park geometry ``geometry`` can build ``garage`` (its stall layout raises no GeometryError)."""
+    try:
+        stall_layout(garage, world_with(PARK_GEOMETRIES[geometry].world))
+    except GeometryError:
+        return False
+    return True
 
 
 @dataclass
@@ -159,21 +253,48 @@ def _starting(map_name: str | None, library: str | Path | None, n: int, seed: in
     return list(found.values())
 
 
-def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], tries: int) -> tuple[Garage, str] | None:
-    """A new garage mutated from a tournament-picked parent, re-painted by the painter env; None if none found."""
+def _start_pairs(sources: list[CruiseSource], geometries: Sequence[str], seed: int, n: int,
+                 can_build: Any) -> list[tuple[CruiseSource, str]]:
+    """A park hunt's start: the first ``n`` of ``sources`` that some geometry builds, each with one of those drawn
+    uniformly (seeded by the hunt's seed)."""
+    rng = np.random.default_rng([seed, 0])
+    pairs = []
+    for src in sources:
+        if len(pairs) >= n:
+            break
+        ok = [g for g in geometries if can_build(src.garage, g)]
+        if ok:
+            pairs.append((src, ok[int(rng.integers(len(ok)))]))
+    return pairs
+
+
+def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], tries: int,
+           geometries: Sequence[str] = (), can_build: Any = None) -> tuple[Garage, str, Scored] | None:
+    """A new candidate from a tournament-picked parent: a garage mutated from the parent's, re-painted by the painter
+    env, or (a park hunt, with probability :data:`GEOMETRY_SWITCH`) the parent's garage in another of ``geometries``
+    that builds it; (garage, geometry, parent), None if none found."""
     for _ in range(tries):
         a, b = rng.choice(len(parents), size=2, replace=len(parents) < 2)
         parent = parents[a] if parents[a].score >= parents[b].score else parents[b]
+        if len(geometries) > 1 and rng.random() < GEOMETRY_SWITCH:
+            garage = parent.source.garage
+            others = [g for g in geometries if candidate_key(parent.source.hash, g) not in seen
+                      and can_build(garage, g)]
+            if others:
+                return garage, others[int(rng.integers(len(others)))], parent
+            continue
         g = mutate(parent.source.garage, rng)
         if g is None:
             continue
         h = g.canonical_hash()
-        if h in seen:
+        if candidate_key(h, parent.geometry) in seen:
             continue
         painted, info = replay(g)
         if not info.get("usable") or painted.canonical_hash() != h:
             continue
-        return painted, parent.source.hash
+        if parent.geometry and not can_build(painted, parent.geometry):
+            continue
+        return painted, parent.geometry, parent
     return None
 
 
@@ -182,7 +303,8 @@ def _state_file(out: Path) -> Path:
 
 
 def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = None, library: str | Path | None = None,
-         config: HuntConfig | None = None, compute: Compute = DEFAULT_COMPUTE, **cruise_kwargs: Any) -> HuntResult:
+         config: HuntConfig | None = None, compute: Compute = DEFAULT_COMPUTE,
+         geometries: Sequence[str] | None = None, **cruise_kwargs: Any) -> HuntResult:
     """Hunt the garages where ``settings.driver`` fails (module docstring); resumable in ``out_dir``.
 
     ``settings``: the driver, the hunt's seed (start garages, mutations, test seeds), action type,
@@ -190,7 +312,8 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
     declares; another one than that is an ``ActionTypeWarning`` (once). ``hunt.json`` records the type
     and where it came from. ``compute``: where the tests run (:mod:`garage_mj.core.backends`; one Ray
     session for the whole hunt) and the hunt's progress bar. The results do not depend on it. No
-    videos: :func:`garage_mj.reporting.hunt.hunt` records them after this.
+    videos: :func:`garage_mj.reporting.hunt.hunt` records them after this. ``geometries``: a park or AVP hunt's
+    park geometries (None: :data:`PARK_HUNT_GEOMETRIES`; a cruise hunt refuses them), stored in ``hunt.json``.
     """
     from garage_mj.driving.drivers import choose_action_type
 
@@ -199,20 +322,36 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
         raise HuntError("hunt: give a map (--map) or a library (--library)")
     # a bad driver fails here; one warning for all the runs
     choice = choose_action_type(settings.driver, settings.action_type)
+    raw_env = dict(settings.env or {})  # without the driver's sensors: the oracle's re-drives need none
     settings = settings.resolved(choice.action_type)
     if settings.stall is not None:
         raise HuntError(f"hunt: stall {settings.stall}: the hunt's garages change, so each test draws its stall; "
                         "leave stall out")
     check_task(settings)  # a driver made for other tasks is refused before anything is written
+    names = hunt_geometries(settings.task, geometries)
+    given = [k for k in _GEOMETRY_KEYS if k in (settings.env or {})]
+    if names and given:
+        raise HuntError(f"hunt: env {', '.join(given)}: a park hunt's geometries set these; leave them out and name "
+                        "the geometries (--geometries)")
     check_backend(compute, reach=True)  # Ray missing or its cluster unreachable: before any write
     check_driver(settings)  # a driver that cannot be built stops the hunt before hunt.json is written
     start = _starting(map, library, cfg.population, settings.seed)  # a bad map or library: before any write
+    can_build = _build_cache()
+    pairs = [(s, "") for s in start]
+    if names:
+        pairs = _start_pairs(start, names, settings.seed, cfg.population, can_build)
+        if len(pairs) < cfg.population:  # some garages no geometry builds: draw more
+            more = _starting(map, library, 4 * cfg.population, settings.seed)
+            pairs = _start_pairs(more, names, settings.seed, cfg.population, can_build)
+        if not pairs:
+            raise HuntError(f"hunt: none of the starting garages can be built in {', '.join(names)}; give other "
+                            "--geometries or another map")
     out = ensure_dir(out_dir, "--out")
     stored = {"driver": settings.driver, "map": map, "library": str(Path(library).resolve()) if library else None,
               "seed": settings.seed, "action_type": settings.action_type, "occupancy": settings.occupancy,
               "env": settings.env, "test_timeout": settings.test_timeout, "config": asdict(cfg)}
     if settings.task != "cruise":  # a cruise hunt's hunt.json stays as it was
-        stored.update(task=settings.task, maneuver=settings.maneuver)
+        stored.update(task=settings.task, maneuver=settings.maneuver, geometries=list(names))
     session = ray_session(compute) if compute.backend == "ray" else contextlib.nullcontext()
     with FolderLock(out, "garage-mj hunt", remove=True), session:
         state_path = _state_file(out)
@@ -226,7 +365,7 @@ def hunt(settings: CruiseSettings, out_dir: str | Path, *, map: str | None = Non
                 f"{out} holds a hunt with other settings ({', '.join(diff)}); use another --out or the same settings"))
         else:
             write_json(state_path, {"settings": stored, "action_type_from": choice.source})
-        result = _hunt(settings, choice, out, start, cfg, compute, cruise_kwargs)
+        result = _hunt(settings, choice, out, pairs, cfg, compute, cruise_kwargs, names, can_build, raw_env)
     result.action_type, result.action_label = choice.action_type, choice.label
     return result
 
@@ -243,69 +382,151 @@ def _read_state(path: Path) -> dict[str, Any]:
     return state
 
 
-def _hunt(settings: CruiseSettings, choice: ActionChoice, out: Path, start: list[CruiseSource], cfg: HuntConfig,
-          compute: Compute, cruise_kwargs: dict[str, Any]) -> HuntResult:
+def _build_cache() -> Any:
+    """:func:`buildable`, remembered per (garage hash, geometry)."""
+    known: dict[tuple[str, str], bool] = {}
+
+    def can_build(garage: Garage, geometry: str) -> bool:
+        key = (garage.canonical_hash(), geometry)
+        if key not in known:
+            known[key] = buildable(garage, geometry)
+        return known[key]
+
+    return can_build
+
+
+def _hunt(settings: CruiseSettings, choice: ActionChoice, out: Path, start: list[tuple[CruiseSource, str]],
+          cfg: HuntConfig, compute: Compute, cruise_kwargs: dict[str, Any], geometries: Sequence[str] = (),
+          can_build: Any = None, raw_env: dict[str, Any] | None = None) -> HuntResult:
     from tqdm import tqdm
 
     seed = settings.seed
-    cruise_dir = out / "cruise"
     quiet = dataclasses.replace(compute, progress=False)  # the hunt's own bar counts the tests
     scored: dict[str, Scored] = {}
     spent = 0  # tests asked for so far (finished or read back)
+    oracle = _Oracle(out, settings, raw_env or {}) if geometries else None
 
     def run(batch: list[tuple[Scored, int]]) -> None:
-        """Test each (garage, first index) pair ``cfg.tests`` times from that index; rows into ``scored``."""
+        """Test each (candidate, first index) pair ``cfg.tests`` times from that index; rows into ``scored``; a park
+        hunt's new failures driven again by the oracle."""
         nonlocal spent
-        by_count: dict[int, list[Scored]] = {}
+        groups: dict[tuple[str, int], list[Scored]] = {}
         for s, first in batch:
-            by_count.setdefault(first + cfg.tests, []).append(s)
-        for count, group in sorted(by_count.items()):
-            res = run_cruise([s.source for s in group], count, settings, cruise_dir, compute=quiet, choice=choice,
-                             **cruise_kwargs)
+            groups.setdefault((s.geometry, first + cfg.tests), []).append(s)
+        for (geometry, count), group in sorted(groups.items()):
+            res = run_cruise([s.source for s in group], count, candidate_settings(settings, geometry),
+                             cruise_dir(out, geometry), compute=quiet, choice=choice, **cruise_kwargs)
             for s in group:
                 s.rows = [r for r in res.rows if r["garage_hash"] == s.source.hash]
+                if oracle is not None:
+                    s.oracle_parks = oracle.parks(s)
         spent += cfg.tests * len(batch)
         bar.update(cfg.tests * len(batch))
 
     bar = tqdm(total=cfg.budget, disable=not compute.progress, unit="test",
                desc="hunt" if settings.task == "cruise" else f"hunt ({settings.task})")
-    for s in start:
-        scored[s.hash] = Scored(s)
-    run([(scored[s.hash], 0) for s in start])
+    for src, geometry in start:
+        c = Scored(src, geometry=geometry)
+        scored[c.key] = c
+    run([(s, 0) for s in scored.values()])
     generation = 0
     while spent + cfg.tests <= cfg.budget:
         generation += 1
         rng = np.random.default_rng([seed, generation])
-        ranked = sorted(scored.values(), key=lambda s: (-s.score, s.source.hash))
+        ranked = sorted(scored.values(), key=lambda s: (-s.score, s.key))
         elites = ranked[: cfg.elites]
         batch = [(e, len(e.rows)) for e in elites]
         room = (cfg.budget - spent) // cfg.tests - len(batch)
         if room < 0:
             batch = batch[: (cfg.budget - spent) // cfg.tests]
             room = 0
-        children = []
+        children: list[Scored] = []
         for _ in range(min(cfg.population - cfg.elites, room)):
-            got = _child(elites, rng, set(scored) | {c.source.hash for c in children}, cfg.max_tries)
+            got = _child(elites, rng, set(scored) | {c.key for c in children}, cfg.max_tries, geometries, can_build)
             if got is None:
                 break
-            g, parent = got
-            src = CruiseSource.from_garage(g, f"{g.name or 'garage'}-g{generation}-{g.canonical_hash()[:8]}")
-            children.append(Scored(src, parent))
+            g, geometry, parent = got
+            if g is parent.source.garage:  # the parent's garage in another geometry
+                src = parent.source
+            else:
+                src = CruiseSource.from_garage(g, f"{g.name or 'garage'}-g{generation}-{g.canonical_hash()[:8]}")
+            children.append(Scored(src, parent.key, geometry=geometry))
         for c in children:
-            scored[c.source.hash] = c
+            scored[c.key] = c
         if not batch and not children:
             break
         run(batch + [(c, 0) for c in children])
     bar.close()
-    ranked = sorted(scored.values(), key=lambda s: (-(s.rate if s.feasible else -1.0), -len(s.feasible),
-                                                      s.source.hash))
+    if oracle is not None:
+        oracle.close()
+    ranked = sorted(scored.values(), key=lambda s: (-(s.rate if s.feasible else -1.0), -len(s.feasible), s.key))
     files, worst, table = _write_outputs(out, ranked, cfg, settings)
     state = _read_state(_state_file(out))
     state.update({"action_type_from": choice.source, "generations": generation,
                   "tests": sum(len(s.rows) for s in scored.values()),
                   "garages": len(scored), "files": {k: str(v) for k, v in files.items() if not isinstance(v, list)}})
+    if geometries:
+        state["oracle"] = {"failures": sum(len(s.failures) for s in scored.values()),
+                           "oracle_parks": sum(len(s.confirmed) for s in scored.values())}
     write_json(_state_file(out), state)
     return HuntResult(out, state["tests"], generation, ranked, files, worst, table)
+
+
+def oracle_settings(settings: CruiseSettings, env: dict[str, Any], geometry: str) -> CruiseSettings:
+    """The settings that drive a park hunt's test again with the oracle: the hunt's seed, occupancy, task, maneuver
+    and ``env`` (the hunt's, without the driver's sensors) in ``geometry``, the oracle's own action type."""
+    from garage_mj.driving.drivers import choose_action_type
+
+    base = CruiseSettings(ORACLE, settings.seed, None, settings.occupancy, dict(env), test_timeout=settings.test_timeout,
+                          task=settings.task, maneuver=settings.maneuver)
+    return candidate_settings(base.resolved(choose_action_type(ORACLE, None).action_type), geometry)
+
+
+class _Oracle:
+    """A park hunt's failing tests driven again by the oracle, kept in ``OUT/oracle.csv`` (appended as each ends, read
+    back on a resume): the oracle's outcome of the same garage, geometry and test seed."""
+
+    def __init__(self, out: Path, settings: CruiseSettings, env: dict[str, Any]) -> None:
+        self.path = out / "oracle.csv"
+        self.settings, self.env = settings, env
+        self.outcomes: dict[tuple[str, str, int], str] = {}
+        if self.path.is_file():
+            with self.path.open(newline="") as f:
+                for r in csv.DictReader(f):
+                    if all(r.get(c) for c in _ORACLE_COLUMNS[1:]) and r["test"].isdigit():  # a torn last line: again
+                        self.outcomes[(r["geometry"] or "", r["garage_hash"], int(r["test"]))] = r["outcome"]
+        self.used = False
+
+    def parks(self, s: Scored) -> set[int]:
+        """The failing tests of ``s`` that the oracle parks (each driven once, ever)."""
+        settings = oracle_settings(self.settings, self.env, s.geometry)
+        parked = set()
+        for r in s.failures:
+            i = int(r["test"])
+            key = (s.geometry, s.source.hash, i)
+            if key not in self.outcomes:
+                row = run_test(s.source, i, settings)
+                self.used = True
+                self._append({"geometry": s.geometry, "garage_hash": s.source.hash, "test": i, "seed": row["seed"],
+                              "outcome": row["outcome"]})
+                self.outcomes[key] = str(row["outcome"])
+            if self.outcomes[key] == "success":
+                parked.add(i)
+        return parked
+
+    def _append(self, row: dict[str, Any]) -> None:
+        new = not self.path.is_file()
+        with self.path.open("a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=_ORACLE_COLUMNS)
+            if new:
+                w.writeheader()
+            w.writerow(row)
+            f.flush()
+            os.fsync(f.fileno())  # a killed hunt keeps the oracle's outcomes so far
+
+    def close(self) -> None:
+        if self.used:
+            close_cached_env()  # the scenes the re-drives kept
 
 
 def _where(rows: list[dict[str, str]]) -> str:
@@ -331,9 +552,10 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, settings: C
                           seed=settings.seed,
                           episode=0, timestep=0)
             ids[s.source.hash] = gid if gid is not None else (lib.id_of(s.source.hash) or -1)
+    park = any(s.geometry for s in ranked)
     rows = []
     for k, s in enumerate(ranked, 1):
-        fails = s.failures
+        fails = s.confirmed if park else s.failures
         counts = {COUNT_COLUMNS[kind]: n for kind, n in failure_counts(fails).items()}
         hits: dict[str, int] = {}
         for r in fails:
@@ -342,19 +564,22 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, settings: C
         rows.append({
             "rank": k, "garage": s.source.name, "garage_hash": s.source.hash, "library_id": ids.get(s.source.hash, -1),
             "difficulty": round(s.source.difficulty, 4), "tests": len(s.rows), "feasible": len(s.feasible),
-            "failures": len(fails),
-            "failure_pct": round(100.0 * s.rate, 2) if s.feasible else "",
+            "failures": len(s.failures),
+            "failure_pct": round(100.0 * len(s.failures) / len(s.feasible), 2) if s.feasible else "",
             **{c: counts[c] for c in _COUNTS},
             "hit": " ".join(f"{c}:{n}" for c, n in sorted(hits.items())), "failure_progress": _where(fails),
             "failing_tests": " ".join(r["test"] for r in fails), "failing_seeds": " ".join(r["seed"] for r in fails),
-            "parent": s.parent[:12],
+            "parent": _short(s.parent),
         })
+        if park:  # the class counts, hits and failing tests above are of the failures the oracle parks
+            rows[-1].update(geometry=s.geometry, oracle_parks=len(s.confirmed),
+                            confirmed_pct=round(100.0 * s.rate, 2) if s.feasible else "")
     buf = io.StringIO(newline="")
-    w = csv.DictWriter(buf, fieldnames=FAILURE_COLUMNS)
+    w = csv.DictWriter(buf, fieldnames=PARK_FAILURE_COLUMNS if park else FAILURE_COLUMNS)
     w.writeheader()
     w.writerows(rows)
     atomic_write(out / "failures.csv", buf.getvalue())
-    worst = [s for s in ranked if s.failures][: cfg.worst]
+    worst = [s for s in ranked if s.confirmed][: cfg.worst]
     packs, xoscs = _export_worst(out, worst, settings)
     return {"library": lib_path, "failures": out / "failures.csv", "packs": packs, "xosc": xoscs}, worst, rows
 
@@ -366,18 +591,38 @@ def _export_worst(out: Path, worst: list[Scored], settings: CruiseSettings) -> t
     packs, xoscs = [], []
     try:
         for s in worst:
-            pack = export_pack(s.source.garage, out / "packs")
+            mine = candidate_settings(settings, s.geometry)
+            pack = export_pack(s.source.garage, out / "packs", world=world_with((mine.env or {}).get("world")))
             packs.append(pack)
             src = dataclasses.replace(s.source, pack=str(pack.resolve()))
-            for r in s.failures:
+            folder = out / "xosc" / s.geometry if s.geometry else out / "xosc"
+            for r in s.confirmed:
                 i = int(r["test"])
-                path = out / "xosc" / xosc_name(src, i)
+                path = folder / xosc_name(src, i)
                 if not path.is_file():
-                    run_test(src, i, settings, str(out / "xosc"), export_only=True)
+                    run_test(src, i, mine, str(folder), export_only=True)
                 xoscs.append(path)
     finally:
         close_cached_env()  # the scene run_test kept for the exports
     return packs, xoscs
+
+
+def _short(key: str) -> str:
+    """A candidate's key as ``failures.csv`` names a parent: 12 hex digits of the hash (and ``:<geometry>``)."""
+    h, _, geometry = key.partition(":")
+    return candidate_key(h[:12], geometry)
+
+
+def hunt_settings(out_dir: str | Path, geometry: str = "") -> CruiseSettings:
+    """The settings the hunt in ``out_dir`` ran its tests in ``geometry`` with (a cruise hunt's: "")."""
+    return candidate_settings(CruiseSettings.from_stored(read_settings(out_dir)), geometry)
+
+
+def run_dirs(out_dir: str | Path) -> list[Path]:
+    """The hunt's cruise runs: ``OUT/cruise``, or one per geometry of a park or AVP hunt."""
+    out = Path(out_dir)
+    geometries = read_settings(out).get("geometries") or [""]
+    return [cruise_dir(out, g) for g in geometries if (cruise_dir(out, g) / "tests.csv").is_file()]
 
 
 def read_settings(out_dir: str | Path) -> dict[str, Any]:
@@ -393,20 +638,31 @@ def add_file(out_dir: str | Path, name: str, path: Path) -> None:
     write_json(state_path, state)
 
 
-def rerun(out_dir: str | Path, garage_hash: str, test: int) -> dict[str, Any]:
-    """Re-run one listed (garage, test) of a hunt in ``out_dir``: the cruise row (same seed, same outcome)."""
+def rerun(out_dir: str | Path, garage_hash: str, test: int, geometry: str | None = None) -> dict[str, Any]:
+    """Re-run one listed (garage, test) of a hunt in ``out_dir``: the cruise row (same seed, same outcome). A park or
+    AVP hunt's garage tested in several geometries needs ``geometry``, its ``failures.csv`` column."""
     out = Path(out_dir)
     state = read_settings(out)
-    rows = [r for r in read_tests(out / "cruise" / "tests.csv") if r["garage_hash"].startswith(garage_hash)]
-    if not rows:
-        raise HuntError(f"{out}: no hunted garage with hash {garage_hash}")
+    found = []
+    for g in ([geometry] if geometry is not None else state.get("geometries") or [""]):
+        path = cruise_dir(out, g) / "tests.csv"
+        rows = [r for r in read_tests(path) if r["garage_hash"].startswith(garage_hash)] if path.is_file() else []
+        if rows:
+            found.append((g, rows))
+    if not found:
+        raise HuntError(f"{out}: no hunted garage with hash {garage_hash}"
+                        + (f" in geometry {geometry}" if geometry else ""))
+    if len(found) > 1:
+        raise HuntError(f"{out}: garage {garage_hash} was tested in geometries {', '.join(g for g, _ in found)}; "
+                        "name one (geometry=, the geometry column of failures.csv)")
+    geometry, rows = found[0]
     with Library(out / "hunt.sqlite", create=False) as lib:
         gid = lib.id_of(rows[0]["garage_hash"])
         if gid is None:
             raise HuntError(f"{out}/hunt.sqlite: garage {garage_hash} is not stored; run the hunt again to finish it")
         garage = lib.get(gid).garage
     src = CruiseSource.from_garage(garage, rows[0]["garage"])
-    settings = CruiseSettings.from_stored(state)
+    settings = candidate_settings(CruiseSettings.from_stored(state), geometry)
     try:
         return run_test(src, int(test), settings)
     finally:

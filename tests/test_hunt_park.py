@@ -1,0 +1,120 @@
+"""garage-mj hunt --task park: (garage, geometry) candidates, failures the oracle confirms, the same hunt per seed."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from garage_mj.cli import main
+from garage_mj.core.backends import Compute
+from garage_mj.driving.hunt import (
+    PARK_FAILURE_COLUMNS,
+    HuntConfig,
+    HuntError,
+    Scored,
+    _build_cache,
+    _child,
+    _start_pairs,
+    buildable,
+    cruise_dir,
+    hunt,
+    hunt_geometries,
+    rerun,
+)
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES
+from garage_mj.driving.sources import CruiseSettings, CruiseSource
+from garage_mj.grid.painters import paint_garage
+
+QUIET = Compute(progress=False)
+CFG = HuntConfig(budget=10, tests=2, population=3, elites=1, worst=1)  # 3 start candidates, an elite and a child
+GEOMETRIES = ("default", "tight", "parallel")
+
+
+def _hunt(out):
+    return hunt(CruiseSettings("park_assist", seed=1, task="park"), out, map="tiny_7x11", config=CFG, compute=QUIET,
+                geometries=GEOMETRIES)
+
+
+def _table(out):
+    with open(out / "failures.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def hunted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("hunt_park") / "h"
+    return out, _hunt(out)
+
+
+def test_each_candidate_records_its_geometry_and_runs_in_it(hunted):
+    out, res = hunted
+    rows = _table(out)
+    assert list(rows[0]) == list(PARK_FAILURE_COLUMNS)
+    assert len(rows) == len(res.ranked) > CFG.population  # a child was made
+    assert {r["geometry"] for r in rows} <= set(GEOMETRIES)
+    assert json.loads((out / "hunt.json").read_text())["settings"]["geometries"] == list(GEOMETRIES)
+    for s in res.ranked:  # each candidate's tests are in its geometry's run, built in that geometry
+        run = json.loads((cruise_dir(out, s.geometry) / "run.json").read_text())
+        assert run["env"].get("world", {}) == PARK_GEOMETRIES[s.geometry].world
+        assert {r["garage_hash"] for r in s.rows} == {s.source.hash}
+    assert sum(len(s.rows) for s in res.ranked) == res.tests <= CFG.budget
+
+
+def test_failures_are_confirmed_by_the_oracle(hunted):
+    out, res = hunted
+    rows = _table(out)
+    with open(out / "oracle.csv", newline="") as f:
+        oracle = list(csv.DictReader(f))
+    assert sum(int(r["failures"]) for r in rows) == len(oracle) > 0  # every failure, and only those, re-driven once
+    assert all(r["oracle_parks"] != "" and 0 <= int(r["oracle_parks"]) <= int(r["failures"]) for r in rows)
+    assert sum(int(r["oracle_parks"]) for r in rows) == sum(o["outcome"] == "success" for o in oracle) > 0
+    for s in res.ranked:  # the failing tests listed are those the oracle parks
+        assert len(s.confirmed) == len(s.oracle_parks) and {int(r["test"]) for r in s.confirmed} == s.oracle_parks
+    rates = [float(r["confirmed_pct"]) for r in rows if r["confirmed_pct"]]
+    assert rates == sorted(rates, reverse=True)  # ranked by the failures that count
+    worst = res.worst[0]
+    row = worst.confirmed[0]  # a listed failure re-runs with its outcome, in its geometry
+    again = rerun(out, worst.source.hash[:12], int(row["test"]), geometry=worst.geometry)
+    assert (again["outcome"], again["time"]) == (row["outcome"], float(row["time"]))
+
+
+def test_the_same_seed_gives_the_same_hunt(hunted, tmp_path):
+    out, _ = hunted
+    _hunt(tmp_path / "again")
+    assert (tmp_path / "again" / "failures.csv").read_text() == (out / "failures.csv").read_text()
+    before = (out / "oracle.csv").read_text()
+    _hunt(out)  # resumed: nothing driven again
+    assert (out / "oracle.csv").read_text() == before
+
+
+def test_geometries_are_refused_in_one_line(tmp_path, capsys):
+    assert main(["hunt", "--map", "tiny_7x11", "--geometries", "tight", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--geometries is for park and AVP hunts" in err[0]
+    assert main(["hunt", "--map", "tiny_7x11", "--task", "park", "--driver", "park_assist", "--geometries",
+                 "default,narrow", "--out", str(tmp_path / "y")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "narrow" in err[0] and "parallel_mixed" in err[0]
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+    with pytest.raises(HuntError, match="twice"):
+        hunt_geometries("park", ["tight", "tight"])
+    assert hunt_geometries("avp", None)[0] == "default" and hunt_geometries("cruise", None) == ()
+
+
+def test_a_garage_a_geometry_cannot_build_is_never_drawn():
+    garage = paint_garage("m5_13x13_aligned", seed=5)  # its blocks hold no 60-degree rows
+    assert buildable(garage, "default") and not buildable(garage, "angled60")
+    src = CruiseSource.from_garage(garage, "m5")
+    assert [g for _, g in _start_pairs([src] * 20, ("angled60", "default"), 0, 20, _build_cache())] == ["default"] * 20
+    assert _start_pairs([src], ("angled60",), 0, 1, _build_cache()) == []
+    parent = Scored(src, geometry="default", rows=[{"outcome": "collision", "test": "0"}])
+    rng = np.random.default_rng(0)
+    for _ in range(10):  # children: mutations in the parent's geometry, never the garage in angled60
+        g, geometry, _ = _child([parent], rng, {parent.key}, 50, ("default", "angled60"), _build_cache())
+        assert geometry == "default" and g.canonical_hash() != src.hash
+    with pytest.raises(HuntError, match="env world"):
+        hunt(CruiseSettings("park_assist", task="park", env={"world": {"stall_width": 2.3}}), "unused",
+             map="tiny_7x11", config=CFG, compute=QUIET)
