@@ -33,6 +33,7 @@ VERSION = 1
 SHIPPED_PARK_MODELS = {"park_assist": "park_assist.json"}
 DEFAULT_PARK_MODEL = "park_assist"
 FIT_COMMAND = "garage-mj difficulty fit --task park"
+PLAN_CLEAR_CAP = 3.0  # [m] a plan's clearance counts up to this: farther obstacles make no test harder
 
 
 def _cell(row: Mapping[str, Any], column: str) -> float:
@@ -40,6 +41,14 @@ def _cell(row: Mapping[str, Any], column: str) -> float:
     if value is None or value == "":
         raise KeyError(column)
     return float(value)
+
+
+def _plan_clearance(row: Mapping[str, Any]) -> float:
+    """The plan's least clearance, at most :data:`PLAN_CLEAR_CAP`: a plan with nothing near it (an infinite clearance,
+    an empty cell beside a plan length) reads as the cap."""
+    _cell(row, "plan_length_m")  # no plan: no feature
+    value = row.get("plan_clearance_m", "")
+    return PLAN_CLEAR_CAP if value is None or value == "" else min(float(value), PLAN_CLEAR_CAP)
 
 
 def _angle(row: Mapping[str, Any]) -> float:
@@ -55,8 +64,8 @@ PARK_FEATURE_TABLE = {
     "tight_bay": ("the room the stall leaves across the car, negated (-bay_margin_m)",
                   lambda r: -_cell(r, "bay_margin_m")),
     "narrow_aisle": ("the aisle's width, negated (-aisle_width_m)", lambda r: -_cell(r, "aisle_width_m")),
-    "tight_plan": ("the reference plan's least clearance, negated (-plan_clearance_m)",
-                   lambda r: -_cell(r, "plan_clearance_m")),
+    "tight_plan": ("the reference plan's least clearance up to 3 m, negated (-plan_clearance_m)",
+                   lambda r: -_plan_clearance(r)),
     "cusps": ("the reference plan's direction changes (plan_cusps)", lambda r: _cell(r, "plan_cusps")),
     "plan_length": ("the reference plan's length [m] (plan_length_m)", lambda r: _cell(r, "plan_length_m")),
     "start_distance": ("the start's straight-line distance to the stall [m] (start_distance_m)",
