@@ -1,0 +1,116 @@
+"""Does a park hunt find confirmed parking failures faster than uniform sampling? Equal test budgets.
+
+    MUJOCO_GL=egl .venv/bin/python eval/bench_hunt_park.py [--map m5_13x13_aligned] [--driver park_assist ...]
+        [--budget 150] [--tests 5] [--population 10] [--elites 3] [--geometries default,tight,...]
+        [--seed 0] [--workers 1] [--out runs/bench_hunt_park] [--json docs/bench_hunt_park.json]
+
+For each ``--driver``:
+
+1. ``hunt --task park`` spends ``--budget`` park tests on (garage, park geometry) candidates painted on ``--map``
+   (:func:`garage_mj.driving.hunt.hunt`, its geometries ``--geometries``).
+2. The uniform baseline spends the same budget on ``budget / tests`` garages painted uniformly on the same map (the
+   painter's seeds of another hunt seed, ``--seed + 1``), each in a geometry drawn uniformly from the same set (of
+   those that build it), ``--tests`` tests each: a hunt with no generation after its start, so its failures are
+   confirmed the same way.
+3. A confirmed failure is a test the driver fails while the oracle parks it (same garage, geometry and test seed).
+
+Reports, per driver and arm, the tests, feasible tests, failures, confirmed failures, their rate per test spent
+and per feasible test, and the ratio hunt / uniform of the confirmed rate per test (the target: at least 3x);
+each arm is a resumable hunt folder under ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+from _provenance import provenance
+
+from garage_mj.core.backends import Compute
+from garage_mj.driving.hunt import PARK_HUNT_GEOMETRIES, HuntConfig, HuntResult, hunt
+from garage_mj.driving.sources import CruiseSettings
+
+TARGET_RATIO = 3.0  # confirmed failures per test: hunt / uniform
+
+
+def _wilson(k: int, n: int, z: float = 1.96) -> list[float] | None:
+    """Wilson 95% interval of k successes in n trials, as percentages."""
+    if not n:
+        return None
+    p = k / n
+    d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return [round(100 * (c - h), 1), round(100 * (c + h), 1)]
+
+
+def _arm(res: HuntResult, seconds: float) -> dict:
+    """Counts of one arm: tests, feasible, failures, confirmed (oracle parks), per geometry too."""
+    tests = sum(len(s.rows) for s in res.ranked)
+    feasible = sum(len(s.feasible) for s in res.ranked)
+    fails = sum(len(s.failures) for s in res.ranked)
+    confirmed = sum(len(s.confirmed) for s in res.ranked)
+    by_geometry: dict[str, dict[str, int]] = {}
+    for s in res.ranked:
+        g = by_geometry.setdefault(s.geometry, {"candidates": 0, "tests": 0, "feasible": 0, "confirmed": 0})
+        g["candidates"] += 1
+        g["tests"] += len(s.rows)
+        g["feasible"] += len(s.feasible)
+        g["confirmed"] += len(s.confirmed)
+    return {"candidates": len(res.ranked), "generations": res.generations, "tests": tests, "feasible": feasible,
+            "failures": fails, "confirmed": confirmed,
+            "confirmed_per_test_pct": round(100 * confirmed / tests, 2) if tests else None,
+            "confirmed_per_test_ci95": _wilson(confirmed, tests),
+            "confirmed_per_feasible_pct": round(100 * confirmed / feasible, 2) if feasible else None,
+            "by_geometry": dict(sorted(by_geometry.items())), "wall_s": round(seconds, 1)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--map", default="m5_13x13_aligned")
+    ap.add_argument("--driver", action="append", default=None, help="a parking driver (repeat for more; default "
+                                                                      "park_assist)")
+    ap.add_argument("--budget", type=int, default=150)
+    ap.add_argument("--tests", type=int, default=5)
+    ap.add_argument("--population", type=int, default=10)
+    ap.add_argument("--elites", type=int, default=3)
+    ap.add_argument("--geometries", default=",".join(PARK_HUNT_GEOMETRIES))
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--out", type=Path, default=Path("runs/bench_hunt_park"))
+    ap.add_argument("--json", type=Path, default=Path("docs/bench_hunt_park.json"))
+    args = ap.parse_args()
+    geometries = [g for g in args.geometries.split(",") if g]
+    compute = Compute(workers=args.workers, progress=False)
+    drivers = {}
+    for driver in args.driver or ["park_assist"]:
+        arms = {}
+        for arm, seed, cfg in (
+                ("hunt", args.seed, HuntConfig(budget=args.budget, tests=args.tests, population=args.population,
+                                               elites=args.elites, worst=0)),
+                ("uniform", args.seed + 1, HuntConfig(budget=args.budget, tests=args.tests,
+                                                      population=args.budget // args.tests, elites=1, worst=0))):
+            t = time.time()
+            res = hunt(CruiseSettings(driver, seed=seed, task="park"), args.out / driver.replace(":", "_") / arm,
+                       map=args.map, config=cfg, compute=compute, geometries=geometries)
+            arms[arm] = _arm(res, time.time() - t)
+            print(driver, arm, json.dumps({k: v for k, v in arms[arm].items() if k != "by_geometry"}), flush=True)
+        h, u = arms["hunt"]["confirmed_per_test_pct"], arms["uniform"]["confirmed_per_test_pct"]
+        ratio = round(h / u, 2) if h is not None and u else None
+        drivers[driver] = {**arms, "ratio": ratio, "met": ratio is not None and ratio >= TARGET_RATIO}
+        print(f"{driver}: confirmed failures per test, hunt {h}% vs uniform {u}%: ratio {ratio}", flush=True)
+    out = {"what": "confirmed park failures (the driver fails, the oracle parks the same test) per test spent: "
+                   "hunt --task park against uniform sampling of garages and geometries, equal budgets",
+           "map": args.map, "geometries": geometries, "budget": args.budget, "tests_per_evaluation": args.tests,
+           "population": args.population, "elites": args.elites, "seed": args.seed, "target_ratio": TARGET_RATIO,
+           "drivers": drivers, "provenance": provenance()}
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(out, indent=2) + "\n")
+    print(f"wrote {args.json}")
+
+
+if __name__ == "__main__":
+    main()
