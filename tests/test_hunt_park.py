@@ -118,3 +118,19 @@ def test_a_garage_a_geometry_cannot_build_is_never_drawn():
     with pytest.raises(HuntError, match="env world"):
         hunt(CruiseSettings("park_assist", task="park", env={"world": {"stall_width": 2.3}}), "unused",
              map="tiny_7x11", config=CFG, compute=QUIET)
+
+
+def test_the_closing_lines_count_the_failures_the_oracle_parks():
+    from pathlib import Path
+
+    from garage_mj.cli.hunt import failure_summary
+    from garage_mj.driving.hunt import HuntResult
+
+    src = CruiseSource.from_garage(paint_garage("tiny_7x11", seed=1), "g1")
+    rows = [{"outcome": o, "test": str(i)} for i, o in enumerate(["collision", "outside_stall", "success"])]
+    ranked = [Scored(src, rows=rows, geometry="tight", oracle_parks={1}),
+              Scored(src, rows=rows[:1], geometry="parallel", oracle_parks=set())]
+    res = HuntResult(Path("h"), 4, 1, ranked, {}, action_label="x")
+    assert failure_summary(res, task="park").splitlines() == [
+        "4 park tests on 2 garage-geometry pairs in 1 generation (x); 1 pair with a failure the oracle parks:",
+        "  g1 (tight): 1 of 3 feasible tests failed (33%)"]

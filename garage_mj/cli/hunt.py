@@ -118,8 +118,9 @@ def failure_summary(res: HuntResult, show: int = 5, task: str = "cruise") -> str
     test = "test" if task == "cruise" else f"{task_noun(task)} test"
     park = any(s.geometry for s in res.ranked)
     head = (f"{_n(res.tests, test)} on {_n(len(res.ranked), 'garage' if not park else 'garage-geometry pair')} in "
-            f"{_n(res.generations, 'generation')} ({res.action_label}); {_n(len(failing), 'garage')} with a failure"
-            + (" the oracle parks" if park else ""))
+            f"{_n(res.generations, 'generation')} ({res.action_label}); "
+            + (f"{_n(len(failing), 'pair')} with a failure the oracle parks" if park
+               else f"{_n(len(failing), 'garage')} with a failure"))
     if len(failing) > show:
         head += f", the {show} worst:"
     elif failing:
