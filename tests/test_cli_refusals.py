@@ -153,6 +153,8 @@ BAD: list[tuple[str, list[str], str]] = [
     ("hunt", [*HUNT, "--driver", "no_such_driver"], "no_such_driver"),
     ("hunt", [*HUNT, "--driver", "park_assist", "--task", "cruise"], "park_assist"),
     ("hunt", [*HUNT, "--occupancy", "-0.5"], "-0.5"),
+    ("hunt", [*HUNT, "--geometries", "tight"], "--geometries"),  # a cruise hunt searches no park geometry
+    ("hunt", [*HUNT, "--driver", "park_assist", "--task", "park", "--geometries", "tight,narrow"], "narrow"),
     ("hunt", [*HUNT[:3], "--out", FILE], FILE),
     ("train-driver", [*TRAIN_DRIVER, "--iterations", "0"], "0"),
     ("train-driver", [*TRAIN_DRIVER, "--workers", "100000000000"], "100000000000"),
