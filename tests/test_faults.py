@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -843,6 +844,50 @@ def test_a_time_limit_running_out_in_a_gc_callback_is_not_lost(monkeypatch):
         gc.callbacks.remove(_slow_gc_callback)
     assert isinstance(res, backends.LostJob) and res.kind == "timeout"
     assert time.monotonic() - start < 3 and lost == []
+
+
+class _Referent:
+    pass
+
+
+def _slow_weakref_callback(_ref):
+    end = time.monotonic() + 0.6
+    while time.monotonic() < end:  # a plain weakref callback: no frame says it is one
+        pass
+
+
+def _drops_a_watched_object_then_sleeps(_job):
+    obj = _Referent()
+    ref = weakref.ref(obj, _slow_weakref_callback)
+    del obj  # the callback runs now, from the dealloc: a raise in it is swallowed
+    time.sleep(10)
+    return ref
+
+
+def test_a_time_limit_swallowed_where_no_frame_tells_is_not_reported_and_still_stops_the_job(monkeypatch):
+    """Where the raise lands in a callback that no frame marks (a weakref callback run by a dealloc in C), Python
+    swallows it: it is not reported (the next alarm raises it again) and the job still stops; anything else that
+    is unraisable is reported as before."""
+    from garage_mj.core import backends
+
+    lost = []
+    monkeypatch.setattr(sys, "unraisablehook", lost.append)
+    start = time.monotonic()
+    res = backends._limited(_drops_a_watched_object_then_sleeps, None, 0.3)
+    assert isinstance(res, backends.LostJob) and res.kind == "timeout"
+    assert time.monotonic() - start < 3 and lost == [] and sys.unraisablehook == lost.append
+
+    class _Raises:
+        def __del__(self):
+            raise ValueError("not ours")
+
+    def drop(_job):
+        obj = _Raises()
+        del obj
+        return 1
+
+    assert backends._limited(drop, None, 5.0) == 1
+    assert [type(u.exc_value) for u in lost] == [ValueError]
 
 
 def test_the_test_timeout_is_a_stored_setting_and_old_runs_resume(pack_dir, tmp_path, capsys):

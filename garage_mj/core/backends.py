@@ -51,6 +51,7 @@ import multiprocessing as mp
 import numbers
 import os
 import signal
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -201,7 +202,9 @@ def _time_limit(seconds: float | None) -> Iterator[None]:
     only on the main thread of a POSIX process; elsewhere no limit). Interrupts Python code and waits
     (``time.sleep``, locks, sockets), not a C call that never returns: a pool worker is killed for that.
     The timer repeats every :data:`_REPEAT_S` until the block ends, since a raise that lands in a
-    ``__del__``, a weakref or a gc callback is swallowed there (:func:`_in_finalizer`)."""
+    ``__del__``, a weakref or a gc callback is swallowed there: :func:`_in_finalizer` holds it back where it can
+    tell, and where it cannot (a dealloc in C code) the swallowed raise is not reported as an unraisable
+    exception, since the next alarm raises it again."""
     usable = (seconds is not None and hasattr(signal, "setitimer")
               and threading.current_thread() is threading.main_thread())
     if not usable:
@@ -213,6 +216,14 @@ def _time_limit(seconds: float | None) -> Iterator[None]:
         if armed[0] and not _in_finalizer(frame):  # in a finalizer the raise is lost: the next alarm raises
             raise _JobTimeout
 
+    def unraisable(info) -> None:
+        """A raise of ours that landed where Python swallows it is no error (the next alarm raises it again);
+        anything else is reported as before."""
+        if not isinstance(info.exc_value, _JobTimeout):
+            outer_hook(info)
+
+    outer_hook = sys.unraisablehook
+    sys.unraisablehook = unraisable
     old = signal.signal(signal.SIGALRM, expire)
     start = time.monotonic()
     outer, _ = signal.setitimer(signal.ITIMER_REAL, seconds, _REPEAT_S)  # a timer of the caller's (pytest-timeout)
@@ -224,6 +235,8 @@ def _time_limit(seconds: float | None) -> Iterator[None]:
                 armed[0] = False
                 signal.setitimer(signal.ITIMER_REAL, 0)
                 signal.signal(signal.SIGALRM, old)
+                if sys.unraisablehook is unraisable:
+                    sys.unraisablehook = outer_hook
                 if outer > 0:  # the caller's timer goes on with what it had left
                     signal.setitimer(signal.ITIMER_REAL, max(outer - (time.monotonic() - start), 1e-3))
                 break
