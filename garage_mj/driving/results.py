@@ -229,7 +229,7 @@ def row_problem(row: dict[str, str], settings: CruiseSettings) -> tuple[str, str
         if row[col] != "" and not (row[col].isascii() and row[col].isdigit()):
             return col, "is not a whole number >= 0"
     for col in _NUMBER_CELLS:
-        if row[col] != "" and not _finite(row[col]):
+        if row.get(col, "") != "" and not _finite(row[col]):  # .get: a row built by hand may lack the newer columns
             return col, "is not a finite number"
     if row["feasible"] not in ("", "0", "1"):
         return "feasible", "is not 0, 1 or empty"
@@ -240,7 +240,7 @@ def row_problem(row: dict[str, str], settings: CruiseSettings) -> tuple[str, str
     if settings.stall is not None and row["target_stall"] not in ("", str(settings.stall)):
         return "target_stall", f"is not this run's stall ({settings.stall})"
     if settings.task == "cruise":
-        extra = next((c for c in (*PARK_COLUMNS, *ROOM_COLUMNS) if c != "task" and row[c] != ""), None)
+        extra = next((c for c in (*PARK_COLUMNS, *ROOM_COLUMNS) if c != "task" and row.get(c, "") != ""), None)
         if extra is not None:
             return extra, "is filled in a cruise test's row (park columns are empty there)"
     elif row["maneuver"] not in ("", "reverse", "forward") or (
