@@ -168,6 +168,9 @@ def test_a_hand_made_tpcap_parallel_slot_is_parked_by_the_oracle(slot_case, tmp_
     assert float(row["position_error_m"]) < 0.3 and float(row["heading_error_deg"]) < 10
     summary = json.loads((out / "summary.json").read_text())
     assert summary["cases"] == 1 and summary["success_pct"] == 100.0
+    # a case is a park test: its park difficulty under the default park model (the oracle has none of its own)
+    assert 0 < float(row["park_difficulty"]) < 1 and summary["park_model_name"] == "park_assist"
+    assert float(row["bay_margin_m"]) != 0 and float(row["start_distance_m"]) > 0
     assert "1 cases (1 new)" in capsys.readouterr().out
     # resumed: nothing runs again
     assert main(["cruise", "--cases", str(slot_case), "--driver", "oracle", "--out", str(out), "--quiet"]) == 0

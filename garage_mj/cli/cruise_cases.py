@@ -16,8 +16,7 @@ from garage_mj.scene.vehicles import DEFAULT_VEHICLE
 #: Options of ``cruise`` that choose garages or shape a garage's tests: a run of cases has neither.
 _NOT_FOR_CASES = (("sample", "--sample"), ("ids", "--ids"), ("map", "--map"), ("difficulty", "--difficulty"),
                   ("coverage", "--coverage"), ("route_difficulty", "--route-difficulty"), ("feasible", "--feasible"),
-                  ("limit", "--limit"), ("route_model", "--route-model"), ("park_model", "--park-model"),
-                  ("stall", "--stall"),
+                  ("limit", "--limit"), ("route_model", "--route-model"), ("stall", "--stall"),
                   ("pedestrians", "--pedestrians"), ("moving_cars", "--moving-cars"), ("clutter", "--clutter"),
                   ("scenario", "--scenario"))
 
@@ -61,7 +60,7 @@ def run_cases_cli(args: argparse.Namespace, action_warnings: Callable[[str], Abs
         settings = case_settings(args.driver, args.seed, args.action_type, test_timeout=args.test_timeout)
         check_task(settings)
         task_warning("cruise", args.driver, "park")
-        res = run_cases(cases, settings, args.out, compute=compute(args))
+        res = run_cases(cases, settings, args.out, compute=compute(args), park_model=args.park_model or True)
     print(stats_line(res))
     for line in breakdown_lines({k: res.stats[k] for k in BREAKDOWNS if k in res.stats}):
         print(f"  {line}")

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 from garage_mj.core.backends import DEFAULT_COMPUTE, Compute, LostJob, check_backend, map_unordered
 from garage_mj.core.fsutil import FolderLock, clean_temp, ensure_dir, write_json
+from garage_mj.driving.difficulty.park_rating import choose_park_model, park_difficulty_cell
 from garage_mj.driving.episode import check_driver, drive_test
 from garage_mj.driving.results import (
     TEST_COLUMNS,
@@ -61,6 +62,7 @@ from garage_mj.scene.vehicles import FLEET, TPCAP_VEHICLE, VehicleClass
 
 if TYPE_CHECKING:
     from garage_mj.driving.drivers import ActionChoice
+    from garage_mj.scene.park_difficulty import ParkDifficulty
 
 #: ``CruiseSettings.env`` of a run of cases: marks its ``run.json`` (a garage run into the folder is refused).
 CASES_ENV = {"source": "cases"}
@@ -288,9 +290,12 @@ def case_summary(rows: Sequence[dict[str, Any]], settings: CruiseSettings, actio
 
 
 def run_cases(cases: Sequence[ParkCase], settings: CruiseSettings, out_dir: str | Path = "cruise", *,
-              compute: Compute = DEFAULT_COMPUTE, choice: ActionChoice | None = None) -> CaseResult:
+              compute: Compute = DEFAULT_COMPUTE, choice: ActionChoice | None = None,
+              park_model: ParkDifficulty | str | Path | bool = True) -> CaseResult:
     """Drive every case of ``cases`` once (module docstring); resumable. ``settings``: :func:`case_settings`'s.
-    Refuses a bad driver, a resumed folder of other settings or rows, in one line before anything is written."""
+    ``park_model``: the model of each row's ``park_difficulty``, as :func:`garage_mj.driving.cruise.run_cruise`'s.
+    Refuses a bad driver, a bad park model, a resumed folder of other settings or rows, in one line before anything
+    is written."""
     from garage_mj.driving.cruise import check_task
     from garage_mj.driving.drivers import choose_action_type
 
@@ -301,6 +306,7 @@ def run_cases(cases: Sequence[ParkCase], settings: CruiseSettings, out_dir: str 
     settings = settings.resolved(choice.action_type)
     check_task(settings)
     check_driver(settings)
+    park = choose_park_model(park_model, settings.driver, settings.driver_kwargs)
     out = ensure_dir(out_dir, "--out")
     with FolderLock(out, "garage-mj cruise", remove=True):
         csv_path = out / "tests.csv"
@@ -319,6 +325,8 @@ def run_cases(cases: Sequence[ParkCase], settings: CruiseSettings, out_dir: str 
             with csv_path.open("a", newline="") as f:
                 writer = csv.DictWriter(f, fieldnames=TEST_COLUMNS)
                 for row in _rows(jobs, compute, settings):
+                    if park.model is not None:
+                        row["park_difficulty"] = park_difficulty_cell(park.model, row)
                     writer.writerow(row)
                     f.flush()
                     os.fsync(f.fileno())
@@ -326,7 +334,7 @@ def run_cases(cases: Sequence[ParkCase], settings: CruiseSettings, out_dir: str 
                     new += 1
         by_hash = {r["garage_hash"]: r for r in rows}
         mine = [by_hash[c.digest] for c in cases if c.digest in by_hash]
-        stats = case_summary(mine, settings, choice.source)
+        stats = {**case_summary(mine, settings, choice.source), **park.record()}
         write_json(out / "summary.json", stats)
         return CaseResult(out, new, mine, stats, choice.label, list(cases))
 
