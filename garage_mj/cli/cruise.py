@@ -455,6 +455,10 @@ def closing_lines(s: dict, new: int, action_label: str, out: Path) -> list[str]:
         lines += [f"  {line}" for line in breakdown_lines({k: s[k] for k in BREAKDOWNS})]
     if (out / PARK_FIGURE).is_file():
         lines.append(f"  {task_noun(task)} success by level and maneuver: {out / PARK_FIGURE}")
+    if s.get("park_model"):  # whose failure probability tests.csv's park_difficulty is
+        fitted = ", ".join(s.get("park_model_fitted_for") or []) or "unknown drivers"
+        lines.append(f"  park_difficulty in tests.csv: model {s['park_model_name']} (fitted on {fitted})"
+                     + (" - not this driver's own; --park-model FILE gives one" if s.get("park_note") else ""))
     return lines
 
 
