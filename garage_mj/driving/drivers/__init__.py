@@ -39,6 +39,7 @@ from garage_mj.driving.drivers.base import (
     DriverNoiseConfig,
     discretize,
 )
+from garage_mj.driving.learning.saved_model import learned_kind
 
 #: Hand-written built-in drivers: name -> "module:Class".
 DRIVERS: dict[str, str] = {
@@ -156,8 +157,6 @@ def resolve_driver(spec: str) -> type:
     ``learned:PATH`` give the learned parking driver's class, ``learned:avp`` the learned AVP driver's."""
     model = learned_model(spec)
     if model is not None:
-        from garage_mj.driving.drivers.learned import learned_kind
-
         target = {"cruise": LEARNED_DRIVER, "park": LEARNED_PARK_DRIVER, "avp": LEARNED_AVP_DRIVER}[learned_kind(model)]
     else:
         target = DRIVERS.get(spec, spec)

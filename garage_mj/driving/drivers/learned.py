@@ -17,7 +17,6 @@ from __future__ import annotations
 import json
 import math
 import zipfile
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -32,16 +31,18 @@ from garage_mj.driving.learning.observation import (
     park_observation,
     park_space,
 )
-from garage_mj.driving.learning.saved_model import load_driver_model
+from garage_mj.driving.learning.saved_model import (  # noqa: F401  (the shipped models' names, read here too)
+    DEFAULT_MODEL,
+    DRIVER_MODELS,
+    NAMED,
+    PARK_MODEL,
+    default_model,
+    learned_kind,
+    load_driver_model,
+    model_path,
+)
 from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, PARK_CONTINUOUS_SIZE, DiscreteAction
 
-DRIVER_MODELS = "drivers"  # the folder of models/ that holds the shipped driver models
-DEFAULT_MODEL = "cruise_m5"  # models/drivers/<DEFAULT_MODEL>.zip: what ``--driver learned`` runs
-#: The shipped parking model ``learned:park`` runs: models/drivers/<PARK_MODEL>.zip.
-PARK_MODEL = "park_m5"
-#: The learned drivers a ``learned:NAME`` spec names: the parking model, and the AVP driver (the shipped cruise and
-#: parking models together, :class:`LearnedAVPDriver`).
-NAMED = ("park", "avp")
 N_ACTIONS = len(DiscreteAction)  # the paper's 4 actions
 #: The SB3 algorithm that loads a zip, by the module of the policy class its ``data`` records.
 ALGORITHMS = {"stable_baselines3.dqn.policies": "DQN", "stable_baselines3.common.policies": "PPO"}
@@ -59,38 +60,6 @@ TORCH_THREADS = 1
 MKLDNN_IN_ACT = False
 _MODEL_CACHE_SIZE = 4  # models a process keeps loaded (a retrained file is a new entry)
 _MODELS: dict[tuple[str, int, int], Any] = {}
-
-
-def default_model(name: str = DEFAULT_MODEL) -> Path:
-    """A shipped model: ``models/drivers/<name>.zip`` in the package (by default what ``--driver learned`` runs)."""
-    return Path(str(resources.files("garage_mj.models").joinpath(DRIVER_MODELS, f"{name}.zip")))
-
-
-def model_path(model: str | Path | None) -> Path:
-    """The file of a learned driver's model: None or ``""`` the shipped cruise model, ``park`` the shipped parking
-    model (:data:`PARK_MODEL`), anything else a path."""
-    if model is None or str(model) == "":
-        return default_model()
-    if str(model) == "park":
-        return default_model(PARK_MODEL)
-    return Path(model).expanduser()
-
-
-def learned_kind(model: str | Path | None) -> str:
-    """Which learned driver runs ``model`` (a ``learned:`` spec's model part): ``"avp"`` for ``avp``
-    (:class:`LearnedAVPDriver`), ``"park"`` for ``park`` or a zip whose action space is the continuous park action
-    (:class:`LearnedParkDriver`; read from its plain ``data``, nothing loaded), else ``"cruise"``
-    (:class:`LearnedDriver`; a file that cannot be read too: its loader then names what is wrong with it)."""
-    if model is not None and str(model) in NAMED:
-        return str(model)
-    if model is None or str(model) == "":
-        return "cruise"
-    try:
-        with zipfile.ZipFile(model_path(model)) as z:
-            data = json.loads(z.read("data"))
-        return "park" if "box.Box" in str(data["action_space"][":type:"]) else "cruise"
-    except (OSError, zipfile.BadZipFile, KeyError, TypeError, ValueError):
-        return "cruise"
 
 
 def _no_model(path: Path, why: str = "") -> DriverError:

@@ -5,13 +5,18 @@ the policy class (the algorithm's ``MultiInputPolicy``), the network (``CameraRo
 observation space (:func:`~garage_mj.driving.learning.observation.learned_space` at the recorded camera
 size; :func:`~garage_mj.driving.learning.observation.park_space` for a parking driver), the action space (the
 paper's ``Discrete`` or the continuous park action) and schedules (:data:`~garage_mj.core.model_file.COMMON`). Any other pickled
-entry refuses the file. Imported by the learned driver and by ``train-driver``'s resume.
+entry refuses the file. Imported by the learned driver and by ``train-driver``'s resume. It also names the shipped
+models (:func:`model_path`: ``learned``, ``learned:park``) and tells which learned driver runs a model
+(:func:`learned_kind`), reading no more than a zip's plain ``data``.
 """
 
 from __future__ import annotations
 
 import inspect
+import json
 import re
+import zipfile
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -84,4 +89,47 @@ def load_driver_model(path: str | Path, algo: type, env: Any = None, **kwargs: A
     return load_sb3(path, algo, DRIVER_REBUILDS, env=env, **kwargs)
 
 
-__all__ = ["DRIVER_REBUILDS", "load_driver_model"]
+# -- the shipped models, by the names ``learned`` and ``learned:NAME`` run ----------------------------------------
+DRIVER_MODELS = "drivers"  # the folder of models/ that holds the shipped driver models
+DEFAULT_MODEL = "cruise_m5"  # models/drivers/<DEFAULT_MODEL>.zip: what ``--driver learned`` runs
+#: The shipped parking model ``learned:park`` runs: models/drivers/<PARK_MODEL>.zip.
+PARK_MODEL = "park_m5"
+#: The learned drivers a ``learned:NAME`` spec names: the parking model, and the AVP driver (the shipped cruise and
+#: parking models together, :class:`~garage_mj.driving.drivers.learned.LearnedAVPDriver`).
+NAMED = ("park", "avp")
+
+
+def default_model(name: str = DEFAULT_MODEL) -> Path:
+    """A shipped model: ``models/drivers/<name>.zip`` in the package (by default what ``--driver learned`` runs)."""
+    return Path(str(resources.files("garage_mj.models").joinpath(DRIVER_MODELS, f"{name}.zip")))
+
+
+def model_path(model: str | Path | None) -> Path:
+    """The file of a learned driver's model: None or ``""`` the shipped cruise model, ``park`` the shipped parking
+    model (:data:`PARK_MODEL`), anything else a path."""
+    if model is None or str(model) == "":
+        return default_model()
+    if str(model) == "park":
+        return default_model(PARK_MODEL)
+    return Path(model).expanduser()
+
+
+def learned_kind(model: str | Path | None) -> str:
+    """Which learned driver runs ``model`` (a ``learned:`` spec's model part): ``"avp"`` for ``avp``
+    (:class:`~garage_mj.driving.drivers.learned.LearnedAVPDriver`), ``"park"`` for ``park`` or a zip whose action space is the continuous park action
+    (:class:`~garage_mj.driving.drivers.learned.LearnedParkDriver`; read from its plain ``data``, nothing loaded), else ``"cruise"``
+    (:class:`~garage_mj.driving.drivers.learned.LearnedDriver`; a file that cannot be read too: its loader then names what is wrong with it)."""
+    if model is not None and str(model) in NAMED:
+        return str(model)
+    if model is None or str(model) == "":
+        return "cruise"
+    try:
+        with zipfile.ZipFile(model_path(model)) as z:
+            data = json.loads(z.read("data"))
+        return "park" if "box.Box" in str(data["action_space"][":type:"]) else "cruise"
+    except (OSError, zipfile.BadZipFile, KeyError, TypeError, ValueError):
+        return "cruise"
+
+
+__all__ = ["DEFAULT_MODEL", "DRIVER_MODELS", "DRIVER_REBUILDS", "NAMED", "PARK_MODEL", "default_model", "learned_kind",
+           "load_driver_model", "model_path"]
