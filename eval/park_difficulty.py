@@ -13,7 +13,9 @@ Protocol (fixed before any result was seen; nothing is tuned on the held-out set
   many m7_13x13_u garages painted with seed 0, ``--heldout-tests`` park tests each in every geometry, run seed 1.
 * **score** (``garage-mj difficulty score --task park``): per-test AUC of the park difficulty and of HOPE's levels
   (normal 0, complex 1, extreme 2) as failure predictors, and the per-garage Pearson r of each with success %
-  (a garage in one geometry is one point; 95 % bootstrap interval over them), on the held-out set.
+  (a garage in one geometry is one point; 95 % bootstrap interval over them), on the held-out set; the same
+  within each geometry, and for a baseline fitted the same way on the geometry's features alone
+  (:data:`GEOMETRY_FEATURES`: how much the plan, the start and the maneuver add to the geometry).
 
 Each run is a ``garage-mj cruise`` run folder under ``--out/<driver>/<set>/<map>_<geometry>`` (resumable: a re-run
 drives only the tests not there yet). ``--driver`` names the driver (default ``park_assist``; the learned parking
@@ -44,6 +46,8 @@ from garage_mj.scene.stalls import stall_layout
 from garage_mj.scene.world import GeometryError, world_with
 
 GEOMETRIES = ("default", "tight", "angled60", "parallel", "parallel_short")
+#: The features a park geometry alone decides (the baseline the park difficulty is compared with).
+GEOMETRY_FEATURES = ("tight_bay", "narrow_aisle", "angled", "parallel", "jitter", "mixed_fleet")
 FIT_MAP, HELDOUT_MAPS = "m5_13x13_aligned", (("m5_13x13_aligned", 1), ("m7_13x13_u", 0))
 
 
@@ -114,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     fit_runs = [base / "fit" / f"{m}_{g}" for m, _, _ in fit_maps for g in args.geometries]
     heldout_runs = [base / "heldout" / f"{m}_{g}" for m, _, _ in heldout_maps for g in args.geometries]
     from garage_mj.driving.difficulty.park import fit_park_runs, load_park_runs, score_park
-    from garage_mj.scene.park_difficulty import load_park_model
+    from garage_mj.scene.park_difficulty import fit_park, load_park_model
 
     if "fit" in steps:
         model, records = fit_park_runs(fit_runs, model_out)
@@ -131,7 +135,11 @@ def main(argv: list[str] | None = None) -> int:
             if recs:
                 within[g] = {d: {k: v for k, v in f.items() if k in ("tests", "success_pct", "park", "levels")}
                              for d, f in score_park(model, recs).items()}
-        figures = {"all_geometries": figures, "within_geometry": within}
+        # how much of it is the geometry: the same fit on the fit set with the geometry's features alone
+        fit_recs = load_park_runs(fit_runs)
+        geo = fit_park(fit_recs, [r["failed"] for r in fit_recs], GEOMETRY_FEATURES)
+        baseline = {d: {"features": list(GEOMETRY_FEATURES), **f["park"]} for d, f in score_park(geo, records).items()}
+        figures = {"all_geometries": figures, "within_geometry": within, "geometry_only_baseline": baseline}
         print(json.dumps(figures, indent=1))
         if args.json:
             write_json(args.json, {
