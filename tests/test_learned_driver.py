@@ -271,7 +271,9 @@ def test_missing_or_corrupt_models_name_the_file_and_the_fix(tmp_path, dqn_zip):
 def test_learned_alone_runs_the_shipped_model(tmp_path, monkeypatch, dqn_zip):
     assert default_model() == REPO / "models" / "drivers" / f"{DEFAULT_MODEL}.zip"
     shipped = tmp_path / "drivers" / f"{DEFAULT_MODEL}.zip"
-    monkeypatch.setattr(learned_mod, "default_model", lambda: shipped)
+    import garage_mj.driving.learning.saved_model as saved_model_mod  # where the shipped models are named
+
+    monkeypatch.setattr(saved_model_mod, "default_model", lambda name=DEFAULT_MODEL: shipped)
     with pytest.raises(DriverError, match=NO_MODEL.format(shipped)):
         load_driver("learned")
     shipped.parent.mkdir()

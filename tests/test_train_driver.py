@@ -414,7 +414,8 @@ def test_train_driver_task_park_trains_a_parking_model_that_parks_with_its_senso
     run = json.loads((out / "run.json").read_text())
     assert run["task"] == "park" and run["config"]["geometries"] == ["default", "tight"]
     shard = np.load(out / "data" / "iter_000.npz")
-    assert shard["image"].shape[1:] == (4, 64, 64) and shard["label"].shape[1:] == (3,)  # the park command
+    assert shard["image"].shape[1:] == (4, 64, 64) and shard["label"].ndim == 1  # a park command's index
+    assert 0 <= shard["label"].min() and shard["label"].max() < 90
     spec = f"learned:{out / 'model.zip'}"
     driver = load_driver(spec)
     assert isinstance(driver, LearnedParkDriver) and tasks_of(spec) == ("park",)
@@ -456,3 +457,14 @@ def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_
     assert step(-0.5, -5.0, 1.0) == [-1.0, 0.0, 1.0] and driver.phase == "stop"
     assert step(-0.7, -5.0, 0.0) == [pytest.approx(0.3), 1.0, -1.0] and driver.phase == "park"  # at rest: it parks
     assert step(20.0, 0.0, 2.0)[2] == -1.0 and driver.phase == "park"  # and keeps parking
+
+
+def test_a_park_command_is_the_nearest_of_the_grid_in_the_same_gear():
+    from garage_mj.driving.learning.park_actions import PARK_COMMANDS, nearest_park_action, park_command
+
+    assert PARK_COMMANDS.shape == (90, 3)
+    for index in range(len(PARK_COMMANDS)):  # every command is its own nearest
+        assert nearest_park_action(PARK_COMMANDS[index]) == index
+    assert park_command(nearest_park_action([0.9, -0.6, -1.0])).tolist() == [1.0, -0.5, -1.0]
+    assert park_command(nearest_park_action([-0.2, 0.13, 1.0])).tolist() == [pytest.approx(-0.3), 0.25, 1.0]
+    assert park_command(nearest_park_action([0.0, 0.0, 0.4])).tolist()[2] == 1.0  # gear >= 0: D, as the env reads it

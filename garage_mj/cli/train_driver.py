@@ -1,5 +1,5 @@
-"""``garage-mj train-driver``: train a learned cruise driver (SB3 DQN, DAgger warm start) or a parking driver (an
-SB3 PPO policy trained by DAgger) over garages."""
+"""``garage-mj train-driver``: train a learned cruise driver (SB3 DQN, DAgger warm start) or a parking driver (the same
+DQN over the parking sensors and 90 park commands) over garages."""
 
 from __future__ import annotations
 
@@ -51,10 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sees the route plan, its pose or the goal in the world frame. The run folder gets run.json, "
             "curve.csv (validation success per iteration), garages.json, checkpoints/ and model.zip; an "
             "interrupted run continues with --resume. Drive with it: --driver learned:OUT/model.zip.\n\n"
-            "--task park trains a parking driver instead: an SB3 PPO policy (MultiInputPolicy) over both cameras "
-            "(front and rear depth + segmentation), the 12 ultrasonic ranges, the slot detector, the heading to end "
-            "in, speed, steering and gear, sending the continuous park action [pedal, steer, gear]; trained by DAgger "
-            "on the oracle's park command (squared error), on park tests of the garages built in --geometries, with "
+            "--task park trains a parking driver instead: the same DQN over both cameras (front and rear depth + "
+            "segmentation), the 12 ultrasonic ranges, the slot detector, the heading to end in, speed, steering and "
+            "gear, picking one of 90 park commands [pedal, steer, gear]; trained by DAgger on the command nearest the "
+            "oracle's, on park tests of the garages built in --geometries, with "
             "the actors of --scenarios. Drive it with --task park --driver learned:OUT/model.zip; an AVP test is "
             "driven by a cruise model and a parking model together (--driver learned:avp)."
         ),

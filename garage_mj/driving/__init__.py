@@ -21,8 +21,9 @@
     driver both cameras, the ultrasonic ranges and the slot detector; nothing privileged).
   - ``learning.network``: the learned driver's network body (NatureCNN-shaped convolutions over the camera, joined with the route vector).
   - ``learning.fleet_env``: ``FleetDriveEnv``, one garage of a set per episode, with the oracle's action as a label.
-  - ``learning.train``: ``train-driver``, DQN (cruise) or a PPO policy (park, AVP) on the unprivileged observation,
-    trained by DAgger.
+  - ``learning.park_actions``: the learned parking driver's 90 park commands.
+  - ``learning.train``: ``train-driver``, a DQN (cruise, or park over the park commands) on the unprivileged
+    observation, trained by DAgger.
 - ``difficulty``: relating outcomes to difficulty.
   - ``difficulty.regression``: Pearson r and the regression of success on difficulty, the paper's table; bootstrap r, AUC.
   - ``difficulty.fit``: fit and score the route-aware difficulty on recorded cruise outcomes.

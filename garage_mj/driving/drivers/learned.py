@@ -31,6 +31,7 @@ from garage_mj.driving.learning.observation import (
     park_observation,
     park_space,
 )
+from garage_mj.driving.learning.park_actions import PARK_COMMANDS, park_command
 from garage_mj.driving.learning.saved_model import (  # noqa: F401  (the shipped models' names, read here too)
     DEFAULT_MODEL,
     DRIVER_MODELS,
@@ -41,7 +42,7 @@ from garage_mj.driving.learning.saved_model import (  # noqa: F401  (the shipped
     load_driver_model,
     model_path,
 )
-from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, PARK_CONTINUOUS_SIZE, DiscreteAction
+from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction
 
 N_ACTIONS = len(DiscreteAction)  # the paper's 4 actions
 #: The SB3 algorithm that loads a zip, by the module of the policy class its ``data`` records.
@@ -92,8 +93,9 @@ def load_model(path: str | Path, parking: bool = False) -> Any:
 
     The file is read as data (:func:`~garage_mj.driving.learning.saved_model.load_driver_model`): weights and plain
     settings, nothing in it unpickled or run. Checks that it acts with the paper's 4 actions (``parking``: with the
-    continuous park action); a missing, unreadable, corrupt or code-carrying file, or another action space, is a
-    one-line :class:`DriverError` naming the file, what is wrong and the fix.
+    90 park commands of :mod:`~garage_mj.driving.learning.park_actions`); a missing, unreadable, corrupt or
+    code-carrying file, or another action space, is a one-line :class:`DriverError` naming the file, what is wrong
+    and the fix.
     """
     path = Path(path).expanduser()
     try:
@@ -115,11 +117,11 @@ def load_model(path: str | Path, parking: bool = False) -> Any:
     except Exception as exc:  # torch/zip errors of a damaged file: name the file, keep one short line
         raise _no_model(path, f" (cannot load it as {algo}: {_one_line(exc)})") from None
     space = model.action_space
-    if parking:
-        if type(space).__name__ != "Box" or space.shape != (PARK_CONTINUOUS_SIZE,):
-            raise DriverError(f"learned parking driver model {path}: its actions are {space}, the park action is "
-                              f"Box(-1, 1, ({PARK_CONTINUOUS_SIZE},)); train it with garage-mj train-driver --task park")
-    elif type(space).__name__ != "Discrete" or int(space.n) != N_ACTIONS or int(getattr(space, "start", 0)) != 0:
+    want = len(PARK_COMMANDS) if parking else N_ACTIONS
+    if type(space).__name__ != "Discrete" or int(space.n) != want or int(getattr(space, "start", 0)) != 0:
+        if parking:
+            raise DriverError(f"learned parking driver model {path}: its actions are {space}, the park commands' are "
+                              f"Discrete({want}); train it with garage-mj train-driver --task park")
         raise DriverError(f"learned driver model {path}: its actions are {space}, the paper's are Discrete({N_ACTIONS}); "
                           "train it on a discrete GarageDriveEnv (garage-mj train-driver)")
     _check_finite_weights(model, path)
@@ -200,12 +202,13 @@ class LearnedDriver:
 
 
 class LearnedParkDriver:
-    """A trained parking policy (``train-driver --task park``) sending the continuous park action.
+    """A trained parking model (``train-driver --task park``) sending the continuous park action.
 
     It sees :func:`~garage_mj.driving.learning.observation.park_observation`: both cameras, the 12 ultrasonic
     ranges, the slot detector, the heading to end in, speed, steering and gear (nothing privileged, no route); a
-    run turns on the sensors it declares (:data:`sensors`). The command is the policy's mean action
-    (deterministic): ``[pedal, steer, gear]``. ``learned:park`` runs the shipped model.
+    run turns on the sensors it declares (:data:`sensors`). It picks one of the 90 park commands by argmax (so the
+    same test gives the same drive) and sends it: ``[pedal, steer, gear]``
+    (:data:`~garage_mj.driving.learning.park_actions.PARK_COMMANDS`). ``learned:park`` runs the shipped model.
     """
 
     action_type = "continuous"  # [pedal, steer, gear] (garage_mj.driving.sim.vehicle.park_command_from_action)
@@ -246,11 +249,11 @@ class LearnedParkDriver:
         try:
             with torch.inference_mode():
                 batch = {k: torch.from_numpy(v).unsqueeze(0) for k, v in o.items()}
-                action = self.model.policy._predict(batch, deterministic=True).reshape(-1).numpy()
+                action = int(self.model.policy._predict(batch, deterministic=True).reshape(-1)[0])
         finally:
             torch.set_num_threads(threads)
             torch.backends.mkldnn.enabled = mkldnn
-        return np.clip(action.astype(np.float32), -1.0, 1.0)
+        return park_command(action)
 
 
 class LearnedAVPDriver:

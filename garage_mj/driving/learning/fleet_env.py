@@ -15,8 +15,9 @@ angle. With ``expert=True`` each ``info`` also carries ``expert_action``: what t
 do in the state just observed, the label that imitation learning (DAgger) trains on. The expert
 reads the privileged state, the learner never does.
 
-Park tests (``env_kwargs`` with ``task`` "park"): the continuous park action ``[pedal, steer,
-gear]`` (the oracle's park tracker labels it), the parking sensors on
+Park tests (``env_kwargs`` with ``task`` "park"): one of the 90 park commands of
+:mod:`~garage_mj.driving.learning.park_actions` (the label: the one nearest the oracle's continuous command), the
+parking sensors on
 (:data:`~garage_mj.driving.learning.observation.PARK_SENSORS`) and the parking driver's observation
 (:func:`~garage_mj.driving.learning.observation.park_observation`). ``variants`` gives garages their own env
 settings (a park geometry, a parked fleet): garage ``k`` is built with ``variants[k % len(variants)]`` over
@@ -41,9 +42,10 @@ from garage_mj.driving.learning.observation import (
     park_observation,
     park_space,
 )
+from garage_mj.driving.learning.park_actions import PARK_COMMANDS, nearest_park_action
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.driving.sim.sensors import CameraConfig
-from garage_mj.driving.sim.vehicle import DiscreteAction, park_action_space
+from garage_mj.driving.sim.vehicle import DiscreteAction
 from garage_mj.driving.sources import CruiseSource
 
 DRAWS = 20  # test draws per reset before a garage is taken as one without a drivable test
@@ -59,8 +61,8 @@ class FleetDriveEnv(gym.Env):
         cache_size: how many garages' scenes are kept compiled.
         expert: put the oracle's action for each observed state in ``info["expert_action"]``.
         env_kwargs: more :class:`GarageDriveEnv` keyword arguments (``occupancy``, ``camera``,
-            ``scenario``, ``task``, ...); ``action_type`` is discrete in cruise tests and continuous in park tests,
-            ``image_obs`` off.
+            ``scenario``, ``task``, ...); the env's ``action_type`` is discrete in cruise tests and continuous in
+            park tests (this env's own actions are discrete in both), ``image_obs`` off.
         variants: env settings per garage (garage ``k``: ``variants[k % len(variants)]`` over ``env_kwargs``).
     """
 
@@ -90,7 +92,7 @@ class FleetDriveEnv(gym.Env):
             self.action_type = "continuous"
             self.env_kwargs.setdefault("sensors", {name: True for name in PARK_SENSORS})
             self.observation_space = park_space(cam.height, cam.width)
-            self.action_space = park_action_space("continuous")
+            self.action_space = spaces.Discrete(len(PARK_COMMANDS))
         self.cache_size = int(cache_size)
         self.expert = bool(expert)
         self._envs: collections.OrderedDict[int, GarageDriveEnv] = collections.OrderedDict()
@@ -173,14 +175,14 @@ class FleetDriveEnv(gym.Env):
                 info["expert_action"] = int(self._oracle.act(obs))
             return learned_observation(obs), info
         if self.expert:
-            info["expert_action"] = np.asarray(self._oracle.act(obs), dtype=np.float32)
+            info["expert_action"] = nearest_park_action(self._oracle.act(obs))
         return park_observation(obs), info
 
     def step(self, action):
         if self.env is None:
             raise RuntimeError("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(
-            int(action) if self.task == "cruise" else np.asarray(action, dtype=np.float32))
+            int(action) if self.task == "cruise" else PARK_COMMANDS[int(action)])
         out, info = self._out(obs, info)
         return out, reward, terminated, truncated, info
 

@@ -3,8 +3,8 @@
 :data:`DRIVER_REBUILDS` makes each pickled entry a ``train-driver`` model holds from its plain fields:
 the policy class (the algorithm's ``MultiInputPolicy``), the network (``CameraRouteExtractor``), the
 observation space (:func:`~garage_mj.driving.learning.observation.learned_space` at the recorded camera
-size; :func:`~garage_mj.driving.learning.observation.park_space` for a parking driver), the action space (the
-paper's ``Discrete`` or the continuous park action) and schedules (:data:`~garage_mj.core.model_file.COMMON`). Any other pickled
+size; :func:`~garage_mj.driving.learning.observation.park_space` for a parking driver), the action space
+(``Discrete``) and schedules (:data:`~garage_mj.core.model_file.COMMON`). Any other pickled
 entry refuses the file. Imported by the learned driver and by ``train-driver``'s resume. It also names the shipped
 models (:func:`model_path`: ``learned``, ``learned:park``) and tells which learned driver runs a model
 (:func:`learned_kind`), reading no more than a zip's plain ``data``.
@@ -23,7 +23,6 @@ from typing import Any
 from garage_mj.core.model_file import (
     ModelFileError,
     Rebuild,
-    discrete_space,
     load_sb3,
     policy_class,
     rebuilds,
@@ -54,21 +53,6 @@ def _observation_space(entry: dict, data: dict, algo: type, env: Any) -> Any:
     return space
 
 
-def _action_space(entry: dict, data: dict, algo: type, env: Any) -> Any:
-    """The paper's discrete actions (a cruise driver's ``Discrete``) or the continuous park action ``[pedal, steer,
-    gear]`` (a parking driver's ``Box(-1, 1, (3,))``), from the entry's plain fields."""
-    if "Discrete" in str(entry.get(":type:")):
-        return discrete_space(entry, data, algo, env)
-    from garage_mj.driving.sim.vehicle import park_action_space
-
-    space = park_action_space("continuous")
-    plain = {"dtype": "float32", "_shape": f"[{space.shape[0]}]", "low": str(space.low), "high": str(space.high)}
-    if "box.Box" not in str(entry.get(":type:")) or any(str(entry.get(k)) != v for k, v in plain.items()):
-        raise ModelFileError(f"its action space is {str(entry.get(':type:'))[:60]} {str(entry.get('_shape'))[:20]}, "
-                             "neither Discrete(n) nor the continuous park action Box(-1, 1, (3,))")
-    return space
-
-
 def _train_freq(entry: dict, data: dict, algo: type, env: Any) -> Any:
     return inspect.signature(algo).parameters["train_freq"].default  # the algorithm's own; a driver does not train
 
@@ -79,7 +63,6 @@ DRIVER_REBUILDS: dict[str, Rebuild] = rebuilds(
                                          "the algorithm's MultiInputPolicy (the learned driver's)")),
     Rebuild("policy_kwargs", _policy_kwargs),
     Rebuild("observation_space", _observation_space),
-    Rebuild("action_space", _action_space),
     Rebuild("train_freq", _train_freq),
 )
 
@@ -116,8 +99,10 @@ def model_path(model: str | Path | None) -> Path:
 
 def learned_kind(model: str | Path | None) -> str:
     """Which learned driver runs ``model`` (a ``learned:`` spec's model part): ``"avp"`` for ``avp``
-    (:class:`~garage_mj.driving.drivers.learned.LearnedAVPDriver`), ``"park"`` for ``park`` or a zip whose action space is the continuous park action
-    (:class:`~garage_mj.driving.drivers.learned.LearnedParkDriver`; read from its plain ``data``, nothing loaded), else ``"cruise"``
+    (:class:`~garage_mj.driving.drivers.learned.LearnedAVPDriver`), ``"park"`` for ``park`` or a zip whose observation
+    is the parking driver's (:func:`~garage_mj.driving.learning.observation.park_space`: 4 image planes;
+    :class:`~garage_mj.driving.drivers.learned.LearnedParkDriver`; read from its plain ``data``, nothing loaded),
+    else ``"cruise"``
     (:class:`~garage_mj.driving.drivers.learned.LearnedDriver`; a file that cannot be read too: its loader then names what is wrong with it)."""
     if model is not None and str(model) in NAMED:
         return str(model)
@@ -126,7 +111,10 @@ def learned_kind(model: str | Path | None) -> str:
     try:
         with zipfile.ZipFile(model_path(model)) as z:
             data = json.loads(z.read("data"))
-        return "park" if "box.Box" in str(data["action_space"][":type:"]) else "cruise"
+        from garage_mj.driving.learning.observation import PARK_IMAGE_CHANNELS
+
+        spaces = str(data["observation_space"]["spaces"])
+        return "park" if f"'image': Box(0, 255, ({PARK_IMAGE_CHANNELS}, " in spaces else "cruise"
     except (OSError, zipfile.BadZipFile, KeyError, TypeError, ValueError):
         return "cruise"
 

@@ -128,9 +128,9 @@ class DriverTrainConfig:
     # at weight 1, all of the shipped model's held-out failures (stops 1 m short of or past the goal)
     stop_weight: float = bounded(4.0, gt=0.0, le=1e6)
     net_arch: tuple[int, ...] = bounded((128, 128), ge=1, le=65_536)  # hidden layer widths after the features
-    # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a PPO policy over
-    # the continuous park action, from both cameras, the ultrasonic ranges and the slot detector); an AVP test is
-    # driven by the two together (learned:avp)
+    # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
+    # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
+    # is driven by the two together (learned:avp)
     task: str = bounded("cruise", choices=TRAIN_TASKS)
     maneuver: str = bounded("any", choices=MANEUVER_CHOICES)  # park tests: reverse, forward or any (drawn per test)
     # park tests: the park geometries the garages are built in (garage k: the (k mod n)th), by name
@@ -154,7 +154,7 @@ class DriverTrainConfig:
 
     @property
     def parking(self) -> bool:
-        """Whether this trains a parking driver: a PPO policy over the continuous park action."""
+        """Whether this trains a parking driver: park tests, the parking observation and the 90 park commands."""
         return self.task != "cruise"
 
     def variants(self) -> list[dict[str, Any]]:
@@ -259,7 +259,7 @@ def _collect(model, venv, steps: int, beta: float, seed: int, weights: np.ndarra
         actions = labels
         if use_model.any():  # one forward pass on one thread: the workers have the cores
             mine, _ = model.predict(obs, deterministic=True)
-            actions = np.where(use_model.reshape(-1, *([1] * (labels.ndim - 1))), mine, labels)
+            actions = np.where(use_model, mine, labels)
         obs, _, dones, infos = venv.step(actions)
         labels = np.array([i["expert_action"] for i in infos])
         for e in np.flatnonzero(dones):
@@ -270,13 +270,8 @@ def _collect(model, venv, steps: int, beta: float, seed: int, weights: np.ndarra
                 failures[k] += infos[e]["outcome"] != "success"
             labels[e] = venv.reset_infos[e]["expert_action"]
             own[e] = False
-    acts = np.concatenate(acts)
-    return (np.concatenate(images), np.concatenate(vectors), acts.astype(np.int64 if acts.ndim == 1 else np.float32),
+    return (np.concatenate(images), np.concatenate(vectors), np.concatenate(acts).astype(np.int64),
             drives, failures, outcomes)
-
-
-#: Weights of the park command's parts in a parking driver's imitation loss: pedal, steer, gear.
-PARK_LOSS_WEIGHTS = (1.0, 2.0, 1.0)
 
 
 def _near(cfg: DriverTrainConfig, vectors: np.ndarray) -> np.ndarray:
@@ -293,12 +288,9 @@ def _near(cfg: DriverTrainConfig, vectors: np.ndarray) -> np.ndarray:
 
 def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg: DriverTrainConfig,
          seed: int) -> tuple[float, float]:
-    """``epochs`` passes over the states (the last metres, :func:`_near`, weighted ``stop_weight``): a cruise
-    driver's cross-entropy on the Q-network, a parking driver's weighted squared error of the policy's mean park
-    command (:data:`PARK_LOSS_WEIGHTS`); (mean loss, agreement) of the last (a parking driver agrees when its gear
-    and the sign of its pedal are the oracle's and its steer is within 0.1 of it)."""
-    if cfg.parking:
-        return _fit_park(model, images, vectors, labels, cfg, seed)
+    """``epochs`` passes of cross-entropy on the Q-network over the states (the last metres, :func:`_near`, weighted
+    ``stop_weight``), so the greedy action is the oracle's (a parking driver's: the park command nearest the
+    oracle's); (mean loss, agreement) of the last."""
     import torch
 
     torch.manual_seed(seed)
@@ -326,42 +318,6 @@ def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg
             agree += float((q.argmax(1) == y).sum())
     q_net.eval()
     model.policy.q_net_target.load_state_dict(q_net.state_dict())
-    return loss_sum / n, agree / n
-
-
-def _fit_park(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg: DriverTrainConfig,
-              seed: int) -> tuple[float, float]:
-    """:func:`_fit` of a parking driver: the PPO policy's mean action regressed on the oracle's park command."""
-    import torch
-
-    torch.manual_seed(seed)
-    policy = model.policy
-    policy.set_training_mode(True)
-    opt = torch.optim.Adam(policy.parameters(), lr=cfg.learning_rate)
-    rng = np.random.default_rng(seed)
-    n = len(labels)
-    weights = np.where(_near(cfg, vectors), cfg.stop_weight, 1.0).astype(np.float32)
-    part = torch.as_tensor(PARK_LOSS_WEIGHTS, dtype=torch.float32)
-    loss_sum = agree = 0.0
-    for _ in range(cfg.epochs):
-        order = rng.permutation(n)
-        loss_sum = agree = 0.0
-        for lo in range(0, n, cfg.batch_size):
-            idx = np.sort(order[lo: lo + cfg.batch_size])
-            obs = {"image": torch.as_tensor(images[idx]), "vector": torch.as_tensor(vectors[idx])}
-            y = torch.as_tensor(labels[idx])
-            mean = policy.get_distribution(obs).distribution.mean
-            w = torch.as_tensor(weights[idx])
-            loss = ((((mean - y) ** 2) * part).sum(1) * w).sum() / w.sum()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            loss_sum += loss.item() * len(idx)
-            with torch.no_grad():
-                same = ((mean[:, 2] >= 0) == (y[:, 2] >= 0)) & ((mean[:, 0] >= 0) == (y[:, 0] >= 0)) \
-                    & ((mean[:, 1].clamp(-1, 1) - y[:, 1]).abs() <= 0.1)
-                agree += float(same.sum())
-    policy.set_training_mode(False)
     return loss_sum / n, agree / n
 
 
@@ -400,20 +356,14 @@ def _success(counts: dict[str, int]) -> float | None:
     return round(counts.get("success", 0) / feasible, 4) if feasible else None
 
 
-def _algorithm(cfg: DriverTrainConfig) -> type:
-    """The SB3 class of the model a run trains: DQN for a cruise driver, PPO (its policy, trained by imitation)
-    for a parking one."""
-    from stable_baselines3 import DQN, PPO
-
-    return PPO if cfg.parking else DQN
-
-
 def _load_checkpoint(path: Path, venv, cfg: DriverTrainConfig, **kwargs: Any):
     """A checkpoint saved by :func:`_save` on ``venv`` (None: none), ``kwargs`` set on the model, read as data
     (:func:`~garage_mj.driving.learning.saved_model.load_driver_model`: weights and plain settings, nothing in
     it unpickled or run)."""
     try:
-        return load_driver_model(path, _algorithm(cfg), env=venv, **kwargs)
+        from stable_baselines3 import DQN
+
+        return load_driver_model(path, DQN, env=venv, **kwargs)
     except ModelFileError as exc:
         raise TrainDriverError(f"checkpoint {path} cannot be resumed: {exc}; "
                                "run garage-mj train-driver again with another --out") from None
@@ -538,7 +488,7 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
 def _new_manifest(garages, validation, sources: list[CruiseSource], cfg: DriverTrainConfig, seed: int,
                   env_kwargs: dict[str, Any]) -> dict[str, Any]:
     """The run's ``run.json`` without its ``state``: what it trains, on what, with which settings."""
-    algorithm = ("PPO (MultiInputPolicy) policy, trained by DAgger on the continuous park action" if cfg.parking
+    algorithm = ("DQN (MultiInputPolicy) over 90 park commands, trained by DAgger" if cfg.parking
                  else "DQN (MultiInputPolicy), DAgger warm start")
     return {"kind": "garage-mj driver", "algorithm": algorithm, "task": cfg.task,
             "seed": seed, "config": dataclasses.asdict(cfg), "env": env_kwargs,
@@ -622,7 +572,7 @@ def _undone_if_no_run(out: Path):
 
 def _start_model(out: Path, done: int, venv, cfg: DriverTrainConfig, seed: int):
     """The model after ``done`` iterations: the last checkpoint's, or a new one seeded with ``seed``."""
-    from stable_baselines3 import DQN, PPO
+    from stable_baselines3 import DQN
 
     if done:
         return _load_checkpoint(out / "checkpoints" / f"iter_{done - 1:03d}.zip", venv, cfg)
@@ -632,9 +582,6 @@ def _start_model(out: Path, done: int, venv, cfg: DriverTrainConfig, seed: int):
                      "normalize_images": False,  # the extractor scales the image itself
                      "features_extractor_kwargs": {"channels": tuple(cfg.cnn_channels),
                                                    "cnn_features": cfg.cnn_features}}
-    if cfg.parking:  # the policy is trained by imitation (:func:`_fit_park`); PPO holds it and could fine-tune it
-        return PPO("MultiInputPolicy", venv, seed=seed, device="cpu", verbose=0, n_steps=64, batch_size=64,
-                   policy_kwargs=policy_kwargs)
     return DQN("MultiInputPolicy", venv, seed=seed, device="cpu", verbose=0, buffer_size=1,
                learning_starts=0, policy_kwargs=policy_kwargs)
 
@@ -702,7 +649,7 @@ def _dagger(model, workers: _Workers, out: Path, manifest: dict[str, Any], state
 
 
 #: The arrays of a data shard (``data/iter_NNN.npz``) and how many axes each has.
-_SHARD_ARRAYS = {"image": (4,), "vector": (2,), "label": (1, 2)}  # a label: an action index or a park command
+_SHARD_ARRAYS = {"image": (4,), "vector": (2,), "label": (1,)}
 
 
 def _load_shard(path: Path, out: Path) -> dict[str, np.ndarray]:
