@@ -9,6 +9,8 @@ from pathlib import Path
 from garage_mj.cli import UserError
 from garage_mj.cli._common import (
     SHIPPED_ROUTE_MODELS,
+    add_geometry_args,
+    geometry_world,
     int_in,
     positive_seconds,
     seed,
@@ -17,7 +19,9 @@ from garage_mj.cli._common import (
 )
 from garage_mj.generation.library import check_writable
 from garage_mj.grid.map_io import list_maps, load_map
+from garage_mj.scene.park_difficulty import SHIPPED_PARK_MODELS, load_park_model
 from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
+from garage_mj.scene.world import GEOMETRY_KEYS, geometry
 
 #: garage_mj.generation.generator's bounds, named here so that --help stays light (no torch import)
 MAX_COUNT = 1_000_000  # [garages] one call's --count
@@ -51,7 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:
             "difficulty, for seeds of every kind) and every search step are rated by "
             "planning the routes to all stalls (about 0.1-0.2 CPU-s per 13x13 garage), the search climbs and "
             "walks by that rating, and each garage stored gets its value in the library (library ls "
-            "--route-difficulty LO HI finds them)."
+            "--route-difficulty LO HI finds them). With --metric park the band is one of the park difficulty "
+            "(docs/difficulty.md): each garage is rated by the reference park plans of 6 seeded target stalls' park "
+            "tests in the park geometry of the options below (about 0.2-0.4 CPU-s per 13x13 garage), and stored "
+            "with its value under the key park:<model>:<geometry>."
         ),
         epilog="example: garage-mj generate --map m5_13x13_aligned --difficulty 0.3 0.4 --count 20 "
                "--library garages.sqlite",
@@ -59,12 +66,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--map", required=True, help="shipped map name (garage-mj maps list) or map file")
     p.add_argument("--difficulty", required=True, nargs=2, type=unit_range, metavar=("LO", "HI"),
                    help="difficulty band [LO, HI] (0-1), of the --metric")
-    p.add_argument("--metric", choices=("paper", "route"), default="paper",
+    p.add_argument("--metric", choices=("paper", "route", "park"), default="paper",
                    help="paper: the paper's difficulty (road length and intersections of the grid; default); "
                         "route: the route-aware difficulty, the expected failure rate of a cruise test predicted "
-                        "from the planned routes (garage-mj difficulty); each garage stored gets it in the library")
+                        "from the planned routes (garage-mj difficulty); park: the park difficulty, the mean "
+                        "predicted failure rate of the garage's park tests in the park geometry given; each garage "
+                        "stored gets its route or park difficulty in the library")
     p.add_argument("--route-model", type=Path, metavar="FILE",
                    help=f"with --metric route: a model of garage-mj difficulty fit (default: the shipped one; {SHIPPED_ROUTE_MODELS})")
+    p.add_argument("--park-model", metavar="FILE",
+                   help="with --metric park: a model of garage-mj difficulty fit --task park, or a shipped one's name "
+                        f"(default: {', '.join(SHIPPED_PARK_MODELS)})")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"), help="coverage band [LO, HI] (0-1)")
     p.add_argument("--count", required=True, type=int_in(1, MAX_COUNT),
                    help=f"distinct garages to find (1 to {MAX_COUNT:,})")
@@ -86,22 +98,37 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="map file without --model: where the trained generator goes (reused when it exists; "
                    "default <library stem>.<map name>.generator.zip next to the library)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_geometry_args(p)  # with --metric park: the geometry the garages are rated in
     p.set_defaults(func=run)
 
 
 @user_errors
 def run(args: argparse.Namespace) -> int:
-    from garage_mj.generation.conditioned import default_model_out, shipped_generator, train_for_map
-    from garage_mj.generation.generator import generate
+    from garage_mj.generation.conditioned import (
+        GenerationError,
+        default_model_out,
+        shipped_generator,
+        train_for_map,
+    )
+    from garage_mj.generation.generator import RouteMetric, generate
 
-    route = None
+    route = rater = None
     if args.metric == "route":
-        from garage_mj.generation.generator import RouteMetric
-
         rmodel = load_route_model(args.route_model)
         route = RouteMetric(functools.partial(route_difficulty, model=rmodel), rmodel.key)
     elif args.route_model is not None:
         raise UserError("--route-model needs --metric route")
+    given = [f"--{k.replace('_', '-')}" for k in (*GEOMETRY_KEYS, "layout") if getattr(args, k, None) is not None]
+    if args.metric == "park":
+        from garage_mj.scene.park_rating import ParkRater
+
+        rater = ParkRater(geometry_world(args), load_park_model(args.park_model))
+        route = RouteMetric(rater, rater.key, "park difficulty")
+    elif args.park_model is not None:
+        raise UserError("--park-model needs --metric park")
+    elif given:
+        raise UserError(f"{given[0]} is a park geometry, which only --metric park rates garages in; add --metric park "
+                        "or drop it")
     for name in ("difficulty", "coverage"):
         band = getattr(args, name)
         if band is not None and band[0] > band[1]:
@@ -129,15 +156,34 @@ def run(args: argparse.Namespace) -> int:
                                         progress=not args.no_progress)
             print(f"trained the generator in {secs:.0f} s: {model}" if secs is not None
                   else f"using the generator trained earlier: {model}", flush=True)
-    r = generate(args.map, tuple(args.difficulty), args.count, args.library,
-                 coverage=tuple(args.coverage) if args.coverage else None, model=model, seed=args.seed,
-                 max_episodes=args.max_episodes, max_seconds=args.max_seconds, progress=not args.no_progress,
-                 search=not args.no_search, route=route)
+    try:
+        r = generate(args.map, tuple(args.difficulty), args.count, args.library,
+                     coverage=tuple(args.coverage) if args.coverage else None, model=model, seed=args.seed,
+                     max_episodes=args.max_episodes, max_seconds=args.max_seconds, progress=not args.no_progress,
+                     search=not args.no_search, route=route)
+    except GenerationError as exc:
+        if rater is None or not rater.unbuildable:
+            raise
+        err = GenerationError(f"{exc}; {_unbuildable(rater)}")
+        err.result = exc.result
+        raise err from None
     lo, hi = min(r.difficulties), max(r.difficulties)
     stages = f"{r.found_policy} from the policy's {r.episodes} episodes"
     if r.found_search or r.search_steps:
         stages += f", {r.found_search} from {r.search_steps} search steps"
-    what = "difficulty" if route is None else "route difficulty"
+    what = "difficulty" if route is None else route.name
+    park = ""
+    if rater is not None:
+        shape = ", ".join(f"{k} {v:g}" for k, v in geometry(rater.world).items())
+        park = f"; park model {rater.model.key}, geometry {shape} (library key {rater.key})"
+        if rater.unbuildable:
+            park += f"; {_unbuildable(rater)}"
     print(f"{r.found} distinct garages with {what} {lo:.3f}-{hi:.3f} ({stages}; {r.seconds:.1f} s); "
-          f"{r.stored} new in {args.library}")
+          f"{r.stored} new in {args.library}{park}")
     return 0
+
+
+def _unbuildable(rater) -> str:
+    """The closing words on the garages ``rater``'s park geometry could not build (skipped, never stored)."""
+    n = rater.unbuildable
+    return f"{n} garage{'s' if n != 1 else ''} of {rater.rated} rated skipped: the park geometry cannot build them"

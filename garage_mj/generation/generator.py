@@ -61,11 +61,14 @@ class RouteMetric:
     stall), ``key`` names the model it comes from (stored with each value in the library).
 
     The generation stage does not plan routes: the caller passes the rater
-    (``garage_mj.scene.route_difficulty.route_difficulty`` with a model, as ``garage-mj generate --metric route`` does).
+    (``garage_mj.scene.route_difficulty.route_difficulty`` with a model, as ``garage-mj generate --metric route`` does;
+    ``garage_mj.scene.park_rating.ParkRater`` for ``--metric park``, ``name="park difficulty"``, its key naming the park
+    model and geometry).
     """
 
     rate: Callable[[Garage], float]
     key: str
+    name: str = "route difficulty"  # what the value is called in the progress bar and the error of an unfilled band
 
 
 class _Rated:
@@ -377,7 +380,7 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     if progress:
         from tqdm import tqdm
 
-        what = "difficulty" if route is None else "route difficulty"
+        what = "difficulty" if route is None else route.name
         bar = tqdm(total=count, desc=f"{garage0.name} {what} {difficulty[0]:.2f}-{difficulty[1]:.2f}",
                    unit="garage", dynamic_ncols=True)
     try:
@@ -396,7 +399,7 @@ def generate(map: str, difficulty: tuple[float, float], count: int, library: str
     result.cpu_seconds = time.process_time() - cpu0
     if result.found < count:
         raise _not_filled(result, count, garage0.name, difficulty, coverage, search, max_seconds, library,
-                          "difficulty" if route is None else "route difficulty")
+                          "difficulty" if route is None else route.name)
     return result
 
 

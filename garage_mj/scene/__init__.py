@@ -23,6 +23,8 @@ Public names load lazily (``from garage_mj.scene import GarageScene``).
 - ``route_difficulty``: the route-aware difficulty, a monotone logistic model of failure on route features.
 - ``park_difficulty``: the park difficulty, the same monotone logistic model on a park test's features known before
   its drive (bay margin, aisle, plan, start distance, stall angle, maneuver, actors, jitter), in a format of its own.
+- ``park_rating``: a garage's park difficulty without a drive: the mean over a few seeded target stalls' park tests
+  (their reference plans and geometry), what ``generate --metric park`` rates garages by.
 - ``car``: the ego car's model file and geometry (outline, axles, steering limit, camera poses).
 - ``vehicles``: the fleet table of vehicle classes (compact, sedan, SUV, van; TPCAP's car): outline, axles, steering.
 - ``case_scene``: a park case from elsewhere (a problem file's obstacle polygons, start and goal): its convex pieces,
