@@ -47,9 +47,12 @@ def park_label(driver: str, task: str, maneuver: str) -> str:
 
 def park_runs(drivers: Sequence[str], maneuvers: Sequence[str], avp_maneuver: str) -> list[tuple[str, str, str]]:
     """(driver, task, maneuver) of each run: per driver a park run per maneuver, then an AVP run (none when
-    ``avp_maneuver`` is empty)."""
+    ``avp_maneuver`` is empty), each only where the driver is made for the task (``learned:park`` parks,
+    ``learned:avp`` drives AVP tests)."""
+    from garage_mj.driving.drivers import tasks_of  # the drivers' classes: deferred
+
     tasks = [("park", m) for m in maneuvers] + ([("avp", avp_maneuver)] if avp_maneuver else [])
-    return [(d, t, m) for d in drivers for t, m in tasks]
+    return [(d, t, m) for d in drivers for t, m in tasks if t in tasks_of(d) or "cruise" in tasks_of(d)]
 
 
 def run_park_part(runs: Sequence[tuple[str, str, str]], sources: Sequence[CruiseSource], tests: int, out: Path,

@@ -128,6 +128,9 @@ class DriverTrainConfig:
     # at weight 1, all of the shipped model's held-out failures (stops 1 m short of or past the goal)
     stop_weight: float = bounded(4.0, gt=0.0, le=1e6)
     net_arch: tuple[int, ...] = bounded((128, 128), ge=1, le=65_536)  # hidden layer widths after the features
+    # a parking driver: weight of the states where the oracle asks for the other gear. They are about 1% of the
+    # states, and at weight 1 the model never changed gear: it waited in D at the start of a reverse-in test
+    gear_change_weight: float = bounded(20.0, gt=0.0, le=1e6)
     # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
     # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
     # is driven by the two together (learned:avp)
@@ -286,10 +289,23 @@ def _near(cfg: DriverTrainConfig, vectors: np.ndarray) -> np.ndarray:
     return vectors[:, VECTOR_KEYS.index("near_goal")] < 1.0
 
 
+def _state_weights(cfg: DriverTrainConfig, vectors: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Each state's weight in the imitation loss: ``stop_weight`` in the last metres (:func:`_near`), else 1; a
+    parking driver's states where the oracle asks for the other gear than the one engaged ``gear_change_weight``."""
+    weights = np.where(_near(cfg, vectors), cfg.stop_weight, 1.0).astype(np.float32)
+    if cfg.parking:
+        from garage_mj.driving.learning.observation import PARK_VECTOR_KEYS
+        from garage_mj.driving.learning.park_actions import PARK_COMMANDS
+
+        change = (PARK_COMMANDS[labels, 2] < 0) != (vectors[:, PARK_VECTOR_KEYS.index("gear")] < 0)
+        weights = np.where(change, cfg.gear_change_weight, weights).astype(np.float32)
+    return weights
+
+
 def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg: DriverTrainConfig,
          seed: int) -> tuple[float, float]:
-    """``epochs`` passes of cross-entropy on the Q-network over the states (the last metres, :func:`_near`, weighted
-    ``stop_weight``), so the greedy action is the oracle's (a parking driver's: the park command nearest the
+    """``epochs`` passes of cross-entropy on the Q-network over the states (weighted by :func:`_state_weights`), so
+    the greedy action is the oracle's (a parking driver's: the park command nearest the
     oracle's); (mean loss, agreement) of the last."""
     import torch
 
@@ -299,7 +315,7 @@ def _fit(model, images: np.ndarray, vectors: np.ndarray, labels: np.ndarray, cfg
     opt = torch.optim.Adam(q_net.parameters(), lr=cfg.learning_rate)
     rng = np.random.default_rng(seed)
     n = len(labels)
-    weights = np.where(_near(cfg, vectors), cfg.stop_weight, 1.0).astype(np.float32)
+    weights = _state_weights(cfg, vectors, labels)
     loss_sum = agree = 0.0
     for _ in range(cfg.epochs):
         order = rng.permutation(n)
