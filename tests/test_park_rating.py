@@ -65,6 +65,13 @@ def test_generate_by_park_difficulty_stores_the_value_in_the_band(tmp_path, caps
     value = values[records[0].id]
     assert 0.2 <= value <= 0.5
     assert value == pytest.approx(garage_park_difficulty(records[0].garage), abs=1e-12)
+    # a library reader finds it by the key the closing line printed
+    assert main(["library", "ls", str(lib), "--route-difficulty", "0.2", "0.5", "--route-model", key]) == 0
+    out = capsys.readouterr().out
+    assert f"{value:.3f}" in out and "1 garage(s)" in out and "park difficulty" in out
+    other = key.replace(":default", ":0badc0de")  # another geometry's values are not this one's
+    assert main(["library", "ls", str(lib), "--route-difficulty", "0.2", "0.5", "--route-model", other]) == 2
+    assert f"no route difficulty under model {other}" in capsys.readouterr().err
 
 
 def test_generate_by_park_difficulty_in_another_geometry_keys_it(tmp_path, capsys):

@@ -151,7 +151,8 @@ def add_filters(p: argparse.ArgumentParser) -> None:
                    "stored by 'garage-mj library rate LIBRARY'")
     p.add_argument("--route-model", type=Path, metavar="FILE",
                    help="route difficulty model of --route-difficulty and of the values shown (default: the shipped "
-                   f"one; {SHIPPED_ROUTE_MODELS}; 'garage-mj difficulty fit' writes others)")
+                   f"one; {SHIPPED_ROUTE_MODELS}; 'garage-mj difficulty fit' writes others), or the key "
+                   "park:<model>:<geometry> that 'generate --metric park' printed, for its park difficulty")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"),
                    help="only coverage in [LO, HI] (0-1)")
     p.add_argument("--feasible", nargs=2, type=unit_range, metavar=("LO", "HI"),
@@ -223,8 +224,12 @@ def filters(args: argparse.Namespace) -> dict:
 
 
 def route_key(args: argparse.Namespace) -> str:
-    """The key of the route difficulty model ``--route-model`` names, or of the shipped one."""
-    return load_route_model(getattr(args, "route_model", None)).key
+    """The key of the route difficulty model ``--route-model`` names, or of the shipped one; a park key
+    (``park:<model>:<geometry>``, what ``generate --metric park`` stores its values under) as it is."""
+    given = getattr(args, "route_model", None)
+    if given is not None and str(given).startswith("park:"):
+        return str(given)
+    return load_route_model(given).key
 
 
 def checked_range(rng: list[float] | None, flag: str) -> tuple[float, float] | None:

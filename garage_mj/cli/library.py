@@ -31,6 +31,9 @@ HEADER = (f"{'id':>6}  {'map':<18} {'seed':>4} {'episode':>7} {'timestep':>9}  {
           f"{'stalls':>6} {'E[X]':>5} {'E[Y]':>5}")
 ROUTE_NOTE = ("diff: the paper's difficulty; route: the route difficulty (expected failure rate) under model {key}, "
               "'-' not rated yet (garage-mj library rate), 'n/a' no feasible stall")
+#: The same for a park key (``park:<model>:<geometry>``, stored by ``generate --metric park``).
+PARK_NOTE = ("diff: the paper's difficulty; route: the park difficulty (expected failure rate of its park tests) under "
+             "{key}, '-' not rated under it")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -107,7 +110,7 @@ def _print_records(records, route: dict[int, float], key: str) -> None:
     print(HEADER)
     for r in records:
         print(_line(r, route.get(r.id)))
-    print(f"{len(records)} garage(s); " + ROUTE_NOTE.format(key=key))
+    print(f"{len(records)} garage(s); " + (PARK_NOTE if key.startswith("park:") else ROUTE_NOTE).format(key=key))
 
 
 @user_errors
