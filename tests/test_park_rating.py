@@ -115,3 +115,28 @@ def test_generate_counts_the_garages_a_geometry_cannot_build(tmp_path, capsys, m
                  "--library", str(tmp_path / "lib.sqlite"), "--no-progress", "--max-episodes", "30"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "found 0 of 1" in err and "the park geometry cannot build them" in err, err
+
+
+def test_a_rated_test_has_the_features_a_park_run_would_write_for_it(painted_tiny):
+    """The scene-only row of a test equals what the drive env's info says of the same test (stall, parked cars,
+    start, maneuver): the rating plans what a park run plans."""
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+    from garage_mj.scene.drivable import drive_planner
+    from garage_mj.scene.park_rating import PARK_OCCUPANCY, START_NOISE, _noisy
+
+    scene, car = GarageScene(painted_tiny), car_geometry()
+    sid = next(s.id for s in scene.stalls.stalls if drive_planner(scene, car).plan(s.id).feasible)
+    row = park_row(scene, car, ParkPlanner(scene, car), sid, "forward", np.random.default_rng(5))
+    rng = np.random.default_rng(5)  # the same draws, in park_row's order: parked cars, lateral, yaw
+    draw = rng.random(len(scene.stalls.stalls)) < PARK_OCCUPANCY
+    occupied = [s.id for s, o in zip(scene.stalls.stalls, draw, strict=True) if o and s.id != sid]
+    start = _noisy(drive_planner(scene, car).plan(sid).goal, rng.uniform(-1, 1) * START_NOISE[0],
+                   rng.uniform(-1, 1) * START_NOISE[1])
+    env = GarageDriveEnv(painted_tiny, task="park", maneuver="forward")
+    _, info = env.reset(seed=0, options={"target": sid, "occupied": occupied, "start": start})
+    assert row["plan_length_m"] == pytest.approx(info["plan_length"], abs=1e-9)
+    assert row["plan_cusps"] == info["plan_cusps"]
+    assert row["plan_clearance_m"] == pytest.approx(info["plan_clearance"], abs=1e-9)
+    for cell, key in (("bay_margin_m", "bay_margin"), ("aisle_width_m", "aisle_width"),
+                      ("start_distance_m", "start_distance"), ("stall_angle_deg", "stall_angle")):
+        assert row[cell] == pytest.approx(info[key], abs=1e-9), cell
