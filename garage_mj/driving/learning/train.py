@@ -70,6 +70,7 @@ from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
 from garage_mj.driving.hunt import HuntConfig, hunt
 from garage_mj.driving.learning.observation import PARK_SENSORS
+from garage_mj.driving.learning.park_actions import PARK_COMMANDS
 from garage_mj.driving.learning.saved_model import load_driver_model
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sim.outcomes import OutcomeKind
@@ -295,7 +296,6 @@ def _state_weights(cfg: DriverTrainConfig, vectors: np.ndarray, labels: np.ndarr
     weights = np.where(_near(cfg, vectors), cfg.stop_weight, 1.0).astype(np.float32)
     if cfg.parking:
         from garage_mj.driving.learning.observation import PARK_VECTOR_KEYS
-        from garage_mj.driving.learning.park_actions import PARK_COMMANDS
 
         change = (PARK_COMMANDS[labels, 2] < 0) != (vectors[:, PARK_VECTOR_KEYS.index("gear")] < 0)
         weights = np.where(change, cfg.gear_change_weight, weights).astype(np.float32)
