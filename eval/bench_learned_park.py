@@ -11,7 +11,9 @@ Reported per driver (and per task): success over the driven tests (infeasible an
 with a 95% Wilson interval, by HOPE's level (``normal``, ``complex``, ``extreme``), without and with actors; the
 position and heading error of the successes (mean and median); the collision rate over driven tests; and, for the
 first driver, the simulated seconds per wall second of its tests (both cameras, ultrasonic and slot detector on;
-``time`` over ``wall_s`` of tests.csv, reset and planning included) per worker. Each run folder is kept under
+``time`` over ``wall_s`` of tests.csv, reset and planning included) per worker; how the tests' park difficulty
+(``park_difficulty``, the run's park model) predicts each driver's failures: per-test AUC and per-garage r, drawn
+as success against park difficulty per garage beside the JSON (``OUT.png``). Each run folder is kept under
 ``--runs``: the same command resumes a stopped benchmark where it left off.
 
     .venv/bin/python eval/bench_learned_park.py --driver learned:park --workers 2 \\
@@ -33,6 +35,7 @@ from _provenance import provenance  # eval/_provenance.py: command, date, machin
 
 from garage_mj.core.backends import Compute
 from garage_mj.driving.cruise import run_cruise
+from garage_mj.driving.difficulty.regression import auc, pearson
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sources import CruiseSettings
@@ -97,6 +100,48 @@ def summary(rows: list[dict]) -> dict:
             "static": stats([r for r in rows if not actors(r)]), "actors": stats([r for r in rows if actors(r)]),
             "static_by_level": {lv: stats([r for r in rows if r.get("park_level") == lv and not actors(r)])
                                 for lv in LEVELS}}
+
+
+def difficulty_fit(rows: list[dict]) -> dict:
+    """How the tests' ``park_difficulty`` (the run's park model) predicts ``rows``' failures: per-test AUC and, per
+    garage and geometry, Pearson r of the mean park difficulty with success % (the paper's figure for parking)."""
+    driven = [r for r in rows if r["outcome"] not in NOT_DRIVEN and r.get("park_difficulty") not in ("", None)]
+    groups: dict[tuple, list[dict]] = {}
+    for r in driven:
+        groups.setdefault((r["set"], r["geometry"], r["garage_hash"]), []).append(r)
+    points = [(statistics.fmean(float(r["park_difficulty"]) for r in g),
+               100.0 * sum(r["outcome"] == "success" for r in g) / len(g), len(g)) for g in groups.values()]
+    failed = [r["outcome"] != "success" for r in driven]
+    score = [float(r["park_difficulty"]) for r in driven]
+    r_value = pearson([d for d, _, _ in points], [s for _, s, _ in points]) if len(points) > 2 else math.nan
+    a = auc(score, failed) if 0 < sum(failed) < len(failed) else math.nan
+    return {"tests": len(driven), "garages": len(points), "auc": None if math.isnan(a) else round(a, 3),
+            "r": None if math.isnan(r_value) else round(r_value, 3),
+            "points": [[round(d, 4), round(s, 1), n] for d, s, n in points]}
+
+
+def figure(result: dict, path: Path) -> None:
+    """Success against park difficulty per garage and geometry, one panel per driver, with r."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    drivers = list(result["park_difficulty"])
+    fig, axes = plt.subplots(1, len(drivers), figsize=(3.6 * len(drivers), 3.4), sharey=True, squeeze=False)
+    for ax, d in zip(axes[0], drivers):
+        fit = result["park_difficulty"][d]
+        xs = [p[0] for p in fit["points"]]
+        ys = [p[1] for p in fit["points"]]
+        ax.scatter(xs, ys, s=14, alpha=0.7)
+        ax.set(xlim=(0, 1), ylim=(-5, 105), xlabel="park difficulty (garage mean)",
+               title=f"{d}\nr = {fit['r']}, AUC = {fit['auc']} ({fit['garages']} garages)")
+        ax.title.set_fontsize(9)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("success of driven tests [%]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def buildable(sources: list, geometry: str) -> tuple[list, list[str]]:
@@ -176,10 +221,12 @@ def main(argv: list[str] | None = None) -> int:
                         for g in args.geometries},
         "by_set": {n: {d: stats([r for r in rows[d] if r["set"] == n]) for d in drivers} for n in args.sets},
         "sim_s_per_wall_s_per_worker": round(sim / wall, 1) if wall else None,
+        "park_difficulty": {d: difficulty_fit(rows[d]) for d in drivers},
         "garages_left_out": left_out,
         "wall_s": round(time.perf_counter() - t0, 1), "provenance": prov}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")
+    figure(result, args.out.with_suffix(".png"))
     a = result["drivers"][args.driver]
     print(f"{args.driver}: {a['all']['success']}/{a['all']['driven']} ({a['all']['success_pct']}%), by level "
           + ", ".join(f"{lv} {a['by_level'][lv]['success_pct']}%" for lv in LEVELS)
