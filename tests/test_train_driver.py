@@ -377,6 +377,11 @@ def test_park_observation_reads_the_parking_sensors_and_nothing_privileged():
         np.testing.assert_array_equal(out[key], moved[key])
     with pytest.raises(ValueError, match="rear_depth, ultrasonic, slot.*--sensors rear_camera,ultrasonic,slot"):
         park_observation({k: v for k, v in obs.items() if k not in ("rear_depth", "ultrasonic", "slot")})
+    # with the park route: the waypoint ahead on the route and the route left, at two scales, after the rest
+    routed = park_observation(obs, route=True)
+    assert park_space(64, 64, route=True).contains(routed) and not park_space(64, 64).contains(routed)
+    np.testing.assert_array_equal(routed["vector"][: len(PARK_VECTOR_KEYS)], out["vector"])
+    assert routed["vector"][len(PARK_VECTOR_KEYS):].tolist() == [1.0, -0.25, 0.5, 1.0]  # 4 m ahead, 5 m left
 
 
 def test_a_parking_config_refuses_what_only_a_cruise_driver_does():

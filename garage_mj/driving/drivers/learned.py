@@ -25,7 +25,9 @@ import numpy as np
 from garage_mj.core.model_file import ModelFileError
 from garage_mj.driving.drivers import DriverError
 from garage_mj.driving.learning.observation import (
+    PARK_ROUTE_KEYS,
     PARK_SENSORS,
+    PARK_VECTOR_KEYS,
     learned_observation,
     learned_space,
     park_observation,
@@ -218,6 +220,8 @@ class LearnedParkDriver:
     def __init__(self, model: str | Path | None = None) -> None:
         self.path = model_path("park" if model is None else model)
         self.model = load_model(self.path, parking=True)
+        # a model trained with the park route observes it (train-driver's park_route): its vector is longer
+        self.route = int(self.model.observation_space["vector"].shape[0]) == len(PARK_VECTOR_KEYS) + len(PARK_ROUTE_KEYS)
         self._checked: tuple[int, ...] | None = None
 
     def reset(self, info: dict[str, Any]) -> None:
@@ -227,7 +231,7 @@ class LearnedParkDriver:
                               "gear]; leave out --action-type (or give continuous)")
 
     def _check(self, shape: tuple[int, ...]) -> None:
-        why = _space_difference(self.model.observation_space, park_space(*shape))
+        why = _space_difference(self.model.observation_space, park_space(*shape, self.route))
         if why:
             raise DriverError(f"learned parking driver model {self.path} does not fit this camera ({shape[0]}x"
                               f"{shape[1]}): {why}; drive with the camera it was trained on")
@@ -236,7 +240,7 @@ class LearnedParkDriver:
     def act(self, obs: dict[str, Any]) -> np.ndarray:
         """The policy's park command for ``obs`` (a park or AVP test's observation, depth in metres)."""
         try:
-            o = park_observation(obs)
+            o = park_observation(obs, self.route)
         except ValueError as exc:
             raise DriverError(f"learned parking driver: {exc}") from None
         if self._checked != o["image"].shape[1:]:

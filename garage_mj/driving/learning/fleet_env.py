@@ -64,13 +64,14 @@ class FleetDriveEnv(gym.Env):
             ``scenario``, ``task``, ...); the env's ``action_type`` is discrete in cruise tests and continuous in
             park tests (this env's own actions are discrete in both), ``image_obs`` off.
         variants: env settings per garage (garage ``k``: ``variants[k % len(variants)]`` over ``env_kwargs``).
+        park_route: park tests: observe the park route too (:func:`park_observation`'s ``route``).
     """
 
     metadata = {"render_modes": []}
 
     def __init__(self, garages: Sequence[CruiseSource], weights: Sequence[float] | None = None,
                  cache_size: int = 8, expert: bool = False, env_kwargs: dict[str, Any] | None = None,
-                 variants: Sequence[dict[str, Any]] | None = None) -> None:
+                 variants: Sequence[dict[str, Any]] | None = None, park_route: bool = False) -> None:
         self.sources = list(garages)
         if not self.sources:
             raise ValueError("FleetDriveEnv needs at least one garage")
@@ -81,6 +82,7 @@ class FleetDriveEnv(gym.Env):
             if key in self.env_kwargs:
                 raise ValueError(f"FleetDriveEnv sets {key!r} itself; leave it out of env_kwargs")
         self.variants = [dict(v) for v in variants] if variants else [{}]
+        self.park_route = bool(park_route)
         self.task = str(self.env_kwargs.get("task", "cruise"))
         camera = self.env_kwargs.get("camera")
         cam = camera if isinstance(camera, CameraConfig) else CameraConfig(**(camera or {}))
@@ -91,7 +93,7 @@ class FleetDriveEnv(gym.Env):
         else:
             self.action_type = "continuous"
             self.env_kwargs.setdefault("sensors", {name: True for name in PARK_SENSORS})
-            self.observation_space = park_space(cam.height, cam.width)
+            self.observation_space = park_space(cam.height, cam.width, self.park_route)
             self.action_space = spaces.Discrete(len(PARK_COMMANDS))
         self.cache_size = int(cache_size)
         self.expert = bool(expert)
@@ -176,7 +178,7 @@ class FleetDriveEnv(gym.Env):
             return learned_observation(obs), info
         if self.expert:
             info["expert_action"] = nearest_park_action(self._oracle.act(obs))
-        return park_observation(obs), info
+        return park_observation(obs, self.park_route), info
 
     def step(self, action):
         if self.env is None:

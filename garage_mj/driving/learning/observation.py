@@ -85,14 +85,19 @@ SLOT_NEAR = 2.0  # [m] ... and again at a finer scale, for the last metres into 
 ULTRASONIC_RANGE = 5.0  # [m] the rangefinders' farthest reading (park_sensors.ULTRASONIC_MAX)
 PARK_VECTOR_KEYS = ("slot_x", "slot_y", "slot_cos", "slot_sin", "slot_near_x", "slot_near_y", "slot_width",
                     "slot_depth", "facing_cos", "facing_sin", "speed", "steer", "gear", *(f"ultrasonic_{i}" for i in range(12)))
+#: With ``route``: the park route's waypoint ahead (car frame, over the lookahead) and the route left (over
+#: :data:`REMAINING_RANGE`, and again over :data:`NEAR_RANGE`).
+PARK_ROUTE_KEYS = ("route_x", "route_y", "route_left", "route_near")
 PARK_IMAGE_CHANNELS = 4  # front depth, front segmentation, rear depth, rear segmentation
 
 
-def park_space(height: int, width: int) -> spaces.Dict:
-    """The observation space of :func:`park_observation` for ``height`` x ``width`` cameras."""
+def park_space(height: int, width: int, route: bool = False) -> spaces.Dict:
+    """The observation space of :func:`park_observation` for ``height`` x ``width`` cameras (``route``: with the
+    park route's entries)."""
+    size = len(PARK_VECTOR_KEYS) + (len(PARK_ROUTE_KEYS) if route else 0)
     return spaces.Dict({
         "image": spaces.Box(0, 255, (PARK_IMAGE_CHANNELS, height, width), np.uint8),
-        "vector": spaces.Box(-np.inf, np.inf, (len(PARK_VECTOR_KEYS),), np.float32),
+        "vector": spaces.Box(-np.inf, np.inf, (size,), np.float32),
     })
 
 
@@ -102,7 +107,7 @@ def _camera_planes(depth: Any, segmentation: Any, out: np.ndarray) -> None:
     np.multiply(np.asarray(segmentation, dtype=np.uint8), SEG_SCALE, out=out[1])
 
 
-def park_observation(obs: dict[str, Any]) -> dict[str, np.ndarray]:
+def park_observation(obs: dict[str, Any], route: bool = False) -> dict[str, np.ndarray]:
     """What a learned parking driver sees, from a park or AVP test's drive env observation with the
     :data:`PARK_SENSORS` on (depth in metres, ``image_obs=False``):
 
@@ -113,10 +118,12 @@ def park_observation(obs: dict[str, Any]) -> dict[str, np.ndarray]:
       the direction it opens to, its width and depth (over 5 m and 6 m), the cosine and sine of the heading the
       car must end in, relative to its own (the test's instruction: reverse-in or nose-in, from the ``stall``
       entry; its position is not read), the speed, the road-wheel angle, the
-      gear (+1 D, -1 R) and the 12 ultrasonic ranges over 5 m.
+      gear (+1 D, -1 R) and the 12 ultrasonic ranges over 5 m; with ``route``, then :data:`PARK_ROUTE_KEYS`: the
+      route's waypoint ahead and the route left, as the cruise driver reads its route.
 
-    Nothing privileged: no pose, no plan, no other road user's state (:data:`UNPRIVILEGED` only), and no route:
-    a park test's route is its reference plan, which the driver finds for itself."""
+    Nothing the observation table marks privileged: no pose, no plan's poses and gears, no other road user's state
+    (:data:`UNPRIVILEGED` only). The route of a park test is the reference planner's path to the stall, planned
+    around the parked cars as they stand: without ``route`` the driver finds its way from its sensors alone."""
     obs = {k: obs[k] for k in UNPRIVILEGED if k in obs}
     missing = [k for k in ("rear_depth", "ultrasonic", "slot", "gear", "stall") if k not in obs]
     if missing:
@@ -135,7 +142,12 @@ def park_observation(obs: dict[str, Any]) -> dict[str, np.ndarray]:
     steer = float(np.asarray(obs["steer"]).reshape(-1)[0]) if "steer" in obs else 0.0
     gear = float(np.asarray(obs["gear"]).reshape(-1)[0])
     sonar = np.asarray(obs["ultrasonic"], dtype=np.float32).reshape(-1) / ULTRASONIC_RANGE
+    way: list[float] = []
+    if route:
+        wx, wy = (float(v) for v in np.asarray(obs["waypoint"]).reshape(-1)[:2])
+        left = float(np.asarray(obs["remaining"]).reshape(-1)[0])
+        way = [wx / LOOKAHEAD, wy / LOOKAHEAD, min(left / REMAINING_RANGE, 1.0), min(left / NEAR_RANGE, 1.0)]
     vector = np.array([_unit(sx / SLOT_RANGE), _unit(sy / SLOT_RANGE), math.cos(syaw), math.sin(syaw),
                        _unit(sx / SLOT_NEAR), _unit(sy / SLOT_NEAR), swidth / 5.0, sdepth / 6.0, fcos, fsin,
-                       speed / SPEED_RANGE, steer, gear, *sonar.tolist()], dtype=np.float32)
+                       speed / SPEED_RANGE, steer, gear, *sonar.tolist(), *way], dtype=np.float32)
     return {"image": image, "vector": vector}

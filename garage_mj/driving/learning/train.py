@@ -132,6 +132,9 @@ class DriverTrainConfig:
     # a parking driver: weight of the states where the oracle asks for the other gear. They are about 1% of the
     # states, and at weight 1 the model never changed gear: it waited in D at the start of a reverse-in test
     gear_change_weight: float = bounded(20.0, gt=0.0, le=1e6)
+    # a parking driver: observe the park route too (the waypoint ahead on the test's reference plan and the route
+    # left, as the cruise driver reads its route); without it, it parks from its sensors alone
+    park_route: bool = False
     # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
     # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
     # is driven by the two together (learned:avp)
@@ -228,13 +231,13 @@ def _hunted(out: Path, it: int, sources: list[CruiseSource], cfg: DriverTrainCon
 
 
 def _make_venv(sources: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any], expert: bool,
-               variants: list[dict[str, Any]] | None = None):
+               variants: list[dict[str, Any]] | None = None, park_route: bool = False):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from garage_mj.driving.learning.fleet_env import FleetDriveEnv
 
     def make():
-        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs, variants=variants)
+        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs, variants=variants, park_route=park_route)
 
     if n_envs == 1:
         return DummyVecEnv([make])
@@ -409,10 +412,12 @@ class _Workers:
     A worker process that dies under the run (``kill -9``, the OOM killer, a segfault) is :meth:`lost`: one line."""
 
     def __init__(self, pool: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any],
-                 variants: list[dict[str, Any]] | None = None) -> None:
+                 variants: list[dict[str, Any]] | None = None, park_route: bool = False) -> None:
         self.pool, self.n_envs, self.env_kwargs, self.variants = pool, n_envs, env_kwargs, variants
+        self.park_route = park_route
         self.venv = None
-        self.venv = self._open(lambda: _make_venv(pool, n_envs, env_kwargs, expert=True, variants=variants))
+        self.venv = self._open(lambda: _make_venv(pool, n_envs, env_kwargs, expert=True, variants=variants,
+                                                  park_route=park_route))
 
     def _open(self, make: Callable[[], Any]) -> Any:
         try:
@@ -426,7 +431,7 @@ class _Workers:
             self.pool = pool
             self.close()
             self.venv = self._open(lambda: _make_venv(pool, self.n_envs, self.env_kwargs, expert=True,
-                                                      variants=self.variants))
+                                                      variants=self.variants, park_route=self.park_route))
 
     def remake(self, make: Callable[[], Any]) -> Any:
         """Close the workers, then run on those ``make()`` returns."""
@@ -486,7 +491,7 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
     with _undone_if_no_run(out):
         _prepare_folder(out, garages, validation)
         torch.set_num_threads(cfg.torch_threads)
-        workers = _Workers(sources, cfg.n_envs, env_kwargs, cfg.variants())  # the garages the worker envs draw from (the hunt adds some)
+        workers = _Workers(sources, cfg.n_envs, env_kwargs, cfg.variants(), cfg.park_route)  # the garages the worker envs draw from (the hunt adds some)
         try:
             model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed)
             state = _dagger(model, workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs,
