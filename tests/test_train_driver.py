@@ -473,3 +473,16 @@ def test_a_park_command_is_the_nearest_of_the_grid_in_the_same_gear():
     assert park_command(nearest_park_action([0.9, -0.6, -1.0])).tolist() == [1.0, -0.5, -1.0]
     assert park_command(nearest_park_action([-0.2, 0.13, 1.0])).tolist() == [pytest.approx(-0.3), 0.25, 1.0]
     assert park_command(nearest_park_action([0.0, 0.0, 0.4])).tolist()[2] == 1.0  # gear >= 0: D, as the env reads it
+
+
+@pytest.mark.parametrize("spec", ["learned:park", "learned:avp"])
+def test_the_named_parking_drivers_say_how_to_train_a_model_while_none_is_shipped(spec):
+    from garage_mj.driving.drivers import DriverError, load_driver
+    from garage_mj.driving.learning.saved_model import PARK_MODEL, default_model
+
+    if default_model(PARK_MODEL).is_file():
+        pytest.skip("a parking model is shipped: the named drivers load it")
+    with pytest.raises(DriverError, match=r"^no parking model is shipped at .*park_m5\.zip: train one with garage-mj "
+                                          r"train-driver GARAGES --task park --out RUN and drive it with --driver "
+                                          r"learned:RUN/model\.zip"):
+        load_driver(spec)

@@ -218,7 +218,12 @@ class LearnedParkDriver:
     sensors = PARK_SENSORS  # the parking sensors it observes (CruiseSettings.with_sensors turns them on)
 
     def __init__(self, model: str | Path | None = None) -> None:
-        self.path = model_path("park" if model is None else model)
+        named = model is None or str(model) in NAMED
+        self.path = model_path("park" if named else model)
+        if named and not self.path.is_file():
+            raise DriverError(f"no parking model is shipped at {self.path}: train one with garage-mj train-driver "
+                              "GARAGES --task park --out RUN and drive it with --driver learned:RUN/model.zip "
+                              "(docs/learned-parking.md)")
         self.model = load_model(self.path, parking=True)
         # a model trained with the park route observes it (train-driver's park_route): its vector is longer
         self.route = int(self.model.observation_space["vector"].shape[0]) == len(PARK_VECTOR_KEYS) + len(PARK_ROUTE_KEYS)
