@@ -486,3 +486,29 @@ def test_the_named_parking_drivers_say_how_to_train_a_model_while_none_is_shippe
                                           r"train-driver GARAGES --task park --out RUN and drive it with --driver "
                                           r"learned:RUN/model\.zip"):
         load_driver(spec)
+
+
+def test_the_replanning_park_expert_plans_again_once_the_car_has_left_its_plan(tiny_sources):
+    from garage_mj.driving.learning.fleet_env import FleetDriveEnv
+    from garage_mj.driving.learning.park_actions import PARK_COMMANDS
+
+    off_plan = int(np.flatnonzero((PARK_COMMANDS == [1.0, 1.0, 1.0]).all(1))[0])  # full throttle, full left, D
+
+    def plans(replan):
+        env = FleetDriveEnv(tiny_sources, expert=True, env_kwargs={"task": "park", "maneuver": "any"}, replan=replan)
+        obs, info = env.reset(seed=1)
+        seen = [env._plan_poses]
+        for t in range(10):
+            obs, _, term, trunc, info = env.step(off_plan)
+            if env._plan_poses is not seen[-1]:
+                seen.append(env._plan_poses)
+            if term or trunc:
+                break
+        env.close()
+        return seen
+
+    kept = plans(False)
+    assert len(kept) == 1  # the first plan, tracked whatever the car does
+    again = plans(True)
+    assert len(again) >= 2  # a new plan from where the car went
+    assert np.hypot(*(again[1][0, :2] - again[0][0, :2])) > 0.5  # it starts from the car, not the test's start

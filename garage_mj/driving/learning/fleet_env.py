@@ -49,6 +49,9 @@ from garage_mj.driving.sim.vehicle import DiscreteAction
 from garage_mj.driving.sources import CruiseSource
 
 DRAWS = 20  # test draws per reset before a garage is taken as one without a drivable test
+REPLAN_DISTANCE = 0.5  # [m] park expert (replan): the car this far from every pose of the plan has left it ...
+REPLAN_HEADING = 0.35  # [rad] ... or this far off the heading of the nearest one
+REPLAN_EVERY = 1.0  # [s] and it plans again at most this often
 
 
 class FleetDriveEnv(gym.Env):
@@ -65,13 +68,18 @@ class FleetDriveEnv(gym.Env):
             park tests (this env's own actions are discrete in both), ``image_obs`` off.
         variants: env settings per garage (garage ``k``: ``variants[k % len(variants)]`` over ``env_kwargs``).
         park_route: park tests: observe the park route too (:func:`park_observation`'s ``route``).
+        replan: park tests: the expert plans again (the test's reference planner, from the car's pose, around the
+            same parked cars) when the car has left its plan (:data:`REPLAN_DISTANCE`, :data:`REPLAN_HEADING`), at
+            most every :data:`REPLAN_EVERY` seconds, and labels by the new plan: off the plan, tracking the old one
+            would only brake.
     """
 
     metadata = {"render_modes": []}
 
     def __init__(self, garages: Sequence[CruiseSource], weights: Sequence[float] | None = None,
                  cache_size: int = 8, expert: bool = False, env_kwargs: dict[str, Any] | None = None,
-                 variants: Sequence[dict[str, Any]] | None = None, park_route: bool = False) -> None:
+                 variants: Sequence[dict[str, Any]] | None = None, park_route: bool = False,
+                 replan: bool = False) -> None:
         self.sources = list(garages)
         if not self.sources:
             raise ValueError("FleetDriveEnv needs at least one garage")
@@ -83,6 +91,9 @@ class FleetDriveEnv(gym.Env):
                 raise ValueError(f"FleetDriveEnv sets {key!r} itself; leave it out of env_kwargs")
         self.variants = [dict(v) for v in variants] if variants else [{}]
         self.park_route = bool(park_route)
+        self.replan = bool(replan)
+        self._plan_poses: np.ndarray | None = None  # the poses of the plan the expert tracks
+        self._replanned_at = -np.inf
         self.task = str(self.env_kwargs.get("task", "cruise"))
         camera = self.env_kwargs.get("camera")
         cam = camera if isinstance(camera, CameraConfig) else CameraConfig(**(camera or {}))
@@ -167,8 +178,35 @@ class FleetDriveEnv(gym.Env):
 
             if self._oracle is None:
                 self._oracle = OracleDriver()
-            self._oracle.reset(env.driver_info(test_seed))
+            driver_info = env.driver_info(test_seed)
+            self._oracle.reset(driver_info)
+            plan = driver_info.get("park_plan")
+            self._plan_poses = None if plan is None else np.asarray(plan["poses"], dtype=float)
+            self._replanned_at = -np.inf
         return self._out(obs, info)
+
+    def _follow(self, obs: dict[str, Any], info: dict[str, Any]) -> None:
+        """Park tests with ``replan``: a new plan for the expert when the car has left its plan (class docstring)."""
+        if self._plan_poses is None or "outcome" in info or self._oracle.tracker is None:
+            return
+        x, y, yaw = (float(v) for v in np.asarray(obs["pose"]).reshape(-1)[:3])
+        d = np.hypot(self._plan_poses[:, 0] - x, self._plan_poses[:, 1] - y)
+        i = int(np.argmin(d))
+        dyaw = abs((yaw - self._plan_poses[i, 2] + np.pi) % (2 * np.pi) - np.pi)
+        now = float(info.get("time", 0.0))
+        if (d[i] <= REPLAN_DISTANCE and dyaw <= REPLAN_HEADING) or now - self._replanned_at < REPLAN_EVERY:
+            return
+        self._replanned_at = now
+        from garage_mj.driving.drivers.park_tracking import ParkTracker
+        from garage_mj.scene.parked_fleet import body_obstacles
+
+        env, test = self.env, self.env._park
+        plan = env.park_planner.plan((x, y, yaw), test.stall, test.maneuver, occupied=test.occupied,
+                                     obstacles=body_obstacles(env.park_planner.obstacles(), test.stall, test.bodies))
+        if plan.found:
+            oracle = self._oracle
+            oracle.tracker = ParkTracker(plan.poses, plan.directions, oracle.car, oracle.park_config, oracle.dt)
+            self._plan_poses = np.asarray(plan.poses, dtype=float)
 
     def _out(self, obs: dict[str, Any], info: dict[str, Any]):
         info = dict(info, garage=self.sources[self.index].name, garage_index=self.index, test_seed=self.test_seed)
@@ -177,6 +215,8 @@ class FleetDriveEnv(gym.Env):
                 info["expert_action"] = int(self._oracle.act(obs))
             return learned_observation(obs), info
         if self.expert:
+            if self.replan:
+                self._follow(obs, info)
             info["expert_action"] = nearest_park_action(self._oracle.act(obs))
         return park_observation(obs, self.park_route), info
 

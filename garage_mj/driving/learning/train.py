@@ -135,6 +135,9 @@ class DriverTrainConfig:
     # a parking driver: observe the park route too (the waypoint ahead on the test's reference plan and the route
     # left, as the cruise driver reads its route); without it, it parks from its sensors alone
     park_route: bool = False
+    # a parking driver: the expert plans again from the car's pose when the car has left its plan (FleetDriveEnv's
+    # replan); tracking the first plan, its labels off it were brakes, and the model learned to stop
+    replan: bool = False
     # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
     # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
     # is driven by the two together (learned:avp)
@@ -231,13 +234,14 @@ def _hunted(out: Path, it: int, sources: list[CruiseSource], cfg: DriverTrainCon
 
 
 def _make_venv(sources: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any], expert: bool,
-               variants: list[dict[str, Any]] | None = None, park_route: bool = False):
+               variants: list[dict[str, Any]] | None = None, park_route: bool = False, replan: bool = False):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from garage_mj.driving.learning.fleet_env import FleetDriveEnv
 
     def make():
-        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs, variants=variants, park_route=park_route)
+        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs, variants=variants, park_route=park_route,
+                             replan=replan)
 
     if n_envs == 1:
         return DummyVecEnv([make])
@@ -412,12 +416,12 @@ class _Workers:
     A worker process that dies under the run (``kill -9``, the OOM killer, a segfault) is :meth:`lost`: one line."""
 
     def __init__(self, pool: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any],
-                 variants: list[dict[str, Any]] | None = None, park_route: bool = False) -> None:
+                 variants: list[dict[str, Any]] | None = None, park_route: bool = False, replan: bool = False) -> None:
         self.pool, self.n_envs, self.env_kwargs, self.variants = pool, n_envs, env_kwargs, variants
-        self.park_route = park_route
+        self.park_route, self.replan = park_route, replan
         self.venv = None
         self.venv = self._open(lambda: _make_venv(pool, n_envs, env_kwargs, expert=True, variants=variants,
-                                                  park_route=park_route))
+                                                  park_route=park_route, replan=replan))
 
     def _open(self, make: Callable[[], Any]) -> Any:
         try:
@@ -431,7 +435,8 @@ class _Workers:
             self.pool = pool
             self.close()
             self.venv = self._open(lambda: _make_venv(pool, self.n_envs, self.env_kwargs, expert=True,
-                                                      variants=self.variants, park_route=self.park_route))
+                                                      variants=self.variants, park_route=self.park_route,
+                                                      replan=self.replan))
 
     def remake(self, make: Callable[[], Any]) -> Any:
         """Close the workers, then run on those ``make()`` returns."""
@@ -491,7 +496,7 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
     with _undone_if_no_run(out):
         _prepare_folder(out, garages, validation)
         torch.set_num_threads(cfg.torch_threads)
-        workers = _Workers(sources, cfg.n_envs, env_kwargs, cfg.variants(), cfg.park_route)  # the garages the worker envs draw from (the hunt adds some)
+        workers = _Workers(sources, cfg.n_envs, env_kwargs, cfg.variants(), cfg.park_route, cfg.replan)  # the garages the worker envs draw from (the hunt adds some)
         try:
             model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed)
             state = _dagger(model, workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs,
