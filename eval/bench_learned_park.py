@@ -134,8 +134,12 @@ def figure(result: dict, path: Path) -> None:
         xs = [p[0] for p in fit["points"]]
         ys = [p[1] for p in fit["points"]]
         ax.scatter(xs, ys, s=14, alpha=0.7)
+        if fit["r"] is None:  # success is the same on every garage: no r, no AUC
+            what = f"success {ys[0]:.0f}% on every garage" if ys and len(set(ys)) == 1 else "too few garages"
+        else:
+            what = f"r = {fit['r']}, AUC = {fit['auc']}"
         ax.set(xlim=(0, 1), ylim=(-5, 105), xlabel="park difficulty (garage mean)",
-               title=f"{d}\nr = {fit['r']}, AUC = {fit['auc']} ({fit['garages']} garages)")
+               title=f"{d}\n{what} ({fit['garages']} garages)")
         ax.title.set_fontsize(9)
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("success of driven tests [%]")
