@@ -131,7 +131,7 @@ def test_clearance_is_checked_against_walls_pillars_and_stall_outlines():
     strict = drive_planner(scene, config=DriveConfig(clearance_margin=2.5))  # lanes pass stalls 1.8 m away
     plans = strict.plans()
     assert plans and not any(p.feasible for p in plans)
-    assert any("parked_car" in p.reason for p in plans)
+    assert any("parked car" in p.reason for p in plans)  # messages write a class as words
     # the measured clearance on a straight lane: stall outline 4.5 m, car side 1.75 + 0.95 m from the road centre
     plan = drive_planner(scene).plan(next(s.id for s in scene.stalls.stalls if s.road_cell == (3, 2)))
     rear, hdg = plan.rear[40:41], plan.heading[40:41]
