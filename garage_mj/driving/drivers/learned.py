@@ -156,6 +156,25 @@ def _space_difference(got, want) -> str | None:
     return None
 
 
+def greedy_action(model: Any, obs: dict[str, np.ndarray]) -> int:
+    """The model's greedy action for one observation (a dict of arrays): the policy's own greedy step on a batch of
+    one, as ``model.predict`` does, without its checks and copies (half the time of predict per step; same action:
+    tests compare them), on :data:`TORCH_THREADS` threads and with oneDNN as :data:`MKLDNN_IN_ACT` says, both given
+    back after it."""
+    import torch  # loaded with the model already: a dict lookup
+
+    threads, mkldnn = torch.get_num_threads(), torch.backends.mkldnn.enabled
+    torch.set_num_threads(TORCH_THREADS)  # ~0.2 us a swap
+    torch.backends.mkldnn.enabled = MKLDNN_IN_ACT
+    try:
+        with torch.inference_mode():
+            batch = {k: torch.from_numpy(v).unsqueeze(0) for k, v in obs.items()}
+            return int(model.policy._predict(batch, deterministic=True).reshape(-1)[0])
+    finally:
+        torch.set_num_threads(threads)
+        torch.backends.mkldnn.enabled = mkldnn
+
+
 class LearnedDriver:
     """A trained SB3 model driving with the paper's 4 actions, deterministically (argmax)."""
 
@@ -184,20 +203,7 @@ class LearnedDriver:
         o = learned_observation(obs)
         if self._checked != o["image"].shape[1:]:
             self._check(o["image"].shape[1:])
-        import torch  # loaded with the model already: a dict lookup
-
-        threads, mkldnn = torch.get_num_threads(), torch.backends.mkldnn.enabled
-        torch.set_num_threads(TORCH_THREADS)  # ~0.2 us a swap
-        torch.backends.mkldnn.enabled = MKLDNN_IN_ACT  # given back below, as the threads are
-        try:
-            # the policy's own greedy step on a batch of one, as model.predict does, without its checks and
-            # copies (half the time of predict per step; same action: tests compare them)
-            with torch.inference_mode():
-                batch = {k: torch.from_numpy(v).unsqueeze(0) for k, v in o.items()}
-                action = int(self.model.policy._predict(batch, deterministic=True).reshape(-1)[0])
-        finally:
-            torch.set_num_threads(threads)
-            torch.backends.mkldnn.enabled = mkldnn
+        action = greedy_action(self.model, o)
         if self.discrete:
             return action
         return np.array(DISCRETE_COMMANDS[DiscreteAction(action)], dtype=np.float32)
@@ -250,19 +256,7 @@ class LearnedParkDriver:
             raise DriverError(f"learned parking driver: {exc}") from None
         if self._checked != o["image"].shape[1:]:
             self._check(o["image"].shape[1:])
-        import torch
-
-        threads, mkldnn = torch.get_num_threads(), torch.backends.mkldnn.enabled
-        torch.set_num_threads(TORCH_THREADS)
-        torch.backends.mkldnn.enabled = MKLDNN_IN_ACT
-        try:
-            with torch.inference_mode():
-                batch = {k: torch.from_numpy(v).unsqueeze(0) for k, v in o.items()}
-                action = int(self.model.policy._predict(batch, deterministic=True).reshape(-1)[0])
-        finally:
-            torch.set_num_threads(threads)
-            torch.backends.mkldnn.enabled = mkldnn
-        return park_command(action)
+        return park_command(greedy_action(self.model, o))
 
 
 class LearnedAVPDriver:
