@@ -77,6 +77,14 @@ SLOW = frozenset({
     "tests/test_pytest_plugin.py::test_a_driver_that_never_returns_fails_as_driver_timeout",
     "tests/test_park_problems.py::test_a_read_only_park_problems_target_is_one_line_naming_it",
     "tests/test_train_driver.py::test_a_killed_env_worker_is_one_line_that_says_resume",
+    # and: a driver process that dies (test_a_driver_that_segfaults_is_a_driver_crash_and_the_run_ends), a kill -9 of
+    # a generation run (test_cli_generation.py), an export folder given as cases (test_an_exported_park_problem_runs_
+    # end_to_end), a newcomer's path through the docs (the parking one, test_a_newcomer_brings_their_own_parking_stack,
+    # with the README's plugin example, test_the_readme_example_passes)
+    "tests/test_faults.py::test_kill_9_of_a_cruise_worker_is_retried_and_the_run_completes",
+    "tests/test_protocol_status.py::test_status_after_a_real_kill_9",
+    "tests/test_park_cases.py::test_a_folder_of_an_export_stands_for_its_json_problems",
+    "tests/test_docs.py::test_a_newcomer_follows_the_docs_to_their_own_driver",
 })
 
 
