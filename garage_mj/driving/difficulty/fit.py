@@ -139,12 +139,14 @@ def load_runs(runs: Sequence[str | Path], library: str | Path | None = None, mod
     return out, per_garage
 
 
-def write_records(path: str | Path, records: Sequence[dict[str, Any]]) -> None:
+def write_records(path: str | Path, records: Sequence[dict[str, Any]],
+                  columns: Sequence[str] = RECORD_COLUMNS) -> None:
+    """``records`` as a CSV of ``columns`` (a fit's data file), floats to 6 places, written atomically."""
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=RECORD_COLUMNS, lineterminator="\n")
+    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
     w.writeheader()
     for r in records:
-        w.writerow({k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items() if k in RECORD_COLUMNS})
+        w.writerow({k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items() if k in columns})
     atomic_write(Path(path), buf.getvalue())
 
 

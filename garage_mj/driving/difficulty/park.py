@@ -13,8 +13,6 @@ and :func:`park_difficulty_cell` fills a row's ``park_difficulty``.
 
 from __future__ import annotations
 
-import csv
-import io
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,8 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from garage_mj.core.fsutil import atomic_write
-from garage_mj.driving.difficulty.fit import DifficultyFitError, _check_out
+from garage_mj.driving.difficulty.fit import DifficultyFitError, _check_out, write_records
 from garage_mj.driving.difficulty.regression import (
     attainable_r,
     auc,
@@ -84,12 +81,8 @@ def load_park_runs(runs: Sequence[str | Path]) -> list[dict[str, Any]]:
 
 
 def write_park_records(path: str | Path, records: Sequence[dict[str, Any]]) -> None:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=PARK_RECORD_COLUMNS, lineterminator="\n")
-    w.writeheader()
-    for r in records:
-        w.writerow({k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items() if k in PARK_RECORD_COLUMNS})
-    atomic_write(Path(path), buf.getvalue())
+    """Park records as a fit's data file (the route fit's writer, with the park columns)."""
+    write_records(path, records, PARK_RECORD_COLUMNS)
 
 
 def fit_park_runs(runs: Sequence[str | Path], out: str | Path, features: Sequence[str] = PARK_FEATURES
