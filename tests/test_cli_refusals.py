@@ -57,6 +57,9 @@ BAD: list[tuple[str, list[str], str]] = [
     ("export", ["export", "--library", TEXT, "--out", OUT], TEXT),
     ("export", ["export", "--library", LIB, "--out", OUT, "--vehicle", "van"], "--park-problems"),
     ("export", ["export", "--library", LIB, "--park-problems", OUT, "--vehicle", "truck"], "truck"),
+    ("export", ["export", "--library", LIB, "--out", OUT, "--stall", "0"], "--park-problems"),
+    ("export", ["export", "--library", LIB, "--park-problems", OUT, "--stall", "9999"], "9999"),
+    ("export", ["export", "--library", LIB, "--park-problems", OUT, "--maneuver", "sideways"], "sideways"),
     # park geometry (docs/spec.md section 9): a bay narrower than the car, an angle no block holds, a geometry the
     # garage's blocks cannot hold, bad layout files
     ("export", ["export", "--garage", GARAGE, "--out", OUT, "--stall-width", "1.8"], "stall_width (--stall-width)"),

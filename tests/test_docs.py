@@ -102,7 +102,7 @@ def test_a_newcomer_brings_their_own_parking_stack(tmp_path):
     word, the test file's heart is in test_my_parker.py, and the page's commands run on those files in an empty
     folder (`garage-mj` as `python -m garage_mj`): park tests from the CLI and under pytest (every one parked),
     then a problem file exported and planned with docs/park_problem_example.py, clear of the obstacles and scored
-    against the reference plan. About 30 s on 2 busy cores: one garage, 3 park tests twice, 116 problems planned."""
+    against the reference plan. About 20 s on 2 busy cores: one garage, 3 park tests twice, 1 problem planned."""
     import glob
     import json
 

@@ -188,7 +188,7 @@ def test_a_blocked_goal_is_infeasible_by_proof_and_never_driven(tmp_path):
 
 
 def test_an_exported_park_problem_runs_end_to_end(painted_tiny, tmp_path):
-    write_park_problems([painted_tiny], tmp_path / "park")
+    write_park_problems([painted_tiny], tmp_path / "park", stalls={0}, maneuvers=("reverse",))
     problem = sorted((tmp_path / "park").rglob("stall*_reverse.json"))[0]
     case = read_case(problem)
     data = json.loads(problem.read_text())
@@ -204,9 +204,9 @@ def test_an_exported_park_problem_runs_end_to_end(painted_tiny, tmp_path):
 
 
 def test_a_folder_of_an_export_stands_for_its_json_problems(painted_tiny, tmp_path):
-    write_park_problems([painted_tiny], tmp_path / "park")
+    write_park_problems([painted_tiny], tmp_path / "park", stalls={0, 1})
     files = case_files([tmp_path / "park"])
-    assert files and all(f.suffix == ".json" and f.name != "park_problems.json" for f in files)
+    assert len(files) == 4 and all(f.suffix == ".json" and f.name != "park_problems.json" for f in files)
     csv_only = tmp_path / "csv"
     csv_only.mkdir()
     (csv_only / "a.csv").write_bytes(files[0].with_suffix(".csv").read_bytes())

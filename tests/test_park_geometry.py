@@ -242,7 +242,7 @@ def test_park_problem_files_carry_the_geometry(painted_tiny, tmp_path):
     from garage_mj.export.park_problems import read_park_problem, write_park_problems
 
     world = world_with({"stall_width": 2.3, "aisle_width": 6.5})
-    index = write_park_problems([GarageScene(painted_tiny, world)], tmp_path / "problems")
+    index = write_park_problems([GarageScene(painted_tiny, world)], tmp_path / "problems", stalls={0})
     first = json.loads(index.read_text())["problems"][0]
     problem = read_park_problem(tmp_path / "problems" / first["json"])
     assert problem.geometry == geometry(world)

@@ -104,12 +104,27 @@ def test_a_tpcap_case_with_wrong_counts_is_refused(tmp_path):
         read_tpcap_case(bad)
 
 
-def test_export_cli_writes_park_problems(painted_tiny, tmp_path, capsys):
+def test_export_cli_writes_the_park_problems_of_the_stalls_and_maneuver_asked_for(painted_tiny, written, tmp_path,
+                                                                                     capsys):
+    """``--stall`` (repeated) and ``--maneuver`` pick problems of the whole export (``written``), byte for byte."""
     garage = tmp_path / "garage.json"
     garage.write_text(painted_tiny.to_json())
-    assert main(["export", "--garage", str(garage), "--park-problems", str(tmp_path / "park")]) == 0
-    index = json.loads((tmp_path / "park" / INDEX).read_text())
-    assert f"{len(index['problems'])} park problem(s) of 1 garage(s)" in capsys.readouterr().out
+    out = tmp_path / "park"
+    assert main(["export", "--garage", str(garage), "--park-problems", str(out), "--stall", "3", "--stall", "0",
+                 "--maneuver", "reverse"]) == 0
+    index = json.loads((out / INDEX).read_text())
+    assert [(p["stall"], p["maneuver"]) for p in index["problems"]] == [(0, "reverse"), (3, "reverse")]
+    assert "2 park problem(s) of 1 garage(s)" in capsys.readouterr().out
+    every, every_index = written
+    for entry in index["problems"]:
+        for key in ("json", "csv"):
+            assert (out / entry[key]).read_bytes() == (every / entry[key]).read_bytes(), entry[key]
+    assert {(p["stall"], p["maneuver"]) for p in every_index["problems"]} >= {(0, "forward"), (3, "forward")}
+    before = snapshot(tmp_path)
+    line = one_line_error(capsys, ["export", "--garage", str(garage), "--park-problems", str(tmp_path / "more"),
+                                   "--stall", "0", "--stall", "999"])
+    assert "--stall 999" in line and f"0..{len(GarageScene(painted_tiny).stalls.stalls) - 1}" in line, line
+    assert snapshot(tmp_path) == before  # refused before anything is written
 
 
 # -- every bad file is one line ------------------------------------------------------------------------
@@ -465,7 +480,7 @@ def test_a_second_park_problems_export_into_a_busy_folder_is_one_line(painted_ti
     for flag in ("--out", "--carla-package"):  # one folder for two kinds of output: refused before any work
         line = one_line_error(capsys, ["export", "--garage", str(garage), "--park-problems", str(out), flag, str(out)])
         assert "--park-problems" in line and flag in line and "a folder of their own" in line, line
-    assert main(["export", "--garage", str(garage), "--park-problems", str(out)]) == 0
+    assert main(["export", "--garage", str(garage), "--park-problems", str(out), "--stall", "0"]) == 0
     assert not (out / LOCK_NAME).exists()
 
 
@@ -473,7 +488,7 @@ def test_a_read_only_park_problems_target_is_one_line_naming_it(painted_tiny, sh
     garage = shared_tmp / "garage.json"
     garage.write_text(painted_tiny.to_json())
     out = shared_tmp / "park"
-    assert main(["export", "--garage", str(garage), "--park-problems", str(out)]) == 0
+    assert main(["export", "--garage", str(garage), "--park-problems", str(out), "--stall", "0"]) == 0
     folder = next(p for p in out.iterdir() if p.is_dir())
     os.chmod(out, 0o777)
     for target in (folder, out):  # the garage's folder, then the whole output folder

@@ -293,7 +293,7 @@ def test_exported_park_problems_hold_the_parked_cars_bodies(painted_tiny):
     from garage_mj.scene.parked_fleet import uniform_size
 
     scene = GarageScene(painted_tiny)
-    problems, _ = park_problems(scene)
+    problems, _ = park_problems(scene, stalls={0, 1})
     length, width, _ = uniform_size()
     cars = [np.array(c) for p in problems[:4] for k, c in p.obstacles if k == "parked_car"]
     assert cars
@@ -363,7 +363,8 @@ def test_cli_export_writes_park_problems_for_a_vehicle_class(painted_tiny, tmp_p
     garage = tmp_path / "garage.json"
     garage.write_text(painted_tiny.to_json())
     out = tmp_path / "problems"
-    assert main(["export", "--garage", str(garage), "--park-problems", str(out), "--vehicle", "van", "--quiet"]) == 0
+    assert main(["export", "--garage", str(garage), "--park-problems", str(out), "--vehicle", "van", "--quiet",
+                 "--stall", "0"]) == 0
     car = json.loads((out / "park_problems.json").read_text())["car"]
     van = FLEET["van"]
     assert (car["length"], car["width"], car["wheelbase"]) == pytest.approx((van.length, van.width, van.wheelbase))

@@ -22,7 +22,7 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from garage_mj.cli import UserError
-from garage_mj.cli._common import add_geometry_args, add_ids, geometry_world, records_by_id
+from garage_mj.cli._common import add_geometry_args, add_ids, geometry_world, non_negative_int, records_by_id
 from garage_mj.export.artefacts import INDEX, contents, formats, left_out_here
 from garage_mj.generation.library import Library, LibraryError, garages_from_json
 from garage_mj.grid.garage import Garage
@@ -65,6 +65,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--vehicle", choices=tuple(FLEET), default=DEFAULT_VEHICLE,
                    help=f"with --park-problems: the car the problems are for, a class of the fleet (default "
                         f"{DEFAULT_VEHICLE}: models/car); its outline, axles and turning radius shape every problem")
+    p.add_argument("--stall", type=non_negative_int, action="append", metavar="ID",
+                   help="with --park-problems: only this stall's problems (repeat for more; default every stall); "
+                        "an id a garage lacks is refused before anything is written, naming its range")
+    p.add_argument("--maneuver", choices=("reverse", "forward", "both"), default="both",
+                   help="with --park-problems: reverse-in, forward (nose-in) or both problems per stall (default)")
     add_geometry_args(p)
     p.add_argument("--force", action="store_true", help="rebuild packs and CARLA maps that are already complete")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -103,6 +108,9 @@ def run(args: argparse.Namespace) -> int:
     if args.vehicle != DEFAULT_VEHICLE and args.park_problems is None:
         raise UserError(f"--vehicle {args.vehicle} chooses the car of --park-problems (packs hold no car); give "
                         "--park-problems DIR or leave --vehicle out")
+    if (args.stall is not None or args.maneuver != "both") and args.park_problems is None:
+        raise UserError("--stall and --maneuver choose which --park-problems to write (packs hold every stall); "
+                        "give --park-problems DIR or leave them out")
     if args.out is not None and args.carla_package is not None and \
             args.out.resolve() == args.carla_package.resolve():
         raise UserError(f"--out and --carla-package both name {args.out}; give the package a folder of its own")
@@ -131,10 +139,13 @@ def run(args: argparse.Namespace) -> int:
             check_geometry(garages, world)  # every garage holds it, or one line names the block and the fix
         args.world = world
         if args.park_problems is not None:
+            from garage_mj.export.park_problems import check_problem_choice
             from garage_mj.scene.garage_scene import GarageScene
 
-            # a read-only one: refused before any pack
-            check_park_problems_targets([GarageScene(g, world) for g in garages], args.park_problems)
+            scenes = [GarageScene(g, world) for g in garages]
+            # a stall id a garage lacks, or a read-only folder: refused before any pack
+            check_problem_choice(scenes, _stalls(args), _maneuvers(args))
+            check_park_problems_targets(scenes, args.park_problems)
         _export(args, garages)
     return 0
 
@@ -179,6 +190,16 @@ def _export(args: argparse.Namespace, garages: list[Garage]) -> None:
 
         car = None if args.vehicle == DEFAULT_VEHICLE else vehicle_class(args.vehicle).geometry()
         index = write_park_problems([GarageScene(g, args.world) for g in garages], args.park_problems, car,
-                                    locked=True)
+                                    stalls=_stalls(args), maneuvers=_maneuvers(args), locked=True)
         count = len(json.loads(index.read_text())["problems"])
         print(f"{count} park problem(s) of {len(garages)} garage(s) in {args.park_problems} (index: {index})")
+
+
+def _stalls(args: argparse.Namespace) -> frozenset[int] | None:
+    """``--stall``: the stalls whose park problems to write, or None for every stall."""
+    return None if args.stall is None else frozenset(args.stall)
+
+
+def _maneuvers(args: argparse.Namespace) -> tuple[str, ...]:
+    """``--maneuver``: the maneuvers of the park problems to write."""
+    return ("reverse", "forward") if args.maneuver == "both" else (args.maneuver,)

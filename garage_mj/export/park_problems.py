@@ -69,7 +69,7 @@ import math
 import os
 import re
 import stat
-from collections.abc import Iterable, Iterator
+from collections.abc import Collection, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
@@ -201,23 +201,27 @@ def _car(car: CarGeometry) -> dict[str, float]:
             "max_steer": car.max_steer, "min_turning_radius": car.min_radius}
 
 
-def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: ParkConfig = DEFAULT_PARK
+def park_problems(scene: GarageScene, car: CarGeometry | None = None, config: ParkConfig = DEFAULT_PARK,
+                  stalls: Collection[int] | None = None, maneuvers: Sequence[str] = MANEUVERS
                   ) -> tuple[list[ParkProblem], dict[int, str]]:
-    """Every park test of ``scene`` as a :class:`ParkProblem`, and the stalls left out with the reason."""
+    """Every park test of ``scene`` as a :class:`ParkProblem` (only those of ``stalls`` and ``maneuvers`` when
+    given), and the stalls left out with the reason."""
+    check_problem_choice([scene], stalls, maneuvers)
     car = car or car_geometry()
     planner, cruise = ParkPlanner(scene, car, config), drive_planner(scene, car)
     problems, skipped = [], {}
     garage = scene.garage
     rows = tuple("".join(str(int(v)) for v in row) for row in garage.grid)
-    stalls = scene.stalls.stalls
-    parked = draw_parked(stalls, [s.id for s in stalls], None, ParkedFleet(), None, scene.world.marking_width)
-    for stall in stalls:
+    every = scene.stalls.stalls
+    parked = draw_parked(every, [s.id for s in every], None, ParkedFleet(), None, scene.world.marking_width)
+    chosen = [s for s in every if stalls is None or s.id in stalls]
+    for stall in chosen:
         test = cruise.plan(stall.id)
         if not test.feasible:
             skipped[stall.id] = f"no feasible cruise test to the stall, so no start pose: {test.reason}"
             continue
         obs = body_obstacles(planner.obstacles(), stall.id, parked)
-        for name in MANEUVERS:
+        for name in maneuvers:
             region = planner.area(test.goal, stall.id, name)
             near = planner.near(obs, region)
             goal = park_pose(stall, car, name)
@@ -282,23 +286,27 @@ def _corners(outline) -> tuple[tuple[float, float], ...]:
 
 
 def write_park_problems(garages: Iterable[Garage | GarageScene], out_dir: str | Path, car: CarGeometry | None = None,
-                        config: ParkConfig = DEFAULT_PARK, *, locked: bool = False) -> Path:
-    """Write every park test of ``garages`` under ``out_dir`` (module docstring); returns the index file.
+                        config: ParkConfig = DEFAULT_PARK, *, stalls: Collection[int] | None = None,
+                        maneuvers: Sequence[str] = MANEUVERS, locked: bool = False) -> Path:
+    """Write every park test of ``garages`` under ``out_dir`` (module docstring); returns the index file. With
+    ``stalls`` and ``maneuvers``, only those stalls' problems in those maneuvers (``export --stall --maneuver``).
 
     ``locked``: the caller holds :func:`park_problems_lock` on ``out_dir`` (the CLI takes it before any
     work); else this takes it. A folder that cannot be written is a :class:`ParkProblemError` naming it.
     """
     if not locked:
         with park_problems_lock(out_dir):
-            return write_park_problems(garages, out_dir, car, config, locked=True)
+            return write_park_problems(garages, out_dir, car, config, stalls=stalls, maneuvers=maneuvers,
+                                       locked=True)
     out_dir = Path(out_dir)
-    items = list(garages)
+    items = [item if isinstance(item, GarageScene) else GarageScene(item) for item in garages]
+    check_problem_choice(items, stalls, maneuvers)
     folders = check_park_problems_targets(items, out_dir)
     entries, left_out = [], []
     try:
         for item, folder in zip(items, folders, strict=True):
-            scene = item if isinstance(item, GarageScene) else GarageScene(item)
-            problems, skipped = park_problems(scene, car, config)
+            scene = item
+            problems, skipped = park_problems(scene, car, config, stalls, maneuvers)
             if folder.is_dir():
                 clean_temp(folder)  # what a killed export left (under the lock: no other writer)
             else:
@@ -316,6 +324,27 @@ def write_park_problems(garages: Iterable[Garage | GarageScene], out_dir: str | 
     index = {"format": "garage-mj park problems", "version": VERSION, "car": _car(car or car_geometry()),
              "problems": entries, "skipped": left_out}
     return _write(out_dir, out_dir / INDEX, json.dumps(index, indent=2) + "\n")
+
+
+def check_problem_choice(scenes: Iterable[GarageScene], stalls: Collection[int] | None,
+                         maneuvers: Sequence[str] = MANEUVERS) -> None:
+    """Refuse, in one :class:`ParkProblemError` line, a stall id that a garage of ``scenes`` lacks (naming the ids
+    every garage has) or a maneuver that is not one of :data:`MANEUVERS`, before anything is written."""
+    bad = [m for m in maneuvers if m not in MANEUVERS]
+    if bad or not maneuvers:
+        raise ParkProblemError(f"maneuver {bad[0] if bad else 'none'!r} is not a park maneuver; give one of "
+                               f"{', '.join(MANEUVERS)}")
+    if stalls is None:
+        return
+    counts = [(scene, len(scene.stalls.stalls)) for scene in scenes]
+    for scene, n in counts:
+        missing = sorted(s for s in stalls if not 0 <= s < n)
+        if missing:
+            common = min(c for _, c in counts)
+            has = f"its stalls are 0..{n - 1}" if n else "it has no stall"
+            fix = f"stalls in 0..{common - 1} (every garage has those)" if common > 0 else "another garage"
+            raise ParkProblemError(f"--stall {missing[0]}: garage {scene.name!r} has no such stall ({has}); give "
+                                   f"{fix}, or leave --stall out for every stall")
 
 
 def check_park_problems_targets(garages: Iterable[Garage | GarageScene], out_dir: str | Path) -> list[Path]:
