@@ -22,7 +22,9 @@ export MUJOCO_GL ?= egl
 
 .PHONY: install browser test test-all demo bench lint docs clean
 
-install: $(STAMP) $(QC_STAMP) $(BLENDER_STAMP)
+# the three virtualenvs and the browser are independent: `make test` builds them side by side (downloads overlap)
+install:
+	@$(MAKE) --no-print-directory -j3 $(STAMP) $(QC_STAMP) $(BLENDER_STAMP)
 
 # What the demo runs: torch first, pinned to the CPU build, so nothing later pulls the multi-GB CUDA
 # wheels; then the package.
@@ -63,10 +65,12 @@ browser:
 # that runs out of tests takes some of the other's, so one long file does not hold up the end; measured 410 s of
 # pytest against 426 s with one file per process): TEST_WORKERS=0 runs them in this process.
 TEST_WORKERS ?= 2
-test: install browser
+test:
+	@$(MAKE) --no-print-directory -j4 $(STAMP) $(QC_STAMP) $(BLENDER_STAMP) browser
 	$(PY) -m pytest -q -m "not slow" -n $(TEST_WORKERS) --dist worksteal
 
-test-all: install browser
+test-all:
+	@$(MAKE) --no-print-directory -j4 $(STAMP) $(QC_STAMP) $(BLENDER_STAMP) browser
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist worksteal
 
 demo: $(MAIN_STAMP)
