@@ -512,3 +512,29 @@ def test_the_replanning_park_expert_plans_again_once_the_car_has_left_its_plan(t
     again = plans(True)
     assert len(again) >= 2  # a new plan from where the car went
     assert np.hypot(*(again[1][0, :2] - again[0][0, :2])) > 0.5  # it starts from the car, not the test's start
+
+
+def test_the_park_expert_steers_on_the_learners_levels_so_its_labels_park(tiny_sources):
+    """The expert's wheel targets are the learner's steering levels: driven by its own labels (the 90 commands), it
+    parks, and it never waits at rest for a wheel angle between two levels (labels that taught the learner to
+    stand still)."""
+    from garage_mj.driving.drivers.park_tracking import ParkTrackConfig, ParkTracker
+    from garage_mj.driving.learning.fleet_env import FleetDriveEnv
+    from garage_mj.driving.learning.park_actions import PARK_COMMANDS, STEER_LEVELS
+
+    env = FleetDriveEnv(tiny_sources, expert=True, env_kwargs={"task": "park", "maneuver": "reverse"}, replan=True)
+    obs, info = env.reset(seed=3)
+    assert env._oracle.park_config.steer_levels == STEER_LEVELS
+    labels, done = [], False
+    while not done:
+        labels.append(info["expert_action"])
+        obs, _, term, trunc, info = env.step(info["expert_action"])
+        done = term or trunc
+    env.close()
+    assert info["outcome"] == "success", info.get("reason")
+    assert set(PARK_COMMANDS[labels, 1].tolist()) <= set(STEER_LEVELS)
+    for levels in (STEER_LEVELS, ()):  # a wheel target between two levels: snapped to the nearer with levels only
+        tracker = ParkTracker.__new__(ParkTracker)
+        tracker.car, tracker.config = env._oracle.car, ParkTrackConfig(steer_levels=levels)
+        wheel = tracker._steer_for(0.04)
+        assert (wheel in STEER_LEVELS) == bool(levels), wheel

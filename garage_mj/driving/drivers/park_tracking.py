@@ -59,6 +59,10 @@ class ParkTrackConfig:
     min_segment: float = 0.0  # [m] a shorter stretch in one gear between two cusps is skipped (0: none)
     handover: float = 6.0  # [m] AVP (oracle): the tracker takes over this far before the cruise goal
     gear_change_speed: float = 0.1  # [m/s] the car's (CarConfig): below it a gear request is honoured
+    # fractions of full lock a driver can command (the learned parking driver's STEER_LEVELS), or () for any: the
+    # wheel target is the nearest of them, so the tracker moves off at rest once the wheels reach a target that
+    # driver can give, and its commands are that driver's to imitate
+    steer_levels: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -231,7 +235,9 @@ class ParkTracker:
         return self._steer_for(seg.gear.sign * kappa)
 
     def _steer_for(self, curvature: float) -> float:
-        return clip(math.atan(self.car.wheelbase * curvature) / self.car.max_steer, -1.0, 1.0)
+        wheel = clip(math.atan(self.car.wheelbase * curvature) / self.car.max_steer, -1.0, 1.0)
+        levels = self.config.steer_levels
+        return min(levels, key=lambda level: abs(level - wheel)) if levels else wheel
 
     def _answer(self, pedal: float, steer: float, gear: Gear) -> tuple[float, float, Gear]:
         """The command, with the tracker's copy of the car's gear and steering moved as the car will."""

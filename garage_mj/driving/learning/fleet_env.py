@@ -42,7 +42,7 @@ from garage_mj.driving.learning.observation import (
     park_observation,
     park_space,
 )
-from garage_mj.driving.learning.park_actions import PARK_COMMANDS, nearest_park_action
+from garage_mj.driving.learning.park_actions import PARK_COMMANDS, STEER_LEVELS, nearest_park_action
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.driving.sim.sensors import CameraConfig
 from garage_mj.driving.sim.vehicle import DiscreteAction
@@ -71,7 +71,9 @@ class FleetDriveEnv(gym.Env):
         replan: park tests: the expert plans again (the test's reference planner, from the car's pose, around the
             same parked cars) when the car has left its plan (:data:`REPLAN_DISTANCE`, :data:`REPLAN_HEADING`), at
             most every :data:`REPLAN_EVERY` seconds, and labels by the new plan: off the plan, tracking the old one
-            would only brake.
+            would only brake. In park tests the expert's wheel targets are the learner's steering levels
+            (``ParkTrackConfig.steer_levels``): with any other target it would wait at rest for a wheel angle no
+            command gives, and its labels there (brake) taught the learner to stand still.
     """
 
     metadata = {"render_modes": []}
@@ -178,6 +180,10 @@ class FleetDriveEnv(gym.Env):
 
             if self._oracle is None:
                 self._oracle = OracleDriver()
+                if self.task != "cruise":  # its wheel targets are the learner's steering levels (ParkTrackConfig)
+                    from garage_mj.driving.drivers.park_tracking import ParkTrackConfig
+
+                    self._oracle.park_config = ParkTrackConfig(steer_levels=STEER_LEVELS)
             driver_info = env.driver_info(test_seed)
             self._oracle.reset(driver_info)
             plan = driver_info.get("park_plan")
