@@ -538,3 +538,20 @@ def test_the_park_expert_steers_on_the_learners_levels_so_its_labels_park(tiny_s
         tracker.car, tracker.config = env._oracle.car, ParkTrackConfig(steer_levels=levels)
         wheel = tracker._steer_for(0.04)
         assert (wheel in STEER_LEVELS) == bool(levels), wheel
+
+
+def test_a_parking_drivers_rare_decisions_weigh_more_in_the_loss():
+    """Changing gear and moving off at rest are a few states among many waits: they weigh gear_change_weight and
+    start_weight; a brake at rest, or a go while moving, weighs 1."""
+    from garage_mj.driving.learning.observation import PARK_VECTOR_KEYS, SPEED_RANGE
+    from garage_mj.driving.learning.park_actions import nearest_park_action
+    from garage_mj.driving.learning.train import DriverTrainConfig, _state_weights
+
+    cfg = DriverTrainConfig(task="park", gear_change_weight=7.0, start_weight=3.0, stop_weight=1.0)
+    speed, gear = PARK_VECTOR_KEYS.index("speed"), PARK_VECTOR_KEYS.index("gear")
+    vectors = np.zeros((4, len(PARK_VECTOR_KEYS)), np.float32)
+    vectors[:, gear] = 1.0  # D engaged
+    vectors[3, speed] = 1.0 / SPEED_RANGE  # 1 m/s
+    labels = np.array([nearest_park_action(c) for c in ([-1.0, 0.0, 1.0], [1.0, 0.5, 1.0], [-1.0, 0.0, -1.0],
+                                                        [1.0, 0.0, 1.0])])
+    assert _state_weights(cfg, vectors, labels).tolist() == [1.0, 3.0, 7.0, 1.0]

@@ -66,10 +66,11 @@ from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.core.model_file import ModelFileError
 from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.cruise import run_test
+from garage_mj.driving.drivers.park_tracking import ParkTrackConfig
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
 from garage_mj.driving.hunt import HuntConfig, hunt
-from garage_mj.driving.learning.observation import PARK_SENSORS
+from garage_mj.driving.learning.observation import PARK_SENSORS, PARK_VECTOR_KEYS, SPEED_RANGE
 from garage_mj.driving.learning.park_actions import PARK_COMMANDS
 from garage_mj.driving.learning.saved_model import load_driver_model
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
@@ -82,6 +83,7 @@ MANIFEST = "run.json"
 CURVE = "curve.csv"
 MODEL = "model.zip"
 RL_MONITOR = "rl_monitor.csv"
+AT_REST = ParkTrackConfig.at_rest  # [m/s] a parking driver's state slower than this is at rest (start_weight)
 CURRICULA = ("uniform", "difficulty", "adversarial", "hunt")
 TRAIN_TASKS = ("cruise", "park")  # what train-driver trains: a cruise driver or a parking driver
 #: ``validate``'s count of the tests of a garage that cannot be built in its park geometry (not driven, not counted).
@@ -132,6 +134,9 @@ class DriverTrainConfig:
     # a parking driver: weight of the states where the oracle asks for the other gear. They are about 1% of the
     # states, and at weight 1 the model never changed gear: it waited in D at the start of a reverse-in test
     gear_change_weight: float = bounded(20.0, gt=0.0, le=1e6)
+    # a parking driver: weight of the states at rest where the oracle moves off. Moving off is one state and the
+    # waits before it many: at weight 1 the at-rest labels were 6% "go", and the model stood still at the start
+    start_weight: float = bounded(20.0, gt=0.0, le=1e6)
     # a parking driver: observe the park route too (the waypoint ahead on the test's reference plan and the route
     # left, as the cruise driver reads its route); without it, it parks from its sensors alone
     park_route: bool = False
@@ -299,13 +304,14 @@ def _near(cfg: DriverTrainConfig, vectors: np.ndarray) -> np.ndarray:
 
 def _state_weights(cfg: DriverTrainConfig, vectors: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """Each state's weight in the imitation loss: ``stop_weight`` in the last metres (:func:`_near`), else 1; a
-    parking driver's states where the oracle asks for the other gear than the one engaged ``gear_change_weight``."""
+    parking driver's states where the oracle asks for the other gear than the one engaged ``gear_change_weight``,
+    and those at rest where it moves off ``start_weight``."""
     weights = np.where(_near(cfg, vectors), cfg.stop_weight, 1.0).astype(np.float32)
     if cfg.parking:
-        from garage_mj.driving.learning.observation import PARK_VECTOR_KEYS
-
         change = (PARK_COMMANDS[labels, 2] < 0) != (vectors[:, PARK_VECTOR_KEYS.index("gear")] < 0)
         weights = np.where(change, cfg.gear_change_weight, weights).astype(np.float32)
+        at_rest = np.abs(vectors[:, PARK_VECTOR_KEYS.index("speed")] * SPEED_RANGE) < AT_REST
+        weights = np.where(at_rest & (PARK_COMMANDS[labels, 0] > 0), cfg.start_weight, weights).astype(np.float32)
     return weights
 
 
