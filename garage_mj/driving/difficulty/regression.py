@@ -106,14 +106,19 @@ def paper_regression() -> Regression:
 
 def bootstrap_r(x: Sequence[float], y: Sequence[float], seed: int = 0, resamples: int = 2000,
                 level: float = 0.95) -> tuple[float, float]:
-    """Percentile bootstrap interval of Pearson r over the (x, y) pairs (SciPy; pairs resampled together)."""
-    from scipy.stats import bootstrap
+    """Percentile bootstrap interval of Pearson r over the (x, y) pairs (SciPy; pairs resampled together); NaN, NaN
+    where there is none: fewer than 3 pairs, or resamples whose r is undefined (SciPy's DegenerateDataWarning)."""
+    import warnings
+
+    from scipy.stats import DegenerateDataWarning, bootstrap
 
     a, b = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
     if a.size < 3:
         return math.nan, math.nan
-    res = bootstrap((a, b), lambda u, v: pearson(u, v), paired=True, vectorized=False, n_resamples=resamples,
-                    confidence_level=level, method="percentile", rng=np.random.default_rng(seed))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DegenerateDataWarning)  # said by the NaN interval it comes with
+        res = bootstrap((a, b), lambda u, v: pearson(u, v), paired=True, vectorized=False, n_resamples=resamples,
+                        confidence_level=level, method="percentile", rng=np.random.default_rng(seed))
     lo, hi = res.confidence_interval
     return float(lo), float(hi)
 
