@@ -10,6 +10,14 @@ Per map (default: the shipped 13x13 maps), park geometry (``default``, and ``tig
 throw-away library. A band is filled when the call finds ``--count``. Each row records the garages found, the
 garages rated and the CPU seconds the ratings took (so the seconds per rating), the unbuildable garages and the
 values found. Writes the JSON with the figures per map and geometry and the provenance; prints one line per call.
+
+With ``--search NAMES`` (named park geometries, comma-separated) each map and band is instead one call of
+``garage_mj.scene.park_rating.generate_in_geometries`` over those geometries (what ``garage-mj generate --metric park
+--geometries NAMES`` runs), ``--seconds`` for the whole call, probes included; the JSON then holds per map the bands
+filled and, per band, the geometry each garage was found in:
+
+    nice -n 10 .venv/bin/python eval/bench_generate_park.py --search default,tight,angled60,parallel \
+        --json docs/bench_generate_park_search.json
 """
 
 from __future__ import annotations
@@ -23,7 +31,8 @@ from _provenance import provenance  # eval/_provenance.py: command, date, machin
 
 from garage_mj.core.fsutil import write_json
 from garage_mj.generation.generator import GenerationError, RouteMetric, generate
-from garage_mj.scene.park_rating import ParkRater
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES
+from garage_mj.scene.park_rating import ParkRater, generate_in_geometries
 from garage_mj.scene.world import geometry, world_with
 
 MAPS = ["m4_13x13_offset", "m5_13x13_aligned", "m6_13x13_s", "m7_13x13_u"]
@@ -54,7 +63,10 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=10.0, help="wall seconds per band (generate's --max-seconds)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=Path("docs/bench_generate_park.json"))
+    ap.add_argument("--search", metavar="NAMES", help="named park geometries searched by one call per band")
     args = ap.parse_args()
+    if args.search:
+        return searched(args, [n.strip() for n in args.search.split(",") if n.strip()])
     rows, summary = [], []
     t_all = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -104,6 +116,45 @@ def main() -> None:
         print(f"{s['geometry']:8s} {s['map']:18s} {s['bands_filled']} of {N_BANDS} bands: {', '.join(s['bands'])} "
               f"(garages rated {s['rated_range']})")
     print(f"{rated} garages rated, {per:.3f} CPU-s per rating; {out['wall_s']:.0f} s in all -> {args.json}")
+
+
+def searched(args: argparse.Namespace, names: list[str]) -> None:
+    """``--search``: one generate_in_geometries call per map and band over the named geometries."""
+    t_all = time.perf_counter()
+    rows, summary = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for map_name in args.maps:
+            filled = []
+            for b in range(N_BANDS):
+                band = (b / N_BANDS, (b + 1) / N_BANDS)
+                raters = {n: ParkRater(world_with(PARK_GEOMETRIES[n].world), seed=args.seed) for n in names}
+                t0 = time.perf_counter()
+                try:
+                    tried = generate_in_geometries(map_name, band, args.count, Path(tmp) / f"{map_name}_{b}.sqlite",
+                                                   raters, max_seconds=args.seconds, seed=args.seed, progress=False)
+                except GenerationError as exc:
+                    tried = exc.tried
+                found = {t.name: t.result.found for t in tried if t.result is not None and t.result.found}
+                row = {"map": map_name, "band": list(band), "asked": args.count, "found": sum(found.values()),
+                       "filled": sum(found.values()) >= args.count, "found_in": found,
+                       "order": [t.name for t in tried], "probe_medians": {t.name: round(t.probe, 4) for t in tried},
+                       "values": {t.name: [round(v, 4) for v in t.result.difficulties] for t in tried if t.result},
+                       "rated": sum(t.rater.rated for t in tried),
+                       "wall_s": round(time.perf_counter() - t0, 1)}
+                rows.append(row)
+                if row["filled"]:
+                    filled.append(f"{band[0]:.1f}-{band[1]:.1f}")
+                print(f"{map_name:18s} {band[0]:.1f}-{band[1]:.1f}: found {row['found']}/{args.count} in {found} "
+                      f"(order {row['order']}) {row['wall_s']:.1f} s", flush=True)
+            summary.append({"map": map_name, "bands_filled": len(filled), "bands": filled})
+    out = {"provenance": provenance(), "count": args.count, "seconds_per_band": args.seconds, "seed": args.seed,
+           "bands": N_BANDS, "model": "park_assist (shipped)", "geometries": names, "summary": summary,
+           "wall_s": round(time.perf_counter() - t_all, 1), "rows": rows}
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    write_json(args.json, out, indent=1)
+    for s in summary:
+        print(f"{s['map']:18s} {s['bands_filled']} of {N_BANDS} bands: {', '.join(s['bands'])}")
+    print(f"{out['wall_s']:.0f} s in all -> {args.json}")
 
 
 if __name__ == "__main__":

@@ -89,7 +89,35 @@ def test_generate_by_park_difficulty_in_another_geometry_keys_it(tmp_path, capsy
     assert value == pytest.approx(garage_park_difficulty(record.garage, world_with(TIGHT)), abs=1e-12)
 
 
+def test_generate_searches_the_named_geometries_nearest_first_and_keys_each_garage_by_its_own(tmp_path, capsys):
+    """``--geometries``: a band only the tight geometry reaches on tiny_7x11 is filled there (tried first, its
+    painted garages rating nearest the band), each garage stored under the tight geometry's key."""
+    from garage_mj.driving.park_geometries import PARK_GEOMETRIES
+    from garage_mj.generation.library import Library
+
+    lib = tmp_path / "lib.sqlite"
+    argv = ["generate", "--map", "tiny_7x11", "--metric", "park", "--difficulty", "0.6", "0.95", "--count", "2",
+            "--library", str(lib), "--no-progress", "--max-seconds", "90", "--geometries", "default,tight"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    tight = ParkRater(world_with(PARK_GEOMETRIES["tight"].world))
+    assert "2 distinct garages with park difficulty 0.6-0.95 in 1 of 2 park geometries" in out, out
+    assert f"  tight: 2 found" in out and tight.key in out and "  default:" not in out, out
+    with Library(lib, create=False) as db:
+        records = db.query()
+        values = db.route_difficulties([r.id for r in records], tight.key)
+        assert not db.route_difficulties([r.id for r in records], ParkRater().key)
+    assert len(records) == 2 and set(values) == {r.id for r in records}
+    for r in records:
+        assert 0.6 <= values[r.id] <= 0.95
+        assert values[r.id] == pytest.approx(tight(r.garage), abs=1e-12)
+
+
 @pytest.mark.parametrize("extra, said", [
+    (["--geometries", "tight"], "--geometries names the park geometries --metric park searches"),
+    (["--metric", "park", "--geometries", "tight,narrow"], "narrow"),
+    (["--metric", "park", "--geometries", "tight,tight"], "names a geometry twice"),
+    (["--metric", "park", "--geometries", "tight", "--stall-width", "2.3"], "give one or the other"),
     (["--park-model", "park_assist"], "--park-model needs --metric park"),
     (["--stall-width", "2.3"], "--stall-width is a park geometry"),
     (["--metric", "route", "--aisle-width", "6.5"], "--aisle-width is a park geometry"),

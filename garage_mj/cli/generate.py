@@ -17,11 +17,12 @@ from garage_mj.cli._common import (
     unit_range,
     user_errors,
 )
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES, geometry_names
 from garage_mj.generation.library import check_writable
 from garage_mj.grid.map_io import list_maps, load_map
 from garage_mj.scene.park_difficulty import SHIPPED_PARK_MODELS, load_park_model
 from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
-from garage_mj.scene.world import GEOMETRY_KEYS, geometry
+from garage_mj.scene.world import GEOMETRY_KEYS, geometry, world_with
 
 #: garage_mj.generation.generator's bounds, named here so that --help stays light (no torch import)
 MAX_COUNT = 1_000_000  # [garages] one call's --count
@@ -98,6 +99,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="map file without --model: where the trained generator goes (reused when it exists; "
                    "default <library stem>.<map name>.generator.zip next to the library)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--geometries", metavar="NAMES", type=lambda v: [n.strip() for n in v.split(",") if n.strip()],
+                   help="with --metric park: search these named park geometries too, comma-separated (docs/spec.md "
+                        f"section 9: {', '.join(PARK_GEOMETRIES)}); the geometries whose painted garages rate "
+                        "nearest the band are tried first, each garage is stored under the key of the geometry it "
+                        "was found in, and the geometry options below are then left out")
     add_geometry_args(p)  # with --metric park: the geometry the garages are rated in
     p.set_defaults(func=run)
 
@@ -119,10 +125,25 @@ def run(args: argparse.Namespace) -> int:
     elif args.route_model is not None:
         raise UserError("--route-model needs --metric route")
     given = [f"--{k.replace('_', '-')}" for k in (*GEOMETRY_KEYS, "layout") if getattr(args, k, None) is not None]
+    if args.geometries is not None:
+        if args.metric != "park":
+            raise UserError("--geometries names the park geometries --metric park searches; add --metric park or "
+                            "drop it")
+        if given:
+            raise UserError(f"--geometries names the park geometries to search; {given[0]} gives one of your own: "
+                            "give one or the other")
+        try:
+            names = geometry_names(args.geometries, "--geometries")
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
     if args.metric == "park":
         from garage_mj.scene.park_rating import ParkRater
 
-        rater = ParkRater(geometry_world(args), load_park_model(args.park_model))
+        model_of_park = load_park_model(args.park_model)
+        if args.geometries is not None:
+            raters = {n: ParkRater(world_with(PARK_GEOMETRIES[n].world, f"park geometry {n}"), model_of_park)
+                      for n in names}
+        rater = ParkRater(geometry_world(args), model_of_park)
         route = RouteMetric(rater, rater.key, "park difficulty")
     elif args.park_model is not None:
         raise UserError("--park-model needs --metric park")
@@ -156,6 +177,8 @@ def run(args: argparse.Namespace) -> int:
                                         progress=not args.no_progress)
             print(f"trained the generator in {secs:.0f} s: {model}" if secs is not None
                   else f"using the generator trained earlier: {model}", flush=True)
+    if args.geometries is not None:
+        return _in_geometries(args, model, raters)
     try:
         r = generate(args.map, tuple(args.difficulty), args.count, args.library,
                      coverage=tuple(args.coverage) if args.coverage else None, model=model, seed=args.seed,
@@ -180,6 +203,30 @@ def run(args: argparse.Namespace) -> int:
             park += f"; {_unbuildable(rater)}"
     print(f"{r.found} distinct garages with {what} {lo:.3f}-{hi:.3f} ({stages}; {r.seconds:.1f} s); "
           f"{r.stored} new in {args.library}{park}")
+    return 0
+
+
+def _in_geometries(args: argparse.Namespace, model, raters: dict) -> int:
+    """``--metric park --geometries``: :func:`~garage_mj.scene.park_rating.generate_in_geometries`, and a closing
+    line per geometry tried (what it found, its library key)."""
+    from garage_mj.scene.park_rating import generate_in_geometries
+
+    tried = generate_in_geometries(args.map, tuple(args.difficulty), args.count, args.library, raters,
+                                   max_seconds=args.max_seconds, max_episodes=args.max_episodes, seed=args.seed,
+                                   model=model, progress=not args.no_progress, search=not args.no_search,
+                                   coverage=tuple(args.coverage) if args.coverage else None)
+    done = [t for t in tried if t.result is not None]
+    found = sum(t.result.found for t in done)
+    stored = sum(t.result.stored for t in done)
+    print(f"{found} distinct garages with park difficulty {args.difficulty[0]:g}-{args.difficulty[1]:g} in "
+          f"{len(done)} of {len(tried)} park geometries; {stored} new in {args.library} (park model "
+          f"{next(iter(raters.values())).model.key})")
+    for t in done:
+        values = t.result.difficulties
+        span = f" ({min(values):.3f}-{max(values):.3f})" if values else ""
+        extra = f"; {_unbuildable(t.rater)}" if t.rater.unbuildable else ""
+        print(f"  {t.name}: {t.result.found} found{span} in {t.result.episodes} ratings and {t.result.seconds:.1f} s, "
+              f"library key {t.rater.key}{extra}")
     return 0
 
 

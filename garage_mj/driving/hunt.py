@@ -69,7 +69,7 @@ from garage_mj.core.errors import GarageMJError
 from garage_mj.core.fsutil import FolderLock, atomic_write, ensure_dir, write_json
 from garage_mj.driving.cruise import check_task, run_cruise, run_test, xosc_name
 from garage_mj.driving.episode import check_driver, close_cached_env
-from garage_mj.driving.park_geometries import PARK_GEOMETRIES
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES, geometry_names
 from garage_mj.driving.results import COUNT_COLUMNS, driven_tests, failed_tests, failure_counts, read_tests
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, MAX_TESTS, CruiseSettings, CruiseSource
 from garage_mj.generation.library import Library, LibraryError
@@ -188,14 +188,10 @@ def hunt_geometries(task: str, geometries: Sequence[str] | None) -> tuple[str, .
             raise HuntError("hunt: --geometries is for park and AVP hunts (give --task park or avp); a cruise hunt's "
                             "garages keep the default geometry")
         return ()
-    names = tuple(PARK_HUNT_GEOMETRIES if geometries is None else geometries)
-    unknown = [n for n in names if n not in PARK_GEOMETRIES]
-    if unknown or not names:
-        raise HuntError(f"hunt: --geometries {','.join(unknown) or '(none)'}: give names from "
-                        f"{', '.join(PARK_GEOMETRIES)}, separated by commas")
-    if len(set(names)) != len(names):
-        raise HuntError(f"hunt: --geometries {','.join(names)} names a geometry twice; give each once")
-    return names
+    try:
+        return geometry_names(PARK_HUNT_GEOMETRIES if geometries is None else geometries, "hunt: --geometries")
+    except ValueError as exc:
+        raise HuntError(str(exc)) from None
 
 
 def candidate_settings(settings: CruiseSettings, geometry: str) -> CruiseSettings:

@@ -49,3 +49,16 @@ def park_geometry(name: str) -> ParkGeometry:
         return PARK_GEOMETRIES[name]
     except KeyError:
         raise ValueError(f"park geometry {name!r}: use one of {', '.join(PARK_GEOMETRIES)}") from None
+
+
+def geometry_names(names, option: str) -> tuple[str, ...]:
+    """``names`` checked as the value of ``option`` (e.g. ``"hunt: --geometries"``): at least one, each a name of
+    :data:`PARK_GEOMETRIES`, none twice; else a ``ValueError`` line naming the option and the fix."""
+    names = tuple(names)
+    unknown = [n for n in names if n not in PARK_GEOMETRIES]
+    if unknown or not names:
+        raise ValueError(f"{option} {','.join(unknown) or '(none)'}: give names from {', '.join(PARK_GEOMETRIES)}, "
+                         "separated by commas")
+    if len(set(names)) != len(names):
+        raise ValueError(f"{option} {','.join(names)} names a geometry twice; give each once")
+    return names

@@ -20,10 +20,15 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from garage_mj.generation.conditioned import GenerationError
+from garage_mj.generation.generator import GenerateResult, RouteMetric, generate
 from garage_mj.grid.garage import Garage
 from garage_mj.scene.car import CarGeometry, car_geometry
 from garage_mj.scene.drivable import drive_planner
@@ -131,6 +136,74 @@ class ParkRater:
             return math.nan
 
 
+PROBE_GARAGES = 4  # painted garages per geometry that order the geometries of generate_in_geometries
+
+
+@dataclass
+class GeometryGeneration:
+    """What :func:`generate_in_geometries` did in one park geometry (``result``: None when it was not tried)."""
+
+    name: str
+    rater: ParkRater
+    probe: float  # median park difficulty of the painted probe garages in this geometry (NaN: none rated)
+    result: GenerateResult | None = None
+
+
+def generate_in_geometries(map: str, band: tuple[float, float], count: int, library: str | Path,
+                           raters: dict[str, ParkRater], *, max_seconds: float | None = None,
+                           max_episodes: int | None = None, seed: int = 0,
+                           **kwargs: Any) -> list[GeometryGeneration]:
+    """``garage-mj generate --metric park --geometries``: ``count`` garages of ``map`` whose park difficulty lies in
+    ``band`` in one of the park geometries of ``raters`` (name -> :class:`ParkRater`), each stored under its
+    geometry's key. The geometries are tried nearest first: a geometry's distance is that of the median rating of
+    :data:`PROBE_GARAGES` painted garages of the map from the band. Each try is a
+    :func:`~garage_mj.generation.generator.generate` for the garages still missing, with an equal share of what is
+    left of ``max_seconds`` and ``max_episodes``; the geometries after the band is filled are not tried. Raises
+    :class:`~garage_mj.generation.conditioned.GenerationError` (``tried`` on it: this list) when all of them
+    together fall short. ``kwargs`` go to ``generate`` (``model``, ``progress``, ``search``, ``clock``)."""
+    from garage_mj.grid.painters import paint_garage
+
+    clock = kwargs.get("clock", time.perf_counter)
+    start = clock()  # the probes count against max_seconds too
+    probes = [paint_garage(map, seed=seed * PROBE_GARAGES + k) for k in range(PROBE_GARAGES)]
+    tried = []
+    for name, rater in raters.items():
+        probe = ParkRater(rater.world, rater.model, rater.stalls, rater.seed)  # its counts stay the rater's own
+        values = [v for v in (probe(g) for g in probes) if not math.isnan(v)]
+        tried.append(GeometryGeneration(name, rater, float(np.median(values)) if values else math.nan))
+    lo, hi = band
+    tried.sort(key=lambda t: math.inf if math.isnan(t.probe) else max(lo - t.probe, t.probe - hi, 0.0))
+    missing, episodes = count, 0
+    for i, t in enumerate(tried):
+        left = len(tried) - i
+        seconds = None if max_seconds is None else (max_seconds - (clock() - start)) / left
+        if seconds is not None and seconds <= 0.0:
+            break  # the time is spent: the geometries left are not tried
+        share = None if max_episodes is None else max((max_episodes - episodes) // left, 1)
+        try:
+            t.result = generate(map, band, missing, library, seed=seed, max_seconds=seconds, max_episodes=share,
+                                route=RouteMetric(t.rater, t.rater.key, "park difficulty"), **kwargs)
+        except GenerationError as exc:
+            if getattr(exc, "result", None) is None:
+                raise
+            t.result = exc.result
+        missing -= t.result.found
+        episodes += t.result.episodes
+        if missing <= 0:
+            return tried
+    found = count - missing
+    err = GenerationError(f"{found} of {count} garages with park difficulty {lo:g}-{hi:g} in "
+                          f"{len(tried)} park geometries ({', '.join(_said(t) for t in tried)}); widen the band, "
+                          "add a geometry or raise --max-seconds")
+    err.tried = tried
+    raise err
+
+
+def _said(t: GeometryGeneration) -> str:
+    probe = "none rated" if math.isnan(t.probe) else f"probe median {t.probe:.2f}"
+    return f"{t.name}: {t.result.found if t.result else 0} found, {probe}"
+
+
 def geometry_key(world: WorldConfig) -> str:
     """8 hex digits naming the park geometry of ``world`` (``default`` for today's default geometry)."""
     if world.is_default_geometry:
@@ -138,4 +211,5 @@ def geometry_key(world: WorldConfig) -> str:
     return hashlib.sha256(json.dumps(geometry(world), sort_keys=True).encode()).hexdigest()[:8]
 
 
-__all__ = ["PARK_OCCUPANCY", "PARK_STALLS", "ParkRater", "garage_park_difficulty", "geometry_key", "park_row"]
+__all__ = ["PARK_OCCUPANCY", "PARK_STALLS", "PROBE_GARAGES", "GeometryGeneration", "ParkRater", "garage_park_difficulty",
+           "generate_in_geometries", "geometry_key", "park_row"]
