@@ -30,8 +30,8 @@ from pathlib import Path
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
 from garage_mj.core.fsutil import write_json
-from garage_mj.generation.generator import GenerationError, RouteMetric, generate
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
+from garage_mj.generation.generator import GenerationError, RouteMetric, generate
 from garage_mj.scene.park_rating import ParkRater, generate_in_geometries
 from garage_mj.scene.world import geometry, world_with
 

@@ -21,7 +21,6 @@ from garage_mj.driving.drivers import (
     load_driver,
     resolve_driver,
 )
-from garage_mj.driving.drivers import learned as learned_mod
 from garage_mj.driving.drivers.learned import DEFAULT_MODEL, LearnedDriver, default_model
 from garage_mj.driving.learning.observation import VECTOR_KEYS, learned_space
 from garage_mj.driving.sim.drive_env import GarageDriveEnv

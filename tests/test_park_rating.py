@@ -102,7 +102,7 @@ def test_generate_searches_the_named_geometries_nearest_first_and_keys_each_gara
     out = capsys.readouterr().out
     tight = ParkRater(world_with(PARK_GEOMETRIES["tight"].world))
     assert "2 distinct garages with park difficulty 0.6-0.95 in 1 of 2 park geometries" in out, out
-    assert f"  tight: 2 found" in out and tight.key in out and "  default:" not in out, out
+    assert "  tight: 2 found" in out and tight.key in out and "  default:" not in out, out
     with Library(lib, create=False) as db:
         records = db.query()
         values = db.route_difficulties([r.id for r in records], tight.key)

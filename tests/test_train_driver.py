@@ -498,7 +498,7 @@ def test_the_replanning_park_expert_plans_again_once_the_car_has_left_its_plan(t
         env = FleetDriveEnv(tiny_sources, expert=True, env_kwargs={"task": "park", "maneuver": "any"}, replan=replan)
         obs, info = env.reset(seed=1)
         seen = [env._plan_poses]
-        for t in range(10):
+        for _ in range(10):
             obs, _, term, trunc, info = env.step(off_plan)
             if env._plan_poses is not seen[-1]:
                 seen.append(env._plan_poses)
