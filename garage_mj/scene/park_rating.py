@@ -157,8 +157,9 @@ def generate_in_geometries(map: str, band: tuple[float, float], count: int, libr
     ``band`` in one of the park geometries of ``raters`` (name -> :class:`ParkRater`), each stored under its
     geometry's key. The geometries are tried nearest first: a geometry's distance is that of the median rating of
     :data:`PROBE_GARAGES` painted garages of the map from the band. Each try is a
-    :func:`~garage_mj.generation.generator.generate` for the garages still missing, with an equal share of what is
-    left of ``max_seconds`` and ``max_episodes``; the geometries after the band is filled are not tried. Raises
+    :func:`~garage_mj.generation.generator.generate` for the garages still missing, with half of what is left of
+    ``max_seconds`` and ``max_episodes`` (the last one: all of it), so the nearest geometry gets the most; the
+    geometries after the band is filled are not tried. Raises
     :class:`~garage_mj.generation.conditioned.GenerationError` (``tried`` on it: this list) when all of them
     together fall short. ``kwargs`` go to ``generate`` (``model``, ``progress``, ``search``, ``clock``)."""
     from garage_mj.grid.painters import paint_garage
@@ -175,11 +176,11 @@ def generate_in_geometries(map: str, band: tuple[float, float], count: int, libr
     tried.sort(key=lambda t: math.inf if math.isnan(t.probe) else max(lo - t.probe, t.probe - hi, 0.0))
     missing, episodes = count, 0
     for i, t in enumerate(tried):
-        left = len(tried) - i
-        seconds = None if max_seconds is None else (max_seconds - (clock() - start)) / left
+        part = 1 if i == len(tried) - 1 else 2  # half of what is left (the last: all of it)
+        seconds = None if max_seconds is None else (max_seconds - (clock() - start)) / part
         if seconds is not None and seconds <= 0.0:
             break  # the time is spent: the geometries left are not tried
-        share = None if max_episodes is None else max((max_episodes - episodes) // left, 1)
+        share = None if max_episodes is None else max((max_episodes - episodes) // part, 1)
         try:
             t.result = generate(map, band, missing, library, seed=seed, max_seconds=seconds, max_episodes=share,
                                 route=RouteMetric(t.rater, t.rater.key, "park difficulty"), **kwargs)
