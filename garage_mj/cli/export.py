@@ -202,4 +202,6 @@ def _stalls(args: argparse.Namespace) -> frozenset[int] | None:
 
 def _maneuvers(args: argparse.Namespace) -> tuple[str, ...]:
     """``--maneuver``: the maneuvers of the park problems to write."""
-    return ("reverse", "forward") if args.maneuver == "both" else (args.maneuver,)
+    from garage_mj.scene.park_planning import MANEUVERS
+
+    return tuple(MANEUVERS) if args.maneuver == "both" else (args.maneuver,)

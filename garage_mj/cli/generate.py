@@ -140,11 +140,12 @@ def run(args: argparse.Namespace) -> int:
         from garage_mj.scene.park_rating import ParkRater
 
         model_of_park = load_park_model(args.park_model)
-        if args.geometries is not None:
+        if args.geometries is not None:  # a rater per geometry searched (_in_geometries)
             raters = {n: ParkRater(world_with(PARK_GEOMETRIES[n].world, f"park geometry {n}"), model_of_park)
                       for n in names}
-        rater = ParkRater(geometry_world(args), model_of_park)
-        route = RouteMetric(rater, rater.key, "park difficulty")
+        else:
+            rater = ParkRater(geometry_world(args), model_of_park)
+            route = RouteMetric(rater, rater.key, "park difficulty")
     elif args.park_model is not None:
         raise UserError("--park-model needs --metric park")
     elif given:
