@@ -26,21 +26,27 @@ export MUJOCO_GL ?= egl
 install:
 	@$(MAKE) --no-print-directory -j3 $(STAMP) $(QC_STAMP) $(BLENDER_STAMP)
 
-# What the demo runs: torch first, pinned to the CPU build, so nothing later pulls the multi-GB CUDA
-# wheels; then the package.
-$(MAIN_STAMP): pyproject.toml
+# The virtualenv with pip up to date and torch first, pinned to the CPU build, so nothing later pulls the
+# multi-GB CUDA wheels.
+define venv_with_torch
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q $(TORCH)
+endef
+
+# What the demo runs: torch, then the package.
+$(MAIN_STAMP): pyproject.toml
+	$(venv_with_torch)
 	$(PY) -m pip install -q -e .
 	touch $(MAIN_STAMP)
 
-# What the tests add: the test and docs tools and Ray core (--backend ray; tests/test_ray_backend.py),
-# then CARLA's OpenDRIVE parser for the XODR tests (34 MB wheel, CPython 3.10-3.12, Linux/Windows).
-$(STAMP): $(MAIN_STAMP)
-	$(PY) -m pip install -q -e '.[dev,ray]'
-	$(PY) -m pip install -q -e '.[carla]' || echo "warning: no carla wheel for this Python/platform; the XODR CARLA test will fail with a hint"
-	touch $(STAMP)
+# What the tests add, in the same install (one editable build): the test and docs tools, Ray core (--backend
+# ray; tests/test_ray_backend.py) and CARLA's OpenDRIVE parser for the XODR tests (34 MB wheel, CPython
+# 3.10-3.12, Linux/Windows); where no carla wheel fits, the rest without it.
+$(STAMP): pyproject.toml
+	$(venv_with_torch)
+	$(PY) -m pip install -q -e '.[dev,ray,carla]' || { echo "warning: no carla wheel for this Python/platform; the XODR CARLA test will fail with a hint"; $(PY) -m pip install -q -e '.[dev,ray]'; }
+	touch $(MAIN_STAMP) $(STAMP)
 
 # Depends on the Makefile so a new checker pin reaches an existing .venv-qc (pip skips what is installed).
 $(QC_STAMP): Makefile
