@@ -85,6 +85,9 @@ SLOW = frozenset({
     "tests/test_protocol_status.py::test_status_after_a_real_kill_9",
     "tests/test_park_cases.py::test_a_folder_of_an_export_stands_for_its_json_problems",
     "tests/test_docs.py::test_a_newcomer_follows_the_docs_to_their_own_driver",
+    # and: difficulty fit and score from runs on the command line (the park runs', test_cli_fits_and_scores_park_runs_
+    # beside_the_levels; the route fit itself in test_fit_is_monotone_and_finds_what_makes_tests_fail)
+    "tests/test_route_difficulty.py::test_fit_and_score_from_a_cruise_run",
 })
 
 

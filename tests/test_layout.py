@@ -186,6 +186,6 @@ def _make_plan(target: str) -> str:
 def test_make_demo_installs_only_what_the_demo_runs():
     demo, test = _make_plan("demo"), _make_plan("test")
     assert "-m pip install -q -e ." in demo and "garage-mj demo" in demo
-    for tests_only in (".venv-blender", ".venv-qc", "[dev", "[carla]", "chromium"):
+    for tests_only in (".venv-blender", ".venv-qc", "[dev", "carla", "chromium"):
         assert tests_only not in demo and tests_only in test
     assert "-m pip install -q -e ." in test and "pytest" in test
