@@ -188,4 +188,4 @@ def test_make_demo_installs_only_what_the_demo_runs():
     assert "-m pip install -q -e ." in demo and "garage-mj demo" in demo
     for tests_only in (".venv-blender", ".venv-qc", "[dev", "carla", "chromium"):
         assert tests_only not in demo and tests_only in test
-    assert "-m pip install -q -e ." in test and "pytest" in test
+    assert "-m pip install -q -e '.[dev,ray,carla]'" in test and "pytest" in test  # the package, with the test tools
