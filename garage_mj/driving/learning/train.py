@@ -135,7 +135,7 @@ class DriverTrainConfig:
     # states, and at weight 1 the model never changed gear: it waited in D at the start of a reverse-in test
     gear_change_weight: float = bounded(20.0, gt=0.0, le=1e6)
     # a parking driver: weight of the states at rest where the oracle moves off. Moving off is one state and the
-    # waits before it many: at weight 1 the at-rest labels were 6% "go", and the model stood still at the start
+    # waits before it many: in a run at weight 1, 8% of the at-rest labels moved off, and the model stood still
     start_weight: float = bounded(20.0, gt=0.0, le=1e6)
     # a parking driver: observe the park route too (the waypoint ahead on the test's reference plan and the route
     # left, as the cruise driver reads its route); without it, it parks from its sensors alone
