@@ -43,7 +43,7 @@ def test_table_entries_are_unique_and_documented():
     (ObservationSetup(CameraConfig()), {"depth", "segmentation", "waypoint", "speed", "goal", "remaining",
                                         "steer", "pose"}),
     (ObservationSetup(CameraConfig(rgb=True), image_obs=True, actors=3),
-     {e.name for e in OBSERVATIONS} - {"stall", "gear"} - SENSORS),  # a cruise test's: no stall, no gear
+     {e.name for e in OBSERVATIONS} - {"stall", "gear", "park_guide"} - SENSORS),  # a cruise test's: none of a park test's
     (ObservationSetup(CameraConfig(rgb=True), image_obs=True, actors=3, task="park"),
      {e.name for e in OBSERVATIONS} - SENSORS),
     (ObservationSetup(CameraConfig(rgb=True), image_obs=True, actors=3, task="park", sensors=ALL_SENSORS),
@@ -61,7 +61,7 @@ def test_env_space_and_observation_follow_the_table(painted_tiny):
     setup = ObservationSetup(env.camera_config, actors=1)
     assert env.observation_space == spaces.Dict(observation_spaces(setup))
     obs, _ = env.reset(seed=0)
-    assert list(obs) == [e.name for e in OBSERVATIONS if e.name not in {"stall", "gear"} | SENSORS]  # in order
+    assert list(obs) == [e.name for e in OBSERVATIONS if e.name not in {"stall", "gear", "park_guide"} | SENSORS]  # in order
     assert env.observation_space.contains(obs)
     env.close()
 

@@ -25,13 +25,12 @@ import numpy as np
 from garage_mj.core.model_file import ModelFileError
 from garage_mj.driving.drivers import DriverError
 from garage_mj.driving.learning.observation import (
-    PARK_ROUTE_KEYS,
     PARK_SENSORS,
-    PARK_VECTOR_KEYS,
     learned_observation,
     learned_space,
     park_observation,
     park_space,
+    park_vector_size,
 )
 from garage_mj.driving.learning.park_actions import PARK_COMMANDS, park_command
 from garage_mj.driving.learning.saved_model import (  # noqa: F401  (the shipped models' names, read here too)
@@ -213,7 +212,8 @@ class LearnedParkDriver:
     """A trained parking model (``train-driver --task park``) sending the continuous park action.
 
     It sees :func:`~garage_mj.driving.learning.observation.park_observation`: both cameras, the 12 ultrasonic
-    ranges, the slot detector, the heading to end in, speed, steering and gear (nothing privileged, no route); a
+    ranges, the slot detector, the heading to end in, speed, steering and gear, and the park route or its guide
+    where the model was trained with them (nothing privileged); a
     run turns on the sensors it declares (:data:`sensors`). It picks one of the 90 park commands by argmax (so the
     same test gives the same drive) and sends it: ``[pedal, steer, gear]``
     (:data:`~garage_mj.driving.learning.park_actions.PARK_COMMANDS`). ``learned:park`` runs the shipped model.
@@ -231,8 +231,11 @@ class LearnedParkDriver:
                               "GARAGES --task park --out RUN and drive it with --driver learned:RUN/model.zip "
                               "(docs/learned-parking.md)")
         self.model = load_model(self.path, parking=True)
-        # a model trained with the park route observes it (train-driver's park_route): its vector is longer
-        self.route = int(self.model.observation_space["vector"].shape[0]) == len(PARK_VECTOR_KEYS) + len(PARK_ROUTE_KEYS)
+        # a model trained with the park route or the park guide observes them (train-driver's park_route and
+        # park_guide): its vector is longer by theirs
+        size = int(self.model.observation_space["vector"].shape[0])
+        self.route, self.guide = next(((r, g) for r in (False, True) for g in (False, True)
+                                       if park_vector_size(r, g) == size), (False, False))
         self._checked: tuple[int, ...] | None = None
 
     def reset(self, info: dict[str, Any]) -> None:
@@ -242,7 +245,7 @@ class LearnedParkDriver:
                               "gear]; leave out --action-type (or give continuous)")
 
     def _check(self, shape: tuple[int, ...]) -> None:
-        why = _space_difference(self.model.observation_space, park_space(*shape, self.route))
+        why = _space_difference(self.model.observation_space, park_space(*shape, self.route, self.guide))
         if why:
             raise DriverError(f"learned parking driver model {self.path} does not fit this camera ({shape[0]}x"
                               f"{shape[1]}): {why}; drive with the camera it was trained on")
@@ -251,7 +254,7 @@ class LearnedParkDriver:
     def act(self, obs: dict[str, Any]) -> np.ndarray:
         """The policy's park command for ``obs`` (a park or AVP test's observation, depth in metres)."""
         try:
-            o = park_observation(obs, self.route)
+            o = park_observation(obs, self.route, self.guide)
         except ValueError as exc:
             raise DriverError(f"learned parking driver: {exc}") from None
         if self._checked != o["image"].shape[1:]:

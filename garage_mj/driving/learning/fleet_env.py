@@ -73,6 +73,8 @@ class FleetDriveEnv(gym.Env):
             park tests (this env's own actions are discrete in both), ``image_obs`` off.
         variants: env settings per garage (garage ``k``: ``variants[k % len(variants)]`` over ``env_kwargs``).
         park_route: park tests: observe the park route too (:func:`park_observation`'s ``route``).
+        park_guide: park tests: observe the park route stretch by stretch too (:func:`park_observation`'s ``guide``);
+            the expert then drives the stretch the guide shows (they keep the same rule; this keeps them in step).
         replan: park tests: the expert plans again (the test's reference planner, from the car's pose, around the
             same parked cars) when the car has left its plan (:data:`REPLAN_DISTANCE`, :data:`REPLAN_HEADING`), at
             most every :data:`REPLAN_EVERY` seconds, and labels by the new plan: off the plan, tracking the old one
@@ -86,7 +88,7 @@ class FleetDriveEnv(gym.Env):
     def __init__(self, garages: Sequence[CruiseSource], weights: Sequence[float] | None = None,
                  cache_size: int = 8, expert: bool = False, env_kwargs: dict[str, Any] | None = None,
                  variants: Sequence[dict[str, Any]] | None = None, park_route: bool = False,
-                 replan: bool = False) -> None:
+                 replan: bool = False, park_guide: bool = False) -> None:
         self.sources = list(garages)
         if not self.sources:
             raise ValueError("FleetDriveEnv needs at least one garage")
@@ -98,6 +100,10 @@ class FleetDriveEnv(gym.Env):
                 raise ValueError(f"FleetDriveEnv sets {key!r} itself; leave it out of env_kwargs")
         self.variants = [dict(v) for v in variants] if variants else [{}]
         self.park_route = bool(park_route)
+        self.park_guide = bool(park_guide)
+        if self.park_guide and replan:
+            raise ValueError("park_guide and replan: the guide shows the test's plan, a replanning expert drives "
+                             "another; give one")
         self.replan = bool(replan)
         self._plan_poses: np.ndarray | None = None  # the poses of the plan the expert tracks
         self._replanned_at = -np.inf
@@ -111,7 +117,7 @@ class FleetDriveEnv(gym.Env):
         else:
             self.action_type = "continuous"
             self.env_kwargs.setdefault("sensors", {name: True for name in PARK_SENSORS})
-            self.observation_space = park_space(cam.height, cam.width, self.park_route)
+            self.observation_space = park_space(cam.height, cam.width, self.park_route, self.park_guide)
             self.action_space = spaces.Discrete(len(PARK_COMMANDS))
         self.cache_size = int(cache_size)
         self.expert = bool(expert)
@@ -226,8 +232,12 @@ class FleetDriveEnv(gym.Env):
         if self.expert:
             if self.replan:
                 self._follow(obs, info)
+            guide, tracker = self.env.park_guide, self._oracle.tracker
+            if self.park_guide and self.task == "park" and guide is not None and tracker is not None and \
+                    tracker.k != guide.stretch:
+                tracker.k, tracker.index, tracker.stopping = guide.stretch, 0, False  # the stretch the learner sees
             info["expert_action"] = nearest_park_action(self._oracle.act(obs))
-        return park_observation(obs, self.park_route), info
+        return park_observation(obs, self.park_route, self.park_guide), info
 
     def step(self, action):
         if self.env is None:

@@ -88,13 +88,27 @@ PARK_VECTOR_KEYS = ("slot_x", "slot_y", "slot_cos", "slot_sin", "slot_near_x", "
 #: With ``route``: the park route's waypoint ahead (car frame, over the lookahead) and the route left (over
 #: :data:`REMAINING_RANGE`, and again over :data:`NEAR_RANGE`).
 PARK_ROUTE_KEYS = ("route_x", "route_y", "route_left", "route_near")
+#: With ``guide``: the park route stretch by stretch (the drive env's ``park_guide``): the stretch's gear, the offset
+#: from it (over 2 m, clipped), the cosine and sine of the heading off it, its curvature near and far (times 3 m, about a
+#: wheelbase: the wheel's tangent), the stretch left (over 5 m and again over 1 m, clipped to [-1, 1]) and the stretches
+#: after it (over 2, capped at 1).
+PARK_GUIDE_KEYS = ("guide_gear", "guide_lateral", "guide_cos", "guide_sin", "guide_near", "guide_far", "guide_left",
+                   "guide_left_near", "guide_after")
+GUIDE_OFFSET = 2.0  # [m] the offset from the stretch, read up to this
+GUIDE_LEFT = 5.0  # [m] the stretch left, read up to this ...
+GUIDE_NEAR = 1.0  # [m] ... and again at a finer scale, for the stop at its end
 PARK_IMAGE_CHANNELS = 4  # front depth, front segmentation, rear depth, rear segmentation
 
 
-def park_space(height: int, width: int, route: bool = False) -> spaces.Dict:
+def park_vector_size(route: bool = False, guide: bool = False) -> int:
+    """The length of :func:`park_observation`'s vector with the park route's entries and the guide's or without."""
+    return len(PARK_VECTOR_KEYS) + (len(PARK_ROUTE_KEYS) if route else 0) + (len(PARK_GUIDE_KEYS) if guide else 0)
+
+
+def park_space(height: int, width: int, route: bool = False, guide: bool = False) -> spaces.Dict:
     """The observation space of :func:`park_observation` for ``height`` x ``width`` cameras (``route``: with the
-    park route's entries)."""
-    size = len(PARK_VECTOR_KEYS) + (len(PARK_ROUTE_KEYS) if route else 0)
+    park route's entries; ``guide``: with the park guide's)."""
+    size = park_vector_size(route, guide)
     return spaces.Dict({
         "image": spaces.Box(0, 255, (PARK_IMAGE_CHANNELS, height, width), np.uint8),
         "vector": spaces.Box(-np.inf, np.inf, (size,), np.float32),
@@ -107,7 +121,7 @@ def _camera_planes(depth: Any, segmentation: Any, out: np.ndarray) -> None:
     np.multiply(np.asarray(segmentation, dtype=np.uint8), SEG_SCALE, out=out[1])
 
 
-def park_observation(obs: dict[str, Any], route: bool = False) -> dict[str, np.ndarray]:
+def park_observation(obs: dict[str, Any], route: bool = False, guide: bool = False) -> dict[str, np.ndarray]:
     """What a learned parking driver sees, from a park or AVP test's drive env observation with the
     :data:`PARK_SENSORS` on (depth in metres, ``image_obs=False``):
 
@@ -119,7 +133,9 @@ def park_observation(obs: dict[str, Any], route: bool = False) -> dict[str, np.n
       car must end in, relative to its own (the test's instruction: reverse-in or nose-in, from the ``stall``
       entry; its position is not read), the speed, the road-wheel angle, the
       gear (+1 D, -1 R) and the 12 ultrasonic ranges over 5 m; with ``route``, then :data:`PARK_ROUTE_KEYS`: the
-      route's waypoint ahead and the route left, as the cruise driver reads its route.
+      route's waypoint ahead and the route left, as the cruise driver reads its route; with ``guide``, then
+      :data:`PARK_GUIDE_KEYS`: the park route stretch by stretch (the ``park_guide`` entry), the gear it is driven in,
+      the way it goes from the car and the stretch left.
 
     Nothing the observation table marks privileged: no pose, no plan's poses and gears, no other road user's state
     (:data:`UNPRIVILEGED` only). The route of a park test is the reference planner's path to the stall, planned
@@ -147,6 +163,14 @@ def park_observation(obs: dict[str, Any], route: bool = False) -> dict[str, np.n
         wx, wy = (float(v) for v in np.asarray(obs["waypoint"]).reshape(-1)[:2])
         left = float(np.asarray(obs["remaining"]).reshape(-1)[0])
         way = [wx / LOOKAHEAD, wy / LOOKAHEAD, min(left / REMAINING_RANGE, 1.0), min(left / NEAR_RANGE, 1.0)]
+    if guide:
+        if "park_guide" not in obs:
+            raise ValueError("a learned parking driver trained with the park guide observes park_guide: drive it in "
+                             "park or AVP tests")
+        gear_s, lateral, heading, near, far, stretch, after = (float(v) for v in
+                                                              np.asarray(obs["park_guide"]).reshape(-1)[:7])
+        way += [gear_s, _unit(lateral / GUIDE_OFFSET), math.cos(heading), math.sin(heading), 3.0 * near, 3.0 * far,
+                _unit(stretch / GUIDE_LEFT), _unit(stretch / GUIDE_NEAR), min(after / 2.0, 1.0)]
     vector = np.array([_unit(sx / SLOT_RANGE), _unit(sy / SLOT_RANGE), math.cos(syaw), math.sin(syaw),
                        _unit(sx / SLOT_NEAR), _unit(sy / SLOT_NEAR), swidth / 5.0, sdepth / 6.0, fcos, fsin,
                        speed / SPEED_RANGE, steer, gear, *sonar.tolist(), *way], dtype=np.float32)

@@ -47,7 +47,7 @@ def _observation_space(entry: dict, data: dict, algo: type, env: Any) -> Any:
     size = re.search(r"'image': Box\(0, 255, \((\d+), (\d+), (\d+)\), uint8\)", text)
     channels, shape = (int(size.group(1)), (int(size.group(2)), int(size.group(3)))) if size else (0, (0, 0))
     made = ([learned_space(*shape)] if channels == 2 else
-            [park_space(*shape, route) for route in (False, True)] if channels == PARK_IMAGE_CHANNELS else [])
+            [park_space(*shape, route, guide) for route in (False, True) for guide in (False, True)] if channels == PARK_IMAGE_CHANNELS else [])
     space = next((s for s in made if str(dict(s.spaces)) == text), None)
     if space is None:
         raise ModelFileError(f"its observation space {text[:120]} is not a learned driver's (learned_space or "

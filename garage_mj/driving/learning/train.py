@@ -143,6 +143,10 @@ class DriverTrainConfig:
     # a parking driver: the expert plans again from the car's pose when the car has left its plan (FleetDriveEnv's
     # replan); tracking the first plan, its labels off it were brakes, and the model learned to stop
     replan: bool = False
+    # a parking driver: observe the park route stretch by stretch too (the drive env's park_guide: the gear of the
+    # stretch the car is on, the offset and heading off it, its bend ahead, the stretch left); the expert drives the
+    # stretch it shows. With park_route alone, whose waypoint points back along the way at a cusp, no model parked
+    park_guide: bool = False
     # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
     # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
     # is driven by the two together (learned:avp)
@@ -163,9 +167,19 @@ class DriverTrainConfig:
         if self.task != "cruise" and self.curriculum == "hunt":
             raise ValueError("curriculum: the hunt curriculum searches cruise tests; give uniform, difficulty or "
                              "adversarial for a parking driver")
+        if self.park_guide and self.replan:
+            raise ValueError("park_guide, replan: the guide shows the test's plan and a replanning expert drives "
+                             "another; set one of them")
+        if self.task == "cruise" and (self.park_guide or self.park_route or self.replan):
+            raise ValueError("park_route, park_guide, replan: these are a parking driver's (task = \"park\")")
         if self.task == "cruise" and (self.geometries or self.scenarios):
             raise ValueError("geometries, scenarios: park geometries and actor scenarios are for a parking driver "
                              "(task = \"park\"); a cruise driver's actors: --scenario")
+
+    def fleet_options(self) -> dict[str, bool]:
+        """The worker envs' park observation and expert options (:class:`FleetDriveEnv`'s ``park_route``,
+        ``replan`` and ``park_guide``)."""
+        return {"park_route": self.park_route, "replan": self.replan, "park_guide": self.park_guide}
 
     @property
     def parking(self) -> bool:
@@ -239,14 +253,15 @@ def _hunted(out: Path, it: int, sources: list[CruiseSource], cfg: DriverTrainCon
 
 
 def _make_venv(sources: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any], expert: bool,
-               variants: list[dict[str, Any]] | None = None, park_route: bool = False, replan: bool = False):
+               variants: list[dict[str, Any]] | None = None, fleet: dict[str, bool] | None = None):
+    """``n_envs`` :class:`FleetDriveEnv` workers; ``fleet``: their park observation and expert options
+    (:meth:`DriverTrainConfig.fleet_options`)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from garage_mj.driving.learning.fleet_env import FleetDriveEnv
 
     def make():
-        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs, variants=variants, park_route=park_route,
-                             replan=replan)
+        return FleetDriveEnv(sources, expert=expert, env_kwargs=env_kwargs, variants=variants, **(fleet or {}))
 
     if n_envs == 1:
         return DummyVecEnv([make])
@@ -422,12 +437,11 @@ class _Workers:
     A worker process that dies under the run (``kill -9``, the OOM killer, a segfault) is :meth:`lost`: one line."""
 
     def __init__(self, pool: list[CruiseSource], n_envs: int, env_kwargs: dict[str, Any],
-                 variants: list[dict[str, Any]] | None = None, park_route: bool = False, replan: bool = False) -> None:
-        self.pool, self.n_envs, self.env_kwargs, self.variants = pool, n_envs, env_kwargs, variants
-        self.park_route, self.replan = park_route, replan
+                 variants: list[dict[str, Any]] | None = None, fleet: dict[str, bool] | None = None) -> None:
+        self.pool, self.n_envs, self.env_kwargs, self.variants, self.fleet = pool, n_envs, env_kwargs, variants, fleet
         self.venv = None
         self.venv = self._open(lambda: _make_venv(pool, n_envs, env_kwargs, expert=True, variants=variants,
-                                                  park_route=park_route, replan=replan))
+                                                  fleet=fleet))
 
     def _open(self, make: Callable[[], Any]) -> Any:
         try:
@@ -441,8 +455,7 @@ class _Workers:
             self.pool = pool
             self.close()
             self.venv = self._open(lambda: _make_venv(pool, self.n_envs, self.env_kwargs, expert=True,
-                                                      variants=self.variants, park_route=self.park_route,
-                                                      replan=self.replan))
+                                                      variants=self.variants, fleet=self.fleet))
 
     def remake(self, make: Callable[[], Any]) -> Any:
         """Close the workers, then run on those ``make()`` returns."""
@@ -502,7 +515,7 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
     with _undone_if_no_run(out):
         _prepare_folder(out, garages, validation)
         torch.set_num_threads(cfg.torch_threads)
-        workers = _Workers(sources, cfg.n_envs, env_kwargs, cfg.variants(), cfg.park_route, cfg.replan)  # the garages the worker envs draw from (the hunt adds some)
+        workers = _Workers(sources, cfg.n_envs, env_kwargs, cfg.variants(), cfg.fleet_options())  # the garages the worker envs draw from (the hunt adds some)
         try:
             model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed)
             state = _dagger(model, workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs,

@@ -63,6 +63,7 @@ from garage_mj.driving.sim.outcomes import (
     OutcomeMonitor,
     ego_contacts,
 )
+from garage_mj.driving.sim.park_guide import ParkGuide
 from garage_mj.driving.sim.park_outcomes import ParkMonitor, ParkOutcomeConfig
 from garage_mj.driving.sim.park_sensors import (
     NO_SENSORS,
@@ -361,6 +362,7 @@ class GarageDriveEnv(gym.Env):
         self.route: Route | None = None
         self.monitor: OutcomeMonitor | ParkMonitor | None = None
         self._park: ParkTest | None = None  # the park or AVP test of this reset (None: a cruise test)
+        self.park_guide: ParkGuide | None = None  # its route stretch by stretch (None: a cruise test, or no plan)
         self._info_test: dict[str, Any] | None = None  # _info's entries fixed per test
 
     # -- scene -------------------------------------------------------------------------------------
@@ -498,6 +500,9 @@ class GarageDriveEnv(gym.Env):
         # the actors: their own generator, after the test's draws (park_placement); the stalls they take are freed
         self.scenario, test = park_scenario(self, test, seed, rng, given)
         self._park = test
+        plan = test.plan
+        self.park_guide = ParkGuide(plan.poses, plan.directions, self.car_geometry) \
+            if plan is not None and plan.found and len(plan.poses) >= 2 else None
         self.target, self.occupied, self.test_plan = test.stall, test.occupied, test.cruise
         self.route = test.reference
         self.monitor = park_monitor(self, test)
@@ -608,6 +613,8 @@ class GarageDriveEnv(gym.Env):
                     contacts += ego_contacts(model, data, self.car.geom_mask, self.classes)
         x, y, yaw = pose = self.car.pose(self.data)
         speed = self.car.speed(self.data)
+        if self.park_guide is not None:
+            self.park_guide.update(pose, speed)
         self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])
         self._last_xy = (x, y)
         self.outcome = self.monitor.update(self.data.time, (x, y), speed, contacts, yaw=yaw,

@@ -23,6 +23,7 @@ import numpy as np
 from gymnasium import spaces
 
 from garage_mj.core.words import a_noun
+from garage_mj.driving.sim.park_guide import GUIDE_KEYS, MAX_CURVATURE
 from garage_mj.driving.sim.park_sensors import (
     ALL_SENSORS,
     MAX_SLOT_SIZE,
@@ -173,6 +174,17 @@ def _gear(s: Snapshot) -> np.ndarray:
     return np.array([s.env.car.gear.value], dtype=np.float32)
 
 
+def _park_guide(s: Snapshot) -> np.ndarray:
+    guide = s.env.park_guide
+    return np.zeros(len(GUIDE_KEYS), np.float32) if guide is None else guide.read((s.x, s.y, s.yaw))
+
+
+_GUIDE_SPACE = spaces.Box(np.array([-1.0, -MAX_EXTENT, -np.pi, -MAX_CURVATURE, -MAX_CURVATURE, -MAX_EXTENT, 0.0],
+                                   np.float32),
+                          np.array([1.0, MAX_EXTENT, np.pi, MAX_CURVATURE, MAX_CURVATURE, MAX_EXTENT, MAX_EXTENT],
+                                   np.float32), dtype=np.float32)
+
+
 # -- the parking sensors (garage_mj.driving.sim.park_sensors; each on only when asked for) -------------------
 def _sensor(on: Callable[[SensorConfig], bool], space: Callable[[ObservationSetup], spaces.Box | None]
             ) -> Callable[[ObservationSetup], spaces.Box | None]:
@@ -242,6 +254,13 @@ OBSERVATIONS: tuple[ObservationEntry, ...] = (
                      "yaw relative to the car's; park and AVP tests only", _stall),
     ObservationEntry("gear", _parking(spaces.Box(-1.0, 1.0, (1,), np.float32)), False,
                      "the gear: +1 drive, -1 reverse; park and AVP tests only", _gear),
+    ObservationEntry("park_guide", _parking(_GUIDE_SPACE), False,
+                     "the park route stretch by stretch, as a park assist shows it (`garage_mj.driving.sim.park_guide`): "
+                     "the gear of the stretch the car is on (+1 D, -1 R), the rear axle's offset from it [m] (left of "
+                     "travel), the heading off it [rad], its curvature 0.25 m and 1 m ahead [1/m] (signed as the wheels "
+                     "turn), the stretch left [m] (negative past its end), the stretches after it; the next stretch "
+                     "once the car is at rest at the end of this one; zeros without a plan; park and AVP tests only",
+                     _park_guide),
     ObservationEntry("rear_depth", _sensor(lambda c: c.rear_camera, _depth_space), False,
                      "rear camera depth, as the front camera's (same image, planes and tilt, looking back); "
                      "sensor `rear_camera` only", lambda s: _depth_of(s.rear, s)),

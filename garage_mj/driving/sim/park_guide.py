@@ -1,0 +1,76 @@
+"""The park route as a parking assistant shows it: the stretch the car is on, in its gear.
+
+A park test's route (:class:`~garage_mj.driving.sim.park_task.ParkTest`'s reference plan) is a path with cusps:
+the car drives one stretch forward, stops, and reverses into the stall (or the other way). The ``waypoint`` and
+``remaining`` entries read it as one polyline, which at a cusp points back along the way the car came.
+:class:`ParkGuide` reads it stretch by stretch, as a park assist display does: which gear the current stretch is
+driven in, how far the car is off it and turned from it, how it bends ahead, how much of it is left and how many
+stretches come after it. The guide moves on to the next stretch when the car has come to rest at the end of the
+current one (or past it), by the rule the privileged oracle's tracker keeps
+(:class:`~garage_mj.driving.drivers.park_tracking.ParkTracker`), so a driver imitating the oracle sees the stretch
+the oracle drives.
+
+It is route information (where the planned way goes, like ``waypoint``), not the car's pose in the garage or
+another road user's state; the observation table (:mod:`~garage_mj.driving.sim.observations`) has it as the
+``park_guide`` entry of park and AVP tests.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from garage_mj.driving.drivers.park_tracking import ParkTracker
+from garage_mj.scene.car import CarGeometry
+
+NEAR = 0.25  # [m] the curvature read this far ahead of the car on its stretch ...
+FAR = 1.0  # [m] ... and this far
+MAX_CURVATURE = 10.0  # [1/m] the curvature read is clipped to this (a plan's turns are under 0.3)
+#: the ``park_guide`` entry, in order
+GUIDE_KEYS = ("gear", "lateral", "heading", "curvature_near", "curvature_far", "stretch_left", "stretches_after")
+
+
+class ParkGuide:
+    """The stretch of a park plan the car is on (module docstring).
+
+    Args:
+        poses: the plan's car-centre poses (N, 3).
+        directions: the plan's gear per step (N,): +1 forward, -1 reverse.
+        car: the car's geometry (the rear axle is what the path is measured at).
+    """
+
+    def __init__(self, poses, directions, car: CarGeometry) -> None:
+        self.tracker = ParkTracker(poses, directions, car)
+
+    @property
+    def stretch(self) -> int:
+        """The index of the stretch the car is on."""
+        return self.tracker.k
+
+    def update(self, pose, speed: float) -> None:
+        """Move on to the next stretch when the car at ``pose`` (centre x, y, yaw) with signed ``speed`` [m/s] has
+        come to rest at the end of its stretch: the tracker's own rule (it brakes once the stretch left is within
+        its braking distance, and takes the next stretch at rest)."""
+        t = self.tracker
+        cfg = t.config
+        _, _, _, left = t.errors(pose)
+        v = t.segment.gear.sign * float(speed)
+        if not t.stopping and left <= cfg.stop_within + max(v, 0.0) * cfg.brake_time:
+            t.stopping = True
+        if t.stopping and abs(speed) < cfg.at_rest and t.k < len(t.segments) - 1:
+            t.k, t.index, t.stopping = t.k + 1, 0, False
+
+    def read(self, pose) -> np.ndarray:
+        """:data:`GUIDE_KEYS` for the car at ``pose``: the stretch's gear (+1 D, -1 R); the rear axle's offset from
+        it [m] (left of the direction of travel) and the car's heading off it [rad]; its curvature [1/m] (signed as
+        the road wheels must turn, left positive, in the stretch's gear) :data:`NEAR` and :data:`FAR` ahead; the
+        stretch left [m] (negative past its end) and the stretches after it."""
+        t = self.tracker
+        s_now, lateral, heading, left = t.errors(pose)
+        seg = t.segment
+        sign = seg.gear.sign
+        near, far = (float(np.clip(seg.kappa[min(int(np.searchsorted(seg.s, s_now + d)), len(seg.s) - 1)] * sign,
+                                   -MAX_CURVATURE, MAX_CURVATURE)) for d in (NEAR, FAR))
+        return np.array([sign, lateral, math.remainder(heading, math.tau), near, far, left,
+                         min(len(t.segments) - 1 - t.k, 1000)], dtype=np.float32)

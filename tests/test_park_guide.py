@@ -1,0 +1,93 @@
+"""The park guide: a park test's route stretch by stretch, as the observation's ``park_guide`` entry, and what a
+learned parking driver reads of it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from garage_mj.driving.sim.park_guide import GUIDE_KEYS
+from garage_mj.driving.sources import painted_sources
+
+
+@pytest.fixture(scope="module")
+def env():
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+    from garage_mj.driving.sim.park_sensors import ALL_SENSORS
+
+    (source,) = painted_sources("tiny_7x11", 1, seed=0)
+    e = GarageDriveEnv(garage=source.garage, action_type="continuous", task="park", maneuver="reverse",
+                       sensors=ALL_SENSORS)
+    yield e
+    e.close()
+
+
+def test_the_guide_shows_the_stretch_the_oracle_drives_until_the_car_is_parked(env):
+    """Driven by the oracle, the guide is on the stretch the oracle's tracker is on at every step, in its gear; it
+    moves on at rest at the end of a stretch; the stretches after it count down to 0 and the last stretch's left reads
+    about 0 once the car is parked."""
+    from garage_mj.driving.drivers.oracle import OracleDriver
+
+    oracle = OracleDriver()
+    obs, info = env.reset(seed=2)
+    oracle.reset(env.driver_info(2))
+    first = dict(zip(GUIDE_KEYS, obs["park_guide"].tolist()))
+    stretches = len(oracle.tracker.segments)
+    assert stretches >= 2 and first["stretches_after"] == stretches - 1
+    assert first["gear"] == oracle.tracker.segments[0].gear.sign and first["stretch_left"] > 0.5
+    seen, done, speeds = [], False, []
+    while not done:
+        action = oracle.act(obs)
+        assert env.park_guide.stretch == oracle.tracker.k  # the same rule, the same stretch
+        assert obs["park_guide"][0] == oracle.tracker.segment.gear.sign
+        obs, _, term, trunc, info = env.step(action)
+        seen.append(env.park_guide.stretch)
+        speeds.append(abs(float(obs["speed"][0])))
+        done = term or trunc
+    assert info["outcome"] == "success", info.get("reason")
+    assert seen == sorted(seen) and seen[-1] == stretches - 1  # forward through every stretch, none skipped
+    for k in range(1, stretches):  # a stretch is taken only at rest
+        assert speeds[seen.index(k)] < 0.08
+    last = dict(zip(GUIDE_KEYS, obs["park_guide"].tolist()))
+    assert last["stretches_after"] == 0 and abs(last["stretch_left"]) < 0.3
+    assert abs(last["lateral"]) < 0.1 and abs(last["heading"]) < 0.05
+    assert env.observation_space["park_guide"].contains(obs["park_guide"])
+
+
+def test_a_learned_parking_driver_reads_the_guide_after_the_rest_and_only_when_trained_with_it(env):
+    from garage_mj.driving.learning.observation import (
+        PARK_GUIDE_KEYS,
+        PARK_ROUTE_KEYS,
+        PARK_VECTOR_KEYS,
+        park_observation,
+        park_space,
+        park_vector_size,
+    )
+
+    obs, _ = env.reset(seed=2)
+    plain = park_observation(obs, route=True)
+    guided = park_observation(obs, route=True, guide=True)
+    assert park_vector_size(True, True) == len(PARK_VECTOR_KEYS) + len(PARK_ROUTE_KEYS) + len(PARK_GUIDE_KEYS)
+    assert park_space(64, 64, True, True).contains(guided) and not park_space(64, 64, True).contains(guided)
+    np.testing.assert_array_equal(guided["vector"][: len(plain["vector"])], plain["vector"])
+    read = dict(zip(PARK_GUIDE_KEYS, guided["vector"][len(plain["vector"]):].tolist()))
+    raw = dict(zip(GUIDE_KEYS, obs["park_guide"].tolist()))
+    assert read["guide_gear"] == raw["gear"] and read["guide_after"] == min(raw["stretches_after"] / 2, 1)
+    assert read["guide_left"] == pytest.approx(min(raw["stretch_left"] / 5.0, 1.0))
+    # a different guide, the same rest: the guide is read only when asked for
+    moved = dict(obs, park_guide=obs["park_guide"] + np.float32(0.5))
+    np.testing.assert_array_equal(park_observation(moved, route=True)["vector"], plain["vector"])
+    assert not np.array_equal(park_observation(moved, route=True, guide=True)["vector"], guided["vector"])
+    with pytest.raises(ValueError, match="park_guide"):
+        park_observation({k: v for k, v in obs.items() if k != "park_guide"}, guide=True)
+
+
+def test_a_parking_config_takes_the_guide_or_a_replanning_expert_not_both():
+    from garage_mj.driving.learning.train import DriverTrainConfig
+
+    with pytest.raises(ValueError, match="park_guide, replan"):
+        DriverTrainConfig(task="park", park_guide=True, replan=True)
+    with pytest.raises(ValueError, match="a parking driver's"):
+        DriverTrainConfig(park_guide=True)
+    assert DriverTrainConfig(task="park", park_route=True, park_guide=True).fleet_options() == {
+        "park_route": True, "replan": False, "park_guide": True}
