@@ -3,6 +3,9 @@
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
+# pip installs without compiling every module to bytecode up front (torch alone: about 35 s of CPU); Python
+# compiles what is imported on first import and keeps it, so the same code runs, the install is faster
+PIP_INSTALL := -m pip install -q --no-compile
 MAIN_STAMP := $(VENV)/.installed-main
 STAMP := $(VENV)/.installed
 TORCH := torch==2.13.0
@@ -30,14 +33,14 @@ install:
 # multi-GB CUDA wheels.
 define venv_with_torch
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q $(TORCH)
+	$(PY) $(PIP_INSTALL) --upgrade pip
+	$(PY) $(PIP_INSTALL) $(TORCH)
 endef
 
 # What the demo runs: torch, then the package.
 $(MAIN_STAMP): pyproject.toml
 	$(venv_with_torch)
-	$(PY) -m pip install -q -e .
+	$(PY) $(PIP_INSTALL) -e .
 	touch $(MAIN_STAMP)
 
 # What the tests add, in the same install (one editable build): the test and docs tools, Ray core (--backend
@@ -45,18 +48,18 @@ $(MAIN_STAMP): pyproject.toml
 # 3.10-3.12, Linux/Windows); where no carla wheel fits, the rest without it.
 $(STAMP): pyproject.toml
 	$(venv_with_torch)
-	$(PY) -m pip install -q -e '.[dev,ray,carla]' || { echo "warning: no carla wheel for this Python/platform; the XODR CARLA test will fail with a hint"; $(PY) -m pip install -q -e '.[dev,ray]'; }
+	$(PY) $(PIP_INSTALL) -e '.[dev,ray,carla]' || { echo "warning: no carla wheel for this Python/platform; the XODR CARLA test will fail with a hint"; $(PY) $(PIP_INSTALL) -e '.[dev,ray]'; }
 	touch $(MAIN_STAMP) $(STAMP)
 
 # Depends on the Makefile so a new checker pin reaches an existing .venv-qc (pip skips what is installed).
 $(QC_STAMP): Makefile
 	test -x $(QC_VENV)/bin/python || $(PYTHON) -m venv $(QC_VENV)
-	$(QC_VENV)/bin/python -m pip install -q $(QC_OPENDRIVE) $(QC_OPENSCENARIO)
+	$(QC_VENV)/bin/python $(PIP_INSTALL) $(QC_OPENDRIVE) $(QC_OPENSCENARIO)
 	touch $(QC_STAMP)
 
 $(BLENDER_STAMP): Makefile
 	test -x $(BLENDER_VENV)/bin/python || $(PYTHON) -m venv $(BLENDER_VENV)
-	$(BLENDER_VENV)/bin/python -m pip install -q $(BPY) || echo "warning: no $(BPY) wheel for this Python (CPython 3.11 only); the FBX read-back tests will fail with a hint"
+	$(BLENDER_VENV)/bin/python $(PIP_INSTALL) $(BPY) || echo "warning: no $(BPY) wheel for this Python (CPython 3.11 only); the FBX read-back tests will fail with a hint"
 	touch $(BLENDER_STAMP)
 
 # Headless Chromium + ChromeDriver (Debian packages) for the report test; installed once when missing.
