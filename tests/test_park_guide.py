@@ -91,3 +91,26 @@ def test_a_parking_config_takes_the_guide_or_a_replanning_expert_not_both():
         DriverTrainConfig(park_guide=True)
     assert DriverTrainConfig(task="park", park_route=True, park_guide=True).fleet_options() == {
         "park_route": True, "replan": False, "park_guide": True}
+
+
+def test_the_learners_expert_takes_a_cusp_within_a_tenth_and_creeps_on_when_it_stopped_short():
+    """The guide's rule (GUIDE_TRACKING), which the trainer's expert keeps too: at rest 5 cm short of a cusp the cusp
+    is reached (the oracle's own rule creeps the 5 cm first); at rest 30 cm short of the stall after the stop began,
+    it creeps on (the oracle's own rule holds there: a learner that braked early was told to stay)."""
+    from garage_mj.driving.drivers.park_tracking import ParkTrackConfig, ParkTracker
+    from garage_mj.driving.sim.park_guide import GUIDE_TRACKING
+    from garage_mj.driving.sim.vehicle import Gear
+    from tests.test_park_oracle import CAR, synthetic_plan
+
+    poses, gears = synthetic_plan([(1, 3.0, 0.0), (-1, 3.0, 0.0)])  # 3 m forward, cusp, 3 m back
+    for config, reached in ((GUIDE_TRACKING, True), (ParkTrackConfig(), False)):
+        tracker = ParkTracker(poses, gears, CAR, config)
+        short = (poses[0][0] + 2.95, poses[0][1], poses[0][2])  # at rest 5 cm before the cusp
+        tracker.command(short, 0.0, Gear.D, 0.0)
+        assert (tracker.k == 1) is reached, config
+    for config, creeps in ((GUIDE_TRACKING, True), (ParkTrackConfig(), False)):
+        tracker = ParkTracker(poses, gears, CAR, config)
+        tracker.k, tracker.stopping = 1, True  # the stop at the stall began (the car braked early) ...
+        end = poses[-1]
+        pedal, _, gear = tracker.command((end[0] + 0.3, end[1], end[2]), 0.0, Gear.R, 0.0)  # ... 30 cm short, at rest
+        assert gear is Gear.R and (pedal > 0) is creeps, config

@@ -63,6 +63,11 @@ class ParkTrackConfig:
     # wheel target is the nearest of them, so the tracker moves off at rest once the wheels reach a target that
     # driver can give, and its commands are that driver's to imitate
     steer_levels: tuple[float, ...] = ()
+    # [m] at rest this close to a cusp (or past it), the car has reached it (the stop there begins this far out)
+    cusp_within: float = 0.0
+    # [m] at rest farther than this short of where a segment's stop begins, with the stop begun (it braked early):
+    # creep on instead of holding there (inf: hold). The oracle stops where it means to; a learner it labels for may not
+    resume: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -247,6 +252,21 @@ class ParkTracker:
         self.steer_angle += clip(steer * self.car.max_steer - self.steer_angle, -step, step)
         return pedal, steer, gear
 
+    def stop_state(self, remaining: float, speed: float) -> bool:
+        """Whether the car, ``remaining`` metres short of its segment's end at signed ``speed``, is stopping there: it
+        begins once the end is within ``stop_within`` (a cusp: ``cusp_within``, if more) plus the braking distance,
+        and holds, unless the car is at rest more than ``resume`` short of that. At rest while stopping,
+        :meth:`command` takes the next segment (:class:`~garage_mj.driving.sim.park_guide.ParkGuide` keeps the same
+        rule)."""
+        cfg = self.config
+        v = self.segment.gear.sign * speed  # along the gear's direction
+        reach = cfg.stop_within if self.k == len(self.segments) - 1 else max(cfg.stop_within, cfg.cusp_within)
+        if not self.stopping and remaining <= reach + max(v, 0.0) * cfg.brake_time:
+            self.stopping = True
+        if self.stopping and abs(speed) < cfg.at_rest and remaining > reach + cfg.resume:
+            self.stopping = False  # at rest short of the end: creep on to it
+        return self.stopping
+
     def command(self, pose, speed: float, gear: Gear | None = None,
                 steer: float | None = None, actors=None) -> tuple[float, float, Gear]:
         """``(pedal, steer, gear request)`` for the car at ``pose`` (centre x, y, yaw) with signed ``speed``;
@@ -260,9 +280,7 @@ class ParkTracker:
             self.steer_angle = float(steer) * self.car.max_steer
         s_now, lateral, heading, remaining = self.errors(pose)
         seg = self.segment
-        v = seg.gear.sign * speed  # along the gear's direction
-        if not self.stopping and remaining <= cfg.stop_within + max(v, 0.0) * cfg.brake_time:
-            self.stopping = True
+        self.stop_state(remaining, speed)
         if self.stopping:
             last = self.k == len(self.segments) - 1
             # braking to a cusp (the car moves a centimetre or two): already turn the wheels for the next segment

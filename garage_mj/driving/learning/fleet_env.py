@@ -27,6 +27,7 @@ settings (a park geometry, a parked fleet): garage ``k`` is built with ``variant
 from __future__ import annotations
 
 import collections
+import dataclasses
 import warnings
 from collections.abc import Sequence
 from typing import Any
@@ -35,7 +36,6 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from garage_mj.driving.drivers.park_tracking import ParkTrackConfig
 from garage_mj.driving.learning.observation import (
     PARK_SENSORS,
     learned_observation,
@@ -45,6 +45,7 @@ from garage_mj.driving.learning.observation import (
 )
 from garage_mj.driving.learning.park_actions import PARK_COMMANDS, STEER_LEVELS, nearest_park_action
 from garage_mj.driving.sim.drive_env import GarageDriveEnv
+from garage_mj.driving.sim.park_guide import GUIDE_TRACKING
 from garage_mj.driving.sim.sensors import CameraConfig
 from garage_mj.driving.sim.vehicle import DiscreteAction
 from garage_mj.driving.sources import CruiseSource
@@ -55,8 +56,11 @@ REPLAN_HEADING = 0.35  # [rad] ... or this far off the heading of the nearest on
 REPLAN_EVERY = 1.0  # [s] and it plans again at most this often
 #: the park expert's tracker: its wheel targets are the learner's steering levels, and at rest it waits only for a
 #: wheel change of more than 0.3 rad (the oracle's own 0.08: a learner whose wheel was a little off was told to brake
-#: until it matched, and learned to stand still); driven by its own labels it parks 12 of 12 validation tests either way
-PARK_EXPERT = ParkTrackConfig(steer_levels=STEER_LEVELS, steer_settle=0.3)
+#: until it matched, and learned to stand still); driven by its own labels it parks 12 of 12 validation tests either way.
+#: It ends a stretch as the park guide does (GUIDE_TRACKING: a cusp within 0.1 m at rest; farther short, it creeps on):
+#: with the oracle's own rule, a learner at rest 2 cm short of a cusp was told to go on, and 12 cm short of the stall,
+#: once its stop had begun, to hold there
+PARK_EXPERT = dataclasses.replace(GUIDE_TRACKING, steer_levels=STEER_LEVELS, steer_settle=0.3)
 
 
 class FleetDriveEnv(gym.Env):

@@ -8,7 +8,8 @@ driven in, how far the car is off it and turned from it, how it bends ahead, how
 stretches come after it. The guide moves on to the next stretch when the car has come to rest at the end of the
 current one (or past it), by the rule the privileged oracle's tracker keeps
 (:class:`~garage_mj.driving.drivers.park_tracking.ParkTracker`), so a driver imitating the oracle sees the stretch
-the oracle drives.
+the oracle drives. The guide's rule (:data:`GUIDE_TRACKING`) takes a cusp as reached at rest within
+:data:`CUSP_WITHIN` of it, and a car at rest farther short stays on its stretch.
 
 It is route information (where the planned way goes, like ``waypoint``), not the car's pose in the garage or
 another road user's state; the observation table (:mod:`~garage_mj.driving.sim.observations`) has it as the
@@ -21,11 +22,16 @@ import math
 
 import numpy as np
 
-from garage_mj.driving.drivers.park_tracking import ParkTracker
+from garage_mj.driving.drivers.park_tracking import ParkTrackConfig, ParkTracker
 from garage_mj.scene.car import CarGeometry
 
 NEAR = 0.25  # [m] the curvature read this far ahead of the car on its stretch ...
 FAR = 1.0  # [m] ... and this far
+CUSP_WITHIN = 0.1  # [m] at rest this close to a cusp (or past it), the car has reached it
+RESUME = 0.05  # [m] at rest more than this short of where a stop begins, the stretch goes on
+#: how the guide follows the stretches (and the trainer's expert with it): a cusp reached at rest within CUSP_WITHIN;
+#: at rest farther short, the stretch goes on
+GUIDE_TRACKING = ParkTrackConfig(cusp_within=CUSP_WITHIN, resume=RESUME)
 MAX_CURVATURE = 10.0  # [1/m] the curvature read is clipped to this (a plan's turns are under 0.3)
 #: the ``park_guide`` entry, in order
 GUIDE_KEYS = ("gear", "lateral", "heading", "curvature_near", "curvature_far", "stretch_left", "stretches_after")
@@ -41,7 +47,7 @@ class ParkGuide:
     """
 
     def __init__(self, poses, directions, car: CarGeometry) -> None:
-        self.tracker = ParkTracker(poses, directions, car)
+        self.tracker = ParkTracker(poses, directions, car, GUIDE_TRACKING)
 
     @property
     def stretch(self) -> int:
@@ -50,15 +56,11 @@ class ParkGuide:
 
     def update(self, pose, speed: float) -> None:
         """Move on to the next stretch when the car at ``pose`` (centre x, y, yaw) with signed ``speed`` [m/s] has
-        come to rest at the end of its stretch: the tracker's own rule (it brakes once the stretch left is within
-        its braking distance, and takes the next stretch at rest)."""
+        come to rest at the end of its stretch: the tracker's own rule (:meth:`ParkTracker.stop_state`, with
+        :data:`GUIDE_TRACKING`), which takes the next stretch at rest."""
         t = self.tracker
-        cfg = t.config
-        _, _, _, left = t.errors(pose)
-        v = t.segment.gear.sign * float(speed)
-        if not t.stopping and left <= cfg.stop_within + max(v, 0.0) * cfg.brake_time:
-            t.stopping = True
-        if t.stopping and abs(speed) < cfg.at_rest and t.k < len(t.segments) - 1:
+        left = t.errors(pose)[3]
+        if t.stop_state(left, float(speed)) and abs(speed) < t.config.at_rest and t.k < len(t.segments) - 1:
             t.k, t.index, t.stopping = t.k + 1, 0, False
 
     def read(self, pose) -> np.ndarray:
