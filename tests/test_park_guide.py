@@ -114,3 +114,23 @@ def test_the_learners_expert_takes_a_cusp_within_a_tenth_and_creeps_on_when_it_s
         end = poses[-1]
         pedal, _, gear = tracker.command((end[0] + 0.3, end[1], end[2]), 0.0, Gear.R, 0.0)  # ... 30 cm short, at rest
         assert gear is Gear.R and (pedal > 0) is creeps, config
+
+
+def test_in_an_avp_test_the_guide_waits_for_the_car_at_the_plans_start(painted_tiny):
+    """An AVP test starts at the entrance, at rest, far from the park plan: the guide stays on the plan's first stretch
+    until the car has come near its start (at rest there, it would otherwise have taken the next stretch)."""
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+    from garage_mj.driving.sim.park_guide import START_RADIUS
+
+    env = GarageDriveEnv(garage=painted_tiny, action_type="continuous", task="avp", maneuver="reverse")
+    obs, info = env.reset(seed=0)
+    guide = env.park_guide
+    start = info["park_plan"]["poses"][0]
+    far = env.car.pose(env.data)
+    assert np.hypot(far[0] - start[0], far[1] - start[1]) > START_RADIUS
+    for _ in range(5):  # at rest at the entrance
+        obs, *_ = env.step(np.array([-1.0, 0.0, 1.0], np.float32))
+    assert not guide.started and guide.stretch == 0
+    guide.update(tuple(start), 0.0)  # the car at the plan's start: the guide follows it from there
+    assert guide.started
+    env.close()

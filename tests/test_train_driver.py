@@ -476,13 +476,19 @@ def test_a_park_command_is_the_nearest_of_the_grid_in_the_same_gear():
 
 
 @pytest.mark.parametrize("spec", ["learned:park", "learned:avp"])
-def test_the_named_parking_drivers_say_how_to_train_a_model_while_none_is_shipped(spec):
-    from garage_mj.driving.drivers import DriverError, load_driver
+def test_the_named_parking_drivers_run_the_shipped_model_and_say_how_to_train_one_without_it(spec, monkeypatch,
+                                                                                             tmp_path):
+    import garage_mj.driving.drivers.learned as learned
+    from garage_mj.driving.drivers import DriverError, load_driver, tasks_of
     from garage_mj.driving.learning.saved_model import PARK_MODEL, default_model
 
-    if default_model(PARK_MODEL).is_file():
-        pytest.skip("a parking model is shipped: the named drivers load it")
-    with pytest.raises(DriverError, match=r"^no parking model is shipped at .*park_m5\.zip: train one with garage-mj "
+    driver = load_driver(spec)  # the shipped model, with the park route and the park guide it was trained with
+    park = driver if isinstance(driver, learned.LearnedParkDriver) else driver.park
+    assert park.path == default_model(PARK_MODEL) and (park.route, park.guide) == (True, True)
+    assert tasks_of(spec) == (spec.split(":")[1],)
+    shipped = learned.model_path
+    monkeypatch.setattr(learned, "model_path", lambda name: tmp_path / "park.zip" if name == "park" else shipped(name))
+    with pytest.raises(DriverError, match=r"^no parking model is shipped at .*park\.zip: train one with garage-mj "
                                           r"train-driver GARAGES --task park --out RUN and drive it with --driver "
                                           r"learned:RUN/model\.zip"):
         load_driver(spec)
@@ -555,3 +561,19 @@ def test_a_parking_drivers_rare_decisions_weigh_more_in_the_loss():
     labels = np.array([nearest_park_action(c) for c in ([-1.0, 0.0, 1.0], [1.0, 0.5, 1.0], [-1.0, 0.0, -1.0],
                                                         [1.0, 0.0, 1.0])])
     assert _state_weights(cfg, vectors, labels).tolist() == [1.0, 3.0, 7.0, 1.0]
+
+
+def test_the_shipped_parking_model_parks_a_tiny_garage_test_and_repeats_itself():
+    """``--driver learned:park``: the shipped ``models/drivers/park_m5.zip`` (trained on m5 garages only) parked 2 of
+    the first 6 park tests of this tiny garage when shipped (tests 1 and 2); test 2 is pinned here, driven twice."""
+    from garage_mj.driving.cruise import run_test
+    from garage_mj.driving.learning.observation import PARK_SENSORS
+    from garage_mj.driving.sources import CruiseSettings
+
+    (source,) = painted_sources("tiny_7x11", 1, seed=0)
+    settings = CruiseSettings.from_env_kwargs("learned:park", {}, seed=0, action_type="continuous", task="park",
+                                              maneuver="any").with_sensors(PARK_SENSORS)
+    first, again = (run_test(source, 2, settings) for _ in range(2))
+    assert first["outcome"] == "success", first.get("reason")
+    same = ("outcome", "reason", "time", "path_length")
+    assert {k: first.get(k) for k in same} == {k: again.get(k) for k in same}

@@ -9,7 +9,9 @@ stretches come after it. The guide moves on to the next stretch when the car has
 current one (or past it), by the rule the privileged oracle's tracker keeps
 (:class:`~garage_mj.driving.drivers.park_tracking.ParkTracker`), so a driver imitating the oracle sees the stretch
 the oracle drives. The guide's rule (:data:`GUIDE_TRACKING`) takes a cusp as reached at rest within
-:data:`CUSP_WITHIN` of it, and a car at rest farther short stays on its stretch.
+:data:`CUSP_WITHIN` of it, and a car at rest farther short stays on its stretch. In an AVP test the plan begins
+where the cruise to the stall ends: the guide follows the car only once it has come within :data:`START_RADIUS` of
+the plan's start.
 
 It is route information (where the planned way goes, like ``waypoint``), not the car's pose in the garage or
 another road user's state; the observation table (:mod:`~garage_mj.driving.sim.observations`) has it as the
@@ -32,6 +34,7 @@ RESUME = 0.05  # [m] at rest more than this short of where a stop begins, the st
 #: how the guide follows the stretches (and the trainer's expert with it): a cusp reached at rest within CUSP_WITHIN;
 #: at rest farther short, the stretch goes on
 GUIDE_TRACKING = ParkTrackConfig(cusp_within=CUSP_WITHIN, resume=RESUME)
+START_RADIUS = 1.5  # [m] the guide follows the car once it has come this close to the plan's start
 MAX_CURVATURE = 10.0  # [1/m] the curvature read is clipped to this (a plan's turns are under 0.3)
 #: the ``park_guide`` entry, in order
 GUIDE_KEYS = ("gear", "lateral", "heading", "curvature_near", "curvature_far", "stretch_left", "stretches_after")
@@ -48,6 +51,13 @@ class ParkGuide:
 
     def __init__(self, poses, directions, car: CarGeometry) -> None:
         self.tracker = ParkTracker(poses, directions, car, GUIDE_TRACKING)
+        self._start = np.asarray(poses, dtype=float)[0, :2]
+        self.started = False  # the car has come within START_RADIUS of the plan's start (an AVP test's comes later)
+
+    def _near_start(self, pose) -> bool:
+        if not self.started:
+            self.started = math.hypot(float(pose[0]) - self._start[0], float(pose[1]) - self._start[1]) <= START_RADIUS
+        return self.started
 
     @property
     def stretch(self) -> int:
@@ -58,6 +68,8 @@ class ParkGuide:
         """Move on to the next stretch when the car at ``pose`` (centre x, y, yaw) with signed ``speed`` [m/s] has
         come to rest at the end of its stretch: the tracker's own rule (:meth:`ParkTracker.stop_state`, with
         :data:`GUIDE_TRACKING`), which takes the next stretch at rest."""
+        if not self._near_start(pose):  # an AVP test's cruise to the stall: the plan has not begun
+            return
         t = self.tracker
         left = t.errors(pose)[3]
         if t.stop_state(left, float(speed)) and abs(speed) < t.config.at_rest and t.k < len(t.segments) - 1:
