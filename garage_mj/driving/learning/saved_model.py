@@ -78,7 +78,7 @@ def load_driver_model(path: str | Path, algo: type, env: Any = None, **kwargs: A
 DRIVER_MODELS = "drivers"  # the folder of models/ that holds the shipped driver models
 DEFAULT_MODEL = "cruise_m5"  # models/drivers/<DEFAULT_MODEL>.zip: what ``--driver learned`` runs
 #: Where ``learned:park`` (and ``learned:avp``) look for the shipped parking model: models/drivers/<PARK_MODEL>.zip
-#: (none is shipped yet: docs/learned-parking.md).
+#: (docs/learned-parking.md).
 PARK_MODEL = "park_m5"
 #: The learned drivers a ``learned:NAME`` spec names: the parking model, and the AVP driver (the shipped cruise and
 #: parking models together, :class:`~garage_mj.driving.drivers.learned.LearnedAVPDriver`).
