@@ -42,7 +42,7 @@ def test_a_park_reset_starts_at_rest_on_the_cruise_goal_with_a_plan(park_env):
     assert plan["stall_pose"] == pytest.approx(park_pose(stall, park_env.car_geometry, "reverse"))
     assert np.allclose(plan["poses"][0], info["pose"], atol=1e-6)  # planned from where the car stands
     assert info["plan_length"] > 0 and info["plan_cusps"] >= 0 and info["plan_clearance"] >= 0.1 - 1e-9
-    assert park_env.observation_space.contains(obs) and set(obs) == {*CRUISE_KEYS, "stall", "gear"}
+    assert park_env.observation_space.contains(obs) and set(obs) == {*CRUISE_KEYS, "stall", "gear", "park_guide"}
     assert obs["stall"][0] ** 2 + obs["stall"][1] ** 2 > 1.0  # the stall lies beside the car, not under it
     assert park_env.action_space == gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
     assert park_env.driver_info(0)["park_plan"]["poses"] is plan["poses"]
@@ -118,7 +118,7 @@ def test_avp_starts_at_the_entrance_and_plans_the_route_then_the_stall(painted_t
     assert info["route_length"] > c_info["route_length"] > 0  # the cruise route, then the park plan
     assert np.allclose(info["park_plan"]["poses"][0], env.test_plan.goal, atol=1e-6)  # planned from the cruise goal
     assert info["time_limit"] > c_info["time_limit"]
-    assert set(obs) == {*CRUISE_KEYS, "stall", "gear"}
+    assert set(obs) == {*CRUISE_KEYS, "stall", "gear", "park_guide"}
     env.close()
 
 
