@@ -184,9 +184,11 @@ def sb3_settings(path: str | Path) -> dict:
     return read_sb3_data(Path(path).read_bytes())
 
 
-def load_sb3(path: str | Path, algo: type, table: Mapping[str, Rebuild], env: Any = None, **kwargs: Any) -> Any:
+def load_sb3(path: str | Path, algo: type, table: Mapping[str, Rebuild], env: Any = None,
+             policy_kwargs: Mapping[str, Any] | None = None, **kwargs: Any) -> Any:
     """``algo.load`` of the model zip at ``path`` (``device="cpu"`` unless given; ``env`` and ``kwargs`` passed
-    on), every pickled entry rebuilt by ``table`` and nothing in the file unpickled.
+    on), every pickled entry rebuilt by ``table`` and nothing in the file unpickled; ``policy_kwargs`` are set over
+    the file's own (an optimizer class, say).
 
     Raises :class:`ModelFileError` (one line, without the file name) when the file is not a zip, holds a
     pickled entry ``table`` does not list or whose plain fields do not match, weights that are not plain
@@ -196,6 +198,9 @@ def load_sb3(path: str | Path, algo: type, table: Mapping[str, Rebuild], env: An
     raw = Path(path).read_bytes()  # read once: what is checked is what SB3 loads
     data = read_sb3_data(raw)
     custom = plain_objects(data, algo, table, env)
+    if policy_kwargs:
+        own = custom.get("policy_kwargs", data.get("policy_kwargs"))
+        custom["policy_kwargs"] = {**(own if isinstance(own, dict) else {}), **policy_kwargs}
     with zipfile.ZipFile(io.BytesIO(raw)) as archive:
         for name in archive.namelist():
             if name.endswith(".pth"):

@@ -112,7 +112,7 @@ def load_model(path: str | Path, parking: bool = False) -> Any:
     import stable_baselines3  # heavy (torch): only when a learned driver is built
 
     try:  # the file read as data: weights and plain settings, nothing in it unpickled or run
-        model = load_driver_model(path, getattr(stable_baselines3, algo))
+        model = load_driver_model(path, getattr(stable_baselines3, algo), acting=True)
     except ModelFileError as exc:
         raise _no_model(path, f" (cannot load it as {algo}: {exc})") from None
     except Exception as exc:  # torch/zip errors of a damaged file: name the file, keep one short line

@@ -69,9 +69,33 @@ DRIVER_REBUILDS: dict[str, Rebuild] = rebuilds(
 )
 
 
-def load_driver_model(path: str | Path, algo: type, env: Any = None, **kwargs: Any) -> Any:
-    """The learned-driver model zip at ``path`` as an ``algo`` (DQN or PPO), read as data (module docstring)."""
-    return load_sb3(path, algo, DRIVER_REBUILDS, env=env, **kwargs)
+class ActingOnly:
+    """The optimizer of a model loaded to act, not to train: it keeps no state and refuses to step.
+
+    Building torch's own optimizer imports ``torch._dynamo`` (about 4 s per process on 2 cores), which a driver that
+    only predicts never uses; :func:`load_driver_model` ``(acting=True)`` puts this in its place. The file's
+    optimizer state is read (as weights) and dropped.
+    """
+
+    def __init__(self, params: Any, lr: float = 0.0, **kwargs: Any) -> None:
+        self.param_groups = [{"params": list(params), "lr": lr}]
+
+    def load_state_dict(self, state: Any, strict: bool = True) -> None:
+        """Drops ``state``: an acting model does not train."""
+
+    def zero_grad(self, set_to_none: bool = True) -> None:
+        raise RuntimeError("this model was loaded to act (load_driver_model(acting=True)); load it to train it")
+
+    step = zero_grad
+
+
+def load_driver_model(path: str | Path, algo: type, env: Any = None, *, acting: bool = False, **kwargs: Any) -> Any:
+    """The learned-driver model zip at ``path`` as an ``algo`` (DQN or PPO), read as data (module docstring).
+
+    ``acting``: loaded to predict only (a driver), its optimizer :class:`ActingOnly`; else ready to train on.
+    """
+    return load_sb3(path, algo, DRIVER_REBUILDS, env=env, policy_kwargs={"optimizer_class": ActingOnly} if acting else None,
+                    **kwargs)
 
 
 # -- the shipped models, by the names ``learned`` and ``learned:NAME`` run ----------------------------------------
