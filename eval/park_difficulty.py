@@ -84,7 +84,7 @@ def collect(args: argparse.Namespace, name: str, maps: list[tuple[str, int, int]
             start = time.perf_counter()
             settings = CruiseSettings(driver=args.driver, task="park", maneuver="any", occupancy=0.5,
                                       env=PARK_GEOMETRIES[geometry].env_kwargs(), seed=run_seed)
-            result = run_cruise(srcs, tests, settings, out, compute=Compute(workers=1, progress=False),
+            result = run_cruise(srcs, tests, settings, out, compute=Compute(workers=args.workers, progress=False),
                                 route_model=False, park_model=False)
             done = [r for r in result.rows if r["feasible"] == "1"]
             ok = sum(r["outcome"] == "success" for r in done)
@@ -102,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fit-tests", type=int, default=4, help="park tests per fit garage and geometry (default 4)")
     ap.add_argument("--heldout-garages", type=int, default=8, help="garages per held-out map (default 8)")
     ap.add_argument("--heldout-tests", type=int, default=6, help="park tests per held-out garage and geometry (6)")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="worker processes per run (default 1; the tests and figures are the same for any count)")
     ap.add_argument("--only", choices=("collect", "fit", "score"), help="one step alone (default: all three)")
     ap.add_argument("--out", type=Path, default=Path("runs/park_difficulty"), help="where the runs go")
     ap.add_argument("--model-out", type=Path, help="the model to write (default OUT/<driver>.json)")
@@ -150,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
                              "fit_garages": args.fit_garages, "fit_tests": args.fit_tests,
                              "heldout_maps": [f"{m} (painted seed {s})" for m, s in HELDOUT_MAPS],
                              "heldout_garages_per_map": args.heldout_garages, "heldout_tests": args.heldout_tests,
-                             "occupancy": 0.5, "maneuver": "any", "vehicle": "sedan", "workers": 1},
+                             "occupancy": 0.5, "maneuver": "any", "vehicle": "sedan", "workers": args.workers},
                 "model": {"file": str(model_out), "key": model.key, "fit": {k: v for k, v in model.fit.items()
                                                                              if k != "runs"},
                           "weights": dict(model.coefficients())},
