@@ -256,8 +256,7 @@ class ParkTracker:
         """Whether the car, ``remaining`` metres short of its segment's end at signed ``speed``, is stopping there: it
         begins once the end is within ``stop_within`` (a cusp: ``cusp_within``, if more) plus the braking distance,
         and holds, unless the car is at rest more than ``resume`` short of that. At rest while stopping,
-        :meth:`command` takes the next segment (:class:`~garage_mj.driving.sim.park_guide.ParkGuide` keeps the same
-        rule)."""
+        :meth:`take_next` takes the next segment."""
         cfg = self.config
         v = self.segment.gear.sign * speed  # along the gear's direction
         reach = cfg.stop_within if self.k == len(self.segments) - 1 else max(cfg.stop_within, cfg.cusp_within)
@@ -266,6 +265,15 @@ class ParkTracker:
         if self.stopping and abs(speed) < cfg.at_rest and remaining > reach + cfg.resume:
             self.stopping = False  # at rest short of the end: creep on to it
         return self.stopping
+
+    def take_next(self, remaining: float, speed: float) -> bool:
+        """:meth:`stop_state`, and at rest while stopping at a cusp (not the plan's end), move on to the next segment:
+        whether it did. The one rule by which :meth:`command` and
+        :class:`~garage_mj.driving.sim.park_guide.ParkGuide` go from one segment to the next."""
+        if self.stop_state(remaining, speed) and abs(speed) < self.config.at_rest and self.k < len(self.segments) - 1:
+            self.k, self.index, self.stopping = self.k + 1, 0, False
+            return True
+        return False
 
     def command(self, pose, speed: float, gear: Gear | None = None,
                 steer: float | None = None, actors=None) -> tuple[float, float, Gear]:
@@ -280,18 +288,16 @@ class ParkTracker:
             self.steer_angle = float(steer) * self.car.max_steer
         s_now, lateral, heading, remaining = self.errors(pose)
         seg = self.segment
-        self.stop_state(remaining, speed)
-        if self.stopping:
+        if self.take_next(remaining, speed):  # at rest at a cusp: the next segment
+            s_now, lateral, heading, remaining = self.errors(pose)
+            seg = self.segment
+        elif self.stopping:
             last = self.k == len(self.segments) - 1
             # braking to a cusp (the car moves a centimetre or two): already turn the wheels for the next segment
             wheel = self._steer(seg, min(s_now, seg.length), lateral, heading) if last else \
                 self._steer(self.segments[self.k + 1], 0.0, 0.0, 0.0)
-            if abs(speed) >= cfg.at_rest or self.k == len(self.segments) - 1:
-                self.done = self.k == len(self.segments) - 1 and abs(speed) < cfg.at_rest
-                return self._answer(-1.0, wheel, seg.gear)
-            self.k, self.index, self.stopping = self.k + 1, 0, False  # at rest at a cusp: next segment
-            s_now, lateral, heading, remaining = self.errors(pose)
-            seg = self.segment
+            self.done = last and abs(speed) < cfg.at_rest
+            return self._answer(-1.0, wheel, seg.gear)
         wheel = self._steer(seg, s_now, lateral, heading)
         if self.gear is not seg.gear or abs(wheel * self.car.max_steer - self.steer_angle) > cfg.steer_settle and \
                 abs(speed) < cfg.at_rest:

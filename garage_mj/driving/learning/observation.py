@@ -97,6 +97,8 @@ PARK_GUIDE_KEYS = ("guide_gear", "guide_lateral", "guide_cos", "guide_sin", "gui
 GUIDE_OFFSET = 2.0  # [m] the offset from the stretch, read up to this
 GUIDE_LEFT = 5.0  # [m] the stretch left, read up to this ...
 GUIDE_NEAR = 1.0  # [m] ... and again at a finer scale, for the stop at its end
+GUIDE_RADIUS = 3.0  # [m] the curvature ahead is read times this (a plan's sharpest turn, about 0.3 /m, near 1)
+GUIDE_AFTER = 2.0  # the stretches after this one, read up to this many
 PARK_IMAGE_CHANNELS = 4  # front depth, front segmentation, rear depth, rear segmentation
 
 
@@ -169,8 +171,8 @@ def park_observation(obs: dict[str, Any], route: bool = False, guide: bool = Fal
                              "park or AVP tests")
         gear_s, lateral, heading, near, far, stretch, after = (float(v) for v in
                                                               np.asarray(obs["park_guide"]).reshape(-1)[:7])
-        way += [gear_s, _unit(lateral / GUIDE_OFFSET), math.cos(heading), math.sin(heading), 3.0 * near, 3.0 * far,
-                _unit(stretch / GUIDE_LEFT), _unit(stretch / GUIDE_NEAR), min(after / 2.0, 1.0)]
+        way += [gear_s, _unit(lateral / GUIDE_OFFSET), math.cos(heading), math.sin(heading), GUIDE_RADIUS * near,
+                GUIDE_RADIUS * far, _unit(stretch / GUIDE_LEFT), _unit(stretch / GUIDE_NEAR), min(after / GUIDE_AFTER, 1.0)]
     vector = np.array([_unit(sx / SLOT_RANGE), _unit(sy / SLOT_RANGE), math.cos(syaw), math.sin(syaw),
                        _unit(sx / SLOT_NEAR), _unit(sy / SLOT_NEAR), swidth / 5.0, sdepth / 6.0, fcos, fsin,
                        speed / SPEED_RANGE, steer, gear, *sonar.tolist(), *way], dtype=np.float32)

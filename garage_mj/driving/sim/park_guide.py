@@ -66,14 +66,11 @@ class ParkGuide:
 
     def update(self, pose, speed: float) -> None:
         """Move on to the next stretch when the car at ``pose`` (centre x, y, yaw) with signed ``speed`` [m/s] has
-        come to rest at the end of its stretch: the tracker's own rule (:meth:`ParkTracker.stop_state`, with
-        :data:`GUIDE_TRACKING`), which takes the next stretch at rest."""
+        come to rest at the end of its stretch: the tracker's own rule (:meth:`ParkTracker.take_next`, with
+        :data:`GUIDE_TRACKING`)."""
         if not self._near_start(pose):  # an AVP test's cruise to the stall: the plan has not begun
             return
-        t = self.tracker
-        left = t.errors(pose)[3]
-        if t.stop_state(left, float(speed)) and abs(speed) < t.config.at_rest and t.k < len(t.segments) - 1:
-            t.k, t.index, t.stopping = t.k + 1, 0, False
+        self.tracker.take_next(self.tracker.errors(pose)[3], float(speed))
 
     def read(self, pose) -> np.ndarray:
         """:data:`GUIDE_KEYS` for the car at ``pose``: the stretch's gear (+1 D, -1 R); the rear axle's offset from
