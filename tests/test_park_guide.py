@@ -117,8 +117,9 @@ def test_the_learners_expert_takes_a_cusp_within_a_tenth_and_creeps_on_when_it_s
 
 
 def test_in_an_avp_test_the_guide_waits_for_the_car_at_the_plans_start(painted_tiny):
-    """An AVP test starts at the entrance, at rest, far from the park plan: the guide stays on the plan's first stretch
-    until the car has come near its start (at rest there, it would otherwise have taken the next stretch)."""
+    """An AVP test starts at the entrance, at rest, far from the park plan: the guide reads zeros and stays on the plan's
+    first stretch until the car has come near its start (at rest there, it would otherwise have taken the next
+    stretch)."""
     from garage_mj.driving.sim.drive_env import GarageDriveEnv
     from garage_mj.driving.sim.park_guide import START_RADIUS
 
@@ -131,6 +132,7 @@ def test_in_an_avp_test_the_guide_waits_for_the_car_at_the_plans_start(painted_t
     for _ in range(5):  # at rest at the entrance
         obs, *_ = env.step(np.array([-1.0, 0.0, 1.0], np.float32))
     assert not guide.started and guide.stretch == 0
+    assert not obs["park_guide"].any()  # and reads zeros: no gear yet (the AVP driver hands over when it begins)
     guide.update(tuple(start), 0.0)  # the car at the plan's start: the guide follows it from there
-    assert guide.started
+    assert guide.started and guide.read(tuple(start))[0] == guide.tracker.segments[0].gear.sign  # its first stretch
     env.close()

@@ -436,6 +436,7 @@ def test_train_driver_task_park_trains_a_parking_model_that_parks_with_its_senso
 
 
 def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_parks():
+    """A parking model without the park guide takes over where the slot detector shows the stall alongside."""
     from garage_mj.driving.drivers import resolve_driver
     from garage_mj.driving.drivers.learned import LearnedAVPDriver
 
@@ -446,6 +447,8 @@ def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_
             return np.array([0.5, -0.2], np.float32)
 
     class Park:
+        guide = False
+
         def act(self, obs):
             return np.array([0.3, 1.0, -1.0], np.float32)
 
@@ -462,6 +465,34 @@ def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_
     assert step(-0.5, -5.0, 1.0) == [-1.0, 0.0, 1.0] and driver.phase == "stop"
     assert step(-0.7, -5.0, 0.0) == [pytest.approx(0.3), 1.0, -1.0] and driver.phase == "park"  # at rest: it parks
     assert step(20.0, 0.0, 2.0)[2] == -1.0 and driver.phase == "park"  # and keeps parking
+
+
+def test_the_learned_avp_driver_hands_over_where_the_park_guide_begins():
+    """A parking model that reads the park guide takes over where the guide begins (the park plan's start, where its
+    park tests started), wherever the stall is."""
+    from garage_mj.driving.drivers.learned import LearnedAVPDriver
+
+    class Cruise:
+        def act(self, obs):
+            return np.array([0.5, -0.2], np.float32)
+
+    class Park:
+        guide = True
+
+        def act(self, obs):
+            return np.array([0.3, 1.0, -1.0], np.float32)
+
+    driver = LearnedAVPDriver.__new__(LearnedAVPDriver)
+    driver.cruise, driver.park, driver.phase = Cruise(), Park(), "cruise"
+
+    def step(gear, speed, slot_x=0.0):
+        guide = np.array([gear, 0.1, 0.0, 0.0, 0.0, 4.0, 1.0], np.float32) if gear else np.zeros(7, np.float32)
+        return driver.act({"park_guide": guide, "slot": np.array([slot_x, -5.0, 1.57, 2.5, 4.5], np.float32),
+                           "speed": np.array([speed], np.float32)}).tolist()
+
+    assert step(0.0, 3.0) == [0.5, pytest.approx(-0.2), 1.0] and driver.phase == "cruise"  # stall alongside: not yet
+    assert step(1.0, 3.0, slot_x=7.0) == [-1.0, 0.0, 1.0] and driver.phase == "stop"  # the guide begins: brake
+    assert step(1.0, 0.0, slot_x=6.5) == [pytest.approx(0.3), 1.0, -1.0] and driver.phase == "park"  # at rest: park
 
 
 def test_a_park_command_is_the_nearest_of_the_grid_in_the_same_gear():

@@ -266,10 +266,13 @@ class LearnedAVPDriver:
     """An AVP test driven by two learned models: the cruise model to the stall, then the parking model into it.
 
     ``learned:avp``: the shipped cruise model (:class:`LearnedDriver`, the paper's 4 actions sent as their
-    ``[throttle, steer]`` commands in drive) follows the route from the entrance. When the slot detector reports the
-    target stall alongside (its centre within :data:`HANDOVER_AHEAD` ahead or behind and :data:`HANDOVER_RANGE`
-    away: where a park test starts), the car brakes to rest and the parking model (:class:`LearnedParkDriver`)
-    parks it. Both see only their own unprivileged observations; the handover is the one rule between them.
+    ``[throttle, steer]`` commands in drive) follows the route from the entrance. Where a park test would start, the
+    car brakes to rest and the parking model (:class:`LearnedParkDriver`) parks it: for a parking model that reads the
+    park guide, when the guide begins (its gear reads non-zero: the car has come within
+    :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the park plan's start); for one without, when the slot
+    detector reports the target stall alongside (its centre within :data:`HANDOVER_AHEAD` ahead or behind and
+    :data:`HANDOVER_RANGE` away). Both see only their own unprivileged observations; the handover is the one rule
+    between them.
     """
 
     action_type = "continuous"
@@ -290,12 +293,19 @@ class LearnedAVPDriver:
         self.cruise.reset({**info, "action_type": "continuous"})
         self.phase = "cruise"
 
+    def _at_park_start(self, obs: dict[str, Any]) -> bool:
+        """Whether the car is where a park test starts: the park guide has begun, or without one the stall is
+        alongside."""
+        if self.park.guide:
+            return "park_guide" in obs and float(np.asarray(obs["park_guide"]).reshape(-1)[0]) != 0.0
+        slot = np.asarray(obs["slot"], dtype=float).reshape(-1) if "slot" in obs else None
+        return slot is not None and abs(slot[0]) <= self.HANDOVER_AHEAD and math.hypot(slot[0], slot[1]) <= \
+            self.HANDOVER_RANGE
+
     def act(self, obs: dict[str, Any]) -> np.ndarray:
-        """The cruise model's command until the stall is alongside, a stop, then the parking model's."""
+        """The cruise model's command until the car is where a park test starts, a stop, then the parking model's."""
         if self.phase == "cruise":
-            slot = np.asarray(obs["slot"], dtype=float).reshape(-1) if "slot" in obs else None
-            if slot is not None and abs(slot[0]) <= self.HANDOVER_AHEAD and math.hypot(slot[0], slot[1]) <= \
-                    self.HANDOVER_RANGE:
+            if self._at_park_start(obs):
                 self.phase = "stop"
             else:
                 throttle, steer = (float(v) for v in self.cruise.act(obs))

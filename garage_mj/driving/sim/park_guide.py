@@ -10,8 +10,8 @@ current one (or past it), by the rule the privileged oracle's tracker keeps
 (:class:`~garage_mj.driving.drivers.park_tracking.ParkTracker`), so a driver imitating the oracle sees the stretch
 the oracle drives. The guide's rule (:data:`GUIDE_TRACKING`) takes a cusp as reached at rest within
 :data:`CUSP_WITHIN` of it, and a car at rest farther short stays on its stretch. In an AVP test the plan begins
-where the cruise to the stall ends: the guide follows the car only once it has come within :data:`START_RADIUS` of
-the plan's start.
+where the cruise to the stall ends: the guide reads zeros (no gear) until the car has come within
+:data:`START_RADIUS` of the plan's start, and follows it from there.
 
 It is route information (where the planned way goes, like ``waypoint``), not the car's pose in the garage or
 another road user's state; the observation table (:mod:`~garage_mj.driving.sim.observations`) has it as the
@@ -76,7 +76,10 @@ class ParkGuide:
         """:data:`GUIDE_KEYS` for the car at ``pose``: the stretch's gear (+1 D, -1 R); the rear axle's offset from
         it [m] (left of the direction of travel) and the car's heading off it [rad]; its curvature [1/m] (signed as
         the road wheels must turn, left positive, in the stretch's gear) :data:`NEAR` and :data:`FAR` ahead; the
-        stretch left [m] (negative past its end) and the stretches after it."""
+        stretch left [m] (negative past its end) and the stretches after it. Zeros (no gear) until the car has come
+        within :data:`START_RADIUS` of the plan's start: in an AVP test, while it cruises to the stall."""
+        if not self._near_start(pose):
+            return np.zeros(len(GUIDE_KEYS), dtype=np.float32)
         t = self.tracker
         s_now, lateral, heading, left = t.errors(pose)
         seg = t.segment
