@@ -435,25 +435,32 @@ def test_train_driver_task_park_trains_a_parking_model_that_parks_with_its_senso
     assert result is not None
 
 
-def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_parks():
-    """A parking model without the park guide takes over where the slot detector shows the stall alongside."""
-    from garage_mj.driving.drivers import resolve_driver
+def avp_driver(guide: bool):
+    """A learned:avp driver over two stand-in models: the cruise one always says [0.5, -0.2], the parking one (reading
+    the park guide or not) [0.3, 1.0, -1.0]."""
     from garage_mj.driving.drivers.learned import LearnedAVPDriver
-
-    assert resolve_driver("learned:avp") is LearnedAVPDriver and LearnedAVPDriver.tasks == ("avp",)
 
     class Cruise:
         def act(self, obs):
             return np.array([0.5, -0.2], np.float32)
 
     class Park:
-        guide = False
-
         def act(self, obs):
             return np.array([0.3, 1.0, -1.0], np.float32)
 
     driver = LearnedAVPDriver.__new__(LearnedAVPDriver)
     driver.cruise, driver.park, driver.phase = Cruise(), Park(), "cruise"
+    driver.park.guide = guide
+    return driver
+
+
+def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_parks():
+    """A parking model without the park guide takes over where the slot detector shows the stall alongside."""
+    from garage_mj.driving.drivers import resolve_driver
+    from garage_mj.driving.drivers.learned import LearnedAVPDriver
+
+    assert resolve_driver("learned:avp") is LearnedAVPDriver and LearnedAVPDriver.tasks == ("avp",)
+    driver = avp_driver(guide=False)
 
     def step(slot_x, slot_y, speed):
         return driver.act({"slot": np.array([slot_x, slot_y, 1.57, 2.5, 4.5], np.float32),
@@ -470,20 +477,7 @@ def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_
 def test_the_learned_avp_driver_hands_over_where_the_park_guide_begins():
     """A parking model that reads the park guide takes over where the guide begins (the park plan's start, where its
     park tests started), wherever the stall is."""
-    from garage_mj.driving.drivers.learned import LearnedAVPDriver
-
-    class Cruise:
-        def act(self, obs):
-            return np.array([0.5, -0.2], np.float32)
-
-    class Park:
-        guide = True
-
-        def act(self, obs):
-            return np.array([0.3, 1.0, -1.0], np.float32)
-
-    driver = LearnedAVPDriver.__new__(LearnedAVPDriver)
-    driver.cruise, driver.park, driver.phase = Cruise(), Park(), "cruise"
+    driver = avp_driver(guide=True)
 
     def step(gear, speed, slot_x=0.0):
         guide = np.array([gear, 0.1, 0.0, 0.0, 0.0, 4.0, 1.0], np.float32) if gear else np.zeros(7, np.float32)
