@@ -177,3 +177,11 @@ def test_a_driver_without_a_model_of_its_own_gets_the_default_and_false_gets_non
     other = choose_park_model(True, "oracle")
     assert own.name == other.name == "park_assist" and own.note is None and "oracle" in other.note
     assert choose_park_model(False, "oracle").model is None
+
+
+def test_the_shipped_learned_parking_driver_is_rated_by_its_own_model_and_another_model_file_by_the_default():
+    own = choose_park_model(True, "learned:park")
+    assert own.name == "learned_park" and own.note is None and own.model.fit["drivers"] == ["learned:park"]
+    retrained = choose_park_model(True, "learned:park", {"model": "runs/mine/model.zip"})  # not the shipped model
+    assert retrained.name == "park_assist" and "learned:park" in retrained.note
+    assert choose_park_model("learned_park", "oracle").model.key == own.model.key  # a shipped model by its name

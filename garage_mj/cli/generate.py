@@ -20,7 +20,7 @@ from garage_mj.cli._common import (
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES, geometry_names
 from garage_mj.generation.library import check_writable
 from garage_mj.grid.map_io import list_maps, load_map
-from garage_mj.scene.park_difficulty import SHIPPED_PARK_MODELS, load_park_model
+from garage_mj.scene.park_difficulty import DEFAULT_PARK_MODEL, SHIPPED_PARK_MODELS, load_park_model
 from garage_mj.scene.route_difficulty import load_route_model, route_difficulty
 from garage_mj.scene.world import GEOMETRY_KEYS, geometry, world_with
 
@@ -77,7 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"with --metric route: a model of garage-mj difficulty fit (default: the shipped one; {SHIPPED_ROUTE_MODELS})")
     p.add_argument("--park-model", metavar="FILE",
                    help="with --metric park: a model of garage-mj difficulty fit --task park, or a shipped one's name "
-                        f"(default: {', '.join(SHIPPED_PARK_MODELS)})")
+                        f"(default: {DEFAULT_PARK_MODEL}; shipped: {', '.join(SHIPPED_PARK_MODELS)})")
     p.add_argument("--coverage", nargs=2, type=unit_range, metavar=("LO", "HI"), help="coverage band [LO, HI] (0-1)")
     p.add_argument("--count", required=True, type=int_in(1, MAX_COUNT),
                    help=f"distinct garages to find (1 to {MAX_COUNT:,})")

@@ -8,8 +8,9 @@ aisle, a tighter, longer plan with more cusps, a farther start, an angled or a p
 more actors, more jitter of the parked cars. A test's park difficulty is its fitted failure probability, in [0, 1].
 
 Its file has a format of its own (:data:`FORMAT`): a route model is never read as a park model, nor the other way.
-The shipped ones are in ``models/difficulty`` (:data:`SHIPPED_PARK_MODELS`, per driver: ``park_assist.json``, fitted
-on ``park_assist``'s park tests by ``eval/park_difficulty.py``, is also the default for other drivers).
+The shipped ones are in ``models/difficulty`` (:data:`SHIPPED_PARK_MODELS`, per driver, each fitted on the park tests
+of its driver by ``eval/park_difficulty.py``: ``park_assist.json``, also the default for a driver without one of its
+own, and ``learned_park.json``, the shipped learned parking driver's).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ FORMAT = "garage-mj park difficulty"
 VERSION = 1
 #: The shipped park models by name (``--park-model park_assist``), each fitted on the driver of its name; the
 #: first is the default of a driver without one of its own.
-SHIPPED_PARK_MODELS = {"park_assist": "park_assist.json"}
+SHIPPED_PARK_MODELS = {"park_assist": "park_assist.json", "learned_park": "learned_park.json"}
 DEFAULT_PARK_MODEL = "park_assist"
 FIT_COMMAND = "garage-mj difficulty fit --task park"
 PLAN_CLEAR_CAP = 3.0  # [m] a plan's clearance counts up to this: farther obstacles make no test harder
