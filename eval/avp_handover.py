@@ -1,0 +1,104 @@
+"""Where ``learned:avp`` hands over from the cruise model to the parking model, and what comes of it.
+
+A diagnosis, not a benchmark: it reads the env's privileged state (the car's pose, the park plan) to measure the
+handover, which the driver itself never sees. For the first ``--garages`` of a held-out garage set
+(``docs/learned_driver/heldout/``) in one park geometry, ``--tests`` AVP tests each (the seeds ``garage-mj cruise``
+would use with ``--seed``), driven by ``learned:avp`` with its handover rule (``--rule guide``: where the park guide
+begins, the driver's own) or the slot detector's (``--rule slot``: the stall alongside, centre within 1 m ahead or
+behind and 8 m away, the rule a parking model without the guide gets). Per test: the outcome, where the car was when
+the parking model took over (distance to the park plan's start, heading off it, the slot detector's reading), and how
+many of the plan's stretches the guide reached.
+
+    MUJOCO_GL=egl .venv/bin/python eval/avp_handover.py --rule guide --garages 5 --tests 2
+    MUJOCO_GL=egl .venv/bin/python eval/avp_handover.py --rule slot --garages 5 --tests 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from garage_mj.driving.drivers.learned import LearnedAVPDriver
+from garage_mj.driving.episode import cached_env
+from garage_mj.driving.garage_set import load_garage_set
+from garage_mj.driving.learning.observation import PARK_SENSORS
+from garage_mj.driving.park_geometries import PARK_GEOMETRIES
+from garage_mj.driving.sim.outcomes import NOT_DRIVEN
+from garage_mj.driving.sources import CruiseSettings, cruise_seed
+
+HELDOUT = Path(__file__).resolve().parents[1] / "docs" / "learned_driver" / "heldout"
+
+
+class SlotHandover(LearnedAVPDriver):
+    """``learned:avp`` with the slot detector's handover whatever the parking model reads."""
+
+    def _at_park_start(self, obs) -> bool:
+        slot = np.asarray(obs["slot"], dtype=float).reshape(-1)
+        return abs(slot[0]) <= self.HANDOVER_AHEAD and math.hypot(slot[0], slot[1]) <= self.HANDOVER_RANGE
+
+
+def drive(env, driver, seed: int) -> dict:
+    """One AVP test to its end: its outcome and the handover's pose against the park plan's start."""
+    obs, info = env.reset(seed=seed)
+    if info.get("outcome") in NOT_DRIVEN:
+        return {"outcome": info["outcome"]}
+    driver.reset(env.driver_info(seed))
+    start = env._park.plan.poses[0]  # privileged: measured here, never given to the driver
+    handover, furthest = None, 0
+    while True:
+        action = driver.act(obs)
+        if driver.phase == "park" and handover is None:
+            x, y, yaw = env.car.pose(env.data)
+            handover = {"time_s": round(float(env.data.time), 1),
+                        "from_plan_start_m": round(math.hypot(x - start[0], y - start[1]), 2),
+                        "heading_off_deg": round(math.degrees(math.remainder(yaw - start[2], math.tau)), 1),
+                        "slot": [round(float(v), 2) for v in np.asarray(obs["slot"]).reshape(-1)[:2]]}
+        obs, _, term, trunc, info = env.step(action)
+        furthest = max(furthest, env.park_guide.stretch if env.park_guide is not None else 0)
+        if term or trunc:
+            break
+    stretches = len(env.park_guide.tracker.segments) if env.park_guide is not None else 0
+    return {"outcome": info["outcome"], "maneuver": info.get("maneuver"), "handover": handover,
+            "stretches_reached": furthest + 1, "stretches": stretches, "reason": info["reason"]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rule", choices=("guide", "slot"), default="guide", help="the handover rule (default guide)")
+    ap.add_argument("--set", default="m5_unseen_seed", help="held-out garage set (default m5_unseen_seed)")
+    ap.add_argument("--geometry", default="default", choices=sorted(PARK_GEOMETRIES))
+    ap.add_argument("--garages", type=int, default=5)
+    ap.add_argument("--tests", type=int, default=2, help="AVP tests per garage (default 2)")
+    ap.add_argument("--seed", type=int, default=0, help="run seed (the tests garage-mj cruise --seed draws)")
+    ap.add_argument("--json", type=Path, help="write the per-test records here")
+    args = ap.parse_args(argv)
+    sources = list(load_garage_set(str(HELDOUT / f"{args.set}.json")))[: args.garages]
+    settings = CruiseSettings(driver="learned:avp", seed=args.seed, task="avp", maneuver="any",
+                              action_type="continuous", env=PARK_GEOMETRIES[args.geometry].env_kwargs()
+                              ).with_sensors(PARK_SENSORS)
+    driver = SlotHandover() if args.rule == "slot" else LearnedAVPDriver()
+    records = []
+    for source in sources:
+        env = cached_env(source, settings)
+        for index in range(args.tests):
+            record = {"garage": source.name, "test": index,
+                      **drive(env, driver, cruise_seed(args.seed, source.hash, index))}
+            records.append(record)
+            print(json.dumps(record), flush=True)
+    driven = [r for r in records if r["outcome"] not in NOT_DRIVEN]
+    near = [r for r in driven if r["handover"] and r["handover"]["from_plan_start_m"] <= 1.5]
+    print(f"--rule {args.rule}: {sum(r['outcome'] == 'success' for r in driven)} of {len(driven)} driven AVP tests "
+          f"completed; {len(near)} handovers within 1.5 m of the park plan's start, "
+          f"{sum(r['handover'] is None for r in driven)} tests ended before any")
+    if args.json:
+        args.json.write_text(json.dumps(records, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
