@@ -4,7 +4,8 @@
         [--seconds 10] [--seed 0] [--json docs/bench_generate_park.json]
 
 Per map (default: the shipped 13x13 maps), park geometry (``default``, and ``tight``: stall width 2.3 m, aisle width
-6.5 m) and band [b/5, (b+1)/5] of the park difficulty (the shipped ``park_assist`` model): one call of
+6.5 m) and band [b/5, (b+1)/5] of the park difficulty (``--park-model``, default the shipped ``park_assist`` model; the
+learned parking driver's: ``learned_park``): one call of
 ``garage_mj.generation.generator.generate`` with ``garage_mj.scene.park_rating.ParkRater`` as its metric (what
 ``garage-mj generate --metric park`` runs), asking for ``--count`` garages within ``--seconds`` of wall time into a
 throw-away library. A band is filled when the call finds ``--count``. Each row records the garages found, the
@@ -32,6 +33,7 @@ from _provenance import provenance  # eval/_provenance.py: command, date, machin
 from garage_mj.core.fsutil import write_json
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.generation.generator import GenerationError, RouteMetric, generate
+from garage_mj.scene.park_difficulty import DEFAULT_PARK_MODEL, SHIPPED_PARK_MODELS, load_park_model
 from garage_mj.scene.park_rating import ParkRater, generate_in_geometries
 from garage_mj.scene.world import geometry, world_with
 
@@ -64,7 +66,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=Path("docs/bench_generate_park.json"))
     ap.add_argument("--search", metavar="NAMES", help="named park geometries searched by one call per band")
+    ap.add_argument("--park-model", default=DEFAULT_PARK_MODEL,
+                    help=f"the park difficulty: a shipped model's name ({', '.join(SHIPPED_PARK_MODELS)}) or a model "
+                         f"file (default {DEFAULT_PARK_MODEL})")
     args = ap.parse_args()
+    args.model = load_park_model(args.park_model)
     if args.search:
         return searched(args, [n.strip() for n in args.search.split(",") if n.strip()])
     rows, summary = [], []
@@ -76,7 +82,7 @@ def main() -> None:
                 filled = []
                 for b in range(N_BANDS):
                     band = (b / N_BANDS, (b + 1) / N_BANDS)
-                    rater = ParkRater(world, seed=args.seed)
+                    rater = ParkRater(world, model=args.model, seed=args.seed)
                     timed = _Timed(rater)
                     metric = RouteMetric(timed, rater.key, "park difficulty")
                     lib = Path(tmp) / f"{geo_name}_{map_name}_{b}.sqlite"
@@ -107,7 +113,7 @@ def main() -> None:
     rated = sum(r["rated"] for r in rows)
     per = sum(r["rating_cpu_s"] for r in rows) / rated if rated else None
     out = {"provenance": provenance(), "count": args.count, "seconds_per_band": args.seconds, "seed": args.seed,
-           "bands": N_BANDS, "model": "park_assist (shipped)", "summary": summary,
+           "bands": N_BANDS, "model": f"{args.park_model} ({args.model.key})", "summary": summary,
            "seconds_per_rating": round(per, 3) if per else None, "garages_rated": rated,
            "wall_s": round(time.perf_counter() - t_all, 1), "rows": rows}
     args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -127,7 +133,8 @@ def searched(args: argparse.Namespace, names: list[str]) -> None:
             filled = []
             for b in range(N_BANDS):
                 band = (b / N_BANDS, (b + 1) / N_BANDS)
-                raters = {n: ParkRater(world_with(PARK_GEOMETRIES[n].world), seed=args.seed) for n in names}
+                raters = {n: ParkRater(world_with(PARK_GEOMETRIES[n].world), model=args.model, seed=args.seed)
+                          for n in names}
                 t0 = time.perf_counter()
                 try:
                     tried = generate_in_geometries(map_name, band, args.count, Path(tmp) / f"{map_name}_{b}.sqlite",
@@ -148,7 +155,7 @@ def searched(args: argparse.Namespace, names: list[str]) -> None:
                       f"(order {row['order']}) {row['wall_s']:.1f} s", flush=True)
             summary.append({"map": map_name, "bands_filled": len(filled), "bands": filled})
     out = {"provenance": provenance(), "count": args.count, "seconds_per_band": args.seconds, "seed": args.seed,
-           "bands": N_BANDS, "model": "park_assist (shipped)", "geometries": names, "summary": summary,
+           "bands": N_BANDS, "model": f"{args.park_model} ({args.model.key})", "geometries": names, "summary": summary,
            "wall_s": round(time.perf_counter() - t_all, 1), "rows": rows}
     args.json.parent.mkdir(parents=True, exist_ok=True)
     write_json(args.json, out, indent=1)
