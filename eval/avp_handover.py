@@ -38,8 +38,7 @@ class SlotHandover(LearnedAVPDriver):
     """``learned:avp`` with the slot detector's handover whatever the parking model reads."""
 
     def _at_park_start(self, obs) -> bool:
-        slot = np.asarray(obs["slot"], dtype=float).reshape(-1)
-        return abs(slot[0]) <= self.HANDOVER_AHEAD and math.hypot(slot[0], slot[1]) <= self.HANDOVER_RANGE
+        return self._stall_alongside(obs)
 
 
 def drive(env, driver, seed: int) -> dict:

@@ -438,6 +438,7 @@ def test_a_model_whose_plain_fields_lie_is_refused(tmp_path, dqn_zip):
 
 
 def test_a_driver_loads_its_model_to_act_the_same_as_a_trainer_would(dqn_zip):
+    import torch
     from stable_baselines3 import DQN
 
     from garage_mj.driving.learning.saved_model import ActingOnly, load_driver_model
@@ -451,12 +452,6 @@ def test_a_driver_loads_its_model_to_act_the_same_as_a_trainer_would(dqn_zip):
         obs = {k: v[None] for k, v in acting.observation_space.sample().items()}
         assert acting.predict(obs, deterministic=True)[0] == trainable.predict(obs, deterministic=True)[0]
     for a, b in zip(acting.policy.parameters(), trainable.policy.parameters(), strict=True):
-        assert torch_equal(a, b)
+        assert torch.equal(a, b)
     with pytest.raises(RuntimeError, match="loaded to act"):
         acting.policy.optimizer.step()
-
-
-def torch_equal(a, b) -> bool:
-    import torch
-
-    return bool(torch.equal(a, b))

@@ -298,6 +298,10 @@ class LearnedAVPDriver:
         alongside."""
         if self.park.guide:
             return "park_guide" in obs and float(np.asarray(obs["park_guide"]).reshape(-1)[0]) != 0.0
+        return self._stall_alongside(obs)
+
+    def _stall_alongside(self, obs: dict[str, Any]) -> bool:
+        """Whether the slot detector reports the target stall alongside (the handover without the park guide)."""
         slot = np.asarray(obs["slot"], dtype=float).reshape(-1) if "slot" in obs else None
         return slot is not None and abs(slot[0]) <= self.HANDOVER_AHEAD and math.hypot(slot[0], slot[1]) <= \
             self.HANDOVER_RANGE
