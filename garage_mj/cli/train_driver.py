@@ -23,6 +23,7 @@ from garage_mj.cli.cruise import scenario
 from garage_mj.core.config import load_config
 from garage_mj.core.fsutil import FolderLock
 from garage_mj.driving.garage_set import load_garage_set
+from garage_mj.driving.learning.saved_model import model_path
 from garage_mj.driving.learning.train import CURRICULA, TRAIN_TASKS, DriverTrainConfig, train_driver
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sim.park_task import MANEUVER_CHOICES
@@ -77,6 +78,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="validation garages drawn from a library or painted (default 20)")
     p.add_argument("--out", required=True, type=Path, help="run folder (must be new unless --resume)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out after its last finished iteration")
+    p.add_argument("--init", metavar="MODEL",
+                   help="start from this model instead of a new network, fine-tuning it on GARAGES: a model zip, "
+                        "learned / learned:park for a shipped one, or a run's RUN/checkpoints/iter_NNN.zip, which "
+                        "brings that run's states up to the iteration too; give the config it was trained with "
+                        "(e.g. models/drivers/park_m5.toml)")
     p.add_argument("--config", type=Path, help="TOML of DriverTrainConfig keys (unknown keys are an error)")
     p.add_argument("--iterations", type=positive_int, help="DAgger iterations (default 6)")
     p.add_argument("--steps", type=positive_int, help="env steps driven per iteration (default 6000)")
@@ -118,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
     if args.resume and not (args.out / "run.json").is_file():
         raise UserError(f"--resume: {args.out} holds no driver run to continue; drop --resume to start one there")
     scen = scenario(args)  # bad actor settings are refused before any garage is drawn
+    init = _init_path(args.init)
     garages = load_garage_set(args.garages, map=args.map, difficulty=checked_range(args.difficulty, "difficulty"),
                               run_seeds=args.run_seeds, n=args.n, seed=args.seed)
     validation = None
@@ -137,10 +144,25 @@ def run(args: argparse.Namespace) -> int:
     with FolderLock(args.out, "garage-mj train-driver", remove=True):
         model = train_driver(garages, args.out, validation=validation, config=config, seed=args.seed,
                              resume=args.resume, progress=not args.no_progress,
-                             env_kwargs=None if scen is None else {"scenario": scen})
+                             env_kwargs=None if scen is None else {"scenario": scen}, init=init)
     state = json.loads((args.out / "run.json").read_text())["state"]
     chosen = state.get("selected_iteration")
     row = next((r for r in state["curve"] if r["iteration"] == chosen), {})
     print(f"model -> {model} (iteration {chosen} of {state['iterations_done']}, validation success "
           f"{row.get('val_success', '-')}; {state['wall_s'] / 60:.1f} min); drive it with --driver learned:{model}")
     return 0
+
+
+def _init_path(spec: str | None) -> Path | None:
+    """The model file ``--init`` names (a zip, ``learned`` or ``learned:park``); one that is not a file: a
+    :class:`UserError`, before anything is written."""
+    if spec is None:
+        return None
+    name = spec.removeprefix("learned:") if spec.startswith("learned:") else ("" if spec == "learned" else None)
+    if name == "avp":
+        raise UserError("--init learned:avp is two models (cruise and park): name one, learned or learned:park")
+    path = model_path(name) if name is not None else Path(spec).expanduser()
+    if not path.is_file():
+        raise UserError(f"--init {spec}: {path} is not a file; name a model zip (a run's model.zip or "
+                        "checkpoints/iter_NNN.zip) or learned:park")
+    return path

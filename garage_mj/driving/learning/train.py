@@ -493,10 +493,15 @@ _LOST = (EOFError, ConnectionError)
 
 def train_driver(garages, out_dir: str | Path, *, validation=None, config: DriverTrainConfig | dict | None = None,
                  seed: int = 0, resume: bool = True, progress: bool = True,
-                 env_kwargs: dict[str, Any] | None = None) -> Path:
+                 env_kwargs: dict[str, Any] | None = None, init: str | Path | None = None) -> Path:
     """Train a learned driver on ``garages`` (a :class:`~garage_mj.driving.garage_set.GarageSet`) into
     ``out_dir`` (module docstring); ``validation``: the garages of the curve (default: the training
-    ones). Returns the final model's path. Same seed and config, same model, interrupted or not."""
+    ones). Returns the final model's path. Same seed and config, same model, interrupted or not.
+
+    ``init``: a model zip of the same task and network to start from instead of a new network (fine-tuning a
+    trained driver on other garages): a run's checkpoint (``RUN/checkpoints/iter_NNN.zip``) brings that run's
+    states up to its iteration too, and DAgger goes on over them and this run's (:func:`init_states`); any other
+    zip (a ``model.zip``, a shipped model) its network only."""
     import torch
     from stable_baselines3 import DQN  # noqa: F401  (here: a missing stable-baselines3 fails before the folder is made)
 
@@ -511,13 +516,16 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
     if cfg.parking:
         env_kwargs.update(task=cfg.task, maneuver=cfg.maneuver)
     manifest = _new_manifest(garages, validation, sources, cfg, seed, env_kwargs)
+    if init is not None:
+        manifest["init"] = {"model": str(init), "sha256": _sha256(Path(init)),
+                            "states_from": [str(p) for p in init_states(Path(init))]}
     state = _resumed_state(out, manifest, cfg, resume)
     with _undone_if_no_run(out):
         _prepare_folder(out, garages, validation)
         torch.set_num_threads(cfg.torch_threads)
         workers = _Workers(sources, cfg.n_envs, env_kwargs, cfg.variants(), cfg.fleet_options())  # the garages the worker envs draw from (the hunt adds some)
         try:
-            model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed)
+            model = _start_model(out, state["iterations_done"], workers.venv, cfg, seed, init)
             state = _dagger(model, workers, out, manifest, state, sources, val_sources, cfg, seed, env_kwargs,
                             progress)
             state["selected_iteration"] = _selected(state["curve"])
@@ -544,7 +552,7 @@ def _new_manifest(garages, validation, sources: list[CruiseSource], cfg: DriverT
 
 
 #: The manifest's keys a run resumes only under (more iterations or a DQN stage extend a run: not compared).
-_RESUME_KEYS = ("seed", "config", "env", "garage_hashes")
+_RESUME_KEYS = ("seed", "config", "env", "garage_hashes", "init")
 _EXTENDS = {"iterations": 0, "rl_timesteps": 0}
 
 
@@ -615,12 +623,15 @@ def _undone_if_no_run(out: Path):
         raise
 
 
-def _start_model(out: Path, done: int, venv, cfg: DriverTrainConfig, seed: int):
-    """The model after ``done`` iterations: the last checkpoint's, or a new one seeded with ``seed``."""
+def _start_model(out: Path, done: int, venv, cfg: DriverTrainConfig, seed: int, init: str | Path | None = None):
+    """The model after ``done`` iterations: the last checkpoint's, ``init``'s (:func:`_init_model`) or a new one
+    seeded with ``seed``."""
     from stable_baselines3 import DQN
 
     if done:
         return _load_checkpoint(out / "checkpoints" / f"iter_{done - 1:03d}.zip", venv, cfg)
+    if init is not None:
+        return _init_model(Path(init), venv, cfg, seed)
     from garage_mj.driving.learning.network import CameraRouteExtractor
 
     policy_kwargs = {"net_arch": list(cfg.net_arch), "features_extractor_class": CameraRouteExtractor,
@@ -631,6 +642,57 @@ def _start_model(out: Path, done: int, venv, cfg: DriverTrainConfig, seed: int):
                learning_starts=0, policy_kwargs=policy_kwargs)
 
 
+def _init_model(path: Path, venv, cfg: DriverTrainConfig, seed: int):
+    """The model zip at ``path`` to start a run from, on ``venv``: its observation and actions must be this run's
+    and its network the one ``cfg`` describes (else a :class:`TrainDriverError` naming the difference)."""
+    from stable_baselines3 import DQN
+
+    try:
+        model = load_driver_model(path, DQN, env=venv)
+    except ModelFileError as exc:
+        raise TrainDriverError(f"--init {path} cannot start this run: {exc}") from None
+    kwargs = model.policy_kwargs or {}
+    have = {"net_arch": list(kwargs.get("net_arch") or []),
+            "cnn_channels": list((kwargs.get("features_extractor_kwargs") or {}).get("channels") or []),
+            "cnn_features": (kwargs.get("features_extractor_kwargs") or {}).get("cnn_features")}
+    want = {"net_arch": list(cfg.net_arch), "cnn_channels": list(cfg.cnn_channels), "cnn_features": cfg.cnn_features}
+    diff = [k for k in want if have[k] != want[k]]
+    if diff:
+        k = diff[0]
+        raise TrainDriverError(f"--init {path} has {k} {have[k]}, this run's config {want[k]}: give the config the "
+                               "model was trained with (for a shipped model, models/drivers/<name>.toml)")
+    model.set_random_seed(seed)
+    return model
+
+
+def init_states(model: Path) -> list[Path]:
+    """The states a run started from ``model`` trains on besides its own: for a checkpoint of a driver run
+    (``RUN/checkpoints/iter_NNN.zip`` beside ``RUN/run.json``), that run's ``data/iter_000.npz`` to
+    ``iter_NNN.npz`` (the states its network was fitted on; a missing one: a :class:`TrainDriverError`); for
+    any other file none."""
+    run = model.parent.parent
+    stem = model.stem
+    if model.parent.name != "checkpoints" or not (run / MANIFEST).is_file() or not stem.startswith("iter_") \
+            or not stem[5:].isdigit():
+        return []
+    shards = [run / "data" / f"iter_{i:03d}.npz" for i in range(int(stem[5:]) + 1)]
+    missing = [p for p in shards if not p.is_file()]
+    if missing:
+        raise TrainDriverError(f"--init {model}: its run's states {missing[0]} are missing; start from the run's "
+                               "model.zip (its network only) or restore the run's data/")
+    return shards
+
+
+def _sha256(path: Path) -> str:
+    """The SHA-256 of the file at ``path`` (a missing one: a :class:`TrainDriverError`)."""
+    import hashlib
+
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise TrainDriverError(f"--init {path}: {exc.strerror or exc}; name a model zip") from None
+
+
 def _dagger(model, workers: _Workers, out: Path, manifest: dict[str, Any], state: dict[str, Any],
             sources: list[CruiseSource], val_sources: list[CruiseSource], cfg: DriverTrainConfig, seed: int,
             env_kwargs: dict[str, Any], progress: bool) -> dict[str, Any]:
@@ -639,7 +701,9 @@ def _dagger(model, workers: _Workers, out: Path, manifest: dict[str, Any], state
     import torch
 
     done = state["iterations_done"]
-    shards = [_load_shard(out / "data" / f"iter_{i:03d}.npz", out) for i in range(done)]
+    before = [Path(p) for p in manifest.get("init", {}).get("states_from", [])]
+    shards = [_load_shard(p, p.parents[1]) for p in before]
+    shards += [_load_shard(out / "data" / f"iter_{i:03d}.npz", out) for i in range(done)]
     images = [s["image"] for s in shards]
     vectors = [s["vector"] for s in shards]
     labels = [s["label"] for s in shards]
