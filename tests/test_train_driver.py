@@ -276,6 +276,41 @@ def one_iteration_run(tmp_path_factory):
     return argv, root / "run"
 
 
+def test_init_starts_from_a_trained_model_and_a_checkpoint_brings_its_runs_states(one_iteration_run, tmp_path,
+                                                                                   capsys):
+    """``--init RUN/checkpoints/iter_NNN.zip`` fits the new run over that run's states and its own; ``--init
+    model.zip`` over its own only; a resume with another --init, a missing file or another network is refused in
+    one line, and a refused start leaves no folder."""
+    from garage_mj.cli import main
+
+    argv, run = one_iteration_run
+    ckpt = run / "checkpoints" / "iter_000.zip"
+    out = tmp_path / "tuned"
+    assert main([*argv, "--out", str(out), "--init", str(ckpt)]) == 0
+    manifest = json.loads((out / "run.json").read_text())
+    assert manifest["init"]["states_from"] == [str(run / "data" / "iter_000.npz")]
+    assert manifest["state"]["curve"][0]["states"] == 40  # the run's 20 states and the 20 it started from
+    weights = tmp_path / "weights"
+    assert main([*argv, "--out", str(weights), "--init", str(run / "model.zip")]) == 0
+    manifest = json.loads((weights / "run.json").read_text())
+    assert manifest["init"]["states_from"] == [] and manifest["state"]["curve"][0]["states"] == 20
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out), "--resume", "--init", str(run / "model.zip")]) == 2
+    assert "another init" in capsys.readouterr().err
+    for init, what in ((tmp_path / "none.zip", "is not a file"), ("learned:avp", "two models")):
+        assert main([*argv, "--out", str(tmp_path / "refused"), "--init", str(init)]) == 2
+        err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        assert len(err) == 1 and what in err[0], err
+    other = tmp_path / "other.toml"
+    other.write_text("epochs = 1\nbatch_size = 32\nval_tests = 0\ncnn_channels = [8, 16, 16]\n")
+    config = argv.index("--config") + 1
+    assert main([*argv[:config], str(other), *argv[config + 1:], "--out", str(tmp_path / "refused"),
+                 "--init", str(ckpt)]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1 and "cnn_channels" in err[0] and "models/drivers/" in err[0], err
+    assert not (tmp_path / "refused").exists()
+
+
 @pytest.mark.parametrize("how", ["truncated", "garbage", "empty", "missing", "other_arrays"])
 def test_resume_over_a_damaged_data_shard_is_one_line_naming_it(one_iteration_run, tmp_path, capsys, how):
     import shutil
