@@ -208,3 +208,41 @@ def test_cli_park_scenarios_are_named_and_refused_in_cruise_tests(tmp_path, caps
                  "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "park_car_pulling_out" in err[0]
+
+
+def test_a_present_foresight_tracker_yields_only_to_where_an_actor_is_now(tiny):
+    """The privileged tracker stops for a pedestrian that will cross its path; with ``actor_foresight`` "present"
+    (the expert a camera-driven learner imitates) only once the pedestrian is on it, and both go on when it has
+    passed."""
+    from garage_mj.driving.drivers.park_tracking import ACTOR_FORESIGHT, ParkTrackConfig, ParkTracker
+
+    env = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_pedestrian_behind")
+    try:
+        env.reset(seed=2)
+        (ped,) = env.scenario.actors
+        plan = env._park.plan
+        trackers = {f: ParkTracker(plan.poses, plan.directions, env.car_geometry, ParkTrackConfig(actor_foresight=f))
+                    for f in ACTOR_FORESIGHT}
+        for tracker in trackers.values():
+            tracker.watch([ped], 0.4, 0.5, 2.0)
+        tracker = trackers["trajectory"]
+        k = next(i for i, b in enumerate(tracker.blocks) if b)  # the stretch the pedestrian crosses
+        (_, times, _), = tracker.blocks[k]
+        on_path = trackers["present"].blocks[k][0][2].any(axis=1)  # per moment: on the path now
+        assert on_path.any() and not on_path[0]
+        first = int(np.flatnonzero(on_path)[0])
+        gone = int(np.flatnonzero(on_path)[-1]) + 1
+
+        def stop(foresight, t):
+            tr = trackers[foresight]
+            tr.k, tr.index = k, 0
+            return tr._actor_stop(np.array([[0.0, 0.0, 0.0, times[t] + 0.2]]))
+
+        assert stop("trajectory", 0) < math.inf and stop("present", 0) == math.inf  # coming: only foresight stops
+        assert stop("trajectory", first) < math.inf and stop("present", first) < math.inf  # on the path: both
+        if gone < len(times):
+            assert stop("present", gone) == math.inf  # passed
+        with pytest.raises(ValueError, match="actor_foresight"):
+            ParkTrackConfig(actor_foresight="psychic")
+    finally:
+        env.close()

@@ -311,6 +311,24 @@ def test_init_starts_from_a_trained_model_and_a_checkpoint_brings_its_runs_state
     assert not (tmp_path / "refused").exists()
 
 
+def test_a_run_from_before_a_config_key_existed_resumes_under_its_default(one_iteration_run, tmp_path, capsys):
+    import shutil
+
+    from garage_mj.cli import main
+
+    argv, run = one_iteration_run
+    out = tmp_path / "run"
+    shutil.copytree(run, out)
+    manifest = json.loads((out / "run.json").read_text())
+    del manifest["config"]["expert_foresight"]  # as a run.json written before the key was added
+    (out / "run.json").write_text(json.dumps(manifest))
+    assert main([*argv, "--out", str(out), "--resume"]) == 0
+    manifest["config"]["expert_foresight"] = "present"  # another value than the default is another config
+    (out / "run.json").write_text(json.dumps(manifest))
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out), "--resume"]) == 2 and "another config" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("how", ["truncated", "garbage", "empty", "missing", "other_arrays"])
 def test_resume_over_a_damaged_data_shard_is_one_line_naming_it(one_iteration_run, tmp_path, capsys, how):
     import shutil

@@ -37,6 +37,9 @@ from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.car import CarGeometry
 from garage_mj.scene.park_planning import centre_to_rear, rear_to_centre
 
+#: What a park tracker yields to (:attr:`ParkTrackConfig.actor_foresight`).
+ACTOR_FORESIGHT = ("trajectory", "present")
+
 
 @dataclass(frozen=True)
 class ParkTrackConfig:
@@ -68,6 +71,14 @@ class ParkTrackConfig:
     # [m] at rest farther than this short of where a segment's stop begins, with the stop begun (it braked early):
     # creep on instead of holding there (inf: hold). The oracle stops where it means to; a learner it labels for may not
     resume: float = math.inf
+    # what it yields to (watch): "trajectory", every pose an actor's trajectory will still take (the privileged
+    # oracle, which knows where a pedestrian is going), or "present", only where each actor is now (what a camera
+    # or an ultrasonic sensor can show: an expert a camera-driven learner can imitate)
+    actor_foresight: str = "trajectory"
+
+    def __post_init__(self) -> None:
+        if self.actor_foresight not in ACTOR_FORESIGHT:
+            raise ValueError(f"actor_foresight {self.actor_foresight!r}: give one of {', '.join(ACTOR_FORESIGHT)}")
 
 
 @dataclass(frozen=True)
@@ -173,7 +184,8 @@ class ParkTracker:
         """Yield to moving ``actors`` (:class:`~garage_mj.scene.actor_spec.ActorSpec` or their dicts), as the cruise
         oracle does: per segment and per moment of each actor's trajectory, the poses of the segment the rest of
         the trajectory comes within ``margin`` of; :meth:`command` then stops ``gap`` before the first such pose
-        ahead (braking at ``decel``) while a triggered actor still reaches it."""
+        ahead (braking at ``decel``) while a triggered actor still reaches it. With ``actor_foresight`` "present"
+        only the poses the actor's body is near now block (it goes on as soon as the actor is off its path)."""
         self._yield = (float(margin), float(gap), float(decel))
         self.blocks = [[] for _ in self.segments]
         specs = [a if isinstance(a, ActorSpec) else ActorSpec.from_dict(a) for a in actors]
@@ -185,7 +197,8 @@ class ParkTracker:
                 times = sample_times(a)
                 hit = corr.conflicts(a.shape, actor_poses(a, times), margin)  # (T, n)
                 if hit.any():
-                    blocks.append((k, times, np.logical_or.accumulate(hit[::-1], axis=0)[::-1]))
+                    present = self.config.actor_foresight == "present"
+                    blocks.append((k, times, hit if present else np.logical_or.accumulate(hit[::-1], axis=0)[::-1]))
 
     def _actor_stop(self, actors) -> float:
         """[m] station of the current segment to stop at for the triggered actors (inf when none blocks ahead)."""

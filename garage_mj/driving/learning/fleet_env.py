@@ -85,6 +85,9 @@ class FleetDriveEnv(gym.Env):
             would only brake. In park tests the expert tracks with :data:`PARK_EXPERT`: wheel targets on the
             learner's steering levels (with any other target it waited at rest for a wheel angle no command gives,
             and its labels there, brakes, taught the learner to stand still).
+        actor_foresight: park tests with actors: what the expert yields to (:class:`ParkTrackConfig`'s
+            ``actor_foresight``): "trajectory" (where each actor will go) or "present" (where each actor is now,
+            which the learner's cameras can show).
     """
 
     metadata = {"render_modes": []}
@@ -92,7 +95,7 @@ class FleetDriveEnv(gym.Env):
     def __init__(self, garages: Sequence[CruiseSource], weights: Sequence[float] | None = None,
                  cache_size: int = 8, expert: bool = False, env_kwargs: dict[str, Any] | None = None,
                  variants: Sequence[dict[str, Any]] | None = None, park_route: bool = False,
-                 replan: bool = False, park_guide: bool = False) -> None:
+                 replan: bool = False, park_guide: bool = False, actor_foresight: str = "trajectory") -> None:
         self.sources = list(garages)
         if not self.sources:
             raise ValueError("FleetDriveEnv needs at least one garage")
@@ -109,6 +112,7 @@ class FleetDriveEnv(gym.Env):
             raise ValueError("park_guide and replan: the guide shows the test's plan, a replanning expert drives "
                              "another; give one")
         self.replan = bool(replan)
+        self.park_expert = dataclasses.replace(PARK_EXPERT, actor_foresight=actor_foresight)
         self._plan_poses: np.ndarray | None = None  # the poses of the plan the expert tracks
         self._replanned_at = -np.inf
         self.task = str(self.env_kwargs.get("task", "cruise"))
@@ -196,7 +200,7 @@ class FleetDriveEnv(gym.Env):
             if self._oracle is None:
                 self._oracle = OracleDriver()
                 if self.task != "cruise":
-                    self._oracle.park_config = PARK_EXPERT
+                    self._oracle.park_config = self.park_expert
             driver_info = env.driver_info(test_seed)
             self._oracle.reset(driver_info)
             plan = driver_info.get("park_plan")

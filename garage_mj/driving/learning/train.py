@@ -66,7 +66,7 @@ from garage_mj.core.fsutil import atomic_write, write_json
 from garage_mj.core.model_file import ModelFileError
 from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.cruise import run_test
-from garage_mj.driving.drivers.park_tracking import ParkTrackConfig
+from garage_mj.driving.drivers.park_tracking import ACTOR_FORESIGHT, ParkTrackConfig
 from garage_mj.driving.episode import close_cached_env
 from garage_mj.driving.garage_set import garage_map
 from garage_mj.driving.hunt import HuntConfig, hunt
@@ -150,6 +150,9 @@ class DriverTrainConfig:
     # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
     # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
     # is driven by the two together (learned:avp)
+    # a parking driver with actors: what the expert yields to, "trajectory" (where each actor will go: the oracle's
+    # foresight, which a camera cannot share) or "present" (where each actor is now, which the cameras show)
+    expert_foresight: str = bounded("trajectory", choices=ACTOR_FORESIGHT)
     task: str = bounded("cruise", choices=TRAIN_TASKS)
     maneuver: str = bounded("any", choices=MANEUVER_CHOICES)  # park tests: reverse, forward or any (drawn per test)
     # park tests: the park geometries the garages are built in (garage k: the (k mod n)th), by name
@@ -170,16 +173,19 @@ class DriverTrainConfig:
         if self.park_guide and self.replan:
             raise ValueError("park_guide, replan: the guide shows the test's plan and a replanning expert drives "
                              "another; set one of them")
-        if self.task == "cruise" and (self.park_guide or self.park_route or self.replan):
-            raise ValueError("park_route, park_guide, replan: these are a parking driver's (task = \"park\")")
+        if self.task == "cruise" and (self.park_guide or self.park_route or self.replan
+                                      or self.expert_foresight != "trajectory"):
+            raise ValueError("park_route, park_guide, replan, expert_foresight: these are a parking driver's "
+                             "(task = \"park\")")
         if self.task == "cruise" and (self.geometries or self.scenarios):
             raise ValueError("geometries, scenarios: park geometries and actor scenarios are for a parking driver "
                              "(task = \"park\"); a cruise driver's actors: --scenario")
 
-    def fleet_options(self) -> dict[str, bool]:
+    def fleet_options(self) -> dict[str, Any]:
         """The worker envs' park observation and expert options (:class:`FleetDriveEnv`'s ``park_route``,
-        ``replan`` and ``park_guide``)."""
-        return {"park_route": self.park_route, "replan": self.replan, "park_guide": self.park_guide}
+        ``replan``, ``park_guide`` and ``actor_foresight``)."""
+        return {"park_route": self.park_route, "replan": self.replan, "park_guide": self.park_guide,
+                "actor_foresight": self.expert_foresight}
 
     @property
     def parking(self) -> bool:
@@ -569,9 +575,12 @@ def _resumed_state(out: Path, manifest: dict[str, Any], cfg: DriverTrainConfig, 
         raise TrainDriverError(f"{out / MANIFEST} is not readable JSON ({exc}); remove the folder or use another --out") from None
     if not resume:
         raise TrainDriverError(f"{out} already holds a driver run; pass --resume to continue it or use another --out")
-    wanted = {k: manifest[k] for k in _RESUME_KEYS}
+    wanted = {k: manifest.get(k) for k in _RESUME_KEYS}
     wanted["config"] = {**wanted["config"], **_EXTENDS}
-    stored = {**old, "config": {**old["config"], **_EXTENDS}} if isinstance(old.get("config"), dict) else old
+    # a key the stored config lacks was added since the run began: it ran with that key's default
+    defaults = json.loads(json.dumps(dataclasses.asdict(DriverTrainConfig())))
+    stored = {**old, "config": {**defaults, **old["config"], **_EXTENDS}} if isinstance(old.get("config"), dict) \
+        else old
     refuse_other_settings(stored, wanted, lambda diff: TrainDriverError(
         f"{out} holds a run with another {diff[0]}; use another --out, or the same settings to resume"), _RESUME_KEYS)
     state = old.get("state", state)
