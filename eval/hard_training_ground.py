@@ -163,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--beta0", type=float, default=0.0625,
                     help="the oracle's share of the first iteration's steps, halved each iteration (default "
                          "0.0625: the model drives 15 of 16 steps, as late in a DAgger run)")
-    ap.add_argument("--init", type=Path, default=ROOT / "runs" / "park_m5_ext" / "checkpoints" / "iter_013.zip",
+    ap.add_argument("--init", type=Path, default=ROOT / "runs" / "park_m5" / "checkpoints" / "iter_013.zip",
                     help="the model the runs start from (default: the shipped model's training run at its shipped "
                          "iteration, which brings its states)")
     ap.add_argument("--workers", type=int, default=2)
