@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--heldout", type=int, default=6, help="held-out hard garages per geometry (default 6)")
     ap.add_argument("--tests", type=int, default=2, help="park tests per held-out garage (default 2)")
     ap.add_argument("--seeds", type=int, default=3, help="training runs per arm (default 3)")
-    ap.add_argument("--iterations", type=int, default=2, help="DAgger iterations per run (default 2)")
+    ap.add_argument("--iterations", type=int, default=1, help="DAgger iterations per run (default 1)")
     ap.add_argument("--steps", type=int, default=8000, help="env steps per iteration (default 8,000, as the shipped run)")
     ap.add_argument("--beta0", type=float, default=0.0625,
                     help="the oracle's share of the first iteration's steps, halved each iteration (default "
