@@ -11,7 +11,7 @@ Two arms at the same budget, ``--seeds`` runs each, compared on one held-out har
 - **the held-out hard set**: the same band per geometry, another generation seed, garages of neither arm nor
   the shipped model's training and validation sets (:data:`SHIPPED_SETS`); ``--tests`` park tests per garage (maneuver drawn per test,
   half the other stalls occupied).
-- **the training**: each run goes on from the shipped model's training run at its shipped iteration (``--init``,
+- **the training**: each run goes on from the parking model's first run at its best iteration (``--init``,
   ``garage-mj train-driver --init RUN/checkpoints/iter_NNN.zip`` with ``models/drivers/park_m5.toml``: its network
   and the states it was fitted on) with DAgger for ``--iterations`` x ``--steps`` on its arm's garages, the
   oracle's share ``--beta0`` per step at the first iteration (halved each one), no validation (the last
@@ -53,7 +53,8 @@ from garage_mj.scene.world import world_with
 ROOT = Path(__file__).resolve().parents[1]
 ARMS = ("uniform", "hard")
 MAP = "m5_13x13_aligned"
-#: The shipped model's training and validation garages (its run folder, where this machine has it): never held out.
+#: The parking model's training and validation garages (its first run's folder, where this machine has it): never
+#: held out.
 SHIPPED_SETS = (ROOT / "runs" / "park_m5" / "garages.json", ROOT / "runs" / "park_m5" / "validation_garages.json")
 
 
@@ -164,8 +165,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="the oracle's share of the first iteration's steps, halved each iteration (default "
                          "0.0625: the model drives 15 of 16 steps, as late in a DAgger run)")
     ap.add_argument("--init", type=Path, default=ROOT / "runs" / "park_m5" / "checkpoints" / "iter_013.zip",
-                    help="the model the runs start from (default: the shipped model's training run at its shipped "
-                         "iteration, which brings its states)")
+                    help="the model the runs start from (default: the parking model's first run at its best iteration, "
+                         "13, which brings its states)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0, help="seed of the grounds and the tests (default 0)")
     ap.add_argument("--runs", type=Path, default=ROOT / "runs" / "hard_training_ground")

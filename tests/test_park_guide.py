@@ -90,7 +90,9 @@ def test_a_parking_config_takes_the_guide_or_a_replanning_expert_not_both():
     with pytest.raises(ValueError, match="a parking driver's"):
         DriverTrainConfig(park_guide=True)
     assert DriverTrainConfig(task="park", park_route=True, park_guide=True).fleet_options() == {
-        "park_route": True, "replan": False, "park_guide": True}
+        "park_route": True, "replan": False, "park_guide": True, "actor_foresight": "trajectory"}
+    with pytest.raises(ValueError, match="a parking driver's"):
+        DriverTrainConfig(expert_foresight="present")
 
 
 def test_the_learners_expert_takes_a_cusp_within_a_tenth_and_creeps_on_when_it_stopped_short():
