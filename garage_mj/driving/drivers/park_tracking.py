@@ -189,6 +189,7 @@ class ParkTracker:
         self._yield = (float(margin), float(gap), float(decel))
         self.blocks = [[] for _ in self.segments]
         specs = [a if isinstance(a, ActorSpec) else ActorSpec.from_dict(a) for a in actors]
+        present = self.config.actor_foresight == "present"
         for seg, blocks in zip(self.segments, self.blocks, strict=True):
             corr = park_corridor(rear_to_centre(np.column_stack([seg.points, seg.yaw]), self.car), self.car)
             for k, a in enumerate(specs):
@@ -197,7 +198,6 @@ class ParkTracker:
                 times = sample_times(a)
                 hit = corr.conflicts(a.shape, actor_poses(a, times), margin)  # (T, n)
                 if hit.any():
-                    present = self.config.actor_foresight == "present"
                     blocks.append((k, times, hit if present else np.logical_or.accumulate(hit[::-1], axis=0)[::-1]))
 
     def _actor_stop(self, actors) -> float:

@@ -147,12 +147,12 @@ class DriverTrainConfig:
     # stretch the car is on, the offset and heading off it, its bend ahead, the stretch left); the expert drives the
     # stretch it shows. With park_route alone, whose waypoint points back along the way at a cusp, no model parked
     park_guide: bool = False
-    # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
-    # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
-    # is driven by the two together (learned:avp)
     # a parking driver with actors: what the expert yields to, "trajectory" (where each actor will go: the oracle's
     # foresight, which a camera cannot share) or "present" (where each actor is now, which the cameras show)
     expert_foresight: str = bounded("trajectory", choices=ACTOR_FORESIGHT)
+    # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
+    # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
+    # is driven by the two together (learned:avp)
     task: str = bounded("cruise", choices=TRAIN_TASKS)
     maneuver: str = bounded("any", choices=MANEUVER_CHOICES)  # park tests: reverse, forward or any (drawn per test)
     # park tests: the park geometries the garages are built in (garage k: the (k mod n)th), by name
