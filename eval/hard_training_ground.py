@@ -86,8 +86,8 @@ def grounds(args: argparse.Namespace, model) -> dict:
         held = [s for s in pool if s.hash not in taken][: args.heldout]
         per[g] = {"band": band, "probe_values": [round(v, 4) for v in values],
                   "uniform": probe[: args.per_geometry], "hard": hard, "heldout": held,
-                  "values": {k: [round(rater(s.garage), 4) for s in v]
-                             for k, v in (("uniform", probe[: args.per_geometry]), ("hard", hard), ("heldout", held))}}
+                  "values": {"uniform": [round(v, 4) for v in values[: args.per_geometry]],
+                             **{k: [round(rater(s.garage), 4) for s in v] for k, v in (("hard", hard), ("heldout", held))}}}
         print(f"{g}: band [{band[0]:.3f}, 1]; uniform mean {statistics.fmean(per[g]['values']['uniform']):.3f}, "
               f"hard {statistics.fmean(per[g]['values']['hard']):.3f}, held out "
               f"{statistics.fmean(per[g]['values']['heldout']):.3f} ({len(held)} garages)", flush=True)
