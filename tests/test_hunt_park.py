@@ -1,4 +1,5 @@
-"""garage-mj hunt --task park: (garage, geometry) candidates, failures the oracle confirms, the same hunt per seed."""
+"""garage-mj hunt --task park: (garage, geometry) candidates and children aimed at a failing stall, failures the oracle
+confirms, the same hunt per seed."""
 
 from __future__ import annotations
 
@@ -23,6 +24,9 @@ from garage_mj.driving.hunt import (
     hunt,
     hunt_geometries,
     rerun,
+    split_variant,
+    stall_targets,
+    variant,
 )
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
@@ -58,9 +62,50 @@ def test_each_candidate_records_its_geometry_and_runs_in_it(hunted):
     assert json.loads((out / "hunt.json").read_text())["settings"]["geometries"] == list(GEOMETRIES)
     for s in res.ranked:  # each candidate's tests are in its geometry's run, built in that geometry
         run = json.loads((cruise_dir(out, s.geometry) / "run.json").read_text())
-        assert run["env"].get("world", {}) == PARK_GEOMETRIES[s.geometry].world
+        assert run["env"].get("world", {}) == PARK_GEOMETRIES[s.park_geometry].world
+        assert run.get("stall") == s.stall
         assert {r["garage_hash"] for r in s.rows} == {s.source.hash}
     assert sum(len(s.rows) for s in res.ranked) == res.tests <= CFG.budget
+
+
+def test_a_child_aims_its_tests_at_a_stall_where_its_parent_failed(hunted):
+    out, res = hunted
+    aimed = [s for s in res.ranked if s.stall is not None]
+    assert aimed  # this hunt's child is one (seeded: the same every run)
+    by_key = {s.key: s for s in res.ranked}
+    for s in aimed:
+        parent = by_key[s.parent]
+        assert s.source.hash == parent.source.hash and s.park_geometry == parent.park_geometry
+        assert s.stall in {int(r["target_stall"]) for r in parent.confirmed}
+        assert {int(r["target_stall"]) for r in s.rows} == {s.stall}  # every test aimed at it, seeds drawn anew
+        assert len({r["seed"] for r in s.rows}) == len(s.rows)
+    rows = {(r["garage_hash"], r["geometry"], r["stall"]) for r in _table(out)}
+    assert {(s.source.hash, s.park_geometry, str(s.stall)) for s in aimed} <= rows
+    s = aimed[0]  # its run is a variant's own folder; a test of it re-runs from the failures.csv columns
+    assert cruise_dir(out, s.geometry).name == f"{s.park_geometry}@stall{s.stall}"
+    again = rerun(out, s.source.hash[:12], int(s.rows[0]["test"]), geometry=s.park_geometry, stall=s.stall)
+    assert (again["outcome"], again["target_stall"]) == (s.rows[0]["outcome"], s.stall)
+
+
+def test_stall_targets_are_failing_stalls_then_their_neighbours():
+    garage = paint_garage("m5_13x13_aligned", seed=1)
+    src = CruiseSource.from_garage(garage, "m5")
+    rows = [{"outcome": "collision", "test": "0", "target_stall": "9"},
+            {"outcome": "outside_stall", "test": "1", "target_stall": "3"},
+            {"outcome": "success", "test": "2", "target_stall": "4"}]
+    parent = Scored(src, geometry="default", rows=rows, oracle_parks={0})  # only test 0's failure counts
+    assert stall_targets(parent, set()) == [9]
+    assert stall_targets(parent, {f"{src.hash}:default@stall9"}) == []
+    aimed = Scored(src, geometry=variant("default", 9), rows=rows[:1], oracle_parks={0})
+    assert (aimed.park_geometry, aimed.stall) == ("default", 9)
+    assert stall_targets(aimed, {aimed.key}) == [8, 10]  # stalls 8-10 share a row; 11 is across the aisle
+    assert split_variant("parallel_mixed@stall12") == ("parallel_mixed", 12)
+    assert split_variant("parallel_mixed") == ("parallel_mixed", None)
+    assert Scored(src, geometry="tight", rows=rows).stall is None
+    assert stall_targets(Scored(src, rows=rows), set()) == []  # a cruise hunt aims at no stall
+    rng = np.random.default_rng(0)
+    kinds = [_child([parent], rng, {parent.key}, 50, ("default", "tight"), _build_cache())[1] for _ in range(40)]
+    assert "default@stall9" in kinds and set(kinds) - {"default@stall9"}  # a stall child, and the other kinds too
 
 
 def test_failures_are_confirmed_by_the_oracle(hunted):

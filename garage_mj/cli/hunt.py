@@ -17,7 +17,14 @@ from garage_mj.cli.cruise import (
     task_warning,
     test_seconds,
 )
-from garage_mj.driving.hunt import MAX_BUDGET, MAX_POPULATION, PARK_HUNT_GEOMETRIES, HuntConfig, HuntResult
+from garage_mj.driving.hunt import (
+    MAX_BUDGET,
+    MAX_POPULATION,
+    PARK_HUNT_GEOMETRIES,
+    HuntConfig,
+    HuntResult,
+    variant_label,
+)
 from garage_mj.driving.sources import DEFAULT_TEST_TIMEOUT, MAX_TEST_TIMEOUT, MAX_TESTS, CruiseSettings
 from garage_mj.reporting.report import task_noun
 
@@ -29,7 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "map), test each, re-test the best and mutate them under the painter's rules, until --budget "
                     "cruise tests are spent. Writes OUT/failures.csv (garages ranked by failure rate, with what was "
                     "hit and where), OUT/hunt.sqlite, asset packs, .xosc files and MP4s of the worst garages, and "
-                    "OUT/report.html. Resumable: run the same command again.",
+                    "OUT/report.html. A park or AVP hunt (--task) searches park geometries and stalls too: a child "
+                    "may aim every test at a stall where its parent failed, or one beside it. Resumable: run the "
+                    "same command again.",
         epilog="example: garage-mj hunt --driver vision --map m5_13x13_aligned --budget 1000 --out hunt_vision")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--map", help="start from garages painted on this shipped map (name) or map file")
@@ -125,7 +134,8 @@ def failure_summary(res: HuntResult, show: int = 5, task: str = "cruise") -> str
         head += f", the {show} worst:"
     elif failing:
         head += ":"
-    lines = [head] + [f"  {s.source.name}{' (' + s.geometry + ')' if s.geometry else ''}: {len(s.confirmed)} of "
+    lines = [head] + [f"  {s.source.name}{' (' + variant_label(s.geometry) + ')' if s.geometry else ''}: "
+                      f"{len(s.confirmed)} of "
                       f"{len(s.feasible)} feasible tests failed ({100 * s.rate:.0f}%)" for s in failing[:show]]
     kinds = [r["outcome"] for s in res.ranked for r in s.failures]
     lost = runner_failures({k: kinds.count(k) for k in set(kinds)})

@@ -44,6 +44,15 @@ failures the reference driver would not make:
   where parking was shown possible. ``failures.csv`` gains ``geometry``, ``oracle_parks`` (the failing tests the
   oracle parks) and ``confirmed_pct`` (those, as % of the feasible tests); packs, ``.xosc`` files and videos go
   into a folder per geometry.
+- **Stalls** are searched too: a park test's outcome turns mostly on its stall (its neighbours, its place beside a
+  junction or a pillar), which a test otherwise draws from its seed. A child of a parent with confirmed failures is,
+  with probability :data:`STALL_FOCUS`, the parent's garage and geometry with every test aimed at one stall: a stall
+  where the parent failed, or for a parent aimed at a stall already, a stall beside it (same block and side, the
+  next id). Such a candidate's tests draw their seeds (parked neighbours, maneuver, start) as any test does; its
+  geometry is the *variant* ``<geometry>@stall<id>`` (:func:`variant`), its own cruise run in
+  ``OUT/cruise/<geometry>@stall<id>``; ``failures.csv`` names it in its ``geometry`` and ``stall`` columns. A child
+  made from it by a geometry switch or a mutation draws its stalls again (another geometry or garage numbers its
+  stalls anew). Actor placements are not searched.
 """
 
 from __future__ import annotations
@@ -86,14 +95,19 @@ _COUNTS = tuple(sorted(COUNT_COLUMNS.values()))
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
                    "failure_pct", *_COUNTS, "hit", "failure_progress", "failing_tests", "failing_seeds", "parent")
 #: ``failures.csv`` of a park or AVP hunt: the candidate's geometry, and the failures the oracle parks.
-PARK_FAILURE_COLUMNS = (*FAILURE_COLUMNS[:3], "geometry", *FAILURE_COLUMNS[3:8], "oracle_parks", "confirmed_pct",
-                        *FAILURE_COLUMNS[8:])
+PARK_FAILURE_COLUMNS = (*FAILURE_COLUMNS[:3], "geometry", "stall", *FAILURE_COLUMNS[3:8], "oracle_parks",
+                        "confirmed_pct", *FAILURE_COLUMNS[8:])
 
 #: The park geometries a park or AVP hunt searches when none are given (``--geometries``): bays at 90 and 60
 #: degrees, a narrow aisle with a mixed fleet, parallel slots with and without it.
 PARK_HUNT_GEOMETRIES = ("default", "tight", "angled60", "parallel", "parallel_mixed")
+#: A park hunt's child of a parent with a stall to aim at: the chance that it is the parent's garage and geometry
+#: with its tests aimed at that stall (else a geometry switch or a mutation, as for any parent).
+STALL_FOCUS = 0.5
 #: A park hunt's child: the chance that it is its parent's garage in another geometry (else a mutated garage).
 GEOMETRY_SWITCH = 0.5
+#: What joins a park geometry and a stall in a candidate's variant name (``tight@stall17``).
+_STALL_MARK = "@stall"
 #: The driver that confirms a park hunt's failures (a failure counts when it parks that test).
 ORACLE = "oracle"
 _ORACLE_COLUMNS = ("geometry", "garage_hash", "test", "seed", "outcome")
@@ -142,13 +156,23 @@ class Scored:
     source: CruiseSource
     parent: str = ""  # key of the candidate it was made from ("" for a starting one)
     rows: list[dict[str, str]] = field(default_factory=list)
-    geometry: str = ""  # a park or AVP hunt's park geometry ("" in a cruise hunt)
+    geometry: str = ""  # a park or AVP hunt's park geometry or variant (tight@stall17; "" in a cruise hunt)
     oracle_parks: set[int] | None = None  # failing tests (indices) the oracle parks; None: not confirmed (cruise)
 
     @property
     def key(self) -> str:
         """The candidate: its garage's hash, and ``:<geometry>`` in a park or AVP hunt."""
         return candidate_key(self.source.hash, self.geometry)
+
+    @property
+    def park_geometry(self) -> str:
+        """The park geometry its tests run in ("" in a cruise hunt), without the stall of a variant."""
+        return split_variant(self.geometry)[0]
+
+    @property
+    def stall(self) -> int | None:
+        """The stall its tests are aimed at (None: each test draws its stall)."""
+        return split_variant(self.geometry)[1]
 
     @property
     def feasible(self) -> list[dict[str, str]]:
@@ -175,6 +199,24 @@ class Scored:
         return len(self.confirmed) / f if f else math.nan
 
 
+def variant(geometry: str, stall: int | None = None) -> str:
+    """A park hunt candidate's geometry with its tests aimed at ``stall``: ``<geometry>@stall<id>`` (None: the
+    geometry, every test drawing its stall)."""
+    return geometry if stall is None else f"{geometry}{_STALL_MARK}{int(stall)}"
+
+
+def split_variant(name: str) -> tuple[str, int | None]:
+    """``(geometry, stall)`` of a :func:`variant` name (stall None where the tests draw it)."""
+    geometry, mark, stall = name.partition(_STALL_MARK)
+    return (geometry, int(stall)) if mark and stall.isdigit() else (name, None)
+
+
+def variant_label(name: str) -> str:
+    """A variant as a person reads it: ``tight, stall 17`` (or the geometry alone)."""
+    geometry, stall = split_variant(name)
+    return geometry if stall is None else f"{geometry}, stall {stall}"
+
+
 def candidate_key(garage_hash: str, geometry: str = "") -> str:
     """A hunt candidate's key: the garage's hash, with ``:<geometry>`` in a park or AVP hunt."""
     return f"{garage_hash}:{geometry}" if geometry else garage_hash
@@ -195,10 +237,13 @@ def hunt_geometries(task: str, geometries: Sequence[str] | None) -> tuple[str, .
 
 
 def candidate_settings(settings: CruiseSettings, geometry: str) -> CruiseSettings:
-    """``settings`` with the park geometry ``geometry``'s env keyword arguments over its env ("": as they are)."""
+    """``settings`` with the park geometry ``geometry``'s env keyword arguments over its env ("": as they are); a
+    :func:`variant`'s tests aimed at its stall."""
     if not geometry:
         return settings
-    return dataclasses.replace(settings, env={**(settings.env or {}), **PARK_GEOMETRIES[geometry].env_kwargs()})
+    base, stall = split_variant(geometry)
+    mine = dataclasses.replace(settings, env={**(settings.env or {}), **PARK_GEOMETRIES[base].env_kwargs()})
+    return mine if stall is None else dataclasses.replace(mine, stall=stall)
 
 
 def cruise_dir(out: Path, geometry: str = "") -> Path:
@@ -264,14 +309,35 @@ def _start_pairs(sources: list[CruiseSource], geometries: Sequence[str], seed: i
     return pairs
 
 
+def stall_targets(parent: Scored, seen: set[str]) -> list[int]:
+    """The stalls a park hunt's child of ``parent`` may aim its tests at (:data:`STALL_FOCUS`), none already a
+    candidate in ``seen``: those of the parent's confirmed failures, and for a parent aimed at a stall the stalls
+    beside it (same block and side, the next id); none in a cruise hunt."""
+    geometry, fixed = split_variant(parent.geometry)
+    if not geometry:
+        return []
+    ids = {int(r["target_stall"]) for r in parent.confirmed if str(r.get("target_stall", "")).isdigit()}
+    if fixed is not None:
+        stalls = stall_layout(parent.source.garage, world_with(PARK_GEOMETRIES[geometry].world)).stalls
+        me = next((s for s in stalls if s.id == fixed), None)
+        ids |= {s.id for s in stalls if me is not None and abs(s.id - fixed) == 1
+                and (s.block, s.side) == (me.block, me.side)}
+    return sorted(k for k in ids if candidate_key(parent.source.hash, variant(geometry, k)) not in seen)
+
+
 def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], tries: int,
            geometries: Sequence[str] = (), can_build: Any = None) -> tuple[Garage, str, Scored] | None:
     """A new candidate from a tournament-picked parent: a garage mutated from the parent's, re-painted by the painter
-    env, or (a park hunt, with probability :data:`GEOMETRY_SWITCH`) the parent's garage in another of ``geometries``
-    that builds it; (garage, geometry, parent), None if none found."""
+    env, or in a park hunt the parent's garage with its tests aimed at a stall (:func:`stall_targets`, with
+    probability :data:`STALL_FOCUS` where there is one) or in another of ``geometries`` that builds it (with
+    probability :data:`GEOMETRY_SWITCH`); (garage, geometry or variant, parent), None if none found."""
     for _ in range(tries):
         a, b = rng.choice(len(parents), size=2, replace=len(parents) < 2)
         parent = parents[a] if parents[a].score >= parents[b].score else parents[b]
+        base = parent.park_geometry
+        targets = stall_targets(parent, seen)
+        if targets and rng.random() < STALL_FOCUS:
+            return parent.source.garage, variant(base, targets[int(rng.integers(len(targets)))]), parent
         if len(geometries) > 1 and rng.random() < GEOMETRY_SWITCH:
             garage = parent.source.garage
             others = [g for g in geometries if candidate_key(parent.source.hash, g) not in seen
@@ -283,14 +349,14 @@ def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], trie
         if g is None:
             continue
         h = g.canonical_hash()
-        if candidate_key(h, parent.geometry) in seen:
+        if candidate_key(h, base) in seen:
             continue
         painted, info = replay(g)
         if not info.get("usable") or painted.canonical_hash() != h:
             continue
-        if parent.geometry and not can_build(painted, parent.geometry):
+        if base and not can_build(painted, base):
             continue
-        return painted, parent.geometry, parent
+        return painted, base, parent
     return None
 
 
@@ -568,7 +634,8 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, settings: C
             "parent": _short(s.parent),
         })
         if park:  # the class counts, hits and failing tests above are of the failures the oracle parks
-            rows[-1].update(geometry=s.geometry, oracle_parks=len(s.confirmed),
+            rows[-1].update(geometry=s.park_geometry, stall="" if s.stall is None else s.stall,
+                            oracle_parks=len(s.confirmed),
                             confirmed_pct=round(100.0 * s.rate, 2) if s.feasible else "")
     buf = io.StringIO(newline="")
     w = csv.DictWriter(buf, fieldnames=PARK_FAILURE_COLUMNS if park else FAILURE_COLUMNS)
@@ -615,10 +682,23 @@ def hunt_settings(out_dir: str | Path, geometry: str = "") -> CruiseSettings:
 
 
 def run_dirs(out_dir: str | Path) -> list[Path]:
-    """The hunt's cruise runs: ``OUT/cruise``, or one per geometry of a park or AVP hunt."""
+    """The hunt's cruise runs: ``OUT/cruise``, or one per geometry of a park or AVP hunt, then one per variant
+    (a geometry with its tests aimed at a stall: ``OUT/cruise/<geometry>@stall<id>``), by geometry and stall."""
+    return [cruise_dir(Path(out_dir), name) for name in run_variants(out_dir)]
+
+
+def run_variants(out_dir: str | Path) -> list[str]:
+    """The geometries and variants (:func:`variant`) the hunt in ``out_dir`` ran tests in ("" for a cruise hunt)."""
     out = Path(out_dir)
     geometries = read_settings(out).get("geometries") or [""]
-    return [cruise_dir(out, g) for g in geometries if (cruise_dir(out, g) / "tests.csv").is_file()]
+    if geometries == [""]:
+        return [""] if (cruise_dir(out) / "tests.csv").is_file() else []
+    found = [d.name for d in cruise_dir(out).iterdir() if (d / "tests.csv").is_file()] \
+        if cruise_dir(out).is_dir() else []
+    order = {g: k for k, g in enumerate(geometries)}
+    found = [n for n in found if split_variant(n)[0] in order]
+    return sorted(found, key=lambda n: (order[split_variant(n)[0]], -1 if split_variant(n)[1] is None
+                                        else split_variant(n)[1]))
 
 
 def read_settings(out_dir: str | Path) -> dict[str, Any]:
@@ -634,23 +714,31 @@ def add_file(out_dir: str | Path, name: str, path: Path) -> None:
     write_json(state_path, state)
 
 
-def rerun(out_dir: str | Path, garage_hash: str, test: int, geometry: str | None = None) -> dict[str, Any]:
+def rerun(out_dir: str | Path, garage_hash: str, test: int, geometry: str | None = None,
+          stall: int | None = None) -> dict[str, Any]:
     """Re-run one listed (garage, test) of a hunt in ``out_dir``: the cruise row (same seed, same outcome). A park or
-    AVP hunt's garage tested in several geometries needs ``geometry``, its ``failures.csv`` column."""
+    AVP hunt's garage tested in several geometries needs ``geometry``, and one tested with its tests aimed at a
+    stall ``stall`` too: the ``geometry`` and ``stall`` columns of ``failures.csv`` (``geometry`` may also be the
+    variant, ``tight@stall17``)."""
     out = Path(out_dir)
     state = read_settings(out)
+    names = run_variants(out)
+    if geometry is not None:  # that geometry's own run, or with a stall the run aimed at it
+        base, aimed = split_variant(geometry)
+        geometry = variant(base, aimed if aimed is not None else stall)
+        names = [n for n in names if n == geometry]
     found = []
-    for g in ([geometry] if geometry is not None else state.get("geometries") or [""]):
+    for g in names:
         path = cruise_dir(out, g) / "tests.csv"
         rows = [r for r in read_tests(path) if r["garage_hash"].startswith(garage_hash)] if path.is_file() else []
         if rows:
             found.append((g, rows))
     if not found:
         raise HuntError(f"{out}: no hunted garage with hash {garage_hash}"
-                        + (f" in geometry {geometry}" if geometry else ""))
+                        + (f" in geometry {variant_label(geometry)}" if geometry else ""))
     if len(found) > 1:
-        raise HuntError(f"{out}: garage {garage_hash} was tested in geometries {', '.join(g for g, _ in found)}; "
-                        "name one (geometry=, the geometry column of failures.csv)")
+        raise HuntError(f"{out}: garage {garage_hash} was tested in {', '.join(variant_label(g) for g, _ in found)}; "
+                        "name one (geometry= and stall=, the columns of failures.csv)")
     geometry, rows = found[0]
     with Library(out / "hunt.sqlite", create=False) as lib:
         gid = lib.id_of(rows[0]["garage_hash"])

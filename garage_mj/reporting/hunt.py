@@ -19,7 +19,7 @@ from urllib.parse import quote
 
 from garage_mj.core.fsutil import FolderLock, atomic_write
 from garage_mj.driving import hunt as driving_hunt
-from garage_mj.driving.hunt import HuntResult, Scored, add_file, hunt_settings, run_dirs
+from garage_mj.driving.hunt import HuntResult, Scored, add_file, hunt_settings, run_dirs, variant_label
 from garage_mj.driving.sim.outcomes import RUNNER_KINDS
 from garage_mj.driving.sources import CruiseSettings
 from garage_mj.export.artefacts import PREVIEW
@@ -70,8 +70,8 @@ def _watchable(s: Scored) -> dict[str, str] | None:
 #: The ranking's columns in the report (failures.csv has them all).
 REPORT_COLUMNS = ("rank", "garage", "difficulty", "tests", "feasible", "failures", "failure_pct", "hit",
                   "failure_progress")
-#: A park or AVP hunt's: its geometry, and the failures the oracle parks.
-PARK_REPORT_COLUMNS = ("rank", "garage", "geometry", "difficulty", "tests", "feasible", "failures", "oracle_parks",
+#: A park or AVP hunt's: its geometry, the stall its tests were aimed at (if any), and the failures the oracle parks.
+PARK_REPORT_COLUMNS = ("rank", "garage", "geometry", "stall", "difficulty", "tests", "feasible", "failures", "oracle_parks",
                        "confirmed_pct", "hit", "failure_progress")
 
 
@@ -93,7 +93,7 @@ def _card(s: Scored, pack: Path, xoscs: list[Path], mp4s: list[Path], out: Path)
     fails = "".join(f"<li>test {e(r['test'])} (seed {e(r['seed'])}): {e(r['outcome'].replace('_', ' '))}"
                     f"{' (' + e(r['hit']) + ')' if r['hit'] else ''}: {e(r['reason'])}</li>" for r in s.confirmed)
     files = " ".join(f'<a href="{_href(p, out)}">{e(p.name)}</a>' for p in mine) or "-"
-    where = f" ({e(s.geometry)} geometry; failures the oracle parks)" if s.geometry else ""
+    where = f" ({e(variant_label(s.geometry))}; failures the oracle parks)" if s.geometry else ""
     return (f"<h3>{e(s.source.name)}{where}: {len(s.confirmed)} of {len(s.feasible)} feasible tests failed</h3>"
             f'<div class=card><img src="{_href(pack / PREVIEW, out)}" alt="preview of {e(s.source.name)}" '
             f'style="max-width:360px"><p><a href="{_href(pack, out)}/">asset pack</a></p>'
