@@ -64,6 +64,34 @@ def test_maneuver_any_is_drawn_from_the_seed_and_stall_fixes_the_target(painted_
         GarageDriveEnv(painted_tiny, task="park", maneuver="sideways")
 
 
+def test_a_handover_start_stands_off_the_plans_start_and_keeps_its_plan(painted_tiny):
+    plain = GarageDriveEnv(painted_tiny, action_type="continuous", task="park", maneuver="any")
+    off = GarageDriveEnv(painted_tiny, action_type="continuous", task="park", maneuver="any", handover_start=1.5)
+    moved = []
+    for seed in range(6):
+        _, a = plain.reset(seed=seed)
+        _, b = off.reset(seed=seed)
+        # the same test (stall, parked cars, maneuver, plan from the noised cruise goal); only the car stands elsewhere
+        assert (a["target_stall"], a["maneuver"]) == (b["target_stall"], b["maneuver"])
+        np.testing.assert_allclose(a["park_plan"]["poses"], b["park_plan"]["poses"])
+        start = b["park_plan"]["poses"][0]
+        d = math.hypot(b["pose"][0] - start[0], b["pose"][1] - start[1])
+        assert d <= 1.5 + off.start_noise[0] + 1e-3  # within the handover's reach (the start noise on the route)
+        moved.append(d)
+        assert abs(off.car.speed(off.data)) < 0.05
+    assert max(moved) > 0.3  # it does stand off the start (the plain env: on it)
+    _, again = off.reset(seed=3)
+    _, first = GarageDriveEnv(painted_tiny, action_type="continuous", task="park", maneuver="any",
+                              handover_start=1.5).reset(seed=3)
+    assert again["pose"] == pytest.approx(first["pose"])  # drawn from the test's seed
+    plain.close()
+    off.close()
+    with pytest.raises(ValueError, match="handover_start must be in"):
+        GarageDriveEnv(painted_tiny, task="park", handover_start=9.0)
+    with pytest.raises(ValueError, match="handover_start is for park tests"):
+        GarageDriveEnv(painted_tiny, task="avp", handover_start=1.0)
+
+
 def test_stopping_short_of_the_stall_is_outside_stall(park_env):
     park_env.reset(seed=0)
     for k in range(400):

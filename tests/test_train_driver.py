@@ -290,6 +290,11 @@ def test_init_starts_from_a_trained_model_and_a_checkpoint_brings_its_runs_state
     manifest = json.loads((out / "run.json").read_text())
     assert manifest["init"]["states_from"] == [str(run / "data" / "iter_000.npz")]
     assert manifest["state"]["curve"][0]["states"] == 40  # the run's 20 states and the 20 it started from
+    again = tmp_path / "again"  # carried on from the carried-on run: its states and those it started from
+    assert main([*argv, "--out", str(again), "--init", str(out / "checkpoints" / "iter_000.zip")]) == 0
+    manifest = json.loads((again / "run.json").read_text())
+    assert manifest["init"]["states_from"] == [str(run / "data" / "iter_000.npz"), str(out / "data" / "iter_000.npz")]
+    assert manifest["state"]["curve"][0]["states"] == 60
     weights = tmp_path / "weights"
     assert main([*argv, "--out", str(weights), "--init", str(run / "model.zip")]) == 0
     manifest = json.loads((weights / "run.json").read_text())
@@ -655,3 +660,14 @@ def test_the_shipped_parking_model_parks_a_tiny_garage_test_and_repeats_itself()
     assert first["outcome"] == "success", first.get("reason")
     same = ("outcome", "reason", "time", "path_length")
     assert {k: first.get(k) for k in same} == {k: again.get(k) for k in same}
+
+
+def test_handover_start_is_a_parking_drivers_setting_within_a_car_length():
+    from garage_mj.core.config import load_config
+    from garage_mj.driving.learning.train import DriverTrainConfig
+
+    with pytest.raises(ValueError, match="handover_start"):
+        DriverTrainConfig(handover_start=1.5)  # a cruise driver's tests start at the entrance
+    with pytest.raises(ValueError, match="handover_start"):
+        load_config(DriverTrainConfig, {"task": "park", "handover_start": 7.0})
+    assert DriverTrainConfig(task="park", handover_start=1.5).handover_start == 1.5

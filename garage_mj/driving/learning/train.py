@@ -75,7 +75,7 @@ from garage_mj.driving.learning.park_actions import PARK_COMMANDS
 from garage_mj.driving.learning.saved_model import load_driver_model
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sim.outcomes import OutcomeKind
-from garage_mj.driving.sim.park_task import MANEUVER_CHOICES
+from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, MAX_HANDOVER_START
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.scene.world import GeometryError
 
@@ -150,6 +150,10 @@ class DriverTrainConfig:
     # a parking driver with actors: what the expert yields to, "trajectory" (where each actor will go: the oracle's
     # foresight, which a camera cannot share) or "present" (where each actor is now, which the cameras show)
     expert_foresight: str = bounded("trajectory", choices=ACTOR_FORESIGHT)
+    # a parking driver: [m] each training (and validation) park test starts up to this far before or after its plan's
+    # start, where an AVP test's cruise hands the car over (the drive env's handover_start; learned:avp hands over
+    # within 1.5 m of it); 0: on the plan's start, as every park test
+    handover_start: float = bounded(0.0, ge=0.0, le=MAX_HANDOVER_START)
     # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
     # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
     # is driven by the two together (learned:avp)
@@ -174,9 +178,9 @@ class DriverTrainConfig:
             raise ValueError("park_guide, replan: the guide shows the test's plan and a replanning expert drives "
                              "another; set one of them")
         if self.task == "cruise" and (self.park_guide or self.park_route or self.replan
-                                      or self.expert_foresight != "trajectory"):
-            raise ValueError("park_route, park_guide, replan, expert_foresight: these are a parking driver's "
-                             "(task = \"park\")")
+                                      or self.expert_foresight != "trajectory" or self.handover_start):
+            raise ValueError("park_route, park_guide, replan, expert_foresight, handover_start: these are a parking "
+                             "driver's (task = \"park\")")
         if self.task == "cruise" and (self.geometries or self.scenarios):
             raise ValueError("geometries, scenarios: park geometries and actor scenarios are for a parking driver "
                              "(task = \"park\"); a cruise driver's actors: --scenario")
@@ -521,6 +525,8 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
     env_kwargs.setdefault("occupancy", cfg.occupancy)
     if cfg.parking:
         env_kwargs.update(task=cfg.task, maneuver=cfg.maneuver)
+        if cfg.handover_start:
+            env_kwargs["handover_start"] = cfg.handover_start
     manifest = _new_manifest(garages, validation, sources, cfg, seed, env_kwargs)
     if init is not None:
         manifest["init"] = {"model": str(init), "sha256": _sha256(Path(init)),
@@ -676,15 +682,22 @@ def _init_model(path: Path, venv, cfg: DriverTrainConfig, seed: int):
 
 def init_states(model: Path) -> list[Path]:
     """The states a run started from ``model`` trains on besides its own: for a checkpoint of a driver run
-    (``RUN/checkpoints/iter_NNN.zip`` beside ``RUN/run.json``), that run's ``data/iter_000.npz`` to
-    ``iter_NNN.npz`` (the states its network was fitted on; a missing one: a :class:`TrainDriverError`); for
-    any other file none."""
+    (``RUN/checkpoints/iter_NNN.zip`` beside ``RUN/run.json``), the states its network was fitted on: the states
+    that run started from itself (its ``run.json``'s ``init``, a run carried on from another's checkpoint), then its
+    ``data/iter_000.npz`` to ``iter_NNN.npz`` (a missing one: a :class:`TrainDriverError`); for any other file
+    none."""
     run = model.parent.parent
     stem = model.stem
     if model.parent.name != "checkpoints" or not (run / MANIFEST).is_file() or not stem.startswith("iter_") \
             or not stem[5:].isdigit():
         return []
-    shards = [run / "data" / f"iter_{i:03d}.npz" for i in range(int(stem[5:]) + 1)]
+    try:
+        inherited = json.loads((run / MANIFEST).read_text()).get("init") or {}
+    except (OSError, ValueError) as exc:
+        raise TrainDriverError(f"--init {model}: its run's {MANIFEST} cannot be read ({exc}); restore it or start "
+                               "from the run's model.zip (its network only)") from None
+    shards = [Path(p) for p in inherited.get("states_from") or []]
+    shards += [run / "data" / f"iter_{i:03d}.npz" for i in range(int(stem[5:]) + 1)]
     missing = [p for p in shards if not p.is_file()]
     if missing:
         raise TrainDriverError(f"--init {model}: its run's states {missing[0]} are missing; start from the run's "

@@ -74,6 +74,7 @@ from garage_mj.driving.sim.park_sensors import (
 )
 from garage_mj.driving.sim.park_task import (
     MANEUVER_CHOICES,
+    MAX_HANDOVER_START,
     TASKS,
     ParkTest,
     draw_park_test,
@@ -233,6 +234,12 @@ class GarageDriveEnv(gym.Env):
             their own (:mod:`~garage_mj.driving.actors.park_placement`).
         maneuver: ``"reverse"`` (reverse-in, the default), ``"forward"`` (nose-in) or ``"any"`` (drawn per test).
         stall: a stall id every reset tests (default: drawn per test).
+        handover_start: [m] park tests only: the car starts up to this far before or after the park plan's start
+            (drawn uniformly per test; before it: on the cruise route, after it: along its heading), where an AVP
+            test's cruise leaves it for the parking (:class:`~garage_mj.driving.drivers.learned.LearnedAVPDriver`
+            hands over within :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the plan's start, then
+            brakes to rest). The plan is the one from the noised cruise goal, as without it. 0 (the default): the
+            car starts on the plan's start.
         park_config: :class:`~garage_mj.scene.park_planning.ParkConfig` of the reference park planner.
         world: the park geometry the garage is built in (docs/spec.md section 9): a
             :class:`~garage_mj.scene.world.WorldConfig`, or a dict of its geometry keys (``stall_width``,
@@ -285,6 +292,7 @@ class GarageDriveEnv(gym.Env):
         task: str = "cruise",
         maneuver: str = "reverse",
         stall: int | None = None,
+        handover_start: float = 0.0,
         park_config: ParkConfig | dict[str, Any] | None = None,
         park_outcome: ParkOutcomeConfig | dict[str, Any] | None = None,
         vehicle: str | VehicleClass | None = None,
@@ -310,6 +318,11 @@ class GarageDriveEnv(gym.Env):
         self.task = task
         self.maneuver = maneuver
         self.stall = None if stall is None else int(stall)
+        if isinstance(handover_start, bool) or not 0.0 <= float(handover_start) <= MAX_HANDOVER_START:
+            raise ValueError(f"handover_start must be in [0, {MAX_HANDOVER_START:g}] m, got {handover_start!r}")
+        if handover_start and task != "park":
+            raise ValueError("handover_start is for park tests (task='park'): an AVP test starts at the entrance")
+        self.handover_start = float(handover_start)
         self.garage = garage
         self.world = world if isinstance(world, WorldConfig) else world_with(world)  # its park geometry
         self.infeasible = infeasible

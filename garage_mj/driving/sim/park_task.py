@@ -14,7 +14,8 @@ test (``task="cruise"``, the default) never comes here.
 
 The draws come from the reset's generator in this order: target, parked cars, lateral and yaw noise (as a
 cruise test draws them: :meth:`~garage_mj.driving.sim.drive_env.GarageDriveEnv.draw_parked_and_noise`), then
-the maneuver where it is ``"any"``. A test without a cruise route to the stall, or with a proof that no park plan
+the maneuver where it is ``"any"``, then (a park env with ``handover_start``) how far before or after the plan's
+start the car stands, as an AVP test's handover leaves it. A test without a cruise route to the stall, or with a proof that no park plan
 exists, is ``infeasible`` with the planner's reason; one without a park plan within the planner's escalated
 budget and without a proof is ``unproven`` (docs/spec.md section 9); with ``infeasible="skip"`` another
 stall is drawn instead of either (unless the stall is fixed), while one is left.
@@ -94,10 +95,26 @@ class ParkTest:
         return {"poses": plan.poses, "directions": plan.directions, "stall_pose": tuple(plan.goal)}
 
 
+#: The largest ``handover_start`` of a park env [m]: beyond a car length the start is no longer beside the stall.
+MAX_HANDOVER_START = 5.0
+
 def _noisy(pose, lateral: float, dyaw: float) -> tuple[float, float, float]:
     """``pose`` moved ``lateral`` metres to its left and turned by ``dyaw``."""
     x, y, yaw = (float(v) for v in pose)
     return x - math.sin(yaw) * lateral, y + math.cos(yaw) * lateral, yaw + dyaw
+
+
+def _handed_over(route: Route, start: tuple[float, float, float], lateral: float, dyaw: float,
+                 along: float) -> tuple[float, float, float]:
+    """Where an AVP test's cruise may leave the car for a park test that would start at ``start`` (the noised end of
+    ``route``): ``along`` metres after it along its heading, or before it (``along`` < 0) on the route, with the same
+    lateral and yaw noise."""
+    if along >= 0:
+        x, y, yaw = start
+        return x + along * math.cos(yaw), y + along * math.sin(yaw), yaw
+    s = max(0.0, route.length + along)
+    p = route.point_at(s)
+    return _noisy((p[0], p[1], route.heading_at(s)), lateral, dyaw)
 
 
 def _draw_one(env: GarageDriveEnv, rng: np.random.Generator, options: dict[str, Any], candidates: list[int],
@@ -124,6 +141,8 @@ def _draw_one(env: GarageDriveEnv, rng: np.random.Generator, options: dict[str, 
     if "start" in options:
         start = tuple(float(v) for v in options["start"])
     plan_from = start if env.task == "park" else cruise.goal
+    if env.task == "park" and getattr(env, "handover_start", 0.0) > 0 and "start" not in options:
+        start = _handed_over(route, start, lateral, dyaw, float(rng.uniform(-1.0, 1.0)) * env.handover_start)
     plan = env.park_planner.plan(plan_from, target, name, occupied=occupied,
                                  obstacles=body_obstacles(env.park_planner.obstacles(), target, bodies))
     if not plan.found:
