@@ -272,6 +272,7 @@ class GarageDriveEnv(gym.Env):
     rear_camera: Camera | None = None
     ultrasonic: Ultrasonic | None = None
     slot_rng: np.random.Generator | None = None
+    handover_start: float = 0.0  # [m] park tests start on their plan's start (a subclass that builds its own scene)
 
     def __init__(
         self,

@@ -15,10 +15,10 @@ test (``task="cruise"``, the default) never comes here.
 The draws come from the reset's generator in this order: target, parked cars, lateral and yaw noise (as a
 cruise test draws them: :meth:`~garage_mj.driving.sim.drive_env.GarageDriveEnv.draw_parked_and_noise`), then
 the maneuver where it is ``"any"``, then (a park env with ``handover_start``) how far before or after the plan's
-start the car stands, as an AVP test's handover leaves it. A test without a cruise route to the stall, or with a proof that no park plan
-exists, is ``infeasible`` with the planner's reason; one without a park plan within the planner's escalated
-budget and without a proof is ``unproven`` (docs/spec.md section 9); with ``infeasible="skip"`` another
-stall is drawn instead of either (unless the stall is fixed), while one is left.
+start the car stands, as an AVP test's handover leaves it. A test without a cruise route to the stall, or with a
+proof that no park plan exists, is ``infeasible`` with the planner's reason; one without a park plan within the
+planner's escalated budget and without a proof is ``unproven`` (docs/spec.md section 9); with ``infeasible="skip"``
+another stall is drawn instead of either (unless the stall is fixed), while one is left.
 
 Every test, driven or not, has a level (:func:`test_level`, docs/spec.md section 9), from the solid bodies of the
 reset scene (:func:`~garage_mj.driving.sim.solid_bodies.solid_bodies`); a driven one ends with the metrics of
@@ -98,6 +98,7 @@ class ParkTest:
 #: The largest ``handover_start`` of a park env [m]: beyond a car length the start is no longer beside the stall.
 MAX_HANDOVER_START = 5.0
 
+
 def _noisy(pose, lateral: float, dyaw: float) -> tuple[float, float, float]:
     """``pose`` moved ``lateral`` metres to its left and turned by ``dyaw``."""
     x, y, yaw = (float(v) for v in pose)
@@ -141,7 +142,7 @@ def _draw_one(env: GarageDriveEnv, rng: np.random.Generator, options: dict[str, 
     if "start" in options:
         start = tuple(float(v) for v in options["start"])
     plan_from = start if env.task == "park" else cruise.goal
-    if env.task == "park" and getattr(env, "handover_start", 0.0) > 0 and "start" not in options:
+    if env.task == "park" and env.handover_start > 0 and "start" not in options:
         start = _handed_over(route, start, lateral, dyaw, float(rng.uniform(-1.0, 1.0)) * env.handover_start)
     plan = env.park_planner.plan(plan_from, target, name, occupied=occupied,
                                  obstacles=body_obstacles(env.park_planner.obstacles(), target, bodies))
