@@ -2,15 +2,16 @@
 
 A diagnosis, not a benchmark: it reads the env's privileged state (the car's pose, the park plan) to measure the
 handover, which the driver itself never sees. For the first ``--garages`` of a held-out garage set
-(``docs/learned_driver/heldout/``) in one park geometry, ``--tests`` AVP tests each (the seeds ``garage-mj cruise``
+(``docs/learned_driver/heldout/``, or a garage set file) in one park geometry, ``--tests`` AVP tests each (the seeds ``garage-mj cruise``
 would use with ``--seed``), driven by ``learned:avp`` with its handover rule (``--rule guide``: where the park guide
 begins, the driver's own) or the slot detector's (``--rule slot``: the stall alongside, centre within 1 m ahead or
 behind and 8 m away, the rule a parking model without the guide gets). Per test: the outcome, where the car was when
-the parking model took over (distance to the park plan's start, heading off it, the slot detector's reading), and how
-many of the plan's stretches the guide reached.
+the parking model took over (distance to the park plan's start, how far ahead of it and to its left, heading off it,
+the slot detector's reading), and how many of the plan's stretches the guide reached.
 
     MUJOCO_GL=egl .venv/bin/python eval/avp_handover.py --rule guide --garages 5 --tests 2
     MUJOCO_GL=egl .venv/bin/python eval/avp_handover.py --rule slot --garages 5 --tests 2
+    MUJOCO_GL=egl .venv/bin/python eval/avp_handover.py --set models/drivers/cruise_m5_validation.json --garages 10
 """
 
 from __future__ import annotations
@@ -53,8 +54,12 @@ def drive(env, driver, seed: int) -> dict:
         action = driver.act(obs)
         if driver.phase == "park" and handover is None:
             x, y, yaw = env.car.pose(env.data)
+            dx, dy = x - start[0], y - start[1]
             handover = {"time_s": round(float(env.data.time), 1),
-                        "from_plan_start_m": round(math.hypot(x - start[0], y - start[1]), 2),
+                        "from_plan_start_m": round(math.hypot(dx, dy), 2),
+                        # in the plan start's frame: ahead of it (negative: short of it) and to its left
+                        "along_m": round(dx * math.cos(start[2]) + dy * math.sin(start[2]), 2),
+                        "left_m": round(-dx * math.sin(start[2]) + dy * math.cos(start[2]), 2),
                         "heading_off_deg": round(math.degrees(math.remainder(yaw - start[2], math.tau)), 1),
                         "slot": [round(float(v), 2) for v in np.asarray(obs["slot"]).reshape(-1)[:2]]}
         obs, _, term, trunc, info = env.step(action)
@@ -69,14 +74,17 @@ def drive(env, driver, seed: int) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rule", choices=("guide", "slot"), default="guide", help="the handover rule (default guide)")
-    ap.add_argument("--set", default="m5_unseen_seed", help="held-out garage set (default m5_unseen_seed)")
+    ap.add_argument("--set", default="m5_unseen_seed",
+                    help="held-out garage set (default m5_unseen_seed), or a garage set file (e.g. the learned "
+                         "driver's validation garages, models/drivers/cruise_m5_validation.json)")
     ap.add_argument("--geometry", default="default", choices=sorted(PARK_GEOMETRIES))
     ap.add_argument("--garages", type=int, default=5)
     ap.add_argument("--tests", type=int, default=2, help="AVP tests per garage (default 2)")
     ap.add_argument("--seed", type=int, default=0, help="run seed (the tests garage-mj cruise --seed draws)")
     ap.add_argument("--json", type=Path, help="write the per-test records here")
     args = ap.parse_args(argv)
-    sources = list(load_garage_set(str(HELDOUT / f"{args.set}.json")))[: args.garages]
+    path = Path(args.set) if args.set.endswith(".json") else HELDOUT / f"{args.set}.json"
+    sources = list(load_garage_set(str(path)))[: args.garages]
     settings = CruiseSettings(driver="learned:avp", seed=args.seed, task="avp", maneuver="any",
                               action_type="continuous", env=PARK_GEOMETRIES[args.geometry].env_kwargs()
                               ).with_sensors(PARK_SENSORS)
