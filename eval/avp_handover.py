@@ -3,9 +3,10 @@
 A diagnosis, not a benchmark: it reads the env's privileged state (the car's pose, the park plan) to measure the
 handover, which the driver itself never sees. For the first ``--garages`` of a held-out garage set
 (``docs/learned_driver/heldout/``, or a garage set file) in one park geometry, ``--tests`` AVP tests each (the seeds ``garage-mj cruise``
-would use with ``--seed``), driven by ``learned:avp`` with its handover rule (``--rule guide``: where the park guide
-begins, the driver's own) or the slot detector's (``--rule slot``: the stall alongside, centre within 1 m ahead or
-behind and 8 m away, the rule a parking model without the guide gets). Per test: the outcome, where the car was when
+would use with ``--seed``), driven by ``learned:avp`` with its handover rule (``--rule guide``: from where the park guide
+begins, on at a crawl to the plan's start, the driver's own), braking where the guide begins (``--rule stop``) or
+the slot detector's (``--rule slot``: the stall alongside, centre within 1 m ahead or behind and 8 m away, the rule a
+parking model without the guide gets). Per test: the outcome, where the car was when
 the parking model took over (distance to the park plan's start, how far ahead of it and to its left, heading off it,
 the slot detector's reading), and how many of the plan's stretches the guide reached.
 
@@ -33,6 +34,14 @@ from garage_mj.driving.sim.outcomes import NOT_DRIVEN
 from garage_mj.driving.sources import CruiseSettings, cruise_seed
 
 HELDOUT = Path(__file__).resolve().parents[1] / "docs" / "learned_driver" / "heldout"
+
+
+class StopWhereGuideBegins(LearnedAVPDriver):
+    """``learned:avp`` braking to rest where the park guide begins, without its approach at a crawl to the plan's
+    start (its handover before that approach)."""
+
+    def _approached(self) -> bool:
+        return True
 
 
 class SlotHandover(LearnedAVPDriver):
@@ -73,7 +82,9 @@ def drive(env, driver, seed: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rule", choices=("guide", "slot"), default="guide", help="the handover rule (default guide)")
+    ap.add_argument("--rule", choices=("guide", "stop", "slot"), default="guide",
+                    help="the handover rule: guide (the driver's: from where the park guide begins, on at a crawl to "
+                         "the plan's start), stop (brake where the guide begins), slot (the stall alongside)")
     ap.add_argument("--set", default="m5_unseen_seed",
                     help="held-out garage set (default m5_unseen_seed), or a garage set file (e.g. the learned "
                          "driver's validation garages, models/drivers/cruise_m5_validation.json)")
@@ -88,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     settings = CruiseSettings(driver="learned:avp", seed=args.seed, task="avp", maneuver="any",
                               action_type="continuous", env=PARK_GEOMETRIES[args.geometry].env_kwargs()
                               ).with_sensors(PARK_SENSORS)
-    driver = SlotHandover() if args.rule == "slot" else LearnedAVPDriver()
+    driver = {"slot": SlotHandover, "stop": StopWhereGuideBegins}.get(args.rule, LearnedAVPDriver)()
     records = []
     for source in sources:
         env = cached_env(source, settings)

@@ -508,6 +508,7 @@ def avp_driver(guide: bool):
 
     driver = LearnedAVPDriver.__new__(LearnedAVPDriver)
     driver.cruise, driver.park, driver.phase = Cruise(), Park(), "cruise"
+    driver.dt, driver.decel, driver.covered = 0.1, 5.0, 0.0  # what reset takes from the reset info
     driver.park.guide = guide
     return driver
 
@@ -532,9 +533,12 @@ def test_the_learned_avp_driver_cruises_until_the_stall_is_alongside_stops_then_
     assert step(20.0, 0.0, 2.0)[2] == -1.0 and driver.phase == "park"  # and keeps parking
 
 
-def test_the_learned_avp_driver_hands_over_where_the_park_guide_begins():
-    """A parking model that reads the park guide takes over where the guide begins (the park plan's start, where its
-    park tests started), wherever the stall is."""
+def test_the_learned_avp_driver_hands_over_on_the_plans_start_once_the_park_guide_begins():
+    """A parking model that reads the park guide takes over on the park plan's start (where its park tests started),
+    wherever the stall is: from where the guide begins, START_RADIUS short of it, the car crawls on the cruise model's
+    steering until its odometry says it has covered that, less its stopping distance; then it brakes to rest."""
+    from garage_mj.driving.sim.park_guide import START_RADIUS
+
     driver = avp_driver(guide=True)
 
     def step(gear, speed, slot_x=0.0):
@@ -543,7 +547,16 @@ def test_the_learned_avp_driver_hands_over_where_the_park_guide_begins():
                            "speed": np.array([speed], np.float32)}).tolist()
 
     assert step(0.0, 3.0) == [0.5, pytest.approx(-0.2), 1.0] and driver.phase == "cruise"  # stall alongside: not yet
-    assert step(1.0, 3.0, slot_x=7.0) == [-1.0, 0.0, 1.0] and driver.phase == "stop"  # the guide begins: brake
+    assert step(1.0, 3.0, slot_x=7.0) == [-1.0, pytest.approx(-0.2), 1.0]  # the guide begins: down to a crawl
+    assert driver.phase == "approach" and driver.covered == pytest.approx(0.3)
+    assert step(1.0, 0.4) == [1.0, pytest.approx(-0.2), 1.0]  # below the crawl: on, on the cruise model's steering
+    for _ in range(40):
+        out = step(1.0, 0.5)
+        if driver.phase != "approach":
+            break
+    assert out == [-1.0, 0.0, 1.0] and driver.phase == "stop"  # covered, but for the stop from a crawl: brake
+    stopping = driver.CRAWL * driver.dt + driver.CRAWL ** 2 / (2 * driver.decel)
+    assert START_RADIUS - stopping <= driver.covered < START_RADIUS - stopping + 0.05 + 1e-9
     assert step(1.0, 0.0, slot_x=6.5) == [pytest.approx(0.3), 1.0, -1.0] and driver.phase == "park"  # at rest: park
 
 

@@ -43,6 +43,7 @@ from garage_mj.driving.learning.saved_model import (  # noqa: F401  (the shipped
     load_driver_model,
     model_path,
 )
+from garage_mj.driving.sim.park_guide import START_RADIUS
 from garage_mj.driving.sim.vehicle import DISCRETE_COMMANDS, DiscreteAction
 
 N_ACTIONS = len(DiscreteAction)  # the paper's 4 actions
@@ -267,12 +268,16 @@ class LearnedAVPDriver:
 
     ``learned:avp``: the shipped cruise model (:class:`LearnedDriver`, the paper's 4 actions sent as their
     ``[throttle, steer]`` commands in drive) follows the route from the entrance. Where a park test would start, the
-    car brakes to rest and the parking model (:class:`LearnedParkDriver`) parks it: for a parking model that reads the
-    park guide, when the guide begins (its gear reads non-zero: the car has come within
-    :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the park plan's start); for one without, when the slot
-    detector reports the target stall alongside (its centre within :data:`HANDOVER_AHEAD` ahead or behind and
-    :data:`HANDOVER_RANGE` away). Both see only their own unprivileged observations; the handover is the one rule
-    between them.
+    car brakes to rest and the parking model (:class:`LearnedParkDriver`) parks it. For a parking model that reads the
+    park guide, that is where the plan starts: the guide begins (its gear reads non-zero) when the car has come within
+    :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the plan's start; from there the cruise model steers on
+    at a crawl (:data:`CRAWL`, held by the pedal) and the car brakes to rest once its own odometry (the speed it
+    observes, times the control period) says it has covered that distance, less what it takes to stop from a crawl.
+    (Braked to rest where the guide begins, a car that arrived slowly stood up to a metre short of the start, where
+    the parking model, trained from the start, often failed.) For a parking model without the guide, the car brakes
+    when the slot detector reports the target stall alongside (its centre within :data:`HANDOVER_AHEAD` ahead or
+    behind and :data:`HANDOVER_RANGE` away). Both see only their own unprivileged observations; the handover is the
+    one rule between them.
     """
 
     action_type = "continuous"
@@ -281,17 +286,31 @@ class LearnedAVPDriver:
     HANDOVER_AHEAD = 1.0  # [m] |slot x| (car frame) at most this: the stall is alongside
     HANDOVER_RANGE = 8.0  # [m] and its centre at most this far away
     AT_REST = 0.05  # [m/s] the parking model takes over below this speed
+    CRAWL = 0.5  # [m/s] the approach to the plan's start, once the guide has begun
 
     def __init__(self, model: str | Path | None = None, cruise_model: str | Path | None = None) -> None:
         self.cruise = LearnedDriver(cruise_model)
         self.park = LearnedParkDriver(None if model is None or str(model) == "avp" else model)
         self.phase = "cruise"
+        self.dt = 0.1  # [s] the control period (the reset info's)
+        self.decel = 5.0  # [m/s^2] the car's full braking (the reset info's car)
+        self.covered = 0.0  # [m] odometry since the guide began
 
     def reset(self, info: dict[str, Any]) -> None:
         """Start a test: cruise first."""
         self.park.reset(info)
         self.cruise.reset({**info, "action_type": "continuous"})
         self.phase = "cruise"
+        self.dt = float(info.get("dt", 0.1))
+        self.decel = float(getattr(info.get("car"), "max_decel", 5.0))
+        self.covered = 0.0
+
+    def _approached(self) -> bool:
+        """Whether the car, approaching at a crawl since the guide began, should brake now to stand on the plan's
+        start: it has covered :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` less its stopping distance
+        from a crawl (one control period, then full braking)."""
+        stopping = self.CRAWL * self.dt + self.CRAWL ** 2 / (2 * self.decel)
+        return self.covered + stopping >= START_RADIUS
 
     def _at_park_start(self, obs: dict[str, Any]) -> bool:
         """Whether the car is where a park test starts: the park guide has begun, or without one the stall is
@@ -310,10 +329,18 @@ class LearnedAVPDriver:
         """The cruise model's command until the car is where a park test starts, a stop, then the parking model's."""
         if self.phase == "cruise":
             if self._at_park_start(obs):
-                self.phase = "stop"
+                self.phase = "approach" if self.park.guide else "stop"
             else:
                 throttle, steer = (float(v) for v in self.cruise.act(obs))
                 return np.array([throttle, steer, 1.0], dtype=np.float32)
+        if self.phase == "approach":
+            speed = abs(float(np.asarray(obs["speed"]).reshape(-1)[0]))
+            self.covered += speed * self.dt
+            if self._approached():
+                self.phase = "stop"
+            else:
+                steer = float(self.cruise.act(obs)[1])  # its steering; the pedal holds a crawl
+                return np.array([1.0 if speed < self.CRAWL else -1.0, steer, 1.0], dtype=np.float32)
         if self.phase == "stop":
             if abs(float(np.asarray(obs["speed"]).reshape(-1)[0])) > self.AT_REST:
                 return np.array([-1.0, 0.0, 1.0], dtype=np.float32)
