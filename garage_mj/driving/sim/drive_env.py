@@ -236,10 +236,10 @@ class GarageDriveEnv(gym.Env):
         stall: a stall id every reset tests (default: drawn per test).
         handover_start: [m] park tests only: the car starts up to this far before or after the park plan's start
             (drawn uniformly per test; before it: on the cruise route, after it: along its heading), where an AVP
-            test's cruise leaves it for the parking (:class:`~garage_mj.driving.drivers.learned.LearnedAVPDriver`
-            hands over within :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the plan's start, then
-            brakes to rest). The plan is the one from the noised cruise goal, as without it. 0 (the default): the
-            car starts on the plan's start.
+            test's cruise may leave it for the parking (a car braked to rest where the park guide begins, within
+            :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the plan's start, stands up to that far short
+            of it). The plan is the one from the noised cruise goal, as without it. 0 (the default): the car starts
+            on the plan's start.
         park_config: :class:`~garage_mj.scene.park_planning.ParkConfig` of the reference park planner.
         world: the park geometry the garage is built in (docs/spec.md section 9): a
             :class:`~garage_mj.scene.world.WorldConfig`, or a dict of its geometry keys (``stall_width``,
