@@ -331,11 +331,14 @@ def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], trie
     env, or in a park hunt the parent's garage with its tests aimed at a stall (:func:`stall_targets`, with
     probability :data:`STALL_FOCUS` where there is one) or in another of ``geometries`` that builds it (with
     probability :data:`GEOMETRY_SWITCH`); (garage, geometry or variant, parent), None if none found."""
+    targets_of: dict[str, list[int]] = {}  # per parent: seen does not change while a child is drawn
     for _ in range(tries):
         a, b = rng.choice(len(parents), size=2, replace=len(parents) < 2)
         parent = parents[a] if parents[a].score >= parents[b].score else parents[b]
         base = parent.park_geometry
-        targets = stall_targets(parent, seen)
+        if parent.key not in targets_of:
+            targets_of[parent.key] = stall_targets(parent, seen)
+        targets = targets_of[parent.key]
         if targets and rng.random() < STALL_FOCUS:
             return parent.source.garage, variant(base, targets[int(rng.integers(len(targets)))]), parent
         if len(geometries) > 1 and rng.random() < GEOMETRY_SWITCH:
@@ -696,9 +699,9 @@ def run_variants(out_dir: str | Path) -> list[str]:
     found = [d.name for d in cruise_dir(out).iterdir() if (d / "tests.csv").is_file()] \
         if cruise_dir(out).is_dir() else []
     order = {g: k for k, g in enumerate(geometries)}
-    found = [n for n in found if split_variant(n)[0] in order]
-    return sorted(found, key=lambda n: (order[split_variant(n)[0]], -1 if split_variant(n)[1] is None
-                                        else split_variant(n)[1]))
+    parsed = [(n, *split_variant(n)) for n in found]
+    ranked = sorted((order[g], -1 if stall is None else stall, n) for n, g, stall in parsed if g in order)
+    return [n for _, _, n in ranked]
 
 
 def read_settings(out_dir: str | Path) -> dict[str, Any]:
