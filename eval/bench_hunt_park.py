@@ -2,7 +2,7 @@
 
     MUJOCO_GL=egl .venv/bin/python eval/bench_hunt_park.py [--map m5_13x13_aligned] [--driver park_assist ...]
         [--budget 150] [--tests 5] [--population 10] [--elites 3] [--geometries default,tight,...]
-        [--seed 0] [--workers 1] [--out runs/bench_hunt_park] [--json docs/bench_hunt_park.json]
+        [--seed 0] [--workers 1] [--scenario park_mixed] [--out runs/bench_hunt_park] [--json docs/bench_hunt_park.json]
 
 For each ``--driver``:
 
@@ -14,9 +14,13 @@ For each ``--driver``:
    confirmed the same way.
 3. A confirmed failure is a test the driver fails while the oracle parks it (same garage, geometry and test seed).
 
+``--scenario NAME`` (a named scenario, e.g. ``park_mixed``) puts actors in every test of both arms; the hunt then
+searches actor placements too (children that keep a failing test's scene with the actors placed anew).
+
 Reports, per driver and arm, the tests, feasible tests, failures, confirmed failures, their rate per test spent
 and per feasible test, and the ratio hunt / uniform of the confirmed rate per test (the target: at least 3x);
-each arm is a resumable hunt folder under ``--out``.
+each arm is a resumable hunt folder under ``--out``; ``by_kind`` splits an arm's candidates into those drawing
+their stalls, those aimed at a stall and those keeping a failing test's scene.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from pathlib import Path
 from _provenance import provenance
 
 from garage_mj.core.backends import Compute
+from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.hunt import PARK_HUNT_GEOMETRIES, HuntConfig, HuntResult, hunt
 from garage_mj.driving.sources import CruiseSettings
 
@@ -54,18 +59,22 @@ def _arm(res: HuntResult, seconds: float) -> dict:
     fails = sum(len(s.failures) for s in res.ranked)
     confirmed = sum(len(s.confirmed) for s in res.ranked)
     by_geometry: dict[str, dict[str, int]] = {}
+    by_kind: dict[str, dict[str, int]] = {}
     for s in res.ranked:
-        g = by_geometry.setdefault(s.geometry, {"candidates": 0, "tests": 0, "feasible": 0, "confirmed": 0})
-        g["candidates"] += 1
-        g["tests"] += len(s.rows)
-        g["feasible"] += len(s.feasible)
-        g["confirmed"] += len(s.confirmed)
+        kind = "scene_kept" if s.scene is not None else "stall_aimed" if s.stall is not None else "stalls_drawn"
+        for key, table in ((s.geometry, by_geometry), (kind, by_kind)):
+            g = table.setdefault(key, {"candidates": 0, "tests": 0, "feasible": 0, "confirmed": 0})
+            g["candidates"] += 1
+            g["tests"] += len(s.rows)
+            g["feasible"] += len(s.feasible)
+            g["confirmed"] += len(s.confirmed)
     return {"candidates": len(res.ranked), "generations": res.generations, "tests": tests, "feasible": feasible,
             "failures": fails, "confirmed": confirmed,
             "confirmed_per_test_pct": round(100 * confirmed / tests, 2) if tests else None,
             "confirmed_per_test_ci95": _wilson(confirmed, tests),
             "confirmed_per_feasible_pct": round(100 * confirmed / feasible, 2) if feasible else None,
-            "by_geometry": dict(sorted(by_geometry.items())), "wall_s": round(seconds, 1)}
+            "by_kind": dict(sorted(by_kind.items())), "by_geometry": dict(sorted(by_geometry.items())),
+            "wall_s": round(seconds, 1)}
 
 
 def main() -> None:
@@ -80,6 +89,8 @@ def main() -> None:
     ap.add_argument("--geometries", default=",".join(PARK_HUNT_GEOMETRIES))
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--scenario", choices=sorted(SCENARIOS), default=None,
+                    help="actors in every test (a named scenario; default none)")
     ap.add_argument("--out", type=Path, default=Path("runs/bench_hunt_park"))
     ap.add_argument("--json", type=Path, default=Path("docs/bench_hunt_park.json"))
     args = ap.parse_args()
@@ -94,7 +105,8 @@ def main() -> None:
                 ("uniform", args.seed + 1, HuntConfig(budget=args.budget, tests=args.tests,
                                                       population=args.budget // args.tests, elites=1, worst=0))):
             t = time.time()
-            res = hunt(CruiseSettings(driver, seed=seed, task="park"), args.out / driver.replace(":", "_") / arm,
+            env = {} if args.scenario is None else {"scenario": args.scenario}
+            res = hunt(CruiseSettings(driver, seed=seed, task="park", env=env), args.out / driver.replace(":", "_") / arm,
                        map=args.map, config=cfg, compute=compute, geometries=geometries)
             arms[arm] = _arm(res, time.time() - t)
             print(driver, arm, json.dumps({k: v for k, v in arms[arm].items() if k != "by_geometry"}), flush=True)
@@ -105,7 +117,8 @@ def main() -> None:
     out = {"what": "confirmed park failures (the driver fails, the oracle parks the same test) per test spent: "
                    "hunt --task park against uniform sampling of garages and geometries, equal budgets",
            "map": args.map, "geometries": geometries, "budget": args.budget, "tests_per_evaluation": args.tests,
-           "population": args.population, "elites": args.elites, "seed": args.seed, "target_ratio": TARGET_RATIO,
+           "population": args.population, "elites": args.elites, "seed": args.seed, "scenario": args.scenario,
+           "target_ratio": TARGET_RATIO,
            "drivers": drivers, "provenance": provenance()}
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(out, indent=2) + "\n")

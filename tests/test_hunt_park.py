@@ -1,5 +1,5 @@
-"""garage-mj hunt --task park: (garage, geometry) candidates and children aimed at a failing stall, failures the oracle
-confirms, the same hunt per seed."""
+"""garage-mj hunt --task park: (garage, geometry) candidates, children aimed at a failing stall or keeping a failing
+test's scene with its actors placed anew, failures the oracle confirms, the same hunt per seed."""
 
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ from garage_mj.driving.hunt import (
     hunt,
     hunt_geometries,
     rerun,
+    scene_targets,
     split_variant,
     stall_targets,
     variant,
@@ -99,13 +100,39 @@ def test_stall_targets_are_failing_stalls_then_their_neighbours():
     aimed = Scored(src, geometry=variant("default", 9), rows=rows[:1], oracle_parks={0})
     assert (aimed.park_geometry, aimed.stall) == ("default", 9)
     assert stall_targets(aimed, {aimed.key}) == [8, 10]  # stalls 8-10 share a row; 11 is across the aisle
-    assert split_variant("parallel_mixed@stall12") == ("parallel_mixed", 12)
-    assert split_variant("parallel_mixed") == ("parallel_mixed", None)
+    assert split_variant("parallel_mixed@stall12") == ("parallel_mixed", 12, None)
+    assert split_variant("parallel_mixed") == ("parallel_mixed", None, None)
+    assert scene_targets(parent, set()) == []  # no failure hit an actor
     assert Scored(src, geometry="tight", rows=rows).stall is None
     assert stall_targets(Scored(src, rows=rows), set()) == []  # a cruise hunt aims at no stall
     rng = np.random.default_rng(0)
     kinds = [_child([parent], rng, {parent.key}, 50, ("default", "tight"), _build_cache())[1] for _ in range(40)]
     assert "default@stall9" in kinds and set(kinds) - {"default@stall9"}  # a stall child, and the other kinds too
+
+
+def test_a_child_keeps_the_scene_of_a_failure_that_hit_an_actor_and_places_its_actors_anew(tmp_path):
+    out = tmp_path / "h"
+    res = hunt(CruiseSettings("park_assist", seed=1, task="park", env={"scenario": "park_pedestrian_behind"}), out,
+               map="tiny_7x11", config=CFG, compute=QUIET, geometries=GEOMETRIES)
+    kept = [s for s in res.ranked if s.scene is not None]
+    assert kept  # this hunt's child is one (seeded: the same every run)
+    by_key = {s.key: s for s in res.ranked}
+    s = kept[0]
+    parent = by_key[s.parent]
+    failed = {int(r["seed"]): r for r in parent.confirmed}
+    assert s.source.hash == parent.source.hash and s.park_geometry == parent.park_geometry
+    assert failed[s.scene]["hit"] == "pedestrian"  # a failure that hit an actor
+    assert {r["target_stall"] for r in s.rows} == {failed[s.scene]["target_stall"]} == {str(s.stall)}
+    assert len({r["seed"] for r in s.rows}) == len(s.rows) and str(s.scene) not in {r["seed"] for r in s.rows}
+    run = json.loads((cruise_dir(out, s.geometry) / "run.json").read_text())
+    assert cruise_dir(out, s.geometry).name == f"{s.park_geometry}@scene{s.scene}" and run["env"]["scene_seed"] == s.scene
+    row = next(r for r in _table(out) if r["scene"] == str(s.scene))
+    assert (row["garage_hash"], row["geometry"], row["stall"]) == (s.source.hash, s.park_geometry, str(s.stall))
+    again = rerun(out, s.source.hash[:12], int(s.rows[0]["test"]), geometry=s.park_geometry, scene=s.scene)
+    assert (again["outcome"], again["target_stall"], again["seed"]) == \
+        (s.rows[0]["outcome"], s.stall, int(s.rows[0]["seed"]))
+    assert scene_targets(s, set()) == []  # its failures are of its own scene
+    assert split_variant(s.geometry) == (s.park_geometry, None, s.scene)
 
 
 def test_failures_are_confirmed_by_the_oracle(hunted):

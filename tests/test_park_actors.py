@@ -79,6 +79,37 @@ def test_placement_is_seeded_and_leaves_the_other_draws_alone(tiny):
         bare.close()
 
 
+def test_a_scene_seed_keeps_one_tests_scene_and_places_its_actors_anew(tiny):
+    env = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_mixed", parked_fleet="mixed")
+    kept = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_mixed", parked_fleet="mixed",
+                          scene_seed=4)
+    try:
+        env.reset(seed=4)
+        scene = (env.target, env.start_pose, env._park.plan.poses, env._park.maneuver)
+        actors = [a.as_dict() for a in env.scenario.actors]
+        kept.reset(seed=4)  # its own seed: the very test
+        assert [a.as_dict() for a in kept.scenario.actors] == actors
+        placed = set()
+        for seed in (5, 6, 7):
+            kept.reset(seed=seed)
+            # the scene of seed 4: stall, start, maneuver, plan and parked cars (but those the actors' take)
+            assert (kept.target, kept.start_pose, kept._park.maneuver) == (scene[0], scene[1], scene[3])
+            assert np.array_equal(kept._park.plan.poses, scene[2])
+            taken = kept.scenario.free_stalls | env.scenario.free_stalls
+            assert sorted(set(kept.occupied) - taken) == sorted(set(env.occupied) - taken)
+            assert {k: b for k, b in kept.parked_bodies.items() if k not in taken} == \
+                {k: b for k, b in env.parked_bodies.items() if k not in taken}  # the mixed fleet's cars too
+            placed.add(repr([a.as_dict() for a in kept.scenario.actors]))
+        assert len(placed) == 3 and repr(actors) not in placed
+    finally:
+        env.close()
+        kept.close()
+    with pytest.raises(ValueError, match="scene_seed is for park and AVP tests"):
+        GarageDriveEnv(tiny, scene_seed=4)
+    with pytest.raises(ValueError, match="scene_seed must be a test seed"):
+        GarageDriveEnv(tiny, task="park", scene_seed=-1)
+
+
 def test_the_pedestrian_behind_crosses_the_reverse_path(tiny):
     env = GarageDriveEnv(tiny, action_type="continuous", task="park", scenario="park_pedestrian_behind")
     try:

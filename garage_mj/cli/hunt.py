@@ -37,7 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "cruise tests are spent. Writes OUT/failures.csv (garages ranked by failure rate, with what was "
                     "hit and where), OUT/hunt.sqlite, asset packs, .xosc files and MP4s of the worst garages, and "
                     "OUT/report.html. A park or AVP hunt (--task) searches park geometries and stalls too: a child "
-                    "may aim every test at a stall where its parent failed, or one beside it. Resumable: run the "
+                    "may aim every test at a stall where its parent failed, or one beside it; with actors, it may "
+                    "keep the scene of a test where the car hit one and place the actors anew. Resumable: run the "
                     "same command again.",
         epilog="example: garage-mj hunt --driver vision --map m5_13x13_aligned --budget 1000 --out hunt_vision")
     src = p.add_mutually_exclusive_group(required=True)

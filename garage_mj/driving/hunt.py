@@ -52,7 +52,13 @@ failures the reference driver would not make:
   geometry is the *variant* ``<geometry>@stall<id>`` (:func:`variant`), its own cruise run in
   ``OUT/cruise/<geometry>@stall<id>``; ``failures.csv`` names it in its ``geometry`` and ``stall`` columns. A child
   made from it by a geometry switch or a mutation draws its stalls again (another geometry or garage numbers its
-  stalls anew). Actor placements are not searched.
+  stalls anew).
+- **Actor placements** are searched in a hunt with actors (``settings.env["scenario"]``): a child of a parent with a
+  confirmed failure in which the car hit an actor (a pedestrian, a moving car, clutter) is, with probability
+  :data:`ACTOR_FOCUS`, that failing test's scene (its garage, geometry, stall, parked cars, maneuver and start: the
+  draws of its test seed) with the actors placed anew by each of its tests' seeds (``GarageDriveEnv(scene_seed=)``;
+  the tests' seeds those of a run seeded by the scene's seed, so none is the failing test again); its geometry is the variant ``<geometry>@scene<seed>``, its own cruise run, named in ``failures.csv``'s ``stall``
+  and ``scene`` columns. As an elite it is re-tested with more seeds, so more placements around that scene.
 """
 
 from __future__ import annotations
@@ -95,7 +101,7 @@ _COUNTS = tuple(sorted(COUNT_COLUMNS.values()))
 FAILURE_COLUMNS = ("rank", "garage", "garage_hash", "library_id", "difficulty", "tests", "feasible", "failures",
                    "failure_pct", *_COUNTS, "hit", "failure_progress", "failing_tests", "failing_seeds", "parent")
 #: ``failures.csv`` of a park or AVP hunt: the candidate's geometry, and the failures the oracle parks.
-PARK_FAILURE_COLUMNS = (*FAILURE_COLUMNS[:3], "geometry", "stall", *FAILURE_COLUMNS[3:8], "oracle_parks",
+PARK_FAILURE_COLUMNS = (*FAILURE_COLUMNS[:3], "geometry", "stall", "scene", *FAILURE_COLUMNS[3:8], "oracle_parks",
                         "confirmed_pct", *FAILURE_COLUMNS[8:])
 
 #: The park geometries a park or AVP hunt searches when none are given (``--geometries``): bays at 90 and 60
@@ -104,10 +110,17 @@ PARK_HUNT_GEOMETRIES = ("default", "tight", "angled60", "parallel", "parallel_mi
 #: A park hunt's child of a parent with a stall to aim at: the chance that it is the parent's garage and geometry
 #: with its tests aimed at that stall (else a geometry switch or a mutation, as for any parent).
 STALL_FOCUS = 0.5
+#: A park hunt's child of a parent with a failure in which the car hit an actor: the chance that it is that test's
+#: scene with its actors placed anew (before the stall and the other kinds of child are drawn).
+ACTOR_FOCUS = 0.5
+#: What a car hits (``tests.csv``'s ``hit``) when it hits an actor.
+ACTOR_HITS = ("pedestrian", "moving_car", "clutter")
 #: A park hunt's child: the chance that it is its parent's garage in another geometry (else a mutated garage).
 GEOMETRY_SWITCH = 0.5
 #: What joins a park geometry and a stall in a candidate's variant name (``tight@stall17``).
 _STALL_MARK = "@stall"
+#: ... and a park geometry and a test seed whose scene the candidate keeps (``tight@scene1861353168``).
+_SCENE_MARK = "@scene"
 #: The driver that confirms a park hunt's failures (a failure counts when it parks that test).
 ORACLE = "oracle"
 _ORACLE_COLUMNS = ("geometry", "garage_hash", "test", "seed", "outcome")
@@ -156,7 +169,7 @@ class Scored:
     source: CruiseSource
     parent: str = ""  # key of the candidate it was made from ("" for a starting one)
     rows: list[dict[str, str]] = field(default_factory=list)
-    geometry: str = ""  # a park or AVP hunt's park geometry or variant (tight@stall17; "" in a cruise hunt)
+    geometry: str = ""  # a park or AVP hunt's park geometry or variant (tight@stall17, tight@scene8812; "": cruise)
     oracle_parks: set[int] | None = None  # failing tests (indices) the oracle parks; None: not confirmed (cruise)
 
     @property
@@ -171,8 +184,17 @@ class Scored:
 
     @property
     def stall(self) -> int | None:
-        """The stall its tests are aimed at (None: each test draws its stall)."""
-        return split_variant(self.geometry)[1]
+        """The stall its tests are aimed at (None: each test draws its stall): a stall variant's, or the stall of a
+        scene variant's scene (None before its tests ran)."""
+        _, stall, scene = split_variant(self.geometry)
+        if scene is not None and self.rows and str(self.rows[0].get("target_stall", "")).isdigit():
+            return int(self.rows[0]["target_stall"])
+        return stall
+
+    @property
+    def scene(self) -> int | None:
+        """The test seed whose scene its tests keep, their actors placed anew (None: each test draws its scene)."""
+        return split_variant(self.geometry)[2]
 
     @property
     def feasible(self) -> list[dict[str, str]]:
@@ -199,21 +221,29 @@ class Scored:
         return len(self.confirmed) / f if f else math.nan
 
 
-def variant(geometry: str, stall: int | None = None) -> str:
-    """A park hunt candidate's geometry with its tests aimed at ``stall``: ``<geometry>@stall<id>`` (None: the
-    geometry, every test drawing its stall)."""
+def variant(geometry: str, stall: int | None = None, scene: int | None = None) -> str:
+    """A park hunt candidate's geometry with its tests aimed at ``stall``, ``<geometry>@stall<id>``, or keeping the
+    scene of the test seed ``scene`` with the actors placed anew, ``<geometry>@scene<seed>`` (both None: the geometry,
+    every test drawing its own)."""
+    if scene is not None:
+        return f"{geometry}{_SCENE_MARK}{int(scene)}"
     return geometry if stall is None else f"{geometry}{_STALL_MARK}{int(stall)}"
 
 
-def split_variant(name: str) -> tuple[str, int | None]:
-    """``(geometry, stall)`` of a :func:`variant` name (stall None where the tests draw it)."""
-    geometry, mark, stall = name.partition(_STALL_MARK)
-    return (geometry, int(stall)) if mark and stall.isdigit() else (name, None)
+def split_variant(name: str) -> tuple[str, int | None, int | None]:
+    """``(geometry, stall, scene)`` of a :func:`variant` name (None where the tests draw it)."""
+    for mark in (_STALL_MARK, _SCENE_MARK):
+        geometry, found, number = name.partition(mark)
+        if found and number.isdigit():
+            return (geometry, int(number), None) if mark == _STALL_MARK else (geometry, None, int(number))
+    return name, None, None
 
 
 def variant_label(name: str) -> str:
-    """A variant as a person reads it: ``tight, stall 17`` (or the geometry alone)."""
-    geometry, stall = split_variant(name)
+    """A variant as a person reads it: ``tight, stall 17``, ``tight, scene of seed 8812`` (or the geometry alone)."""
+    geometry, stall, scene = split_variant(name)
+    if scene is not None:
+        return f"{geometry}, scene of seed {scene}"
     return geometry if stall is None else f"{geometry}, stall {stall}"
 
 
@@ -238,11 +268,15 @@ def hunt_geometries(task: str, geometries: Sequence[str] | None) -> tuple[str, .
 
 def candidate_settings(settings: CruiseSettings, geometry: str) -> CruiseSettings:
     """``settings`` with the park geometry ``geometry``'s env keyword arguments over its env ("": as they are); a
-    :func:`variant`'s tests aimed at its stall."""
+    :func:`variant`'s tests aimed at its stall, or keeping its scene (``scene_seed``; the scene's seed seeds its
+    run, so that no test of it is the failing test itself, whose seed is the hunt's)."""
     if not geometry:
         return settings
-    base, stall = split_variant(geometry)
-    mine = dataclasses.replace(settings, env={**(settings.env or {}), **PARK_GEOMETRIES[base].env_kwargs()})
+    base, stall, scene = split_variant(geometry)
+    env = {**(settings.env or {}), **PARK_GEOMETRIES[base].env_kwargs()}
+    if scene is not None:
+        env["scene_seed"] = scene
+    mine = dataclasses.replace(settings, env=env, seed=settings.seed if scene is None else scene)
     return mine if stall is None else dataclasses.replace(mine, stall=stall)
 
 
@@ -313,7 +347,7 @@ def stall_targets(parent: Scored, seen: set[str]) -> list[int]:
     """The stalls a park hunt's child of ``parent`` may aim its tests at (:data:`STALL_FOCUS`), none already a
     candidate in ``seen``: those of the parent's confirmed failures, and for a parent aimed at a stall the stalls
     beside it (same block and side, the next id); none in a cruise hunt."""
-    geometry, fixed = split_variant(parent.geometry)
+    geometry, fixed, _ = split_variant(parent.geometry)
     if not geometry:
         return []
     ids = {int(r["target_stall"]) for r in parent.confirmed if str(r.get("target_stall", "")).isdigit()}
@@ -325,20 +359,36 @@ def stall_targets(parent: Scored, seen: set[str]) -> list[int]:
     return sorted(k for k in ids if candidate_key(parent.source.hash, variant(geometry, k)) not in seen)
 
 
+def scene_targets(parent: Scored, seen: set[str]) -> list[int]:
+    """The test seeds whose scenes a park hunt's child of ``parent`` may keep with its actors placed anew
+    (:data:`ACTOR_FOCUS`), none already a candidate in ``seen``: those of the parent's confirmed failures in which
+    the car hit an actor (:data:`ACTOR_HITS`); none for a parent that keeps a scene already (its failures are of
+    that scene) or in a cruise hunt."""
+    geometry, _, scene = split_variant(parent.geometry)
+    if not geometry or scene is not None:
+        return []
+    seeds = {int(r["seed"]) for r in parent.confirmed if r.get("hit") in ACTOR_HITS and str(r.get("seed", "")).isdigit()}
+    return sorted(k for k in seeds if candidate_key(parent.source.hash, variant(geometry, scene=k)) not in seen)
+
+
 def _child(parents: list[Scored], rng: np.random.Generator, seen: set[str], tries: int,
            geometries: Sequence[str] = (), can_build: Any = None) -> tuple[Garage, str, Scored] | None:
     """A new candidate from a tournament-picked parent: a garage mutated from the parent's, re-painted by the painter
-    env, or in a park hunt the parent's garage with its tests aimed at a stall (:func:`stall_targets`, with
-    probability :data:`STALL_FOCUS` where there is one) or in another of ``geometries`` that builds it (with
-    probability :data:`GEOMETRY_SWITCH`); (garage, geometry or variant, parent), None if none found."""
-    targets_of: dict[str, list[int]] = {}  # per parent: seen does not change while a child is drawn
+    env, or in a park hunt the parent's garage keeping the scene of a failing test with its actors placed anew
+    (:func:`scene_targets`, with probability :data:`ACTOR_FOCUS` where there is one), with its tests aimed at a
+    stall (:func:`stall_targets`, with probability :data:`STALL_FOCUS` where there is one) or in another of
+    ``geometries`` that builds it (with probability :data:`GEOMETRY_SWITCH`); (garage, geometry or variant,
+    parent), None if none found."""
+    targets_of: dict[str, tuple[list[int], list[int]]] = {}  # per parent: seen does not change while a child is drawn
     for _ in range(tries):
         a, b = rng.choice(len(parents), size=2, replace=len(parents) < 2)
         parent = parents[a] if parents[a].score >= parents[b].score else parents[b]
         base = parent.park_geometry
         if parent.key not in targets_of:
-            targets_of[parent.key] = stall_targets(parent, seen)
-        targets = targets_of[parent.key]
+            targets_of[parent.key] = scene_targets(parent, seen), stall_targets(parent, seen)
+        scenes, targets = targets_of[parent.key]
+        if scenes and rng.random() < ACTOR_FOCUS:
+            return parent.source.garage, variant(base, scene=scenes[int(rng.integers(len(scenes)))]), parent
         if targets and rng.random() < STALL_FOCUS:
             return parent.source.garage, variant(base, targets[int(rng.integers(len(targets)))]), parent
         if len(geometries) > 1 and rng.random() < GEOMETRY_SWITCH:
@@ -638,7 +688,7 @@ def _write_outputs(out: Path, ranked: list[Scored], cfg: HuntConfig, settings: C
         })
         if park:  # the class counts, hits and failing tests above are of the failures the oracle parks
             rows[-1].update(geometry=s.park_geometry, stall="" if s.stall is None else s.stall,
-                            oracle_parks=len(s.confirmed),
+                            scene="" if s.scene is None else s.scene, oracle_parks=len(s.confirmed),
                             confirmed_pct=round(100.0 * s.rate, 2) if s.feasible else "")
     buf = io.StringIO(newline="")
     w = csv.DictWriter(buf, fieldnames=PARK_FAILURE_COLUMNS if park else FAILURE_COLUMNS)
@@ -686,7 +736,8 @@ def hunt_settings(out_dir: str | Path, geometry: str = "") -> CruiseSettings:
 
 def run_dirs(out_dir: str | Path) -> list[Path]:
     """The hunt's cruise runs: ``OUT/cruise``, or one per geometry of a park or AVP hunt, then one per variant
-    (a geometry with its tests aimed at a stall: ``OUT/cruise/<geometry>@stall<id>``), by geometry and stall."""
+    (a geometry with its tests aimed at a stall, ``OUT/cruise/<geometry>@stall<id>``, or keeping a test's scene,
+    ``OUT/cruise/<geometry>@scene<seed>``), by geometry, stall and scene."""
     return [cruise_dir(Path(out_dir), name) for name in run_variants(out_dir)]
 
 
@@ -700,8 +751,9 @@ def run_variants(out_dir: str | Path) -> list[str]:
         if cruise_dir(out).is_dir() else []
     order = {g: k for k, g in enumerate(geometries)}
     parsed = [(n, *split_variant(n)) for n in found]
-    ranked = sorted((order[g], -1 if stall is None else stall, n) for n, g, stall in parsed if g in order)
-    return [n for _, _, n in ranked]
+    ranked = sorted((order[g], -1 if stall is None else stall, -1 if scene is None else scene, n)
+                    for n, g, stall, scene in parsed if g in order)
+    return [r[-1] for r in ranked]
 
 
 def read_settings(out_dir: str | Path) -> dict[str, Any]:
@@ -718,17 +770,18 @@ def add_file(out_dir: str | Path, name: str, path: Path) -> None:
 
 
 def rerun(out_dir: str | Path, garage_hash: str, test: int, geometry: str | None = None,
-          stall: int | None = None) -> dict[str, Any]:
+          stall: int | None = None, scene: int | None = None) -> dict[str, Any]:
     """Re-run one listed (garage, test) of a hunt in ``out_dir``: the cruise row (same seed, same outcome). A park or
-    AVP hunt's garage tested in several geometries needs ``geometry``, and one tested with its tests aimed at a
-    stall ``stall`` too: the ``geometry`` and ``stall`` columns of ``failures.csv`` (``geometry`` may also be the
-    variant, ``tight@stall17``)."""
+    AVP hunt's garage tested in several geometries needs ``geometry``, one tested with its tests aimed at a stall
+    ``stall`` too, one tested keeping a test's scene ``scene``: the ``geometry``, ``stall`` and ``scene`` columns of
+    ``failures.csv`` (``geometry`` may also be the variant, ``tight@stall17``, ``tight@scene8812``)."""
     out = Path(out_dir)
     state = read_settings(out)
     names = run_variants(out)
-    if geometry is not None:  # that geometry's own run, or with a stall the run aimed at it
-        base, aimed = split_variant(geometry)
-        geometry = variant(base, aimed if aimed is not None else stall)
+    if geometry is not None:  # that geometry's own run, or the variant's that aimed at a stall or kept a scene
+        base, aimed, kept = split_variant(geometry)
+        kept = kept if kept is not None else scene
+        geometry = variant(base, None if kept is not None else aimed if aimed is not None else stall, kept)
         names = [n for n in names if n == geometry]
     found = []
     for g in names:

@@ -240,6 +240,10 @@ class GarageDriveEnv(gym.Env):
             :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the plan's start, stands up to that far short
             of it). The plan is the one from the noised cruise goal, as without it. 0 (the default): the car starts
             on the plan's start.
+        scene_seed: park and AVP tests only: every reset draws its test (target stall, parked cars and their fleet,
+            maneuver, start, slot noise) from this seed, as ``reset(seed=scene_seed)`` would, and only its actors
+            from its own seed: one test's scene with its actors placed anew per seed (how a park hunt searches actor
+            placements). None (the default): everything from the reset's seed.
         park_config: :class:`~garage_mj.scene.park_planning.ParkConfig` of the reference park planner.
         world: the park geometry the garage is built in (docs/spec.md section 9): a
             :class:`~garage_mj.scene.world.WorldConfig`, or a dict of its geometry keys (``stall_width``,
@@ -273,6 +277,7 @@ class GarageDriveEnv(gym.Env):
     ultrasonic: Ultrasonic | None = None
     slot_rng: np.random.Generator | None = None
     handover_start: float = 0.0  # [m] park tests start on their plan's start (a subclass that builds its own scene)
+    scene_seed: int | None = None  # a park test's draws, but its actors', from the reset's seed (a subclass: the same)
 
     def __init__(
         self,
@@ -294,6 +299,7 @@ class GarageDriveEnv(gym.Env):
         maneuver: str = "reverse",
         stall: int | None = None,
         handover_start: float = 0.0,
+        scene_seed: int | None = None,
         park_config: ParkConfig | dict[str, Any] | None = None,
         park_outcome: ParkOutcomeConfig | dict[str, Any] | None = None,
         vehicle: str | VehicleClass | None = None,
@@ -324,6 +330,12 @@ class GarageDriveEnv(gym.Env):
         if handover_start and task != "park":
             raise ValueError("handover_start is for park tests (task='park'): an AVP test starts at the entrance")
         self.handover_start = float(handover_start)
+        if scene_seed is not None and (isinstance(scene_seed, bool) or not isinstance(scene_seed, int)
+                                       or scene_seed < 0):
+            raise ValueError(f"scene_seed must be a test seed, an integer >= 0, got {scene_seed!r}")
+        if scene_seed is not None and task == "cruise":
+            raise ValueError("scene_seed is for park and AVP tests (task='park' or 'avp')")
+        self.scene_seed = scene_seed
         self.garage = garage
         self.world = world if isinstance(world, WorldConfig) else world_with(world)  # its park geometry
         self.infeasible = infeasible
@@ -425,13 +437,17 @@ class GarageDriveEnv(gym.Env):
         super().reset(seed=seed)
         rng = self.np_random
         options = options or {}
+        actor_seed = seed
+        if self.scene_seed is not None:  # a park test's draws from the scene seed, only its actors' from the reset's
+            seed = self.scene_seed
+            rng = np.random.default_rng(seed)  # the generator reset(seed=scene_seed) makes
         # the parked fleet's draws: a generator of their own (none for the scene's own cars)
         self._fleet_rng = None if self.parked_fleet.default else fleet_rng(seed) if seed is not None else rng
         self.parked_bodies: dict[int, ParkedBody] = {}
         # the slot detector's noise: a generator of its own, drawn from only when it adds noise
         self.slot_rng = None if not self.sensor_config.noisy_slot else slot_rng(seed) if seed is not None else rng
         if self.task != "cruise":
-            return self._reset_park(rng, options, seed)
+            return self._reset_park(rng, options, actor_seed)
         if "target" in options:
             target = int(options["target"])
         elif self.stall is not None:  # one stall for every test (no draw: the other draws as with none)
@@ -505,14 +521,15 @@ class GarageDriveEnv(gym.Env):
                            self.scene.world.marking_width)
 
     def _reset_park(self, rng, options: dict[str, Any], seed: int | None = None):
-        """:meth:`reset` of a park or AVP test (:mod:`~garage_mj.driving.sim.park_task`)."""
+        """:meth:`reset` of a park or AVP test (:mod:`~garage_mj.driving.sim.park_task`): the test drawn from ``rng``,
+        its actors from ``seed`` (the reset's; None: from ``np_random``)."""
         given = options.get("actors")
         if given is not None and "occupied" in options:  # a replay: the stalls its actors take held parked cars
             took = {int(a.stall if isinstance(a, ActorSpec) else a.get("stall", -1)) for a in given} - {-1}
             options = {**options, "occupied": sorted({int(s) for s in options["occupied"]} | took)}
         test = self._draw_park_test(rng, options)
         # the actors: their own generator, after the test's draws (park_placement); the stalls they take are freed
-        self.scenario, test = park_scenario(self, test, seed, rng, given)
+        self.scenario, test = park_scenario(self, test, seed, self.np_random, given)
         self._park = test
         plan = test.plan
         self.park_guide = ParkGuide(plan.poses, plan.directions, self.car_geometry) \
