@@ -51,6 +51,21 @@ class SlotHandover(LearnedAVPDriver):
         return self._stall_alongside(obs)
 
 
+def capped(driver_class: type, cap: float) -> type:
+    """``driver_class`` whose cruise phase holds the car at most ``cap`` m/s (the pedal brakes above it; below it, the
+    cruise model's pedal)."""
+
+    class Capped(driver_class):
+        def act(self, obs):
+            action = super().act(obs)
+            speed = abs(float(np.asarray(obs["speed"]).reshape(-1)[0]))
+            if self.phase == "cruise" and speed > cap:
+                action = np.array([-1.0, action[1], action[2]], dtype=np.float32)
+            return action
+
+    return Capped
+
+
 def drive(env, driver, seed: int) -> dict:
     """One AVP test to its end: its outcome and the handover's pose against the park plan's start."""
     obs, info = env.reset(seed=seed)
@@ -92,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--garages", type=int, default=5)
     ap.add_argument("--tests", type=int, default=2, help="AVP tests per garage (default 2)")
     ap.add_argument("--seed", type=int, default=0, help="run seed (the tests garage-mj cruise --seed draws)")
+    ap.add_argument("--cruise-cap", type=float, default=None, metavar="M/S",
+                    help="hold the cruise phase at most this fast (default: the cruise model's own speed)")
     ap.add_argument("--json", type=Path, help="write the per-test records here")
     args = ap.parse_args(argv)
     path = Path(args.set) if args.set.endswith(".json") else HELDOUT / f"{args.set}.json"
@@ -99,7 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     settings = CruiseSettings(driver="learned:avp", seed=args.seed, task="avp", maneuver="any",
                               action_type="continuous", env=PARK_GEOMETRIES[args.geometry].env_kwargs()
                               ).with_sensors(PARK_SENSORS)
-    driver = {"slot": SlotHandover, "stop": StopWhereGuideBegins}.get(args.rule, LearnedAVPDriver)()
+    kind = {"slot": SlotHandover, "stop": StopWhereGuideBegins}.get(args.rule, LearnedAVPDriver)
+    driver = (kind if args.cruise_cap is None else capped(kind, args.cruise_cap))()
     records = []
     for source in sources:
         env = cached_env(source, settings)
@@ -110,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps(record), flush=True)
     driven = [r for r in records if r["outcome"] not in NOT_DRIVEN]
     near = [r for r in driven if r["handover"] and r["handover"]["from_plan_start_m"] <= 1.5]
-    print(f"--rule {args.rule}: {sum(r['outcome'] == 'success' for r in driven)} of {len(driven)} driven AVP tests "
+    print(f"--rule {args.rule}{'' if args.cruise_cap is None else f' --cruise-cap {args.cruise_cap:g}'}: {sum(r['outcome'] == 'success' for r in driven)} of {len(driven)} driven AVP tests "
           f"completed; {len(near)} handovers within 1.5 m of the park plan's start, "
           f"{sum(r['handover'] is None for r in driven)} tests ended before any")
     if args.json:
