@@ -17,13 +17,19 @@ Protocol (fixed before any result was seen; nothing is tuned on the held-out set
   within each geometry, and for a baseline fitted the same way on the geometry's features alone
   (:data:`GEOMETRY_FEATURES`: how much the plan, the start and the maneuver add to the geometry).
 
-Each run is a ``garage-mj cruise`` run folder under ``--out/<driver>/<set>/<map>_<geometry>`` (resumable: a re-run
-drives only the tests not there yet). ``--driver`` names the driver (default ``park_assist``; the learned parking
+``--scenarios`` (default ``none``) adds, per geometry, a run of the same garages and test seeds with the actors of
+each named scenario (``park_mixed``: a pedestrian behind or beside the stall, a car pulling out, clutter) to both
+sets, so that the fit sees the ``actors`` feature vary; the held-out figures are then given per scenario too.
+
+Each run is a ``garage-mj cruise`` run folder under ``--out/<driver>/<set>/<map>_<geometry>`` (with actors
+``..._<geometry>_<scenario>``; resumable: a re-run drives only the tests not there yet). ``--driver`` names the driver (default ``park_assist``; the learned parking
 model: ``learned:park``); ``--model-out`` the model file to write (default ``runs/park_difficulty/<driver>.json``;
 the shipped park_assist model: ``models/difficulty/park_assist.json``), ``--json`` the figures.
 
     MUJOCO_GL=egl .venv/bin/python eval/park_difficulty.py --driver park_assist \\
         --model-out models/difficulty/park_assist.json --json docs/park_difficulty.json
+    MUJOCO_GL=egl .venv/bin/python eval/park_difficulty.py --driver learned:park --scenarios none park_mixed \\
+        --workers 2 --model-out models/difficulty/learned_park.json --json docs/park_difficulty_learned_park.json
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ from _provenance import provenance  # eval/_provenance.py: command, date, machin
 
 from garage_mj.core.backends import Compute
 from garage_mj.core.fsutil import write_json
+from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.cruise import run_cruise
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sources import CruiseSettings, CruiseSource, painted_sources
@@ -54,6 +61,23 @@ FIT_MAP, HELDOUT_MAPS = "m5_13x13_aligned", (("m5_13x13_aligned", 1), ("m7_13x13
 def slug(driver: str) -> str:
     """A driver spec as a folder name (``learned:park`` -> ``learned_park``)."""
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", driver)
+
+
+def run_name(map_name: str, geometry: str, scenario: str = "none") -> str:
+    """A run's folder name: ``<map>_<geometry>``, with actors ``<map>_<geometry>_<scenario>``."""
+    return f"{map_name}_{geometry}" if scenario == "none" else f"{map_name}_{geometry}_{scenario}"
+
+
+def run_kind(run: str | Path, geometries: list[str], scenarios: list[str]) -> tuple[str, str]:
+    """(geometry, scenario) of a run folder named by :func:`run_name`."""
+    name = Path(run).name
+    for scenario in (s for s in scenarios if s != "none"):
+        if name.endswith(f"_{scenario}"):
+            name = name[: -len(scenario) - 1]
+            break
+    else:
+        scenario = "none"
+    return next(g for g in sorted(geometries, key=len, reverse=True) if name.endswith(f"_{g}")), scenario
 
 
 def buildable(sources: list[CruiseSource], geometry: str) -> list[CruiseSource]:
@@ -78,17 +102,20 @@ def collect(args: argparse.Namespace, name: str, maps: list[tuple[str, int, int]
         if name == "heldout" and map_name == FIT_MAP:  # never a fit garage
             fit_hashes = {s.hash for s in painted_sources(FIT_MAP, args.fit_garages, seed=0)}
             sources = [s for s in sources if s.hash not in fit_hashes]
-        for geometry in args.geometries:
+        for geometry, scenario in ((g, sc) for g in args.geometries for sc in args.scenarios):
             srcs = buildable(sources, geometry)
-            out = args.out / slug(args.driver) / name / f"{map_name}_{geometry}"
+            out = args.out / slug(args.driver) / name / run_name(map_name, geometry, scenario)
             start = time.perf_counter()
-            settings = CruiseSettings(driver=args.driver, task="park", maneuver="any", occupancy=0.5,
-                                      env=PARK_GEOMETRIES[geometry].env_kwargs(), seed=run_seed)
+            env = PARK_GEOMETRIES[geometry].env_kwargs()
+            if scenario != "none":
+                env["scenario"] = scenario
+            settings = CruiseSettings(driver=args.driver, task="park", maneuver="any", occupancy=0.5, env=env,
+                                      seed=run_seed)
             result = run_cruise(srcs, tests, settings, out, compute=Compute(workers=args.workers, progress=False),
                                 route_model=False, park_model=False)
             done = [r for r in result.rows if r["feasible"] == "1"]
             ok = sum(r["outcome"] == "success" for r in done)
-            print(f"{name} {map_name} {geometry}: {len(srcs)} garages, {result.tests_run} new tests, "
+            print(f"{name} {map_name} {geometry} {scenario}: {len(srcs)} garages, {result.tests_run} new tests, "
                   f"{ok}/{len(done)} driven tests parked ({time.perf_counter() - start:.0f} s)", flush=True)
             runs.append(out)
     return runs
@@ -104,6 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--heldout-tests", type=int, default=6, help="park tests per held-out garage and geometry (6)")
     ap.add_argument("--workers", type=int, default=1,
                     help="worker processes per run (default 1; the tests and figures are the same for any count)")
+    ap.add_argument("--scenarios", nargs="+", default=["none"], choices=("none", *sorted(SCENARIOS)),
+                    help="actors: none (the default) and/or named scenarios, each a run per geometry of both sets")
     ap.add_argument("--only", choices=("collect", "fit", "score"), help="one step alone (default: all three)")
     ap.add_argument("--out", type=Path, default=Path("runs/park_difficulty"), help="where the runs go")
     ap.add_argument("--model-out", type=Path, help="the model to write (default OUT/<driver>.json)")
@@ -117,8 +146,10 @@ def main(argv: list[str] | None = None) -> int:
         collect(args, "fit", fit_maps, args.fit_tests, run_seed=0)
         collect(args, "heldout", heldout_maps, args.heldout_tests, run_seed=1)
     base = args.out / slug(args.driver)
-    fit_runs = [base / "fit" / f"{m}_{g}" for m, _, _ in fit_maps for g in args.geometries]
-    heldout_runs = [base / "heldout" / f"{m}_{g}" for m, _, _ in heldout_maps for g in args.geometries]
+    fit_runs = [base / "fit" / run_name(m, g, sc) for m, _, _ in fit_maps for g in args.geometries
+                for sc in args.scenarios]
+    heldout_runs = [base / "heldout" / run_name(m, g, sc) for m, _, _ in heldout_maps for g in args.geometries
+                    for sc in args.scenarios]
     from garage_mj.driving.difficulty.park import fit_park_runs, load_park_runs, score_park
     from garage_mj.scene.park_difficulty import fit_park, load_park_model
 
@@ -131,17 +162,25 @@ def main(argv: list[str] | None = None) -> int:
         records = load_park_runs(heldout_runs)
         figures = score_park(model, records)
         # within one geometry the levels hardly vary: does the park difficulty still tell tests apart there?
-        within = {}
+        within, by_scenario = {}, {}
+        kinds = {r["run"]: run_kind(r["run"], args.geometries, args.scenarios) for r in records}
         for g in args.geometries:
-            recs = [r for r in records if Path(r["run"]).name.endswith(f"_{g}")]
+            recs = [r for r in records if kinds[r["run"]][0] == g]
             if recs:
                 within[g] = {d: {k: v for k, v in f.items() if k in ("tests", "success_pct", "park", "levels")}
                              for d, f in score_park(model, recs).items()}
+        if len(args.scenarios) > 1:  # with and without actors apart
+            for sc in args.scenarios:
+                recs = [r for r in records if kinds[r["run"]][1] == sc]
+                if recs:
+                    by_scenario[sc] = score_park(model, recs)
         # how much of it is the geometry: the same fit on the fit set with the geometry's features alone
         fit_recs = load_park_runs(fit_runs)
         geo = fit_park(fit_recs, [r["failed"] for r in fit_recs], GEOMETRY_FEATURES)
         baseline = {d: {"features": list(GEOMETRY_FEATURES), **f["park"]} for d, f in score_park(geo, records).items()}
         figures = {"all_geometries": figures, "within_geometry": within, "geometry_only_baseline": baseline}
+        if by_scenario:
+            figures["by_scenario"] = by_scenario
         print(json.dumps(figures, indent=1))
         if args.json:
             write_json(args.json, {
@@ -152,7 +191,8 @@ def main(argv: list[str] | None = None) -> int:
                              "fit_garages": args.fit_garages, "fit_tests": args.fit_tests,
                              "heldout_maps": [f"{m} (painted seed {s})" for m, s in HELDOUT_MAPS],
                              "heldout_garages_per_map": args.heldout_garages, "heldout_tests": args.heldout_tests,
-                             "occupancy": 0.5, "maneuver": "any", "vehicle": "sedan", "workers": args.workers},
+                             "scenarios": list(args.scenarios), "occupancy": 0.5, "maneuver": "any",
+                             "vehicle": "sedan", "workers": args.workers},
                 "model": {"file": str(model_out), "key": model.key, "fit": {k: v for k, v in model.fit.items()
                                                                              if k != "runs"},
                           "weights": dict(model.coefficients())},
