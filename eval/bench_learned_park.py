@@ -12,7 +12,7 @@ with a 95% Wilson interval, by HOPE's level (``normal``, ``complex``, ``extreme`
 position and heading error of the successes (mean and median); the collision rate over driven tests; and, for the
 first driver, the simulated seconds per wall second of its tests (both cameras, ultrasonic and slot detector on;
 ``time`` over ``wall_s`` of tests.csv, reset and planning included) per worker; how the tests' park difficulty
-(``park_difficulty``, the run's park model) predicts each driver's failures: per-test AUC and per-garage r, drawn
+(under each driver's park model as shipped now, whichever rated the runs) predicts each driver's failures: per-test AUC and per-garage r, drawn
 as success against park difficulty per garage beside the JSON (``OUT.png``). Each run folder is kept under
 ``--runs``: the same command resumes a stopped benchmark where it left off.
 
@@ -35,6 +35,7 @@ from _provenance import provenance  # eval/_provenance.py: command, date, machin
 
 from garage_mj.core.backends import Compute
 from garage_mj.driving.cruise import run_cruise
+from garage_mj.driving.difficulty.park_rating import choose_park_model, park_difficulty_cell
 from garage_mj.driving.difficulty.regression import auc, pearson
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
@@ -102,9 +103,13 @@ def summary(rows: list[dict]) -> dict:
                                 for lv in LEVELS}}
 
 
-def difficulty_fit(rows: list[dict]) -> dict:
-    """How the tests' ``park_difficulty`` (the run's park model) predicts ``rows``' failures: per-test AUC and, per
-    garage and geometry, Pearson r of the mean park difficulty with success % (the paper's figure for parking)."""
+def difficulty_fit(rows: list[dict], driver: str) -> dict:
+    """How the park difficulty predicts ``rows``' failures: per-test AUC and, per garage and geometry, Pearson r of the
+    mean park difficulty with success % (the paper's figure for parking). Each test is rated under ``driver``'s park
+    model as shipped now (:func:`~garage_mj.driving.difficulty.park_rating.choose_park_model`), whichever model rated
+    its run's ``park_difficulty`` column when it was driven."""
+    model = choose_park_model(True, driver).model
+    rows = [{**r, "park_difficulty": park_difficulty_cell(model, r) if model is not None else ""} for r in rows]
     driven = [r for r in rows if r["outcome"] not in NOT_DRIVEN and r.get("park_difficulty") not in ("", None)]
     groups: dict[tuple, list[dict]] = {}
     for r in driven:
@@ -225,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
                         for g in args.geometries},
         "by_set": {n: {d: stats([r for r in rows[d] if r["set"] == n]) for d in drivers} for n in args.sets},
         "sim_s_per_wall_s_per_worker": round(sim / wall, 1) if wall else None,
-        "park_difficulty": {d: difficulty_fit(rows[d]) for d in drivers},
+        "park_difficulty": {d: difficulty_fit(rows[d], d) for d in drivers},
         "garages_left_out": left_out,
         "wall_s": round(time.perf_counter() - t0, 1), "provenance": prov}
     args.out.parent.mkdir(parents=True, exist_ok=True)
