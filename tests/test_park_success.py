@@ -248,7 +248,8 @@ def test_resumed_rows_with_the_new_columns_validate(painted_tiny, tmp_path):
     assert row_problem({**rows[0], "park_level": ""}, settings)[0] == "park_level"
     assert row_problem({**rows[0], "park_level": "hard"}, settings)[0] == "park_level"
     assert row_problem({**rows[0], "inner_margin_m": "-0.01"}, settings)[0] == "inner_margin_m"
-    assert row_problem({**rows[0], "min_clearance_m": "0"}, settings)[0] == "min_clearance_m"
+    assert row_problem({**rows[0], "min_clearance_m": "-0.01"}, settings)[0] == "min_clearance_m"
+    assert row_problem({**rows[0], "min_clearance_m": "0.0"}, settings) is None  # under half a mm, rounded
     assert row_problem({**rows[0], "outline_clearance_m": "x"}, settings)[0] == "outline_clearance_m"
     path = tmp_path / "tests.csv"
     with open(path, "w", newline="") as f:

@@ -261,8 +261,8 @@ def _park_row_problem(row: dict[str, str]) -> tuple[str, str] | None:
     if row["outcome"] == OutcomeKind.SUCCESS.value:
         if row["inner_margin_m"] != "" and float(row["inner_margin_m"]) < 0:
             return "inner_margin_m", "is negative in a success (a successful car stands inside the lines)"
-        if row["min_clearance_m"] != "" and float(row["min_clearance_m"]) <= 0:
-            return "min_clearance_m", "is not above 0 in a success (a successful car touched nothing)"
+        if row["min_clearance_m"] != "" and float(row["min_clearance_m"]) < 0:  # 0.0: closer than half a mm
+            return "min_clearance_m", "is negative in a success (a successful car touched nothing)"
     return None
 
 
