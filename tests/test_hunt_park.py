@@ -176,6 +176,17 @@ def test_geometries_are_refused_in_one_line(tmp_path, capsys):
     assert hunt_geometries("avp", None)[0] == "default" and hunt_geometries("cruise", None) == ()
 
 
+def test_the_hunt_takes_a_named_scenario_as_cruise_does(tmp_path, capsys):
+    base = ["hunt", "--map", "tiny_7x11", "--task", "park", "--driver", "park_assist", "--out", str(tmp_path / "x")]
+    assert main([*base, "--scenario", "park_mixed", "--budget", "1"]) == 2  # the name taken; the budget refused
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "budget" in err[0] and "scenario" not in err[0]
+    assert main([*base, "--scenario", "park_crowd"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "park_crowd" in err[0] and "park_mixed" in err[0]
+    assert not (tmp_path / "x").exists()
+
+
 def test_a_garage_a_geometry_cannot_build_is_never_drawn():
     garage = paint_garage("m5_13x13_aligned", seed=5)  # its blocks hold no 60-degree rows
     assert buildable(garage, "default") and not buildable(garage, "angled60")

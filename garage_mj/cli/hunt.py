@@ -17,6 +17,7 @@ from garage_mj.cli.cruise import (
     task_warning,
     test_seconds,
 )
+from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.hunt import (
     MAX_BUDGET,
     MAX_POPULATION,
@@ -73,7 +74,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pedestrians", type=int, metavar="N", help="actors per test, as garage-mj cruise")
     p.add_argument("--moving-cars", type=int, metavar="M")
     p.add_argument("--clutter", type=int, metavar="K")
-    p.add_argument("--scenario", type=Path, metavar="FILE.toml", help="ScenarioConfig fields, as garage-mj cruise")
+    p.add_argument("--scenario", metavar="NAME|FILE.toml",
+                   help="a named scenario (" + ", ".join(SCENARIOS) + ") or a TOML file of ScenarioConfig fields, as "
+                        "garage-mj cruise")
     p.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=1,
                    help=f"worker processes, 1 to {MAX_WORKERS:,} (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
