@@ -106,8 +106,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     act.add_argument("--moving-cars", type=non_negative_int, metavar="M", help="moving cars per episode, as cruise")
     act.add_argument("--clutter", type=non_negative_int, metavar="K", help="clutter objects per episode, as cruise")
     act.add_argument("--scenario", metavar="NAME|FILE.toml",
-                   help="a named scenario (" + ", ".join(SCENARIOS) + ") or a TOML file of ScenarioConfig fields, as "
-                        "garage-mj cruise")
+                     help="a named scenario (" + ", ".join(SCENARIOS) + ") or a TOML file of ScenarioConfig fields, "
+                          "as garage-mj cruise")
     p.add_argument("--seed", type=seed, default=0, help="random seed of the run (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)

@@ -57,8 +57,9 @@ failures the reference driver would not make:
   confirmed failure in which the car hit an actor (a pedestrian, a moving car, clutter) is, with probability
   :data:`ACTOR_FOCUS`, that failing test's scene (its garage, geometry, stall, parked cars, maneuver and start: the
   draws of its test seed) with the actors placed anew by each of its tests' seeds (``GarageDriveEnv(scene_seed=)``;
-  the tests' seeds those of a run seeded by the scene's seed, so none is the failing test again); its geometry is the variant ``<geometry>@scene<seed>``, its own cruise run, named in ``failures.csv``'s ``stall``
-  and ``scene`` columns. As an elite it is re-tested with more seeds, so more placements around that scene.
+  the tests' seeds are those of a run seeded by the scene's seed, so none is the failing test again). Its geometry
+  is the variant ``<geometry>@scene<seed>``, its own cruise run, named in ``failures.csv``'s ``stall`` and
+  ``scene`` columns. As an elite it is re-tested with more seeds, so more placements around that scene.
 """
 
 from __future__ import annotations
