@@ -368,7 +368,8 @@ def scene_targets(parent: Scored, seen: set[str]) -> list[int]:
     geometry, _, scene = split_variant(parent.geometry)
     if not geometry or scene is not None:
         return []
-    seeds = {int(r["seed"]) for r in parent.confirmed if r.get("hit") in ACTOR_HITS and str(r.get("seed", "")).isdigit()}
+    seeds = {int(r["seed"]) for r in parent.confirmed
+             if r.get("hit") in ACTOR_HITS and str(r.get("seed", "")).isdigit()}
     return sorted(k for k in seeds if candidate_key(parent.source.hash, variant(geometry, scene=k)) not in seen)
 
 
