@@ -114,17 +114,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "final footprint, a collision's point, the line an outside_stall crosses): failures (the "
                         "failures the report shows; the default with --report) or all (every driven test, successes "
                         "too); drawn with --report or when given")
-    act = p.add_argument_group("adverse events (garage_mj.driving.actors.scenario; drawn per test from its seed)")
-    act.add_argument("--pedestrians", type=non_negative_int, metavar="N",
-                     help="pedestrians per test: crossing, stepping out between parked cars, walking along")
-    act.add_argument("--moving-cars", type=non_negative_int, metavar="M",
-                     help="moving cars per test: reversing out of a stall, oncoming, waiting at a junction")
-    act.add_argument("--clutter", type=non_negative_int, metavar="K",
-                     help="static clutter per test: cones, trolleys, a badly parked car")
-    act.add_argument("--scenario", metavar="NAME|FILE.toml",
-                     help="a named scenario (" + ", ".join(SCENARIOS) + ": park and avp tests' actors around the "
-                          "target stall) or a TOML file of every ScenarioConfig field ([scenario] table: behaviours, "
-                          "speeds, trigger lead, reaction time, braking); the three flags above override its counts")
+    add_actor_arguments(p.add_argument_group("adverse events (garage_mj.driving.actors.scenario; drawn per test "
+                                             "from its seed)"))
     p.add_argument("--xosc", action="store_true",
                    help="also write every test as OpenSCENARIO 1.2 into OUT/xosc/ (garages without an asset "
                         "pack get one in OUT/packs/); replay one with --scenario-file")
@@ -367,6 +358,22 @@ def geometry_env(args: argparse.Namespace, srcs: list) -> dict:
         world = pack_world
     check_geometry([src.garage for src in srcs], world)
     return {} if world.is_default_geometry else {"world": geometry(world)}
+
+
+def add_actor_arguments(group: argparse._ActionsContainer, per: str = "test") -> None:
+    """The actor options of a command whose tests (or training episodes: ``per``) may hold actors: ``--pedestrians``,
+    ``--moving-cars``, ``--clutter`` and ``--scenario``, read back by :func:`scenario`."""
+    group.add_argument("--pedestrians", type=non_negative_int, metavar="N",
+                       help=f"pedestrians per {per}: crossing, stepping out between parked cars, walking along")
+    group.add_argument("--moving-cars", type=non_negative_int, metavar="M",
+                       help=f"moving cars per {per}: reversing out of a stall, oncoming, waiting at a junction")
+    group.add_argument("--clutter", type=non_negative_int, metavar="K",
+                       help=f"static clutter per {per}: cones, trolleys, a badly parked car")
+    group.add_argument("--scenario", metavar="NAME|FILE.toml",
+                       help="a named scenario (" + ", ".join(SCENARIOS) + ": park and avp tests' actors around the "
+                            "target stall) or a TOML file of every ScenarioConfig field ([scenario] table: "
+                            "behaviours, speeds, trigger lead, reaction time, braking); the three flags above "
+                            "override its counts")
 
 
 def scenario(args: argparse.Namespace) -> dict | None:

@@ -10,6 +10,7 @@ from garage_mj.cli._common import compute, int_in, positive_int, seed, unit_rang
 from garage_mj.cli.cruise import (
     MAX_WORKERS,
     action_warnings,
+    add_actor_arguments,
     add_task_args,
     built_in_drivers,
     runner_failures,
@@ -17,7 +18,6 @@ from garage_mj.cli.cruise import (
     task_warning,
     test_seconds,
 )
-from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.hunt import (
     MAX_BUDGET,
     MAX_POPULATION,
@@ -71,12 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"wall time a test may take, at most {MAX_TEST_TIMEOUT:,.0f} s (default "
                         f"{DEFAULT_TEST_TIMEOUT:g} s); past it the test is a "
                         "driver_timeout, as garage-mj cruise")
-    p.add_argument("--pedestrians", type=int, metavar="N", help="actors per test, as garage-mj cruise")
-    p.add_argument("--moving-cars", type=int, metavar="M")
-    p.add_argument("--clutter", type=int, metavar="K")
-    p.add_argument("--scenario", metavar="NAME|FILE.toml",
-                   help="a named scenario (" + ", ".join(SCENARIOS) + ") or a TOML file of ScenarioConfig fields, as "
-                        "garage-mj cruise")
+    add_actor_arguments(p.add_argument_group("adverse events, as garage-mj cruise (a park hunt searches their "
+                                             "placements)"))
     p.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=1,
                    help=f"worker processes, 1 to {MAX_WORKERS:,} (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",

@@ -19,10 +19,9 @@ from garage_mj.cli._common import (
     unit_range,
     user_errors,
 )
-from garage_mj.cli.cruise import scenario
+from garage_mj.cli.cruise import add_actor_arguments, scenario
 from garage_mj.core.config import load_config
 from garage_mj.core.fsutil import FolderLock
-from garage_mj.driving.actors.config import SCENARIOS
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.learning.saved_model import model_path
 from garage_mj.driving.learning.train import CURRICULA, TRAIN_TASKS, DriverTrainConfig, train_driver
@@ -102,12 +101,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                       "geometry and scenario gets its share of the garages): none or park_* names of --scenario")
     act = p.add_argument_group("adverse events while training (the oracle yields to them, the model sees them "
                                "only in its camera)")
-    act.add_argument("--pedestrians", type=non_negative_int, metavar="N", help="pedestrians per episode, as cruise")
-    act.add_argument("--moving-cars", type=non_negative_int, metavar="M", help="moving cars per episode, as cruise")
-    act.add_argument("--clutter", type=non_negative_int, metavar="K", help="clutter objects per episode, as cruise")
-    act.add_argument("--scenario", metavar="NAME|FILE.toml",
-                     help="a named scenario (" + ", ".join(SCENARIOS) + ") or a TOML file of ScenarioConfig fields, "
-                          "as garage-mj cruise")
+    add_actor_arguments(act, per="episode")
     p.add_argument("--seed", type=seed, default=0, help="random seed of the run (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
