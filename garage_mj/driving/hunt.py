@@ -782,8 +782,7 @@ def rerun(out_dir: str | Path, garage_hash: str, test: int, geometry: str | None
     names = run_variants(out)
     if geometry is not None:  # that geometry's own run, or the variant's that aimed at a stall or kept a scene
         base, aimed, kept = split_variant(geometry)
-        kept = kept if kept is not None else scene
-        geometry = variant(base, None if kept is not None else aimed if aimed is not None else stall, kept)
+        geometry = variant(base, aimed if aimed is not None else stall, kept if kept is not None else scene)
         names = [n for n in names if n == geometry]
     found = []
     for g in names:
