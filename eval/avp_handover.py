@@ -128,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps(record), flush=True)
     driven = [r for r in records if r["outcome"] not in NOT_DRIVEN]
     near = [r for r in driven if r["handover"] and r["handover"]["from_plan_start_m"] <= 1.5]
-    print(f"--rule {args.rule}{'' if args.cruise_cap is None else f' --cruise-cap {args.cruise_cap:g}'}: {sum(r['outcome'] == 'success' for r in driven)} of {len(driven)} driven AVP tests "
+    rule = f"--rule {args.rule}" + ("" if args.cruise_cap is None else f" --cruise-cap {args.cruise_cap:g}")
+    print(f"{rule}: {sum(r['outcome'] == 'success' for r in driven)} of {len(driven)} driven AVP tests "
           f"completed; {len(near)} handovers within 1.5 m of the park plan's start, "
           f"{sum(r['handover'] is None for r in driven)} tests ended before any")
     if args.json:

@@ -2,7 +2,8 @@
 
     MUJOCO_GL=egl .venv/bin/python eval/bench_hunt_park.py [--map m5_13x13_aligned] [--driver park_assist ...]
         [--budget 150] [--tests 5] [--population 10] [--elites 3] [--geometries default,tight,...]
-        [--seed 0] [--workers 1] [--scenario park_mixed] [--out runs/bench_hunt_park] [--json docs/bench_hunt_park.json]
+        [--seed 0] [--workers 1] [--scenario park_mixed] [--out runs/bench_hunt_park]
+        [--json docs/bench_hunt_park.json]
 
 For each ``--driver``:
 
@@ -96,6 +97,7 @@ def main() -> None:
     args = ap.parse_args()
     geometries = [g for g in args.geometries.split(",") if g]
     compute = Compute(workers=args.workers, progress=False)
+    env = {} if args.scenario is None else {"scenario": args.scenario}
     drivers = {}
     for driver in args.driver or ["park_assist"]:
         arms = {}
@@ -105,9 +107,9 @@ def main() -> None:
                 ("uniform", args.seed + 1, HuntConfig(budget=args.budget, tests=args.tests,
                                                       population=args.budget // args.tests, elites=1, worst=0))):
             t = time.time()
-            env = {} if args.scenario is None else {"scenario": args.scenario}
-            res = hunt(CruiseSettings(driver, seed=seed, task="park", env=env), args.out / driver.replace(":", "_") / arm,
-                       map=args.map, config=cfg, compute=compute, geometries=geometries)
+            res = hunt(CruiseSettings(driver, seed=seed, task="park", env=env),
+                       args.out / driver.replace(":", "_") / arm, map=args.map, config=cfg, compute=compute,
+                       geometries=geometries)
             arms[arm] = _arm(res, time.time() - t)
             print(driver, arm, json.dumps({k: v for k, v in arms[arm].items() if k != "by_geometry"}), flush=True)
         h, u = arms["hunt"]["confirmed_per_test_pct"], arms["uniform"]["confirmed_per_test_pct"]

@@ -12,9 +12,9 @@ with a 95% Wilson interval, by HOPE's level (``normal``, ``complex``, ``extreme`
 position and heading error of the successes (mean and median); the collision rate over driven tests; and, for the
 first driver, the simulated seconds per wall second of its tests (both cameras, ultrasonic and slot detector on;
 ``time`` over ``wall_s`` of tests.csv, reset and planning included) per worker; how the tests' park difficulty
-(under each driver's park model as shipped now, whichever rated the runs) predicts each driver's failures: per-test AUC and per-garage r, drawn
-as success against park difficulty per garage beside the JSON (``OUT.png``). Each run folder is kept under
-``--runs``: the same command resumes a stopped benchmark where it left off.
+(under each driver's park model as shipped now, whichever rated the runs) predicts each driver's failures:
+per-test AUC and per-garage r, drawn as success against park difficulty per garage beside the JSON (``OUT.png``).
+Each run folder is kept under ``--runs``: the same command resumes a stopped benchmark where it left off.
 
     .venv/bin/python eval/bench_learned_park.py --driver learned:park --workers 2 \\
         --out docs/learned_park/bench_park.json

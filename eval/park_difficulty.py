@@ -22,9 +22,10 @@ each named scenario (``park_mixed``: a pedestrian behind or beside the stall, a 
 sets, so that the fit sees the ``actors`` feature vary; the held-out figures are then given per scenario too.
 
 Each run is a ``garage-mj cruise`` run folder under ``--out/<driver>/<set>/<map>_<geometry>`` (with actors
-``..._<geometry>_<scenario>``; resumable: a re-run drives only the tests not there yet). ``--driver`` names the driver (default ``park_assist``; the learned parking
-model: ``learned:park``); ``--model-out`` the model file to write (default ``runs/park_difficulty/<driver>.json``;
-the shipped park_assist model: ``models/difficulty/park_assist.json``), ``--json`` the figures.
+``..._<geometry>_<scenario>``; resumable: a re-run drives only the tests not there yet). ``--driver`` names the
+driver (default ``park_assist``; the learned parking model: ``learned:park``); ``--model-out`` the model file to
+write (default ``runs/park_difficulty/<driver>.json``; the shipped park_assist model:
+``models/difficulty/park_assist.json``), ``--json`` the figures.
 
     MUJOCO_GL=egl .venv/bin/python eval/park_difficulty.py --driver park_assist \\
         --model-out models/difficulty/park_assist.json --json docs/park_difficulty.json
@@ -66,18 +67,6 @@ def slug(driver: str) -> str:
 def run_name(map_name: str, geometry: str, scenario: str = "none") -> str:
     """A run's folder name: ``<map>_<geometry>``, with actors ``<map>_<geometry>_<scenario>``."""
     return f"{map_name}_{geometry}" if scenario == "none" else f"{map_name}_{geometry}_{scenario}"
-
-
-def run_kind(run: str | Path, geometries: list[str], scenarios: list[str]) -> tuple[str, str]:
-    """(geometry, scenario) of a run folder named by :func:`run_name`."""
-    name = Path(run).name
-    for scenario in (s for s in scenarios if s != "none"):
-        if name.endswith(f"_{scenario}"):
-            name = name[: -len(scenario) - 1]
-            break
-    else:
-        scenario = "none"
-    return next(g for g in sorted(geometries, key=len, reverse=True) if name.endswith(f"_{g}")), scenario
 
 
 def buildable(sources: list[CruiseSource], geometry: str) -> list[CruiseSource]:
@@ -148,8 +137,9 @@ def main(argv: list[str] | None = None) -> int:
     base = args.out / slug(args.driver)
     fit_runs = [base / "fit" / run_name(m, g, sc) for m, _, _ in fit_maps for g in args.geometries
                 for sc in args.scenarios]
-    heldout_runs = [base / "heldout" / run_name(m, g, sc) for m, _, _ in heldout_maps for g in args.geometries
-                    for sc in args.scenarios]
+    kinds = {str(base / "heldout" / run_name(m, g, sc)): (g, sc) for m, _, _ in heldout_maps
+             for g in args.geometries for sc in args.scenarios}  # each held-out run's (geometry, scenario)
+    heldout_runs = [Path(run) for run in kinds]
     from garage_mj.driving.difficulty.park import fit_park_runs, load_park_runs, score_park
     from garage_mj.scene.park_difficulty import fit_park, load_park_model
 
@@ -163,7 +153,6 @@ def main(argv: list[str] | None = None) -> int:
         figures = score_park(model, records)
         # within one geometry the levels hardly vary: does the park difficulty still tell tests apart there?
         within, by_scenario = {}, {}
-        kinds = {r["run"]: run_kind(r["run"], args.geometries, args.scenarios) for r in records}
         for g in args.geometries:
             recs = [r for r in records if kinds[r["run"]][0] == g]
             if recs:
