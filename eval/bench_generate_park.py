@@ -8,8 +8,9 @@ Per map (default: the shipped 13x13 maps), park geometry (``default``, and ``tig
 learned parking driver's: ``learned_park``): one call of
 ``garage_mj.generation.generator.generate`` with ``garage_mj.scene.park_rating.ParkRater`` as its metric (what
 ``garage-mj generate --metric park`` runs), asking for ``--count`` garages within ``--seconds`` of wall time into a
-throw-away library. A band is filled when the call finds ``--count``. Each row records the garages found, the
-garages rated and the CPU seconds the ratings took (so the seconds per rating), the unbuildable garages and the
+throw-away library (``--seconds 0``: no time limit, the default episode budget of ``generate`` alone, as the
+command runs without ``--max-seconds``). A band is filled when the call finds ``--count``. Each row records the
+garages found, the garages rated and the CPU seconds the ratings took (so the seconds per rating), the unbuildable garages and the
 values found. Writes the JSON with the figures per map and geometry and the provenance; prints one line per call.
 
 With ``--search NAMES`` (named park geometries, comma-separated) each map and band is instead one call of
@@ -62,7 +63,9 @@ def main() -> None:
     ap.add_argument("--maps", nargs="+", default=MAPS)
     ap.add_argument("--geometries", nargs="+", default=list(GEOMETRIES), choices=list(GEOMETRIES))
     ap.add_argument("--count", type=int, default=2)
-    ap.add_argument("--seconds", type=float, default=10.0, help="wall seconds per band (generate's --max-seconds)")
+    ap.add_argument("--seconds", type=float, default=10.0,
+                    help="wall seconds per band (generate's --max-seconds); 0: none, generate's default episode budget "
+                         "alone (what the command does without --max-seconds)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=Path("docs/bench_generate_park.json"))
     ap.add_argument("--search", metavar="NAMES", help="named park geometries searched by one call per band")
@@ -71,6 +74,8 @@ def main() -> None:
                          f"file (default {DEFAULT_PARK_MODEL})")
     args = ap.parse_args()
     args.model = load_park_model(args.park_model)
+    if args.seconds <= 0:
+        args.seconds = None
     if args.search:
         return searched(args, [n.strip() for n in args.search.split(",") if n.strip()])
     rows, summary = [], []
