@@ -400,3 +400,39 @@ def test_library_ids_export_and_cruise_and_export_json_lists(library, tmp_path, 
     dump.write_text(json.dumps(data))
     assert main(["export", "--garage", str(dump), "--out", str(tmp_path / "y")]) == 2
     assert f"{dump}, garage 2 of 2: the grid does not match its stored hash" in capsys.readouterr().err
+
+
+def test_a_tests_wall_time_leaves_out_loading_the_driver(tmp_path, monkeypatch):
+    """``wall_s`` is the test's own time: a worker's first test does not pay for building its driver (a model load)."""
+    import sys
+    import textwrap
+
+    from garage_mj.driving.cruise import run_test
+    from garage_mj.driving.episode import forget_cached
+    from garage_mj.driving.sources import painted_sources
+
+    (tmp_path / "slow_driver.py").write_text(textwrap.dedent("""
+        import time
+
+        class SlowToLoad:
+            action_type = "continuous"
+
+            def __init__(self):
+                time.sleep(3.0)  # a large model's load
+
+            def reset(self, info):
+                pass
+
+            def act(self, obs):
+                return [0.0, 0.0]
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    (source,) = painted_sources("tiny_7x11", 1, seed=0)
+    settings = CruiseSettings(driver="slow_driver:SlowToLoad", seed=0, action_type="continuous")
+    forget_cached()  # as in a fresh worker process: no driver built yet
+    try:
+        row = run_test(source, 0, settings)
+    finally:
+        forget_cached()
+        sys.modules.pop("slow_driver", None)
+    assert row["outcome"] == "deadlock" and 0 < float(row["wall_s"]) < 3.0, row

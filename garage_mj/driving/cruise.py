@@ -86,6 +86,8 @@ def run_test(source: CruiseSource, index: int, settings: CruiseSettings, xosc_di
     (``export_only``: only that, for a test driven before; returns None)."""
     env = cached_env(source, settings)
     seed = cruise_seed(settings.seed, source.hash, index)
+    if not export_only:
+        check_driver(settings)  # built once per process, before the clock: loading a model is no part of a test
     start = time.perf_counter()
     obs, info = env.reset(seed=seed)
     if xosc_dir is not None:
