@@ -1,0 +1,135 @@
+"""How well could any model of the park features predict a driver's park failures? A ceiling for the park difficulty.
+
+    .venv/bin/python eval/park_difficulty_ceiling.py RUN [RUN ...] [--only static|actors] [--folds 5] [--repeats 3]
+        [--json OUT.json]
+
+Reads the park tests of the park runs ``RUN`` (folders holding a ``tests.csv``, or folders of such folders, e.g. the
+run folders of ``eval/bench_learned_park.py``), each driven test's :data:`~garage_mj.scene.park_difficulty.PARK_FEATURES`
+(what is known before the drive) and whether it failed (``--only``: the tests without actors, or with them). Scores, per test (AUC of failure):
+
+- the park difficulty each run rated its tests with (``tests.csv``'s ``park_difficulty``: the shipped model, fitted
+  on other garages);
+- cross-validated on these tests themselves, folds by garage (no garage in both the fitting and the scored part),
+  ``--repeats`` shufflings of the garages into ``--folds`` folds: the park difficulty's own model refitted
+  (:func:`~garage_mj.scene.park_difficulty.fit_park`: logistic, every weight >= 0), a logistic regression with free
+  signs, and two flexible models of the same features (scikit-learn's gradient-boosted trees and random forest).
+
+If the flexible models, fitted on the very tests they are scored on (held-out folds aside), reach no higher AUC than
+the shipped model, the features, not the model's form, bound what a park difficulty can predict for this driver.
+Writes the figures and the provenance to ``--json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
+
+from garage_mj.driving.difficulty.regression import auc
+from garage_mj.driving.sim.outcomes import NOT_DRIVEN
+from garage_mj.scene.park_difficulty import PARK_FEATURES, fit_park, park_features
+
+
+def read_tests(runs: list[Path], only: str | None = None) -> list[dict]:
+    """The driven park tests of ``runs`` (a run folder or a folder of run folders), with their features (``only``:
+    ``"static"`` or ``"actors"``, the tests without or with actors)."""
+    files = []
+    for run in runs:
+        files += [run / "tests.csv"] if (run / "tests.csv").is_file() else sorted(run.glob("*/tests.csv"))
+    if not files:
+        raise SystemExit(f"no tests.csv in {', '.join(map(str, runs))}: give park run folders")
+    rows = []
+    for f in files:
+        for r in csv.DictReader(f.open(newline="")):
+            if r["outcome"] in NOT_DRIVEN or not r.get("park_difficulty"):
+                continue
+            actors = any(int(r.get(k) or 0) for k in ("pedestrians", "moving_cars", "clutter"))
+            if only is not None and actors != (only == "actors"):
+                continue
+            rows.append({"features": park_features(r), "failed": r["outcome"] != "success",
+                         "garage": r["garage_hash"], "rated": float(r["park_difficulty"])})
+    return rows
+
+
+def grouped_folds(groups: np.ndarray, folds: int, seed: int) -> list[np.ndarray]:
+    """Index arrays of ``folds`` folds, each garage wholly in one, garages shuffled by ``seed``."""
+    names = np.unique(groups)
+    order = np.random.default_rng(seed).permutation(len(names))
+    fold_of = {name: int(k % folds) for name, k in zip(names, order)}
+    which = np.array([fold_of[g] for g in groups])
+    return [np.flatnonzero(which == k) for k in range(folds)]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", nargs="+", type=Path, help="park run folders (or folders of them)")
+    ap.add_argument("--only", choices=("static", "actors"), help="only the tests without (static) or with actors")
+    ap.add_argument("--folds", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args(argv)
+    try:
+        from sklearn.ensemble import HistGradientBoostingClassifier, RandomForestClassifier
+        from sklearn.linear_model import LogisticRegression
+        from sklearn.pipeline import make_pipeline
+        from sklearn.preprocessing import StandardScaler
+    except ImportError:
+        raise SystemExit("this benchmark needs scikit-learn: make install (or pip install -e '.[dev]')") from None
+    prov = provenance(argv)
+    rows = read_tests(args.runs, args.only)
+    X = np.array([[r["features"][k] for k in PARK_FEATURES] for r in rows])
+    y = np.array([r["failed"] for r in rows], dtype=bool)
+    groups = np.array([r["garage"] for r in rows])
+
+    def park_model(train: np.ndarray, test: np.ndarray) -> np.ndarray:
+        m = fit_park([rows[i]["features"] for i in train], y[train].tolist())
+        return np.array([m.test_probability(rows[i]["features"]) for i in test])
+
+    def sklearn_model(make):
+        def run(train: np.ndarray, test: np.ndarray) -> np.ndarray:
+            m = make()
+            m.fit(X[train], y[train])
+            return m.predict_proba(X[test])[:, 1]
+        return run
+
+    models = {
+        "park difficulty, refitted (logistic, weights >= 0)": park_model,
+        "logistic regression, free signs": sklearn_model(
+            lambda: make_pipeline(StandardScaler(), LogisticRegression(max_iter=1000))),
+        "gradient-boosted trees": sklearn_model(
+            lambda: HistGradientBoostingClassifier(max_depth=3, learning_rate=0.05, max_iter=200, random_state=0)),
+        "random forest": sklearn_model(
+            lambda: RandomForestClassifier(n_estimators=300, min_samples_leaf=5, random_state=0)),
+    }
+    cv = {}
+    for name, run in models.items():
+        aucs = []
+        for rep in range(args.repeats):
+            pred = np.zeros(len(y))
+            parts = grouped_folds(groups, args.folds, rep)
+            for k, test in enumerate(parts):
+                train = np.concatenate([p for j, p in enumerate(parts) if j != k])
+                pred[test] = run(train, test)
+            aucs.append(auc(pred.tolist(), y.tolist()))
+        cv[name] = {"auc_per_repeat": [round(a, 4) for a in aucs], "auc_mean": round(float(np.mean(aucs)), 4)}
+        print(f"{name:52s} grouped {args.folds}-fold CV AUC {np.mean(aucs):.3f} ({', '.join(f'{a:.3f}' for a in aucs)})",
+              flush=True)
+    rated = auc([r["rated"] for r in rows], y.tolist())
+    print(f"{'the park difficulty as rated (the shipped model)':52s} AUC {rated:.3f} over {len(rows)} tests, "
+          f"{len(np.unique(groups))} garages, {y.mean():.1%} failed")
+    out = {"runs": [str(r) for r in args.runs], "only": args.only, "tests": len(rows), "garages": int(len(np.unique(groups))),
+           "failed_pct": round(100 * float(y.mean()), 1), "features": list(PARK_FEATURES),
+           "rated_auc": round(rated, 4), "folds": args.folds, "repeats": args.repeats, "cross_validated": cv,
+           "best_cross_validated_auc": max(v["auc_mean"] for v in cv.values()), "provenance": prov}
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(out, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
