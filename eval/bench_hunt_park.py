@@ -22,11 +22,19 @@ Reports, per driver and arm, the tests, feasible tests, failures, confirmed fail
 and per feasible test, and the ratio hunt / uniform of the confirmed rate per test (the target: at least 3x);
 each arm is a resumable hunt folder under ``--out``; ``by_kind`` splits an arm's candidates into those drawing
 their stalls, those aimed at a stall and those keeping a failing test's scene.
+
+4. Held out (``--holdout-tests N``, as ``eval/bench_hunt.py`` measures the cruise hunt): the hunt's ``--top``
+   candidates (its ranking: confirmed failure rate) and ``--holdout-uniform`` candidates of the uniform arm (the
+   first by key, an order that knows nothing of their outcomes) are each tested N times more with fresh test
+   seeds (the run seed shifted by ``HOLDOUT_SEED``; a candidate aimed at a stall keeps its stall), the oracle
+   re-driving every failure; the ratio of their confirmed failure rates per driven test says whether what the hunt
+   returns fails more often than what uniform sampling returns, beyond the tests that picked it.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import time
@@ -36,10 +44,21 @@ from _provenance import provenance
 
 from garage_mj.core.backends import Compute
 from garage_mj.driving.actors.config import SCENARIOS
-from garage_mj.driving.hunt import PARK_HUNT_GEOMETRIES, HuntConfig, HuntResult, hunt
+from garage_mj.driving.cruise import run_cruise, run_test
+from garage_mj.driving.episode import close_cached_env
+from garage_mj.driving.hunt import (
+    PARK_HUNT_GEOMETRIES,
+    HuntConfig,
+    HuntResult,
+    Scored,
+    candidate_settings,
+    hunt,
+    oracle_settings,
+)
 from garage_mj.driving.sources import CruiseSettings
 
 TARGET_RATIO = 3.0  # confirmed failures per test: hunt / uniform
+HOLDOUT_SEED = 10_000  # the held-out re-tests' run seed: the hunt's plus this (their test seeds are new)
 
 
 def _wilson(k: int, n: int, z: float = 1.96) -> list[float] | None:
@@ -78,6 +97,39 @@ def _arm(res: HuntResult, seconds: float) -> dict:
             "wall_s": round(seconds, 1)}
 
 
+def _holdout(candidates: list[Scored], settings: CruiseSettings, env: dict, tests: int, out: Path,
+             compute: Compute) -> dict:
+    """``tests`` fresh tests of each candidate (run seed ``settings.seed + HOLDOUT_SEED``), each failure re-driven by
+    the oracle: tests, driven, failures, confirmed failures and their rate per driven test. Resumable: each
+    candidate's run folder under ``out`` and the oracle's outcomes in ``out/oracle.json``."""
+    seed = settings.seed + HOLDOUT_SEED
+    oracle_file = out / "oracle.json"
+    oracle = json.loads(oracle_file.read_text()) if oracle_file.is_file() else {}
+    counts = {"candidates": len(candidates), "tests": 0, "driven": 0, "failures": 0, "confirmed": 0}
+    for k, c in enumerate(candidates):
+        mine = dataclasses.replace(candidate_settings(settings, c.geometry), seed=seed)
+        res = run_cruise([c.source], tests, mine, out / f"{k:03d}_{c.source.hash[:12]}_{c.geometry}",
+                         compute=compute, route_model=False, park_model=False)
+        by_oracle = dataclasses.replace(oracle_settings(settings, env, c.geometry), seed=seed)
+        for r in res.rows:
+            counts["tests"] += 1
+            if r["outcome"] in ("infeasible", "unproven"):
+                continue
+            counts["driven"] += 1
+            if r["outcome"] == "success":
+                continue
+            counts["failures"] += 1
+            key = f"{c.source.hash}:{c.geometry}:{r['test']}"
+            if key not in oracle:
+                oracle[key] = run_test(c.source, int(r["test"]), by_oracle)["outcome"]
+                oracle_file.parent.mkdir(parents=True, exist_ok=True)
+                oracle_file.write_text(json.dumps(oracle, indent=0) + "\n")
+            counts["confirmed"] += oracle[key] == "success"
+    close_cached_env()
+    n, k = counts["driven"], counts["confirmed"]
+    return {**counts, "confirmed_per_driven_pct": round(100 * k / n, 2) if n else None, "ci95": _wilson(k, n)}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--map", default="m5_13x13_aligned")
@@ -92,6 +144,11 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--scenario", choices=sorted(SCENARIOS), default=None,
                     help="actors in every test (a named scenario; default none)")
+    ap.add_argument("--holdout-tests", type=int, default=0,
+                    help="fresh tests per held-out candidate (0: no held-out re-test)")
+    ap.add_argument("--top", type=int, default=10, help="the hunt's best candidates re-tested (default 10)")
+    ap.add_argument("--holdout-uniform", type=int, default=None,
+                    help="uniform candidates re-tested (default: all of the uniform arm's)")
     ap.add_argument("--out", type=Path, default=Path("runs/bench_hunt_park"))
     ap.add_argument("--json", type=Path, default=Path("docs/bench_hunt_park.json"))
     args = ap.parse_args()
@@ -100,7 +157,7 @@ def main() -> None:
     env = {} if args.scenario is None else {"scenario": args.scenario}
     drivers = {}
     for driver in args.driver or ["park_assist"]:
-        arms = {}
+        arms, results = {}, {}
         for arm, seed, cfg in (
                 ("hunt", args.seed, HuntConfig(budget=args.budget, tests=args.tests, population=args.population,
                                                elites=args.elites, worst=0)),
@@ -111,15 +168,33 @@ def main() -> None:
                        args.out / driver.replace(":", "_") / arm, map=args.map, config=cfg, compute=compute,
                        geometries=geometries)
             arms[arm] = _arm(res, time.time() - t)
+            results[arm] = res
             print(driver, arm, json.dumps({k: v for k, v in arms[arm].items() if k != "by_geometry"}), flush=True)
         h, u = arms["hunt"]["confirmed_per_test_pct"], arms["uniform"]["confirmed_per_test_pct"]
         ratio = round(h / u, 2) if h is not None and u else None
         drivers[driver] = {**arms, "ratio": ratio, "met": ratio is not None and ratio >= TARGET_RATIO}
         print(f"{driver}: confirmed failures per test, hunt {h}% vs uniform {u}%: ratio {ratio}", flush=True)
+        if args.holdout_tests > 0:
+            t = time.time()
+            top = [s for s in results["hunt"].ranked if s.feasible][: args.top]
+            uniform = sorted(results["uniform"].ranked, key=lambda s: s.key)[: args.holdout_uniform]
+            base = CruiseSettings(driver, seed=args.seed, task="park", env=env)
+            folder = args.out / driver.replace(":", "_") / "holdout"
+            held = {"tests_per_candidate": args.holdout_tests, "seed": args.seed + HOLDOUT_SEED,
+                    "hunt_top": _holdout(top, base, env, args.holdout_tests, folder / "hunt_top", compute),
+                    "uniform": _holdout(uniform, base, env, args.holdout_tests, folder / "uniform", compute)}
+            held["hunt_top"]["variants"] = [s.geometry for s in top]
+            hh, uu = held["hunt_top"]["confirmed_per_driven_pct"], held["uniform"]["confirmed_per_driven_pct"]
+            held["ratio"] = round(hh / uu, 2) if hh is not None and uu else None
+            held["wall_s"] = round(time.time() - t, 1)
+            drivers[driver]["holdout"] = held
+            print(f"{driver}: held out, confirmed failures per driven test, the hunt's top {len(top)} {hh}% vs "
+                  f"{len(uniform)} uniform {uu}%: ratio {held['ratio']}", flush=True)
     out = {"what": "confirmed park failures (the driver fails, the oracle parks the same test) per test spent: "
                    "hunt --task park against uniform sampling of garages and geometries, equal budgets",
            "map": args.map, "geometries": geometries, "budget": args.budget, "tests_per_evaluation": args.tests,
            "population": args.population, "elites": args.elites, "seed": args.seed, "scenario": args.scenario,
+           "holdout_tests": args.holdout_tests, "top": args.top,
            "target_ratio": TARGET_RATIO,
            "drivers": drivers, "provenance": provenance()}
     args.json.parent.mkdir(parents=True, exist_ok=True)
