@@ -25,6 +25,7 @@ from pathlib import Path
 
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
+from garage_mj.core.fsutil import write_json
 from garage_mj.driving.drivers import action_type_of, load_driver
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     print(json.dumps({k: v for k, v in out.items() if k != "provenance"}, indent=1))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(out, indent=1) + "\n")
+        write_json(args.json, out, indent=1)
     return 0
 
 

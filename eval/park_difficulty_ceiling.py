@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 from pathlib import Path
 
 import numpy as np
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
+from garage_mj.core.fsutil import write_json
 from garage_mj.driving.difficulty.regression import auc
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN
 from garage_mj.scene.park_difficulty import PARK_FEATURES, fit_park, park_features
@@ -119,15 +119,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:52s} grouped {args.folds}-fold CV AUC {np.mean(aucs):.3f} ({', '.join(f'{a:.3f}' for a in aucs)})",
               flush=True)
     rated = auc([r["rated"] for r in rows], y.tolist())
-    print(f"{'the park difficulty as rated (the shipped model)':52s} AUC {rated:.3f} over {len(rows)} tests, "
-          f"{len(np.unique(groups))} garages, {y.mean():.1%} failed")
     out = {"runs": [str(r) for r in args.runs], "only": args.only, "tests": len(rows), "garages": int(len(np.unique(groups))),
            "failed_pct": round(100 * float(y.mean()), 1), "features": list(PARK_FEATURES),
            "rated_auc": round(rated, 4), "folds": args.folds, "repeats": args.repeats, "cross_validated": cv,
            "best_cross_validated_auc": max(v["auc_mean"] for v in cv.values()), "provenance": prov}
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(out, indent=1) + "\n")
+        write_json(args.json, out, indent=1)
+    print(f"{'the park difficulty as rated (the shipped model)':52s} AUC {rated:.3f} over {len(rows)} tests, "
+          f"{len(np.unique(groups))} garages, {y.mean():.1%} failed")
     return 0
 
 
