@@ -1,7 +1,7 @@
 """How well could any model of the park features predict a driver's park failures? A ceiling for the park difficulty.
 
-    .venv/bin/python eval/park_difficulty_ceiling.py RUN [RUN ...] [--only static|actors] [--folds 5] [--repeats 3]
-        [--json OUT.json]
+    .venv/bin/python eval/park_difficulty_ceiling.py RUN [RUN ...] [--only static|actors] [--behaviours] [--folds 5]
+        [--repeats 3] [--json OUT.json]
 
 Reads the park tests of the park runs ``RUN`` (folders holding a ``tests.csv``, or folders of such folders, e.g. the
 run folders of ``eval/bench_learned_park.py``), each driven test's :data:`~garage_mj.scene.park_difficulty.PARK_FEATURES`
@@ -16,6 +16,11 @@ run folders of ``eval/bench_learned_park.py``), each driven test's :data:`~garag
 
 If the flexible models, fitted on the very tests they are scored on (held-out folds aside), reach no higher AUC than
 the shipped model, the features, not the model's form, bound what a park difficulty can predict for this driver.
+
+``--behaviours`` adds what the features lack about the actors: each test with actors is drawn again (its run's
+settings and garage, its seed: the env's reset, nothing driven) to count its pedestrians by behaviour (crossing
+behind the stall, walking beside it), and the two free-form models and the park difficulty's own form are also
+cross-validated with these counts as two more features.
 Writes the figures and the provenance to ``--json``.
 """
 
@@ -23,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
@@ -33,10 +39,32 @@ from garage_mj.driving.difficulty.regression import auc
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN
 from garage_mj.scene.park_difficulty import PARK_FEATURES, fit_park, park_features
 
+BEHAVIOURS = ("behind_stall", "beside_stall")  # the pedestrians' park behaviours (garage_mj.scene.actor_spec)
 
-def read_tests(runs: list[Path], only: str | None = None) -> list[dict]:
+
+def pedestrian_behaviours(run: Path, rows: list[dict[str, str]]) -> dict[str, dict[str, int]]:
+    """Per test seed of ``rows`` (tests of the run folder ``run`` with actors), its pedestrians by behaviour: the
+    test drawn again by the run's env (its ``run.json`` settings, its ``garages.json``), nothing driven."""
+    from garage_mj.driving.episode import cached_env, close_cached_env
+    from garage_mj.driving.garage_set import load_garage_set
+    from garage_mj.driving.sources import CruiseSettings
+
+    settings = CruiseSettings.from_stored(json.loads((run / "run.json").read_text()))
+    sources = {s.hash: s for s in load_garage_set(str(run / "garages.json"))}
+    out = {}
+    for r in rows:
+        env = cached_env(sources[r["garage_hash"]], settings)
+        env.reset(seed=int(r["seed"]))
+        kinds = [a.behaviour for a in env.scenario.actors if a.kind == "pedestrian"]
+        out[r["seed"]] = {b: kinds.count(b) for b in BEHAVIOURS}
+    close_cached_env()
+    return out
+
+
+def read_tests(runs: list[Path], only: str | None = None, behaviours: bool = False) -> list[dict]:
     """The driven park tests of ``runs`` (a run folder or a folder of run folders), with their features (``only``:
-    ``"static"`` or ``"actors"``, the tests without or with actors)."""
+    ``"static"`` or ``"actors"``, the tests without or with actors; ``behaviours``: their pedestrians by behaviour
+    too, drawn again, :func:`pedestrian_behaviours`)."""
     files = []
     for run in runs:
         files += [run / "tests.csv"] if (run / "tests.csv").is_file() else sorted(run.glob("*/tests.csv"))
@@ -44,14 +72,19 @@ def read_tests(runs: list[Path], only: str | None = None) -> list[dict]:
         raise SystemExit(f"no tests.csv in {', '.join(map(str, runs))}: give park run folders")
     rows = []
     for f in files:
+        kept = []
         for r in csv.DictReader(f.open(newline="")):
             if r["outcome"] in NOT_DRIVEN or not r.get("park_difficulty"):
                 continue
             actors = any(int(r.get(k) or 0) for k in ("pedestrians", "moving_cars", "clutter"))
             if only is not None and actors != (only == "actors"):
                 continue
+            kept.append((r, actors))
+        drawn = pedestrian_behaviours(f.parent, [r for r, a in kept if a]) if behaviours else {}
+        for r, _ in kept:
             rows.append({"features": park_features(r), "failed": r["outcome"] != "success",
-                         "garage": r["garage_hash"], "rated": float(r["park_difficulty"])})
+                         "garage": r["garage_hash"], "rated": float(r["park_difficulty"]),
+                         "behaviours": drawn.get(r["seed"], dict.fromkeys(BEHAVIOURS, 0))})
     return rows
 
 
@@ -68,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", type=Path, help="park run folders (or folders of them)")
     ap.add_argument("--only", choices=("static", "actors"), help="only the tests without (static) or with actors")
+    ap.add_argument("--behaviours", action="store_true",
+                    help="also with the pedestrians' behaviours as features (each test with actors drawn again)")
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", type=Path)
@@ -80,8 +115,9 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         raise SystemExit("this benchmark needs scikit-learn: make install (or pip install -e '.[dev]')") from None
     prov = provenance(argv)
-    rows = read_tests(args.runs, args.only)
+    rows = read_tests(args.runs, args.only, args.behaviours)
     X = np.array([[r["features"][k] for k in PARK_FEATURES] for r in rows])
+    B = np.array([[r["behaviours"][b] for b in BEHAVIOURS] for r in rows], dtype=float)
     y = np.array([r["failed"] for r in rows], dtype=bool)
     groups = np.array([r["garage"] for r in rows])
 
@@ -89,11 +125,21 @@ def main(argv: list[str] | None = None) -> int:
         m = fit_park([rows[i]["features"] for i in train], y[train].tolist())
         return np.array([m.test_probability(rows[i]["features"]) for i in test])
 
-    def sklearn_model(make):
+    def park_model_behaviours(train: np.ndarray, test: np.ndarray) -> np.ndarray:
+        """The park difficulty's form (weights >= 0) with the pedestrians' behaviour counts as two more features."""
+        from garage_mj.scene.route_difficulty import fit
+
+        feats = [{**rows[i]["features"], **rows[i]["behaviours"]} for i in range(len(rows))]
+        m = fit([feats[i] for i in train], y[train].tolist(), (*PARK_FEATURES, *BEHAVIOURS))
+        return np.array([m.test_probability(feats[i]) for i in test])
+
+    def sklearn_model(make, with_behaviours: bool = False):
+        data = np.hstack([X, B]) if with_behaviours else X
+
         def run(train: np.ndarray, test: np.ndarray) -> np.ndarray:
             m = make()
-            m.fit(X[train], y[train])
-            return m.predict_proba(X[test])[:, 1]
+            m.fit(data[train], y[train])
+            return m.predict_proba(data[test])[:, 1]
         return run
 
     models = {
@@ -105,6 +151,14 @@ def main(argv: list[str] | None = None) -> int:
         "random forest": sklearn_model(
             lambda: RandomForestClassifier(n_estimators=300, min_samples_leaf=5, random_state=0)),
     }
+    if args.behaviours:
+        models.update({
+            "park difficulty's form + pedestrians' behaviours": park_model_behaviours,
+            "logistic regression, free signs + behaviours": sklearn_model(
+                lambda: make_pipeline(StandardScaler(), LogisticRegression(max_iter=1000)), True),
+            "random forest + behaviours": sklearn_model(
+                lambda: RandomForestClassifier(n_estimators=300, min_samples_leaf=5, random_state=0), True),
+        })
     cv = {}
     for name, run in models.items():
         aucs = []
@@ -119,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:52s} grouped {args.folds}-fold CV AUC {np.mean(aucs):.3f} ({', '.join(f'{a:.3f}' for a in aucs)})",
               flush=True)
     rated = auc([r["rated"] for r in rows], y.tolist())
-    out = {"runs": [str(r) for r in args.runs], "only": args.only, "tests": len(rows), "garages": int(len(np.unique(groups))),
+    out = {"runs": [str(r) for r in args.runs], "only": args.only, "behaviours": args.behaviours, "tests": len(rows), "garages": int(len(np.unique(groups))),
            "failed_pct": round(100 * float(y.mean()), 1), "features": list(PARK_FEATURES),
            "rated_auc": round(rated, 4), "folds": args.folds, "repeats": args.repeats, "cross_validated": cv,
            "best_cross_validated_auc": max(v["auc_mean"] for v in cv.values()), "provenance": prov}
