@@ -214,6 +214,8 @@ def test_park_actors_export_replay_and_any_worker_count(tmp_path, tiny):
     assert key(one.rows) == key(two.rows)  # the same actors and outcomes whatever the worker count
     rows = sorted(read_tests(tmp_path / "w1" / "tests.csv"), key=lambda r: int(r["test"]))
     assert all(int(r["pedestrians"]) + int(r["moving_cars"]) + int(r["clutter"]) >= 2 for r in rows)
+    # the pedestrians by behaviour, the hazard a park difficulty would weigh
+    assert all(int(r["pedestrians_behind"]) + int(r["pedestrians_beside"]) == int(r["pedestrians"]) for r in rows)
     assert any(int(r["moving_cars"]) for r in rows)  # a pulling-out car's stall is freed in the replay too
     files = sorted((tmp_path / "w1" / "xosc").glob("*.xosc"))
     assert len(files) == 3
@@ -277,3 +279,24 @@ def test_a_present_foresight_tracker_yields_only_to_where_an_actor_is_now(tiny):
             ParkTrackConfig(actor_foresight="psychic")
     finally:
         env.close()
+
+
+def test_a_rows_pedestrians_by_behaviour_are_the_tests_own(tiny):
+    """``pedestrians_behind`` and ``pedestrians_beside`` count the test's pedestrians by what they do; a cruise row
+    leaves both empty."""
+    from garage_mj.driving.cruise import run_test
+    from garage_mj.driving.sources import CruiseSource
+
+    source = CruiseSource.from_garage(tiny, "tiny")
+    for scenario, behaviour in (("park_pedestrian_behind", "behind_stall"), ("park_pedestrian_beside", "beside_stall")):
+        settings = CruiseSettings("oracle", action_type="continuous", task="park", env={"scenario": scenario})
+        row = run_test(source, 0, settings)
+        env = GarageDriveEnv(garage=tiny, task="park", scenario=scenario)
+        env.reset(seed=int(row["seed"]))
+        drawn = [a.behaviour for a in env.scenario.actors if a.kind == "pedestrian"]
+        env.close()
+        assert drawn == [behaviour] and int(row["pedestrians"]) == 1, (scenario, drawn, row["pedestrians"])
+        cells = (int(row["pedestrians_behind"]), int(row["pedestrians_beside"]))
+        assert cells == ((1, 0) if behaviour == "behind_stall" else (0, 1)), (scenario, cells)
+    cruise = run_test(source, 0, CruiseSettings("oracle", action_type="continuous"))
+    assert cruise["pedestrians_behind"] == cruise["pedestrians_beside"] == ""

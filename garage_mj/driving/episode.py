@@ -17,7 +17,7 @@ import traceback
 from typing import Any
 
 from garage_mj.core.errors import GarageMJError
-from garage_mj.driving.results import PARK_COLUMNS, ROOM_COLUMNS, vehicle_cells
+from garage_mj.driving.results import HAZARD_COLUMNS, PARK_COLUMNS, ROOM_COLUMNS, vehicle_cells
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN
 from garage_mj.driving.sources import CruiseError, CruiseSettings, CruiseSource
 
@@ -122,15 +122,17 @@ def _cell(value: Any, digits: int = 3) -> Any:
 
 
 def park_cells(info: dict[str, Any]) -> dict[str, Any]:
-    """The park columns of a test's row (:data:`~garage_mj.driving.results.PARK_COLUMNS` and the room of
-    :data:`~garage_mj.driving.results.ROOM_COLUMNS` but ``park_difficulty``, which the runner fills) from the env's
-    last info: for a cruise test its task only; the parking metrics where the test was driven, the plan's where one
-    was found."""
-    cells: dict[str, Any] = dict.fromkeys((*PARK_COLUMNS, *ROOM_COLUMNS), "")
+    """The park columns of a test's row (:data:`~garage_mj.driving.results.PARK_COLUMNS`, the room of
+    :data:`~garage_mj.driving.results.ROOM_COLUMNS` but ``park_difficulty``, which the runner fills, and the
+    pedestrians by behaviour of :data:`~garage_mj.driving.results.HAZARD_COLUMNS`) from the env's last info: for a
+    cruise test its task only; the parking metrics where the test was driven, the plan's where one was found."""
+    cells: dict[str, Any] = dict.fromkeys((*PARK_COLUMNS, *ROOM_COLUMNS, *HAZARD_COLUMNS), "")
     if "task" not in info:
         return {**cells, "task": "cruise"}
     found = info["plan_cusps"] >= 0
+    walking = info.get("pedestrian_behaviours", {})
     cells |= {"task": info["task"], "maneuver": info["maneuver"],
+             "pedestrians_behind": walking.get("behind_stall", 0), "pedestrians_beside": walking.get("beside_stall", 0),
              "plan_length_m": _cell(info["plan_length"]) if found else "",
              "plan_cusps": info["plan_cusps"] if found else "",
              "plan_clearance_m": _cell(info["plan_clearance"]) if found else "",

@@ -12,8 +12,8 @@ difficulty (``route_r``, ``route_slope``, ``route_intercept``, ``route_n``, unde
 has no feasible stall or was not computed (a run without a route model, a run of an older garage-mj).
 
 A park or AVP run (``CruiseSettings.task``) writes the same files; its ``tests.csv`` rows fill the park
-columns (:data:`PARK_COLUMNS`, empty but ``task`` in a cruise row), and its ``summary.csv`` and
-``summary.json`` add :data:`PARK_SUMMARY_COLUMNS` (a cruise run's keep their columns); its ``summary.json`` also breaks
+columns (:data:`PARK_COLUMNS`, :data:`HAZARD_COLUMNS` and :data:`ROOM_COLUMNS`, empty but ``task`` in a cruise row),
+and its ``summary.csv`` and ``summary.json`` add :data:`PARK_SUMMARY_COLUMNS` (a cruise run's keep their columns); its ``summary.json`` also breaks
 success down by level, maneuver and stall angle (:func:`park_breakdown`, docs/spec.md section 9).
 
 Failures are counted per failure kind of :data:`garage_mj.driving.sim.outcomes.OUTCOMES`
@@ -75,7 +75,11 @@ VEHICLE_DEFAULTS = {"vehicle": "sedan", "parked_fleet": "uniform", "parked_jitte
 #: difficulty, its failure probability under the run's park model (:mod:`garage_mj.scene.park_difficulty`; empty
 #: for a test that is not driven, or a run without a park model).
 ROOM_COLUMNS = ("bay_margin_m", "aisle_width_m", "start_distance_m", "park_difficulty")
-TEST_COLUMNS = (*LEGACY_TEST_COLUMNS, *PARK_COLUMNS, *VEHICLE_COLUMNS, *ROOM_COLUMNS)
+#: A park or AVP test's pedestrians by behaviour (docs/spec.md section 8's hazards; empty in a cruise row and in a row
+#: from before them): crossing behind the target stall as the car reverses (``behind_stall``), and walking along
+#: the aisle past it (``beside_stall``). ``pedestrians`` counts both.
+HAZARD_COLUMNS = ("pedestrians_behind", "pedestrians_beside")
+TEST_COLUMNS = (*LEGACY_TEST_COLUMNS, *PARK_COLUMNS, *VEHICLE_COLUMNS, *HAZARD_COLUMNS, *ROOM_COLUMNS)
 #: What a collision can hit (``hit`` column): the summary counts collisions per class.
 HIT_CLASSES = ("parked_car", "wall", "pillar", "obstacle", "pedestrian", "moving_car", "clutter")
 #: The failure outcomes, as ``tests.csv`` writes them, in display order.
@@ -190,7 +194,8 @@ def read_tests(path: Path) -> list[dict[str, str]]:
 
 
 #: Cells that hold a whole number >= 0 where not empty, and cells that hold a finite number where not empty.
-_COUNT_CELLS = ("target_stall", "pedestrians", "moving_cars", "clutter", "direction_changes", "plan_cusps")
+_COUNT_CELLS = ("target_stall", "pedestrians", "moving_cars", "clutter", "direction_changes", "plan_cusps",
+                *HAZARD_COLUMNS)
 _NUMBER_CELLS = ("time", "path_length", "route_length", "difficulty", "mean_road_length", "mean_intersection_degree",
                  "wall_s", "position_error_m", "heading_error_deg", "lateral_offset_m", "park_time_s",
                  "min_clearance_m", "plan_length_m", "plan_clearance_m", "inner_margin_m", "outline_clearance_m",
@@ -240,7 +245,8 @@ def row_problem(row: dict[str, str], settings: CruiseSettings) -> tuple[str, str
     if settings.stall is not None and row["target_stall"] not in ("", str(settings.stall)):
         return "target_stall", f"is not this run's stall ({settings.stall})"
     if settings.task == "cruise":
-        extra = next((c for c in (*PARK_COLUMNS, *ROOM_COLUMNS) if c != "task" and row.get(c, "") != ""), None)
+        extra = next((c for c in (*PARK_COLUMNS, *HAZARD_COLUMNS, *ROOM_COLUMNS) if c != "task" and row.get(c, "") != ""),
+                     None)
         if extra is not None:
             return extra, "is filled in a cruise test's row (park columns are empty there)"
     elif row["maneuver"] not in ("", "reverse", "forward") or (

@@ -686,11 +686,15 @@ class GarageDriveEnv(gym.Env):
                 self._info_test["actors_missing"] = dict(self.scenario.missing)
             if self._park is not None:
                 stall = self.stalls[self._park.stall]
+                walking = [a.behaviour for a in self.scenario.actors if a.kind == "pedestrian"]
                 self._info_test.update(park_info(self._park, self._park_level, stall), **test_room(self, self._park),
-                                       feasible=self._park.feasible and self.scenario.feasible)
+                                       feasible=self._park.feasible and self.scenario.feasible,
+                                       pedestrian_behaviours={b: walking.count(b) for b in set(walking)})
         info: dict[str, Any] = {"time": float(self.data.time), "path_length": self.path_length,
                                 "progress": self.monitor.progress, "pose": (x, y, yaw), **self._info_test}
         info["actors"] = dict(info["actors"])  # fresh dicts: a caller may keep or change an info
+        if "pedestrian_behaviours" in info:
+            info["pedestrian_behaviours"] = dict(info["pedestrian_behaviours"])
         if "actors_missing" in info:
             info["actors_missing"] = dict(info["actors_missing"])
         if self.outcome is not None:
