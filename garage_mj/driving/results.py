@@ -231,7 +231,8 @@ def row_problem(row: dict[str, str], settings: CruiseSettings) -> tuple[str, str
     if int(row["seed"]) != cruise_seed(settings.seed, row["garage_hash"], int(row["test"])):
         return "seed", f"is not the seed of test {row['test']} of this garage under the run's seed {settings.seed}"
     for col in _COUNT_CELLS:
-        if row[col] != "" and not (row[col].isascii() and row[col].isdigit()):
+        cell = row.get(col, "")  # .get: a row built by hand may lack the newer columns
+        if cell != "" and not (cell.isascii() and cell.isdigit()):
             return col, "is not a whole number >= 0"
     for col in _NUMBER_CELLS:
         if row.get(col, "") != "" and not _finite(row[col]):  # .get: a row built by hand may lack the newer columns
