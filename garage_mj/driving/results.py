@@ -13,8 +13,9 @@ has no feasible stall or was not computed (a run without a route model, a run of
 
 A park or AVP run (``CruiseSettings.task``) writes the same files; its ``tests.csv`` rows fill the park
 columns (:data:`PARK_COLUMNS`, :data:`HAZARD_COLUMNS` and :data:`ROOM_COLUMNS`, empty but ``task`` in a cruise row),
-and its ``summary.csv`` and ``summary.json`` add :data:`PARK_SUMMARY_COLUMNS` (a cruise run's keep their columns); its ``summary.json`` also breaks
-success down by level, maneuver and stall angle (:func:`park_breakdown`, docs/spec.md section 9).
+and its ``summary.csv`` and ``summary.json`` add :data:`PARK_SUMMARY_COLUMNS` (a cruise run's keep their columns);
+its ``summary.json`` also breaks success down by level, maneuver and stall angle (:func:`park_breakdown`,
+docs/spec.md section 9).
 
 Failures are counted per failure kind of :data:`garage_mj.driving.sim.outcomes.OUTCOMES`
 (:data:`FAILURE_KINDS`, each with its column of :data:`COUNT_COLUMNS`), and folded into the paper's three
