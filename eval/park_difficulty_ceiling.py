@@ -88,15 +88,6 @@ def read_tests(runs: list[Path], only: str | None = None, behaviours: bool = Fal
     return rows
 
 
-def grouped_folds(groups: np.ndarray, folds: int, seed: int) -> list[np.ndarray]:
-    """Index arrays of ``folds`` folds, each garage wholly in one, garages shuffled by ``seed``."""
-    names = np.unique(groups)
-    order = np.random.default_rng(seed).permutation(len(names))
-    fold_of = {name: int(k % folds) for name, k in zip(names, order)}
-    which = np.array([fold_of[g] for g in groups])
-    return [np.flatnonzero(which == k) for k in range(folds)]
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", type=Path, help="park run folders (or folders of them)")
@@ -110,6 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         from sklearn.ensemble import HistGradientBoostingClassifier, RandomForestClassifier
         from sklearn.linear_model import LogisticRegression
+        from sklearn.model_selection import GroupKFold
         from sklearn.pipeline import make_pipeline
         from sklearn.preprocessing import StandardScaler
     except ImportError:
@@ -164,9 +156,7 @@ def main(argv: list[str] | None = None) -> int:
         aucs = []
         for rep in range(args.repeats):
             pred = np.zeros(len(y))
-            parts = grouped_folds(groups, args.folds, rep)
-            for k, test in enumerate(parts):
-                train = np.concatenate([p for j, p in enumerate(parts) if j != k])
+            for train, test in GroupKFold(args.folds, shuffle=True, random_state=rep).split(X, y, groups):
                 pred[test] = run(train, test)
             aucs.append(auc(pred.tolist(), y.tolist()))
         cv[name] = {"auc_per_repeat": [round(a, 4) for a in aucs], "auc_mean": round(float(np.mean(aucs)), 4)}
