@@ -68,9 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     sources = list(load_garage_set(str(HELDOUT / f"{args.set}.json")))[: args.garages]
     driver = load_driver(args.driver)  # built before the clock, as a run builds it once per process
     action_type = action_type_of(args.driver)
-    reset_s = act_s = step_s = sim_s = 0.0
-    renders = steps = tests = 0
-    render_s = 0.0
+    reset_s = act_s = step_s = sim_s = render_s = 0.0
+    frames = steps = tests = 0
     per_test = []
     for geometry in args.geometries:
         env_kwargs = PARK_GEOMETRIES[geometry].env_kwargs()
@@ -88,10 +87,10 @@ def main(argv: list[str] | None = None) -> int:
                     t0 = time.perf_counter()
                     obs, info = env.reset(seed=seed)
                     t1 = time.perf_counter()
-                    reset_s += t1 - t0
-                    if info.get("outcome") in NOT_DRIVEN:
+                    if info.get("outcome") in NOT_DRIVEN:  # never driven: left out, as the park benchmarks do
                         continue
-                    before = sum(c.seconds for c in cams)
+                    reset_s += t1 - t0
+                    before = sum(c.seconds for c in cams), sum(c.calls for c in cams)
                     driver.reset(env.driver_info(seed))
                     n, a_s, s_s = 0, 0.0, 0.0
                     while True:
@@ -111,14 +110,13 @@ def main(argv: list[str] | None = None) -> int:
                     tests += 1
                     sim_s += info["time"]
                     per_test.append(info["time"] / (t1 - t0 + a_s + s_s))
-                    render_s += sum(c.seconds for c in cams) - before
+                    # the drive's renders (the reset's first observation is the reset's)
+                    render_s += sum(c.seconds for c in cams) - before[0]
+                    frames += sum(c.calls for c in cams) - before[1]
             finally:
-                renders += sum(c.calls for c in cams)
                 env.close()
     wall = reset_s + act_s + step_s
-    # renders inside the drive (reset's first observation renders too, counted in reset)
-    drive_renders = render_s
-    physics_etc = step_s - drive_renders
+    physics_etc = step_s - render_s
     ms = 1000.0 / steps
     out = {
         "driver": args.driver, "set": args.set, "garages": len(sources), "tests_per_garage": args.tests,
@@ -126,15 +124,15 @@ def main(argv: list[str] | None = None) -> int:
         "simulated_s": round(sim_s, 1), "wall_s": round(wall, 2),
         "sim_s_per_wall_s": round(sim_s / wall, 1),
         "sim_s_per_wall_s_median_test": round(statistics.median(per_test), 1),
-        "per_control_step_ms": {"cameras": round(drive_renders * ms, 3), "env_step_without_cameras":
+        "camera_frames": frames, "per_control_step_ms": {"cameras": round(render_s * ms, 3), "env_step_without_cameras":
                                 round(physics_etc * ms, 3), "driver_act": round(act_s * ms, 3),
                                 "reset_spread": round(reset_s * ms, 3)},
         "reset_ms_per_test": round(1000 * reset_s / max(tests, 1), 1),
-        "share": {"reset": round(reset_s / wall, 3), "cameras": round(drive_renders / wall, 3),
+        "share": {"reset": round(reset_s / wall, 3), "cameras": round(render_s / wall, 3),
                   "env_step_without_cameras": round(physics_etc / wall, 3), "driver_act": round(act_s / wall, 3)},
         # what the drive would run at with only the cameras and the rest of the env step (no driver, no reset)
         "ceiling_env_only_sim_s_per_wall_s": round(sim_s / step_s, 1),
-        "ceiling_cameras_only_sim_s_per_wall_s": round(sim_s / drive_renders, 1) if drive_renders else None,
+        "ceiling_cameras_only_sim_s_per_wall_s": round(sim_s / render_s, 1) if render_s else None,
         "provenance": prov,
     }
     print(json.dumps({k: v for k, v in out.items() if k != "provenance"}, indent=1))
