@@ -4,11 +4,11 @@
         [--repeats 3] [--json OUT.json]
 
 Reads the park tests of the park runs ``RUN`` (folders holding a ``tests.csv``, or folders of such folders, e.g. the
-run folders of ``eval/bench_learned_park.py``), each driven test's :data:`~garage_mj.scene.park_difficulty.PARK_FEATURES`
-(what is known before the drive) and whether it failed (``--only``: the tests without actors, or with them). Scores, per test (AUC of failure):
+run folders of ``eval/bench_learned_park.py``) as ``garage-mj difficulty fit --task park`` reads them: each driven
+test's :data:`~garage_mj.scene.park_difficulty.PARK_FEATURES` (what is known before the drive) and whether it failed
+(``--only``: the tests without actors, or with them). Scores, per test (AUC of failure):
 
-- the park difficulty each run rated its tests with (``tests.csv``'s ``park_difficulty``: the shipped model, fitted
-  on other garages);
+- the park difficulty under the driver's park model as shipped (fitted on other garages);
 - cross-validated on these tests themselves, folds by garage (no garage in both the fitting and the scored part),
   ``--repeats`` shufflings of the garages into ``--folds`` folds: the park difficulty's own model refitted
   (:func:`~garage_mj.scene.park_difficulty.fit_park`: logistic, every weight >= 0), a logistic regression with free
@@ -20,14 +20,12 @@ the shipped model, the features, not the model's form, bound what a park difficu
 ``--behaviours`` adds what the features lack about the actors: each test with actors is drawn again (its run's
 settings and garage, its seed: the env's reset, nothing driven) to count its pedestrians by behaviour (crossing
 behind the stall, walking beside it), and the two free-form models and the park difficulty's own form are also
-cross-validated with these counts as two more features.
-Writes the figures and the provenance to ``--json``.
+cross-validated with these counts as two more features. Writes the figures and the provenance to ``--json``.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 from pathlib import Path
 
@@ -35,56 +33,54 @@ import numpy as np
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
 from garage_mj.core.fsutil import write_json
+from garage_mj.driving.difficulty.park import load_park_runs
+from garage_mj.driving.difficulty.park_rating import choose_park_model
 from garage_mj.driving.difficulty.regression import auc
-from garage_mj.driving.sim.outcomes import NOT_DRIVEN
-from garage_mj.scene.park_difficulty import PARK_FEATURES, fit_park, park_features
+from garage_mj.scene.park_difficulty import PARK_FEATURES, fit_park
 
 BEHAVIOURS = ("behind_stall", "beside_stall")  # the pedestrians' park behaviours (garage_mj.scene.actor_spec)
 
 
-def pedestrian_behaviours(run: Path, rows: list[dict[str, str]]) -> dict[str, dict[str, int]]:
-    """Per test seed of ``rows`` (tests of the run folder ``run`` with actors), its pedestrians by behaviour: the
-    test drawn again by the run's env (its ``run.json`` settings, its ``garages.json``), nothing driven."""
+def pedestrian_behaviours(run: Path, records: list[dict]) -> dict[tuple[str, int], dict[str, int]]:
+    """Per test (garage hash, index) of ``records`` (tests of the run folder ``run`` with actors), its pedestrians by behaviour:
+    the test drawn again by the run's env (its ``run.json`` settings, its ``garages.json``, the test's seed), nothing
+    driven."""
     from garage_mj.driving.episode import cached_env, close_cached_env
     from garage_mj.driving.garage_set import load_garage_set
-    from garage_mj.driving.sources import CruiseSettings
+    from garage_mj.driving.sources import CruiseSettings, cruise_seed
 
     settings = CruiseSettings.from_stored(json.loads((run / "run.json").read_text()))
     sources = {s.hash: s for s in load_garage_set(str(run / "garages.json"))}
     out = {}
-    for r in rows:
+    for r in records:
         env = cached_env(sources[r["garage_hash"]], settings)
-        env.reset(seed=int(r["seed"]))
+        env.reset(seed=cruise_seed(settings.seed, r["garage_hash"], r["test"]))
         kinds = [a.behaviour for a in env.scenario.actors if a.kind == "pedestrian"]
-        out[r["seed"]] = {b: kinds.count(b) for b in BEHAVIOURS}
+        out[r["garage_hash"], r["test"]] = {b: kinds.count(b) for b in BEHAVIOURS}
     close_cached_env()
     return out
 
 
 def read_tests(runs: list[Path], only: str | None = None, behaviours: bool = False) -> list[dict]:
-    """The driven park tests of ``runs`` (a run folder or a folder of run folders), with their features (``only``:
-    ``"static"`` or ``"actors"``, the tests without or with actors; ``behaviours``: their pedestrians by behaviour
-    too, drawn again, :func:`pedestrian_behaviours`)."""
-    files = []
+    """The driven park tests of ``runs`` (a run folder or a folder of run folders) as
+    :func:`~garage_mj.driving.difficulty.park.load_park_runs` reads them, each rated under its driver's park model
+    as shipped (``only``: ``"static"`` or ``"actors"``, the tests without or with actors; ``behaviours``: their
+    pedestrians by behaviour too, drawn again, :func:`pedestrian_behaviours`)."""
+    folders = []
     for run in runs:
-        files += [run / "tests.csv"] if (run / "tests.csv").is_file() else sorted(run.glob("*/tests.csv"))
-    if not files:
+        folders += [run] if (run / "tests.csv").is_file() else sorted(p.parent for p in run.glob("*/tests.csv"))
+    if not folders:
         raise SystemExit(f"no tests.csv in {', '.join(map(str, runs))}: give park run folders")
     rows = []
-    for f in files:
-        kept = []
-        for r in csv.DictReader(f.open(newline="")):
-            if r["outcome"] in NOT_DRIVEN or not r.get("park_difficulty"):
-                continue
-            actors = any(int(r.get(k) or 0) for k in ("pedestrians", "moving_cars", "clutter"))
-            if only is not None and actors != (only == "actors"):
-                continue
-            kept.append((r, actors))
-        drawn = pedestrian_behaviours(f.parent, [r for r, a in kept if a]) if behaviours else {}
-        for r, _ in kept:
-            rows.append({"features": park_features(r), "failed": r["outcome"] != "success",
-                         "garage": r["garage_hash"], "rated": float(r["park_difficulty"]),
-                         "behaviours": drawn.get(r["seed"], dict.fromkeys(BEHAVIOURS, 0))})
+    for folder in folders:
+        records = [r for r in load_park_runs([folder]) if only is None or (r["actors"] > 0) == (only == "actors")]
+        drawn = pedestrian_behaviours(folder, [r for r in records if r["actors"] > 0]) if behaviours else {}
+        for r in records:
+            model = choose_park_model(True, r["driver"]).model
+            features = {k: r[k] for k in PARK_FEATURES}
+            rows.append({"features": features, "failed": bool(r["failed"]), "garage": r["garage_hash"],
+                         "rated": float(model.test_probability(features)),
+                         "behaviours": drawn.get((r["garage_hash"], r["test"]), dict.fromkeys(BEHAVIOURS, 0))})
     return rows
 
 
