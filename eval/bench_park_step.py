@@ -27,9 +27,9 @@ from _provenance import provenance  # eval/_provenance.py: command, date, machin
 
 from garage_mj.core.fsutil import write_json
 from garage_mj.driving.drivers import action_type_of, load_driver
+from garage_mj.driving.episode import cached_env, close_cached_env
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
-from garage_mj.driving.sim.drive_env import GarageDriveEnv
 from garage_mj.driving.sim.outcomes import NOT_DRIVEN
 from garage_mj.driving.sources import CruiseSettings, cruise_seed
 
@@ -78,8 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         settings = CruiseSettings(driver=args.driver, seed=args.seed, task="park", maneuver="any",
                                   env=env_kwargs).resolved(action_type)  # the sensors the driver declares on
         for source in sources:
-            env = GarageDriveEnv(garage=source.garage, action_type=action_type, occupancy=settings.occupancy,
-                                 infeasible="report", **settings.task_kwargs(), **settings.env)
+            env = cached_env(source, settings)  # the env a run's worker builds for these settings
             cams = [_Timed(c) for c in (env.camera, env.rear_camera) if c is not None]
             try:
                 for index in range(args.tests):
@@ -114,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
                     render_s += sum(c.seconds for c in cams) - before[0]
                     frames += sum(c.calls for c in cams) - before[1]
             finally:
-                env.close()
+                close_cached_env()
     wall = reset_s + act_s + step_s
     physics_etc = step_s - render_s
     ms = 1000.0 / steps
