@@ -39,6 +39,7 @@ from garage_mj.driving.difficulty.park_rating import choose_park_model, park_dif
 from garage_mj.driving.difficulty.regression import auc, pearson
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
+from garage_mj.driving.sim.park_guide import MAX_REPLANS
 from garage_mj.driving.sources import CruiseSettings
 from garage_mj.scene.stalls import stall_layout
 from garage_mj.scene.world import GeometryError, world_with
@@ -179,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
                     default=["default", "tight", "angled60", "parallel"])
     ap.add_argument("--scenarios", nargs="*", default=["none", "park_mixed"], help="actor scenarios (none: no actors)")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--guide-replans", type=int, default=MAX_REPLANS,
+                    help=f"new plans the park guide may show a test (default {MAX_REPLANS}; 0: the test's plan only)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--runs", type=Path, default=ROOT / "runs" / "bench_learned_park", help="run folders (resumable)")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "learned_park" / "bench_park.json")
@@ -202,6 +205,8 @@ def main(argv: list[str] | None = None) -> int:
                 env = PARK_GEOMETRIES[geometry].env_kwargs()
                 if scenario != "none":
                     env["scenario"] = scenario
+                if args.guide_replans != MAX_REPLANS:
+                    env["guide_replans"] = args.guide_replans
                 for driver in drivers:
                     folder = args.runs / args.task / driver.replace(":", "_").replace("/", "_") / \
                         f"{name}_{geometry}_{scenario}"
@@ -223,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
         "settings": {"driver": args.driver, "baselines": args.baselines, "task": args.task, "sets": args.sets,
                      "garages_per_set": args.garages, "tests_per_garage": args.tests, "geometries": args.geometries,
                      "scenarios": args.scenarios, "occupancy": 0.5, "maneuver": "any", "seed": args.seed,
-                     "workers": args.workers},
+                     "workers": args.workers, "guide_replans": args.guide_replans},
         "targets": TARGETS,
         "drivers": {d: summary(rows[d]) for d in drivers},
         "by_geometry": {g: {d: stats([r for r in rows[d] if r["geometry"] == g]) for d in drivers}

@@ -138,3 +138,64 @@ def test_in_an_avp_test_the_guide_waits_for_the_car_at_the_plans_start(painted_t
     guide.update(tuple(start), 0.0)  # the car at the plan's start: the guide follows it from there
     assert guide.started and guide.read(tuple(start))[0] == guide.tracker.segments[0].gear.sign  # its first stretch
     env.close()
+
+
+def test_the_guide_plans_again_for_a_car_at_rest_off_its_plan_and_the_oracle_parks_on_the_new_plan():
+    """A car held at rest on the plan's start for REPLAN_STUCK is shown a new plan from where it stands (the judge's
+    reference stays the test's); the oracle driving that plan parks. With ``guide_replans=0`` the guide keeps the
+    test's plan."""
+    from garage_mj.driving.drivers.oracle import OracleDriver
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+    from garage_mj.driving.sim.park_guide import REPLAN_STUCK
+    from garage_mj.driving.sim.park_sensors import ALL_SENSORS
+
+    (source,) = painted_sources("tiny_7x11", 1, seed=0)
+    for replans in (3, 0):
+        env = GarageDriveEnv(garage=source.garage, action_type="continuous", task="park", maneuver="reverse",
+                             sensors=ALL_SENSORS, guide_replans=replans)
+        try:
+            obs, info = env.reset(seed=2)
+            first, reference = env.park_guide.poses, env.route
+            brake = np.array([-1.0, 0.0, 1.0], dtype=np.float32)
+            steps = int(round(REPLAN_STUCK / env.dt)) + 2
+            for _ in range(steps):
+                obs, _, term, trunc, info = env.step(brake)
+                assert not (term or trunc)
+            guide = env.park_guide
+            assert env.route is reference
+            if not replans:
+                assert guide.replans == 0 and guide.poses is first
+                continue
+            assert guide.replans == 1 and guide.poses is not first
+            x, y, yaw = info["pose"]
+            assert np.hypot(*(guide.poses[0, :2] - (x, y))) < 0.05  # the new plan starts where the car stands
+            assert obs["park_guide"][GUIDE_KEYS.index("stretches_after")] == len(guide.tracker.segments) - 1
+            oracle = OracleDriver()
+            oracle.reset(env.driver_info(2))
+            oracle.follow(guide.poses, guide.directions)
+            done = False
+            while not done:
+                obs, _, term, trunc, info = env.step(oracle.act(obs))
+                done = term or trunc
+            assert info["outcome"] == "success", info.get("reason")
+        finally:
+            env.close()
+    with pytest.raises(ValueError, match="guide_replans"):
+        GarageDriveEnv(garage=source.garage, task="park", guide_replans=11)
+
+
+def test_when_the_guide_wants_a_new_plan():
+    """At rest where the last stretch ends (the guide stopping the car there) after REPLAN_AT_END, anywhere else after
+    REPLAN_STUCK; never before the plan has begun, nor after ``max_replans`` tries."""
+    from garage_mj.driving.sim.park_guide import REPLAN_AT_END, REPLAN_STUCK, ParkGuide
+    from tests.test_park_oracle import CAR, synthetic_plan
+
+    poses, gears = synthetic_plan([(1, 3.0, 0.0), (-1, 3.0, 0.0)])
+    guide = ParkGuide(poses, gears, CAR, max_replans=1)
+    assert not guide.wants_plan(100.0)  # the plan has not begun (an AVP test's cruise)
+    guide.update(poses[0], 0.0)
+    assert guide.started and not guide.wants_plan(REPLAN_AT_END) and guide.wants_plan(REPLAN_STUCK)
+    guide.tracker.k, guide.tracker.stopping = 1, True  # stopped where the last stretch ends
+    assert guide.wants_plan(REPLAN_AT_END) and not guide.wants_plan(REPLAN_AT_END - 0.2)
+    guide.replace(poses[::-1], gears[::-1])
+    assert guide.replans == 1 and guide.stretch == 0 and not guide.wants_plan(100.0)

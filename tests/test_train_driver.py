@@ -616,6 +616,30 @@ def test_the_replanning_park_expert_plans_again_once_the_car_has_left_its_plan(t
     assert np.hypot(*(again[1][0, :2] - again[0][0, :2])) > 0.5  # it starts from the car, not the test's start
 
 
+def test_the_guided_park_expert_drives_the_new_plan_the_guide_shows(tiny_sources):
+    """With the park guide, a learner held at rest off its plan is shown a new plan (the env's ``guide_replans``); the
+    expert that labels its states tracks that plan from then on, not the test's first."""
+    from garage_mj.driving.learning.fleet_env import FleetDriveEnv
+    from garage_mj.driving.learning.park_actions import PARK_COMMANDS
+    from garage_mj.driving.sim.park_guide import REPLAN_STUCK
+
+    brake = int(np.flatnonzero((PARK_COMMANDS == [-1.0, 0.0, 1.0]).all(1))[0])
+    env = FleetDriveEnv(tiny_sources, expert=True, env_kwargs={"task": "park", "maneuver": "reverse"},
+                        park_route=True, park_guide=True)
+    try:
+        env.reset(seed=3)
+        first = env._oracle.tracker
+        for _ in range(int(round(REPLAN_STUCK / env.env.dt)) + 2):
+            _, _, term, trunc, info = env.step(brake)
+            assert not (term or trunc)
+        guide, tracker = env.env.park_guide, env._oracle.tracker
+        assert guide.replans == 1 and tracker is not first
+        np.testing.assert_allclose(tracker.segments[0].points[0], guide.tracker.segments[0].points[0])
+        assert tracker.k == guide.stretch == 0
+    finally:
+        env.close()
+
+
 def test_the_park_expert_steers_on_the_learners_levels_so_its_labels_park(tiny_sources):
     """The expert's wheel targets are the learner's steering levels: driven by its own labels (the 90 commands), it
     parks, and it never waits at rest for a wheel angle between two levels (labels that taught the learner to

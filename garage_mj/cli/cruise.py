@@ -127,6 +127,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_geometry_args(p)
     add_vehicle_args(p)
     add_sensor_args(p)
+    add_guide_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=user_errors(run))
 
@@ -198,6 +199,34 @@ def add_sensor_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--slot-noise", type=float, nargs=2, metavar=("M", "RAD"),
                    help="the slot detector's noise: standard deviations of its position (each of x, y) and its yaw, "
                         "drawn per observation from the test's seed (needs --sensors with slot; default 0 0)")
+
+
+def add_guide_args(p: argparse.ArgumentParser) -> None:
+    """``--guide-replans``: how often the park guide may plan again (docs/observations.md, ``park_guide``)."""
+    from garage_mj.driving.sim.park_guide import MAX_REPLANS
+
+    p.add_argument("--guide-replans", type=replan_count, default=MAX_REPLANS, metavar="N",
+                   help="park and avp: new plans the park guide (the observation's park_guide) may show a test, each "
+                        "from where the car stands at rest outside the stall, as a park assist plans again (0 to 10, "
+                        f"default {MAX_REPLANS}; 0: the test's plan only). The test is judged along its own plan")
+
+
+def replan_count(text: str) -> int:
+    """argparse type of --guide-replans: an integer from 0 to 10."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of plans") from None
+    if not 0 <= value <= 10:
+        raise argparse.ArgumentTypeError(f"{value} is outside 0 to 10")
+    return value
+
+
+def guide_env(args: argparse.Namespace) -> dict:
+    """The ``GarageDriveEnv`` keyword argument of ``--guide-replans``, only when it differs from the default."""
+    from garage_mj.driving.sim.park_guide import MAX_REPLANS
+
+    return {} if args.guide_replans == MAX_REPLANS else {"guide_replans": args.guide_replans}
 
 
 def sensor_names(text: str) -> list[str]:
@@ -500,6 +529,7 @@ def run(args: argparse.Namespace) -> int:
         env["scenario"] = scen
     env.update(vehicle_env(args))
     env.update(sensor_env(args))
+    env.update(guide_env(args))
     with action_warnings("cruise"):
         settings = CruiseSettings(args.driver, args.seed, args.action_type, args.occupancy, env,
                                   test_timeout=args.test_timeout, task=args.task, maneuver=args.maneuver,

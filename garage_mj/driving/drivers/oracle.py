@@ -80,6 +80,7 @@ class OracleDriver(BaseDriver):
     def reset(self, info: dict[str, Any]) -> None:
         super().reset(info)
         self.tracker: ParkTracker | None = None
+        self._actors = info.get("actors") or []  # the test's moving actors (the park tracker yields to them)
         self.phase = "cruise"  # "cruise" (no park plan, or an AVP test's route) or "park"
         plan = info.get("park_plan")
         avp = info.get("task", "park") == "avp"
@@ -103,6 +104,13 @@ class OracleDriver(BaseDriver):
         if plan is not None and len(plan["poses"]) >= 2:  # AVP: the route's last stretch, then the park plan
             self.tracker = self._handover(plan)
             self._park_yield(info)
+
+    def follow(self, poses, directions) -> None:
+        """Track a new park plan from here on (``poses`` (N, 3) car centre, ``directions`` (N,) +1/-1): a plan made
+        again from the car's pose, as the park guide shows one; it yields to the test's actors as the first did."""
+        self.tracker = ParkTracker(poses, directions, self.car, self.park_config, self.dt)
+        self.phase = "park"
+        self._park_yield({"actors": self._actors})
 
     def _park_yield(self, info: dict[str, Any]) -> None:
         """The park tracker yields to the test's moving actors as the cruise route does (``actor_margin``, ``_gap``,

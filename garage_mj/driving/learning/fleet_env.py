@@ -206,6 +206,7 @@ class FleetDriveEnv(gym.Env):
             plan = driver_info.get("park_plan")
             self._plan_poses = None if plan is None else np.asarray(plan["poses"], dtype=float)
             self._replanned_at = -np.inf
+            self._guide_plan = None  # the plan the park guide showed at the last step (the expert drives it)
         return self._out(obs, info)
 
     def _follow(self, obs: dict[str, Any], info: dict[str, Any]) -> None:
@@ -220,15 +221,13 @@ class FleetDriveEnv(gym.Env):
         if (d[i] <= REPLAN_DISTANCE and dyaw <= REPLAN_HEADING) or now - self._replanned_at < REPLAN_EVERY:
             return
         self._replanned_at = now
-        from garage_mj.driving.drivers.park_tracking import ParkTracker
         from garage_mj.scene.parked_fleet import body_obstacles
 
         env, test = self.env, self.env._park
         plan = env.park_planner.plan((x, y, yaw), test.stall, test.maneuver, occupied=test.occupied,
                                      obstacles=body_obstacles(env.park_planner.obstacles(), test.stall, test.bodies))
         if plan.found:
-            oracle = self._oracle
-            oracle.tracker = ParkTracker(plan.poses, plan.directions, oracle.car, oracle.park_config, oracle.dt)
+            self._oracle.follow(plan.poses, plan.directions)
             self._plan_poses = np.asarray(plan.poses, dtype=float)
 
     def _out(self, obs: dict[str, Any], info: dict[str, Any]):
@@ -241,9 +240,14 @@ class FleetDriveEnv(gym.Env):
             if self.replan:
                 self._follow(obs, info)
             guide, tracker = self.env.park_guide, self._oracle.tracker
-            if self.park_guide and self.task == "park" and guide is not None and tracker is not None and \
-                    tracker.k != guide.stretch:
-                tracker.k, tracker.index, tracker.stopping = guide.stretch, 0, False  # the stretch the learner sees
+            if self.park_guide and self.task == "park" and guide is not None and tracker is not None:
+                if guide.poses is not self._guide_plan:  # the guide shows a new plan: the expert drives it too
+                    if self._guide_plan is not None:
+                        self._oracle.follow(guide.poses, guide.directions)
+                        tracker = self._oracle.tracker
+                    self._guide_plan = guide.poses
+                if tracker.k != guide.stretch:
+                    tracker.k, tracker.index, tracker.stopping = guide.stretch, 0, False  # the stretch the learner sees
             info["expert_action"] = nearest_park_action(self._oracle.act(obs))
         return park_observation(obs, self.park_route, self.park_guide), info
 

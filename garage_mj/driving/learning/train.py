@@ -75,6 +75,7 @@ from garage_mj.driving.learning.park_actions import PARK_COMMANDS
 from garage_mj.driving.learning.saved_model import load_driver_model
 from garage_mj.driving.park_geometries import PARK_GEOMETRIES
 from garage_mj.driving.sim.outcomes import OutcomeKind
+from garage_mj.driving.sim.park_guide import MAX_REPLANS
 from garage_mj.driving.sim.park_task import MANEUVER_CHOICES, MAX_HANDOVER_START
 from garage_mj.driving.sources import CruiseSettings, CruiseSource
 from garage_mj.scene.world import GeometryError
@@ -154,6 +155,9 @@ class DriverTrainConfig:
     # start, where an AVP test's cruise hands the car over (the drive env's handover_start; learned:avp hands over
     # within 1.5 m of it); 0: on the plan's start, as every park test
     handover_start: float = bounded(0.0, ge=0.0, le=MAX_HANDOVER_START)
+    # a parking driver with the park guide: new plans the guide may show a training (and validation) test, each from
+    # where the car stands at rest outside the stall (the drive env's guide_replans); the expert drives the plan shown
+    guide_replans: int = bounded(MAX_REPLANS, ge=0, le=10)
     # what the driver learns to do: cruise tests (a DQN over the paper's 4 actions) or park tests (a DQN over 90 park
     # commands, learning.park_actions, from both cameras, the ultrasonic ranges and the slot detector); an AVP test
     # is driven by the two together (learned:avp)
@@ -178,9 +182,10 @@ class DriverTrainConfig:
             raise ValueError("park_guide, replan: the guide shows the test's plan and a replanning expert drives "
                              "another; set one of them")
         if self.task == "cruise" and (self.park_guide or self.park_route or self.replan
-                                      or self.expert_foresight != "trajectory" or self.handover_start):
-            raise ValueError("park_route, park_guide, replan, expert_foresight, handover_start: these are a parking "
-                             "driver's (task = \"park\")")
+                                      or self.expert_foresight != "trajectory" or self.handover_start
+                                      or self.guide_replans != MAX_REPLANS):
+            raise ValueError("park_route, park_guide, replan, expert_foresight, handover_start, guide_replans: these "
+                             "are a parking driver's (task = \"park\")")
         if self.task == "cruise" and (self.geometries or self.scenarios):
             raise ValueError("geometries, scenarios: park geometries and actor scenarios are for a parking driver "
                              "(task = \"park\"); a cruise driver's actors: --scenario")
@@ -527,6 +532,8 @@ def train_driver(garages, out_dir: str | Path, *, validation=None, config: Drive
         env_kwargs.update(task=cfg.task, maneuver=cfg.maneuver)
         if cfg.handover_start:
             env_kwargs["handover_start"] = cfg.handover_start
+        if cfg.guide_replans != MAX_REPLANS:
+            env_kwargs["guide_replans"] = cfg.guide_replans
     manifest = _new_manifest(garages, validation, sources, cfg, seed, env_kwargs)
     if init is not None:
         manifest["init"] = {"model": str(init), "sha256": _sha256(Path(init)),

@@ -63,7 +63,7 @@ from garage_mj.driving.sim.outcomes import (
     OutcomeMonitor,
     ego_contacts,
 )
-from garage_mj.driving.sim.park_guide import ParkGuide
+from garage_mj.driving.sim.park_guide import MAX_REPLANS, ParkGuide
 from garage_mj.driving.sim.park_outcomes import ParkMonitor, ParkOutcomeConfig
 from garage_mj.driving.sim.park_sensors import (
     NO_SENSORS,
@@ -105,7 +105,7 @@ from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
 from garage_mj.scene.park_planning import ParkConfig, ParkPlanner
-from garage_mj.scene.parked_fleet import ParkedBody, ParkedFleet, draw_parked, fleet_rng
+from garage_mj.scene.parked_fleet import ParkedBody, ParkedFleet, body_obstacles, draw_parked, fleet_rng
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, Semantic, geom_classes
 from garage_mj.scene.vehicles import VehicleClass, vehicle_class
@@ -240,6 +240,9 @@ class GarageDriveEnv(gym.Env):
             :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the plan's start, stands up to that far short
             of it). The plan is the one from the noised cruise goal, as without it. 0 (the default): the car starts
             on the plan's start.
+        guide_replans: park and AVP tests: how many new plans the park guide may show a test, each from where the car
+            stands at rest outside the stall (:mod:`~garage_mj.driving.sim.park_guide`; 0 to 10, default
+            :data:`~garage_mj.driving.sim.park_guide.MAX_REPLANS`); 0: the guide shows the test's plan only.
         scene_seed: park and AVP tests only: every reset draws its test (target stall, parked cars and their fleet,
             maneuver, start, slot noise) from this seed, as ``reset(seed=scene_seed)`` would, and only its actors
             from its own seed: one test's scene with its actors placed anew per seed (how a park hunt searches actor
@@ -277,6 +280,7 @@ class GarageDriveEnv(gym.Env):
     ultrasonic: Ultrasonic | None = None
     slot_rng: np.random.Generator | None = None
     handover_start: float = 0.0  # [m] park tests start on their plan's start (a subclass that builds its own scene)
+    guide_replans: int = MAX_REPLANS  # new plans the park guide may show a test (a subclass: the same)
     scene_seed: int | None = None  # a park test's draws, but its actors', from the reset's seed (a subclass: the same)
 
     def __init__(
@@ -299,6 +303,7 @@ class GarageDriveEnv(gym.Env):
         maneuver: str = "reverse",
         stall: int | None = None,
         handover_start: float = 0.0,
+        guide_replans: int = MAX_REPLANS,
         scene_seed: int | None = None,
         park_config: ParkConfig | dict[str, Any] | None = None,
         park_outcome: ParkOutcomeConfig | dict[str, Any] | None = None,
@@ -330,6 +335,10 @@ class GarageDriveEnv(gym.Env):
         if handover_start and task != "park":
             raise ValueError("handover_start is for park tests (task='park'): an AVP test starts at the entrance")
         self.handover_start = float(handover_start)
+        if isinstance(guide_replans, bool) or not isinstance(guide_replans, int) or not 0 <= guide_replans <= 10:
+            raise ValueError(f"guide_replans must be an integer from 0 to 10 (new plans the park guide may show a "
+                             f"test), got {guide_replans!r}")
+        self.guide_replans = guide_replans
         if scene_seed is not None and (isinstance(scene_seed, bool) or not isinstance(scene_seed, int)
                                        or scene_seed < 0):
             raise ValueError(f"scene_seed must be a test seed, an integer >= 0, got {scene_seed!r}")
@@ -532,7 +541,7 @@ class GarageDriveEnv(gym.Env):
         self.scenario, test = park_scenario(self, test, seed, self.np_random, given)
         self._park = test
         plan = test.plan
-        self.park_guide = ParkGuide(plan.poses, plan.directions, self.car_geometry) \
+        self.park_guide = ParkGuide(plan.poses, plan.directions, self.car_geometry, self.guide_replans) \
             if plan is not None and plan.found and len(plan.poses) >= 2 else None
         self.target, self.occupied, self.test_plan = test.stall, test.occupied, test.cruise
         self.route = test.reference
@@ -552,6 +561,7 @@ class GarageDriveEnv(gym.Env):
         self._park_level = test_level(self, test, self._bodies)
         self.path_length = 0.0  # [m] driven
         self._last_xy = (x, y)
+        self._rest_since: float | None = None  # when the car came to rest (the guide's re-plan waits on it)
         self.outcome = None if test.feasible else Outcome(OutcomeKind(test.verdict), 0.0, test.reason)
         if self.outcome is None and not self.scenario.feasible:
             self.outcome = Outcome(OutcomeKind.INFEASIBLE, 0.0, self.scenario.reason)
@@ -645,7 +655,7 @@ class GarageDriveEnv(gym.Env):
         x, y, yaw = pose = self.car.pose(self.data)
         speed = self.car.speed(self.data)
         if self.park_guide is not None:
-            self.park_guide.update(pose, speed)
+            self._guide(pose, speed)
         self.path_length += math.hypot(x - self._last_xy[0], y - self._last_xy[1])
         self._last_xy = (x, y)
         self.outcome = self.monitor.update(self.data.time, (x, y), speed, contacts, yaw=yaw,
@@ -660,6 +670,30 @@ class GarageDriveEnv(gym.Env):
             elif self.outcome.kind is OutcomeKind.COLLISION:
                 reward += COLLISION_PENALTY
         return self._observe(pose, speed), float(reward), terminated, truncated, self._info(pose)
+
+    def _guide(self, pose, speed: float) -> None:
+        """Move the park guide on; where the car has rested, not parked, as long as the guide's rule says, plan
+        again from its pose into the stall around the parked cars as they stand (the test's planner and obstacles;
+        the judge's reference stays the test's)."""
+        guide = self.park_guide
+        guide.update(pose, speed)
+        if abs(speed) >= self.park_outcome_config.rest_speed:
+            self._rest_since = None
+            return
+        now = float(self.data.time)
+        if self._rest_since is None:
+            self._rest_since = now
+        fit = self.monitor.fit
+        if (fit is not None and fit.parked) or not guide.wants_plan(now - self._rest_since):
+            return
+        test = self._park
+        plan = self.park_planner.plan(pose, test.stall, test.maneuver, occupied=test.occupied,
+                                      obstacles=body_obstacles(self.park_planner.obstacles(), test.stall, test.bodies))
+        self._rest_since = now  # planned or not, the next try waits as long again
+        if plan.found and len(plan.poses) >= 2:
+            guide.replace(plan.poses, plan.directions)
+        else:
+            guide.replans += 1
 
     def _observe(self, pose: tuple[float, float, float] | None = None, speed: float | None = None
                  ) -> dict[str, np.ndarray]:

@@ -13,6 +13,12 @@ the oracle drives. The guide's rule (:data:`GUIDE_TRACKING`) takes a cusp as rea
 where the cruise to the stall ends: the guide reads zeros (no gear) until the car has come within
 :data:`START_RADIUS` of the plan's start, and follows it from there.
 
+Like a park assist, it plans again when the plan has not brought the car into the stall: a car at rest, not parked,
+for :data:`REPLAN_AT_END` where the plan ends or :data:`REPLAN_STUCK` anywhere else is shown a new plan from where
+it stands into the stall, around the parked cars as they stand (the env plans it with the test's own planner and
+obstacles, :meth:`ParkGuide.replace`; at most ``guide_replans`` times a test, :data:`MAX_REPLANS` by default; a
+failed try counts). The test is still judged along its own reference plan.
+
 It is route information (where the planned way goes, like ``waypoint``), not the car's pose in the garage or
 another road user's state; the observation table (:mod:`~garage_mj.driving.sim.observations`) has it as the
 ``park_guide`` entry of park and AVP tests.
@@ -35,6 +41,9 @@ RESUME = 0.05  # [m] at rest more than this short of where a stop begins, the st
 #: at rest farther short, the stretch goes on
 GUIDE_TRACKING = ParkTrackConfig(cusp_within=CUSP_WITHIN, resume=RESUME)
 START_RADIUS = 1.5  # [m] the guide follows the car once it has come this close to the plan's start
+REPLAN_AT_END = 1.5  # [s] at rest this long at its plan's end, not parked: the guide plans again from where the car is
+REPLAN_STUCK = 4.0  # [s] at rest this long anywhere else on the plan, not parked: the same (half the monitor's window)
+MAX_REPLANS = 3  # new plans after the test's own, at most (the default of the env's ``guide_replans``)
 MAX_CURVATURE = 10.0  # [1/m] the curvature read is clipped to this (a plan's turns are under 0.3)
 #: the ``park_guide`` entry, in order
 GUIDE_KEYS = ("gear", "lateral", "heading", "curvature_near", "curvature_far", "stretch_left", "stretches_after")
@@ -49,15 +58,35 @@ class ParkGuide:
         car: the car's geometry (the rear axle is what the path is measured at).
     """
 
-    def __init__(self, poses, directions, car: CarGeometry) -> None:
+    def __init__(self, poses, directions, car: CarGeometry, max_replans: int = MAX_REPLANS) -> None:
         self.tracker = ParkTracker(poses, directions, car, GUIDE_TRACKING)
+        self.poses, self.directions = np.asarray(poses, dtype=float), np.asarray(directions)  # the plan shown
+        self.max_replans = int(max_replans)
         self._start = np.asarray(poses, dtype=float)[0, :2]
         self.started = False  # the car has come within START_RADIUS of the plan's start (an AVP test's comes later)
+        self.replans = 0  # new plans shown after the test's own (:meth:`replace`)
 
     def _near_start(self, pose) -> bool:
         if not self.started:
             self.started = math.hypot(float(pose[0]) - self._start[0], float(pose[1]) - self._start[1]) <= START_RADIUS
         return self.started
+
+    def replace(self, poses, directions) -> None:
+        """Show a new plan (from the car's pose), from its first stretch; it counts as one of :attr:`replans`."""
+        self.tracker = ParkTracker(poses, directions, self.tracker.car, GUIDE_TRACKING)
+        self.poses, self.directions = np.asarray(poses, dtype=float), np.asarray(directions)
+        self.started = True
+        self.replans += 1
+
+    def wants_plan(self, rested: float) -> bool:
+        """Whether a car at rest for ``rested`` seconds, not parked, is due a new plan: once the plan has begun, at
+        rest :data:`REPLAN_AT_END` where the last stretch ends (the guide stopping it there), or :data:`REPLAN_STUCK`
+        anywhere else, while fewer than ``max_replans`` new plans were tried."""
+        if not self.started or self.replans >= self.max_replans:
+            return False
+        t = self.tracker
+        at_end = t.k == len(t.segments) - 1 and t.stopping
+        return rested >= (REPLAN_AT_END if at_end else REPLAN_STUCK)
 
     @property
     def stretch(self) -> int:
