@@ -143,5 +143,6 @@ def park_cells(info: dict[str, Any]) -> dict[str, Any]:
         cells.update(position_error_m=_cell(info["position_error"]), heading_error_deg=_cell(info["heading_error"], 2),
                      lateral_offset_m=_cell(info["lateral_offset"]), direction_changes=info["direction_changes"],
                      park_time_s=_cell(info["park_time"]), min_clearance_m=_cell(info["min_clearance"]),
-                     inner_margin_m=_cell(info["inner_margin"]), outline_clearance_m=_cell(info["outline_clearance"]))
+                     inner_margin_m=_cell(info["inner_margin"]), outline_clearance_m=_cell(info["outline_clearance"]),
+                     guide_replans=info.get("guide_replans", 0))
     return cells

@@ -62,10 +62,11 @@ LEGACY_TEST_COLUMNS = ("garage", "garage_hash", "test", "seed", "driver", "targe
 #: solid bodies (parked cars as they stand, pillars, walls, obstacle blocks), the reference plan's length, cusps and
 #: clearance; the test's level (every park or AVP test, driven or not), the final footprint's smallest margin inside
 #: the stall's painted inner edges (negative: over a line), the least clearance along the driven path to the stall
-#: outlines of the occupied stalls and the rest (what the planner measures; section 8's figure), the stall's angle.
+#: outlines of the occupied stalls and the rest (what the planner measures; section 8's figure), the stall's angle;
+#: the new plans the park guide showed the driven test (:mod:`~garage_mj.driving.sim.park_guide`).
 PARK_COLUMNS = ("task", "maneuver", "position_error_m", "heading_error_deg", "lateral_offset_m", "direction_changes",
                 "park_time_s", "min_clearance_m", "plan_length_m", "plan_cusps", "plan_clearance_m", "park_level",
-                "inner_margin_m", "outline_clearance_m", "stall_angle_deg")
+                "inner_margin_m", "outline_clearance_m", "stall_angle_deg", "guide_replans")
 #: The vehicles of a test (docs/spec.md section 9): the car under test's class, the parked fleet (``uniform`` or
 #: ``mixed``) and the parked cars' jitter bound [m]; a row from before them holds the defaults (:data:`VEHICLE_DEFAULTS`).
 VEHICLE_COLUMNS = ("vehicle", "parked_fleet", "parked_jitter_m")
@@ -196,7 +197,7 @@ def read_tests(path: Path) -> list[dict[str, str]]:
 
 #: Cells that hold a whole number >= 0 where not empty, and cells that hold a finite number where not empty.
 _COUNT_CELLS = ("target_stall", "pedestrians", "moving_cars", "clutter", "direction_changes", "plan_cusps",
-                *HAZARD_COLUMNS)
+                "guide_replans", *HAZARD_COLUMNS)
 _NUMBER_CELLS = ("time", "path_length", "route_length", "difficulty", "mean_road_length", "mean_intersection_degree",
                  "wall_s", "position_error_m", "heading_error_deg", "lateral_offset_m", "park_time_s",
                  "min_clearance_m", "plan_length_m", "plan_clearance_m", "inner_margin_m", "outline_clearance_m",

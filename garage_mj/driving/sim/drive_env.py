@@ -693,7 +693,7 @@ class GarageDriveEnv(gym.Env):
         if plan.found and len(plan.poses) >= 2:
             guide.replace(plan.poses, plan.directions)
         else:
-            guide.replans += 1
+            guide.tries += 1
 
     def _observe(self, pose: tuple[float, float, float] | None = None, speed: float | None = None
                  ) -> dict[str, np.ndarray]:

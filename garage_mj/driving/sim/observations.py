@@ -23,7 +23,13 @@ import numpy as np
 from gymnasium import spaces
 
 from garage_mj.core.words import a_noun
-from garage_mj.driving.sim.park_guide import GUIDE_KEYS, MAX_CURVATURE, START_RADIUS
+from garage_mj.driving.sim.park_guide import (
+    GUIDE_KEYS,
+    MAX_CURVATURE,
+    REPLAN_AT_END,
+    REPLAN_STUCK,
+    START_RADIUS,
+)
 from garage_mj.driving.sim.park_sensors import (
     ALL_SENSORS,
     MAX_SLOT_SIZE,
@@ -259,7 +265,9 @@ OBSERVATIONS: tuple[ObservationEntry, ...] = (
                      "the gear of the stretch the car is on (+1 D, -1 R), the rear axle's offset from it [m] (left of "
                      "travel), the heading off it [rad], its curvature 0.25 m and 1 m ahead [1/m] (signed as the wheels "
                      "turn), the stretch left [m] (negative past its end), the stretches after it; the next stretch "
-                     "once the car is at rest at the end of this one; zeros without a plan and, in an AVP test, until the "
+                     "once the car is at rest at the end of this one; a new plan from where the car stands when it has rested "
+                     f"outside the stall {REPLAN_AT_END:g} s where the plan ends or {REPLAN_STUCK:g} s elsewhere (the "
+                     "env's `guide_replans`); zeros without a plan and, in an AVP test, until the "
                      f"car is within {START_RADIUS:g} m of the park plan's start; park and AVP tests only",
                      _park_guide),
     ObservationEntry("rear_depth", _sensor(lambda c: c.rear_camera, _depth_space), False,

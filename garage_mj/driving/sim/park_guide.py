@@ -65,6 +65,7 @@ class ParkGuide:
         self._start = np.asarray(poses, dtype=float)[0, :2]
         self.started = False  # the car has come within START_RADIUS of the plan's start (an AVP test's comes later)
         self.replans = 0  # new plans shown after the test's own (:meth:`replace`)
+        self.tries = 0  # new plans tried for (a try the planner found no plan for counts too)
 
     def _near_start(self, pose) -> bool:
         if not self.started:
@@ -72,17 +73,18 @@ class ParkGuide:
         return self.started
 
     def replace(self, poses, directions) -> None:
-        """Show a new plan (from the car's pose), from its first stretch; it counts as one of :attr:`replans`."""
+        """Show a new plan (from the car's pose), from its first stretch: one more of :attr:`replans` and :attr:`tries`."""
         self.tracker = ParkTracker(poses, directions, self.tracker.car, GUIDE_TRACKING)
         self.poses, self.directions = np.asarray(poses, dtype=float), np.asarray(directions)
         self.started = True
         self.replans += 1
+        self.tries += 1
 
     def wants_plan(self, rested: float) -> bool:
         """Whether a car at rest for ``rested`` seconds, not parked, is due a new plan: once the plan has begun, at
         rest :data:`REPLAN_AT_END` where the last stretch ends (the guide stopping it there), or :data:`REPLAN_STUCK`
         anywhere else, while fewer than ``max_replans`` new plans were tried."""
-        if not self.started or self.replans >= self.max_replans:
+        if not self.started or self.tries >= self.max_replans:
             return False
         t = self.tracker
         at_end = t.k == len(t.segments) - 1 and t.stopping

@@ -94,6 +94,14 @@ class ParkMonitor(BaseMonitor):
         self.reset()
 
     @property
+    def fit(self) -> ParkFit | None:
+        """The car in the stall at the last update (None before the first): worked out when asked for, which a car
+        that moves faster than ``rest_speed`` never needs for its outcome."""
+        if self._fit is None and self._fit_pose is not None:
+            self._fit = in_stall(self.stall, self.car, self._fit_pose, self.maneuver, self.marking)
+        return self._fit
+
+    @property
     def goal_pose(self) -> tuple[float, float, float]:
         """(x [m], y [m], yaw [rad]) of the stall pose (car centre)."""
         return self.target
@@ -101,7 +109,8 @@ class ParkMonitor(BaseMonitor):
     def reset(self) -> None:
         self.progress = 0.0  # [m] furthest arc length reached along the reference
         self.outcome: Outcome | None = None
-        self.fit: ParkFit | None = None  # the car in the stall at the last update
+        self._fit: ParkFit | None = None  # the car in the stall at the last update (:attr:`fit`, worked out on demand)
+        self._fit_pose: tuple[float, float, float] | None = None  # the pose it is of
         self.poses: list[tuple[float, float, float]] = []  # driven poses, one per update
         self.direction_changes = 0
         self.park_start: float | None = None  # [s] when the parking began
@@ -133,13 +142,14 @@ class ParkMonitor(BaseMonitor):
             sign = 1 if speed > 0 else -1
             self.direction_changes += self._sign != 0 and sign != self._sign
             self._sign = sign
-        fit = self.fit = in_stall(self.stall, self.car, (x, y, yaw), self.maneuver, self.marking)
-        dwelling = abs(speed) < cfg.rest_speed and fit.parked
+        self._fit, self._fit_pose = None, (x, y, yaw)
+        dwelling = abs(speed) < cfg.rest_speed and self.fit.parked
         if not dwelling:
             self.rest_since = None
         elif self.rest_since is None:
             self.rest_since = float(time)
         if dwelling and time - self.rest_since >= cfg.dwell - 1e-9:
+            fit = self.fit
             return self._end(OutcomeKind.SUCCESS, time, f"parked ({fit.position_error:.2f} m, "
                              f"{fit.heading_error:.1f} deg from the stall pose, {fit.margin:.2f} m inside the "
                              f"{fit.line}), at rest {time - self.rest_since:.1f} s")
@@ -155,6 +165,7 @@ class ParkMonitor(BaseMonitor):
         elif time - self._mark_time >= cfg.stuck_time:
             why = f"no progress for {time - self._mark_time:.1f} s"
             if dist <= cfg.outside_radius:
+                fit = self.fit
                 where = f"inside the lines ({fit.margin:.2f} m from the {fit.line})" if fit.inside else \
                     f"{fit.overhang:.2f} m over the {fit.line}"
                 return self._end(OutcomeKind.OUTSIDE_STALL, time,

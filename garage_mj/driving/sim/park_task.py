@@ -226,7 +226,8 @@ def end_info(env: GarageDriveEnv, test: ParkTest, monitor: ParkMonitor, bodies: 
     """The parking metrics of SPEC 8 and 9 at the end of a driven test (``tests.csv``'s park columns): ``min_clearance``
     along the driven path to the solid ``bodies`` of the test (parked cars as they stand, pillars, walls, obstacle
     blocks), ``outline_clearance`` the same to the occupied stalls' outlines and the rest (section 8's figure),
-    ``inner_margin`` the final footprint's smallest margin inside the stall's limits (negative: over one)."""
+    ``inner_margin`` the final footprint's smallest margin inside the stall's limits (negative: over one),
+    ``guide_replans`` the new plans the park guide showed."""
     fit = monitor.fit
     outcome = monitor.outcome
     obstacles = park_obstacles(env.park_planner.obstacles(), test.stall, test.occupied)
@@ -238,7 +239,8 @@ def end_info(env: GarageDriveEnv, test: ParkTest, monitor: ParkMonitor, bodies: 
             "direction_changes": monitor.direction_changes,
             "park_time": math.nan if park_time is None else park_time,
             "min_clearance": monitor.body_clearance(bodies),
-            "outline_clearance": monitor.min_clearance(obstacles)}
+            "outline_clearance": monitor.min_clearance(obstacles),
+            "guide_replans": 0 if env.park_guide is None else env.park_guide.replans}
 
 
 __all__ = ["MANEUVER_CHOICES", "TASKS", "ParkTest", "draw_park_test", "end_info", "park_info", "park_monitor",
