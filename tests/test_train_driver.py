@@ -449,8 +449,10 @@ def test_a_parking_config_refuses_what_only_a_cruise_driver_does():
         DriverTrainConfig(task="park", rl_timesteps=10)
     with pytest.raises(ValueError, match="curriculum"):
         DriverTrainConfig(task="park", curriculum="hunt")
-    with pytest.raises(ValueError, match="geometries, scenarios"):
-        DriverTrainConfig(geometries=("tight",))
+    with pytest.raises(ValueError, match="scenarios: the park actor scenarios"):
+        DriverTrainConfig(scenarios=("park_clutter",))
+    assert DriverTrainConfig(geometries=("default", "tight")).variants() == [  # a cruise driver in two geometries
+        {}, {"world": {"stall_width": 2.3, "aisle_width": 6.5}, "parked_fleet": "mixed", "parked_jitter": 0.15}]
     pairs = DriverTrainConfig(task="park", geometries=("default", "parallel"), scenarios=("none", "park_clutter"))
     assert pairs.variants() == [{}, {"scenario": "park_clutter"}, {"world": {"stall_angle": 0.0}},
                                 {"world": {"stall_angle": 0.0}, "scenario": "park_clutter"}]

@@ -94,8 +94,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     park.add_argument("--maneuver", choices=MANEUVER_CHOICES,
                       help="park tests: reverse, forward or any (drawn per test; the default)")
     park.add_argument("--geometries", type=geometry_list, metavar="NAME,NAME",
-                      help=f"park geometries the garages are built in, garage k in the (k mod n)th: "
-                           f"{', '.join(PARK_GEOMETRIES)} (default: default)")
+                      help=f"park geometries the garages are built in (cruise or park), garage k in the (k mod "
+                           f"n)th: {', '.join(PARK_GEOMETRIES)} (default: default)")
     park.add_argument("--scenarios", type=lambda t: tuple(n.strip() for n in t.split(",") if n.strip()),
                       metavar="NAME,NAME", help="park actor scenarios drawn with each geometry (every pair of "
                       "geometry and scenario gets its share of the garages): none or park_* names of --scenario")

@@ -163,8 +163,8 @@ class DriverTrainConfig:
     # is driven by the two together (learned:avp)
     task: str = bounded("cruise", choices=TRAIN_TASKS)
     maneuver: str = bounded("any", choices=MANEUVER_CHOICES)  # park tests: reverse, forward or any (drawn per test)
-    # park tests: the park geometries the garages are built in (garage k: the (k mod n)th), by name
-    # (garage_mj.driving.park_geometries); none: the default geometry
+    # the park geometries the garages are built in (garage k: the (k mod n)th), by name
+    # (garage_mj.driving.park_geometries), for a cruise or a parking driver; none: the default geometry
     geometries: tuple[str, ...] = bounded((), choices=tuple(PARK_GEOMETRIES))
     # park tests: the actor scenarios drawn with each geometry, by name (garage_mj.driving.actors.config
     # SCENARIOS; "none": no actors): garage k gets the (k mod n)th of every geometry x scenario pair
@@ -186,9 +186,9 @@ class DriverTrainConfig:
                                       or self.guide_replans != MAX_REPLANS):
             raise ValueError("park_route, park_guide, replan, expert_foresight, handover_start, guide_replans: these "
                              "are a parking driver's (task = \"park\")")
-        if self.task == "cruise" and (self.geometries or self.scenarios):
-            raise ValueError("geometries, scenarios: park geometries and actor scenarios are for a parking driver "
-                             "(task = \"park\"); a cruise driver's actors: --scenario")
+        if self.task == "cruise" and self.scenarios:
+            raise ValueError("scenarios: the park actor scenarios are for a parking driver (task = \"park\"); a "
+                             "cruise driver's actors: --scenario")
 
     def fleet_options(self) -> dict[str, Any]:
         """The worker envs' park observation and expert options (:class:`FleetDriveEnv`'s ``park_route``,
