@@ -197,5 +197,9 @@ def test_when_the_guide_wants_a_new_plan():
     assert guide.started and not guide.wants_plan(REPLAN_AT_END) and guide.wants_plan(REPLAN_STUCK)
     guide.tracker.k, guide.tracker.stopping = 1, True  # stopped where the last stretch ends
     assert guide.wants_plan(REPLAN_AT_END) and not guide.wants_plan(REPLAN_AT_END - 0.2)
+    guide.tracker.stopping, guide.left = False, 0.05  # at rest 5 cm short of the end, the stop not begun: at its end
+    assert guide.wants_plan(REPLAN_AT_END)
+    guide.left = 0.5  # half a metre short: stuck on the stretch
+    assert not guide.wants_plan(REPLAN_AT_END) and guide.wants_plan(REPLAN_STUCK)
     guide.replace(poses[::-1], gears[::-1])
     assert guide.replans == 1 and guide.stretch == 0 and not guide.wants_plan(100.0)

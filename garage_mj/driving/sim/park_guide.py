@@ -66,6 +66,7 @@ class ParkGuide:
         self.started = False  # the car has come within START_RADIUS of the plan's start (an AVP test's comes later)
         self.replans = 0  # new plans shown after the test's own (:meth:`replace`)
         self.tries = 0  # new plans tried for (a try the planner found no plan for counts too)
+        self.left = math.inf  # [m] the stretch left at the last update
 
     def _near_start(self, pose) -> bool:
         if not self.started:
@@ -82,12 +83,13 @@ class ParkGuide:
 
     def wants_plan(self, rested: float) -> bool:
         """Whether a car at rest for ``rested`` seconds, not parked, is due a new plan: once the plan has begun, at
-        rest :data:`REPLAN_AT_END` where the last stretch ends (the guide stopping it there), or :data:`REPLAN_STUCK`
-        anywhere else, while fewer than ``max_replans`` new plans were tried."""
+        rest :data:`REPLAN_AT_END` where the last stretch ends (the guide stopping it there, or within
+        :data:`CUSP_WITHIN` of its end), or :data:`REPLAN_STUCK` anywhere else, while fewer than ``max_replans`` new
+        plans were tried."""
         if not self.started or self.tries >= self.max_replans:
             return False
         t = self.tracker
-        at_end = t.k == len(t.segments) - 1 and t.stopping
+        at_end = t.k == len(t.segments) - 1 and (t.stopping or self.left <= CUSP_WITHIN)
         return rested >= (REPLAN_AT_END if at_end else REPLAN_STUCK)
 
     @property
@@ -101,7 +103,8 @@ class ParkGuide:
         :data:`GUIDE_TRACKING`)."""
         if not self._near_start(pose):  # an AVP test's cruise to the stall: the plan has not begun
             return
-        self.tracker.take_next(self.tracker.errors(pose)[3], float(speed))
+        self.left = self.tracker.errors(pose)[3]
+        self.tracker.take_next(self.left, float(speed))
 
     def read(self, pose) -> np.ndarray:
         """:data:`GUIDE_KEYS` for the car at ``pose``: the stretch's gear (+1 D, -1 R); the rear axle's offset from
