@@ -578,11 +578,13 @@ def test_the_named_parking_drivers_run_the_shipped_model_and_say_how_to_train_on
                                                                                              tmp_path):
     import garage_mj.driving.drivers.learned as learned
     from garage_mj.driving.drivers import DriverError, load_driver, tasks_of
-    from garage_mj.driving.learning.saved_model import PARK_MODEL, default_model
+    from garage_mj.driving.learning.saved_model import AVP_CRUISE_MODEL, PARK_MODEL, default_model
 
     driver = load_driver(spec)  # the shipped model, with the park route and the park guide it was trained with
     park = driver if isinstance(driver, learned.LearnedParkDriver) else driver.park
     assert park.path == default_model(PARK_MODEL) and (park.route, park.guide) == (True, True)
+    if spec == "learned:avp":  # to the stall with the cruise model trained in the park geometries too
+        assert driver.cruise.path == default_model(AVP_CRUISE_MODEL) != default_model()
     assert tasks_of(spec) == (spec.split(":")[1],)
     shipped = learned.model_path
     monkeypatch.setattr(learned, "model_path", lambda name: tmp_path / "park.zip" if name == "park" else shipped(name))

@@ -34,6 +34,7 @@ from garage_mj.driving.learning.observation import (
 )
 from garage_mj.driving.learning.park_actions import PARK_COMMANDS, park_command
 from garage_mj.driving.learning.saved_model import (  # noqa: F401  (the shipped models' names, read here too)
+    AVP_CRUISE_MODEL,
     DEFAULT_MODEL,
     DRIVER_MODELS,
     NAMED,
@@ -266,8 +267,9 @@ class LearnedParkDriver:
 class LearnedAVPDriver:
     """An AVP test driven by two learned models: the cruise model to the stall, then the parking model into it.
 
-    ``learned:avp``: the shipped cruise model (:class:`LearnedDriver`, the paper's 4 actions sent as their
-    ``[throttle, steer]`` commands in drive) follows the route from the entrance. Where a park test would start, the
+    ``learned:avp``: a cruise model (:class:`LearnedDriver`, the paper's 4 actions sent as their ``[throttle, steer]``
+    commands in drive; by default the shipped :data:`AVP_CRUISE_MODEL`, trained as ``--driver learned``'s but in the
+    park geometries) follows the route from the entrance. Where a park test would start, the
     car brakes to rest and the parking model (:class:`LearnedParkDriver`) parks it. For a parking model that reads the
     park guide, that is where the plan starts: the guide begins (its gear reads non-zero) when the car has come within
     :data:`~garage_mj.driving.sim.park_guide.START_RADIUS` of the plan's start; from there the cruise model steers on
@@ -289,7 +291,7 @@ class LearnedAVPDriver:
     CRAWL = 0.5  # [m/s] the approach to the plan's start, once the guide has begun
 
     def __init__(self, model: str | Path | None = None, cruise_model: str | Path | None = None) -> None:
-        self.cruise = LearnedDriver(cruise_model)
+        self.cruise = LearnedDriver(default_model(AVP_CRUISE_MODEL) if cruise_model is None else cruise_model)
         self.park = LearnedParkDriver(None if model is None or str(model) == "avp" else model)
         self.phase = "cruise"
         self.dt = 0.1  # [s] the control period (the reset info's)

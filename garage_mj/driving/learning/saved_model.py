@@ -104,6 +104,9 @@ DEFAULT_MODEL = "cruise_m5"  # models/drivers/<DEFAULT_MODEL>.zip: what ``--driv
 #: Where ``learned:park`` (and ``learned:avp``) look for the shipped parking model: models/drivers/<PARK_MODEL>.zip
 #: (docs/learned-parking.md).
 PARK_MODEL = "park_m5"
+#: The cruise model ``learned:avp`` drives to the stall with: models/drivers/<AVP_CRUISE_MODEL>.zip, the cruise model's
+#: run in the park geometries (docs/learned-parking.md).
+AVP_CRUISE_MODEL = "avp_cruise_m5"
 #: The learned drivers a ``learned:NAME`` spec names: the parking model, and the AVP driver (the shipped cruise and
 #: parking models together, :class:`~garage_mj.driving.drivers.learned.LearnedAVPDriver`).
 NAMED = ("park", "avp")
@@ -146,5 +149,5 @@ def learned_kind(model: str | Path | None) -> str:
         return "cruise"
 
 
-__all__ = ["DEFAULT_MODEL", "DRIVER_MODELS", "DRIVER_REBUILDS", "NAMED", "PARK_MODEL", "default_model", "learned_kind",
+__all__ = ["AVP_CRUISE_MODEL", "DEFAULT_MODEL", "DRIVER_MODELS", "DRIVER_REBUILDS", "NAMED", "PARK_MODEL", "default_model", "learned_kind",
            "load_driver_model", "model_path"]
