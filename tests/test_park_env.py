@@ -233,3 +233,25 @@ def test_a_multi_point_turn_of_short_shuffles_is_progress_until_it_stops(painted
         t += 0.5
         out = monitor.update(t, near[:2], 0.0, yaw=near[2])
     assert out.kind is OutcomeKind.OUTSIDE_STALL and "no progress for 8.0 s" in out.reason
+
+
+def test_driving_a_new_plan_out_of_the_stall_area_is_progress_until_it_stops(painted_tiny):
+    """Once the car is shown a new plan (the park guide's, from where it stood), driving along it counts as progress
+    even away from the stall; without one the same drive is no progress, and a stop on it is outside_stall."""
+    _, _, near, with_plan = _monitor_east_of_stall_3(painted_tiny, 0.5)
+    _, _, _, without = _monitor_east_of_stall_3(painted_tiny, 0.5)
+    away = Route([near[:2], (near[0] + 8.0, near[1])])  # the new plan: 8 m straight away from the stall
+    with_plan.follow(away)
+    for t in range(1, 101):  # 10 s at 0.5 m/s along it, away from the stall
+        pose = (near[0] + 0.05 * t, near[1])
+        assert with_plan.update(0.1 * t, pose, 0.5, yaw=near[2]) is None, t
+        out = without.update(0.1 * t, pose, 0.5, yaw=near[2])
+        if out is not None:
+            break
+    assert out is not None and out.kind is OutcomeKind.OUTSIDE_STALL and t * 0.1 >= 8.0
+    stop, t = (near[0] + 5.0, near[1]), 10.0
+    out = None
+    while out is None:  # it stops on the new plan: after stuck_time of no progress, outside_stall
+        t += 0.5
+        out = with_plan.update(t, stop, 0.0, yaw=near[2])
+    assert out.kind is OutcomeKind.OUTSIDE_STALL and 18.0 <= t <= 18.6

@@ -692,6 +692,7 @@ class GarageDriveEnv(gym.Env):
         self._rest_since = now  # planned or not, the next try waits as long again
         if plan.found and len(plan.poses) >= 2:
             guide.replace(plan.poses, plan.directions)
+            self.monitor.follow(Route(plan.poses[:, :2]))  # driving it out and in again is progress, not a stop
         else:
             guide.tries += 1
 

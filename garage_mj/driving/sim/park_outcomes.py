@@ -13,7 +13,8 @@ cruise route followed by the park plan (AVP test, scored as one test). Checks, i
   width); a car that stops there and moves off sooner starts its dwell again. A contact ends the test first,
   so a success had none at any time. While the car dwells it is not stuck;
 - no progress for ``stuck_time``: neither along the reference path nor towards the stall pose by
-  ``stuck_progress``, nor a new direction change (a cusp driven: a multi-point turn of short shuffles,
+  ``stuck_progress``, nor along a new plan the car was shown (:meth:`ParkMonitor.follow`: the park guide plans
+  again from where a car stands outside the stall), nor a new direction change (a cusp driven: a multi-point turn of short shuffles,
   each with the wheels turned at rest, is progress; the time limit still bounds it): ``outside_stall`` within ``outside_radius`` of the stall pose (stopped, but not
   parked: the reason gives the errors and names the line crossed), ``deadlock`` farther away;
 - timeout: ``time_limit`` from the reference length (``park_time_limit``, the dwell included), set by the env.
@@ -120,6 +121,15 @@ class ParkMonitor(BaseMonitor):
         self._mark_progress = 0.0
         self._mark_dist = math.inf
         self._mark_changes = 0  # direction changes at the mark
+        self.new_plan: Route | None = None  # a new plan the car was shown from where it stood (:meth:`follow`)
+        self._plan_progress = 0.0  # [m] furthest reached along it
+        self._mark_plan = 0.0  # ... at the mark
+
+    def follow(self, plan: Route) -> None:
+        """A new plan shown to the car from where it stands (the park guide's): from now on, progress along it counts
+        as progress too, so a car driving it out of the stall to come in again is not stuck. The reference, the time
+        limit and what success is stay the test's."""
+        self.new_plan, self._plan_progress, self._mark_plan = plan, 0.0, 0.0
 
     def start(self, pose, progress: float = 0.0) -> None:
         """The car at rest at ``pose`` (car centre), ``progress`` metres along the reference: before the first step."""
@@ -158,10 +168,14 @@ class ParkMonitor(BaseMonitor):
         if self.park_start is None and self.progress >= self.park_from:
             self.park_start = float(time)
         dist = math.dist((x, y), self.target[:2])
+        if self.new_plan is not None:
+            p = self._plan_progress
+            self._plan_progress = max(p, self.new_plan.project((x, y), p - 1.0, p + 2.0 + abs(speed))[0])
         if hold or dwelling or self.progress - self._mark_progress >= cfg.stuck_progress or \
-                self._mark_dist - dist >= cfg.stuck_progress or self.direction_changes > self._mark_changes:
+                self._mark_dist - dist >= cfg.stuck_progress or self.direction_changes > self._mark_changes or \
+                self._plan_progress - self._mark_plan >= cfg.stuck_progress:
             self._mark_time, self._mark_progress, self._mark_dist = time, self.progress, min(dist, self._mark_dist)
-            self._mark_changes = self.direction_changes
+            self._mark_changes, self._mark_plan = self.direction_changes, self._plan_progress
         elif time - self._mark_time >= cfg.stuck_time:
             why = f"no progress for {time - self._mark_time:.1f} s"
             if dist <= cfg.outside_radius:
