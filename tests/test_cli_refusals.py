@@ -122,6 +122,7 @@ BAD: list[tuple[str, list[str], str]] = [
     ("cruise", [*CRUISE, "--driver", "park_assist", "--task", "park", "--park-model", MISSING], MISSING),
     ("cruise", [*CRUISE, "--driver", "park_assist", "--task", "park", "--park-model", TEXT], TEXT),
     ("cruise", [*CRUISE, "--occupancy", "2"], "2"),
+    ("cruise", [*CRUISE, "--driver", "learned:park", "--task", "park", "--guide-replans", "11"], "11"),
     ("cruise", [*CRUISE, "--vehicle", "truck"], "truck"),
     ("cruise", [*CRUISE, "--parked-fleet", "random"], "random"),
     ("cruise", [*CRUISE, "--parked-jitter", "0.8"], "0.8"),

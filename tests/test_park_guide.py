@@ -203,3 +203,13 @@ def test_when_the_guide_wants_a_new_plan():
     assert not guide.wants_plan(REPLAN_AT_END) and guide.wants_plan(REPLAN_STUCK)
     guide.replace(poses[::-1], gears[::-1])
     assert guide.replans == 1 and guide.stretch == 0 and not guide.wants_plan(100.0)
+
+
+def test_cruise_guide_replans_reaches_the_env_and_the_default_leaves_run_json_as_it_was():
+    from garage_mj.cli import build_parser
+    from garage_mj.cli.cruise import guide_env
+
+    parser = build_parser()
+    base = ["cruise", "--library", "lib.sqlite", "--task", "park", "--driver", "learned:park", "--out", "o"]
+    assert guide_env(parser.parse_args(base)) == {}  # the default: no key, so a default run's run.json is unchanged
+    assert guide_env(parser.parse_args([*base, "--guide-replans", "0"])) == {"guide_replans": 0}

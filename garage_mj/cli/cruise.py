@@ -205,21 +205,10 @@ def add_guide_args(p: argparse.ArgumentParser) -> None:
     """``--guide-replans``: how often the park guide may plan again (docs/observations.md, ``park_guide``)."""
     from garage_mj.driving.sim.park_guide import MAX_REPLANS
 
-    p.add_argument("--guide-replans", type=replan_count, default=MAX_REPLANS, metavar="N",
+    p.add_argument("--guide-replans", type=int_in(0, 10), default=MAX_REPLANS, metavar="N",
                    help="park and avp: new plans the park guide (the observation's park_guide) may show a test, each "
                         "from where the car stands at rest outside the stall, as a park assist plans again (0 to 10, "
                         f"default {MAX_REPLANS}; 0: the test's plan only). The test is judged along its own plan")
-
-
-def replan_count(text: str) -> int:
-    """argparse type of --guide-replans: an integer from 0 to 10."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of plans") from None
-    if not 0 <= value <= 10:
-        raise argparse.ArgumentTypeError(f"{value} is outside 0 to 10")
-    return value
 
 
 def guide_env(args: argparse.Namespace) -> dict:
