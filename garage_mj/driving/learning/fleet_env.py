@@ -221,11 +221,7 @@ class FleetDriveEnv(gym.Env):
         if (d[i] <= REPLAN_DISTANCE and dyaw <= REPLAN_HEADING) or now - self._replanned_at < REPLAN_EVERY:
             return
         self._replanned_at = now
-        from garage_mj.scene.parked_fleet import body_obstacles
-
-        env, test = self.env, self.env._park
-        plan = env.park_planner.plan((x, y, yaw), test.stall, test.maneuver, occupied=test.occupied,
-                                     obstacles=body_obstacles(env.park_planner.obstacles(), test.stall, test.bodies))
+        plan = self.env.plan_from((x, y, yaw))
         if plan.found:
             self._oracle.follow(plan.poses, plan.directions)
             self._plan_poses = np.asarray(plan.poses, dtype=float)

@@ -104,7 +104,7 @@ from garage_mj.scene.car import FRONT_CAMERA, REAR_CAMERA, CarConfig, car_camera
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
-from garage_mj.scene.park_planning import ParkConfig, ParkPlanner
+from garage_mj.scene.park_planning import ParkConfig, ParkPlan, ParkPlanner
 from garage_mj.scene.parked_fleet import ParkedBody, ParkedFleet, body_obstacles, draw_parked, fleet_rng
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, Semantic, geom_classes
@@ -671,6 +671,13 @@ class GarageDriveEnv(gym.Env):
                 reward += COLLISION_PENALTY
         return self._observe(pose, speed), float(reward), terminated, truncated, self._info(pose)
 
+    def plan_from(self, pose) -> ParkPlan:
+        """The reference planner's plan from ``pose`` (car centre x, y, yaw) into this park test's stall with its
+        maneuver, around its parked cars as they stand: the test's plan made again from where the car is."""
+        test = self._park
+        return self.park_planner.plan(pose, test.stall, test.maneuver, occupied=test.occupied,
+                                      obstacles=body_obstacles(self.park_planner.obstacles(), test.stall, test.bodies))
+
     def _guide(self, pose, speed: float) -> None:
         """Move the park guide on; where the car has rested, not parked, as long as the guide's rule says, plan
         again from its pose into the stall around the parked cars as they stand (the test's planner and obstacles;
@@ -686,9 +693,7 @@ class GarageDriveEnv(gym.Env):
         fit = self.monitor.fit
         if (fit is not None and fit.parked) or not guide.wants_plan(now - self._rest_since):
             return
-        test = self._park
-        plan = self.park_planner.plan(pose, test.stall, test.maneuver, occupied=test.occupied,
-                                      obstacles=body_obstacles(self.park_planner.obstacles(), test.stall, test.bodies))
+        plan = self.plan_from(pose)
         self._rest_since = now  # planned or not, the next try waits as long again
         if plan.found and len(plan.poses) >= 2:
             guide.replace(plan.poses, plan.directions)
