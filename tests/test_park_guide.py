@@ -213,3 +213,21 @@ def test_cruise_guide_replans_reaches_the_env_and_the_default_leaves_run_json_as
     base = ["cruise", "--library", "lib.sqlite", "--task", "park", "--driver", "learned:park", "--out", "o"]
     assert guide_env(parser.parse_args(base)) == {}  # the default: no key, so a default run's run.json is unchanged
     assert guide_env(parser.parse_args([*base, "--guide-replans", "0"])) == {"guide_replans": 0}
+
+
+def test_a_plans_first_stretch_of_a_few_centimetres_is_shown_as_driven():
+    """A plan (the test's or a new one) that begins with a stretch shorter than SHORT_FIRST shows the car, at rest
+    where it starts, the second stretch; a longer first stretch, and every later short one, is shown."""
+    from garage_mj.driving.sim.park_guide import SHORT_FIRST, ParkGuide
+    from tests.test_park_oracle import CAR, synthetic_plan
+
+    short, gears = synthetic_plan([(1, 0.1, 0.0), (-1, 3.0, 0.0), (1, 0.1, 0.0), (-1, 1.0, 0.0)])
+    assert 0.1 < SHORT_FIRST
+    guide = ParkGuide(short, gears, CAR)
+    assert guide.stretch == 1 and guide.read(short[0])[0] == -1  # reverse: the 0.1 m forward nudge is not shown
+    assert len(guide.tracker.segments) == 4  # the 0.1 m shuffle later in the plan stays
+    longer, gears = synthetic_plan([(1, 0.3, 0.0), (-1, 3.0, 0.0)])
+    guide.replace(longer, gears)
+    assert guide.stretch == 0 and guide.read(longer[0])[0] == 1
+    guide.replace(short, synthetic_plan([(1, 0.1, 0.0), (-1, 3.0, 0.0), (1, 0.1, 0.0), (-1, 1.0, 0.0)])[1])
+    assert guide.stretch == 1

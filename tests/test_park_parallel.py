@@ -196,3 +196,35 @@ def test_the_planner_plans_among_the_mixed_fleets_bodies(parallel_scene):
     assert plan.verdict == "feasible", plan.reason
     dist, _ = nearest_obstacle(obs, planner.car, plan.rear_poses[:, :2], plan.rear_poses[:, 2])
     assert dist.min() >= planner.config.margin - 1e-6
+
+
+def test_a_car_stopped_a_little_off_the_slot_pose_is_shown_a_correction_that_ends_parked(parallel_scene):
+    """A car at rest in its slot a few centimetres and degrees off the stall pose, not parked (a corner over the
+    kerb-side line), gets a correction: an arc onto the stall pose's heading and straight back, each stretch long
+    enough to drive, clear of the parked cars by the margin, ending parked; a car far from the pose gets none."""
+    from garage_mj.scene.park_planning import CORRECTION_MIN_STRETCH
+
+    scene = parallel_scene
+    planner = park_planner(scene)
+    stalls = list(scene.stalls.stalls)
+    target = 7
+    bodies = draw_parked(stalls, [s.id for s in stalls], target, ParkedFleet("mixed", 0.3), fleet_rng(11))
+    obs = body_obstacles(planner.obstacles(), target, bodies)
+    stall, car = stalls[target], planner.car
+    x, y, yaw = park_pose(stall, car, "reverse")
+    for turn in (math.radians(3.0), math.radians(-3.0)):
+        # 3 degrees turned either way, 2 cm nearer the kerb
+        start = (x - 0.02 * math.cos(stall.yaw), y - 0.02 * math.sin(stall.yaw), yaw + turn)
+        assert not in_stall(stall, car, start, "reverse").parked
+        plan = planner.correct(start, target, "reverse", obstacles=obs)
+        assert plan.found and plan.method == "correction", plan.reason
+        assert np.allclose(plan.poses[0, :2], start[:2]) and abs(math.remainder(plan.poses[0, 2] - start[2], 2 * math.pi)) < 1e-9
+        assert in_stall(stall, car, plan.poses[-1], "reverse").parked
+        assert abs(math.remainder(plan.poses[-1][2] - yaw, 2 * math.pi)) < 1e-9  # on the stall pose's heading
+        dist, _ = nearest_obstacle(obs, car, plan.rear_poses[:, :2], plan.rear_poses[:, 2])
+        assert dist.min() >= planner.config.margin - 1e-6
+        for first, last, _ in plan.segments():
+            steps = np.linalg.norm(np.diff(plan.rear_poses[first:last + 1, :2], axis=0), axis=1)
+            assert steps.sum() >= CORRECTION_MIN_STRETCH - 1e-9
+    far = planner.correct((x + 3.0, y, yaw), target, "reverse", obstacles=obs)
+    assert not far.found and "not within" in far.reason and far.verdict == "unproven"

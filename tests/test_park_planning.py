@@ -202,3 +202,19 @@ def test_planning_prints_nothing_at_exit(tmp_path):
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "True bitstar"
     assert "leaked" not in done.stderr and "nanobind" not in done.stderr, done.stderr
+
+
+def test_a_car_stopped_turned_in_a_bay_is_corrected_out_towards_the_aisle_and_back(tiny):
+    """In a bay the correction's arc leaves towards the aisle (the maneuver's exit gear) and the straight move goes
+    back in, in the maneuver's gear; it ends parked on the stall pose's heading."""
+    scene, planner = tiny
+    stall = scene.stalls.stalls[3]
+    x, y, yaw = park_pose(stall, CAR, "reverse")
+    start = (x, y, yaw + math.radians(4.0))
+    assert not in_stall(stall, CAR, start, "reverse").parked
+    plan = planner.correct(start, 3, "reverse", occupied=[0, 1, 2, 4])
+    assert plan.found and plan.method == "correction", plan.reason
+    assert [gear for *_, gear in plan.segments()] == [1, -1]  # out forward, back in reversing
+    assert in_stall(stall, CAR, plan.poses[-1], "reverse").parked
+    assert abs(math.remainder(plan.poses[-1][2] - yaw, 2 * math.pi)) < 1e-9
+    assert not planner.correct((x, y, yaw + math.radians(30.0)), 3, "reverse").found  # too far turned: plan()'s

@@ -91,6 +91,12 @@ SLOT_EXIT_PAST = 0.5
 SLOT_EXIT_TURNS = (1.0, 0.7, 0.4)
 #: [m] how far ahead of a parallel slot's stall pose (behind it, nose-in) the analytic attempt's pre-park poses lie
 PRE_PARK_AHEAD = (1.5, 2.5, 3.5, 4.5, 5.5, 6.5)
+#: [m] the lengths of a correction's arc (:meth:`ParkPlanner.correct`), tried shortest path first
+CORRECTION_RUNS = (0.3, 0.4, 0.6, 0.8, 1.2)
+#: [deg] the headings off the stall pose's a correction's first arc may end on, to shift the car sideways on its second
+CORRECTION_TURNS = (0.0, 1.0, -1.0, 2.0, -2.0, 4.0, -4.0)
+CORRECTION_MIN_STRETCH = 0.3  # [m] every stretch of a correction is at least this long
+CORRECTION_NEAR = (0.5, 15.0)  # [m], [deg] a car this near the stall pose (centre, heading) is corrected
 HEADING_TOLERANCE = 10.0  # [deg] the car's axis to the stall's, in the maneuver's direction
 _EPS = 1e-9  # [m] geometric tolerance of the inside test
 
@@ -379,7 +385,8 @@ class ParkPlan:
     cusps: int = 0  # gear changes
     min_clearance: float = math.nan  # [m] the footprint to the nearest obstacle, over the poses
     planning_time: float = 0.0  # [s] CPU time of the plan call
-    method: str = ""  # "analytic" (straight out + one Reeds-Shepp curve) or the sampling planner's name
+    method: str = ""  # "analytic" (straight out + one Reeds-Shepp curve), the sampling planner's name, or
+    #                   "correction" (ParkPlanner.correct)
     iterations: int = 0  # sampling planner iterations used (0: analytic), escalation stages included
     verdict: str = "feasible"  # VERDICTS: found; proven impossible (the reason is the proof); or neither
     attempt: int = 0  # 0: the first attempt (analytic or ParkConfig.planner); k: the k-th escalation stage
@@ -656,6 +663,13 @@ def _directions(pts: np.ndarray) -> np.ndarray:
     return np.append(g, g[-1]).astype(np.int8)
 
 
+def _stretches(pts: np.ndarray) -> list[float]:
+    """[m] the lengths of the stretches of one gear of the path ``pts``, in order."""
+    gear, step = _gears(pts), np.linalg.norm(np.diff(pts[:, :2], axis=0), axis=1)
+    cut = np.flatnonzero(gear[1:] != gear[:-1]) + 1
+    return [float(step[a:b].sum()) for a, b in zip(np.r_[0, cut], np.r_[cut, len(step)], strict=True)]
+
+
 def _straight(p: np.ndarray, gear: int, dist: float, step: float) -> np.ndarray:
     """(N, 3) poses from rear-axle pose ``p`` straight along its heading in ``gear`` for ``dist`` metres."""
     n = max(1, math.ceil(dist / step - 1e-9))
@@ -735,6 +749,11 @@ class ParkPlanner:
         except _NoPlan as why:
             return ParkPlan(found=False, reason=str(why), planning_time=time.process_time() - t0,
                             verdict="infeasible" if isinstance(why, _Proof) else "unproven", **base)
+        return self._found(rear, obs, t0, method=method, iterations=iterations, attempt=attempt, **base)
+
+    def _found(self, rear: np.ndarray, obs: Obstacles, t0: float, **fields) -> ParkPlan:
+        """The plan of rear-axle poses ``rear`` planned from the stall pose outward (driven the other way), its
+        clearance to ``obs``, the CPU time since ``t0`` and the other ``fields`` of :class:`ParkPlan`."""
         rear = rear[::-1].copy()  # planned from the stall outward: driven from the start inward
         yaw = rear[:, 2]
         rear[:, 2] = np.where((yaw >= -math.pi) & (yaw < math.pi), yaw, _wrap(yaw))  # in range: kept to the bit
@@ -744,8 +763,72 @@ class ParkPlanner:
                         directions=_frozen(directions),
                         length=float(np.linalg.norm(np.diff(rear[:, :2], axis=0), axis=1).sum()),
                         cusps=int((directions[1:-1] != directions[:-2]).sum()), min_clearance=float(dist.min()),
-                        planning_time=time.process_time() - t0, method=method, iterations=iterations,
-                        attempt=attempt, **base)
+                        planning_time=time.process_time() - t0, **fields)
+
+    def correct(self, start, stall_id: int, maneuver_name: str = "reverse", occupied: Iterable[int] | None = None,
+                obstacles: Obstacles | None = None) -> ParkPlan:
+        """A correction for a car at ``start`` (car centre, at rest) that stopped near the stall pose, not parked, as a
+        park assist straightens a car in its slot: one arc of :data:`CORRECTION_RUNS` (along a parallel slot in either
+        gear, out of a bay towards the aisle) that turns the car onto the stall pose's heading, or
+        :data:`CORRECTION_TURNS` off it, then back in the other gear: straight, level with the stall pose, or on a
+        second arc of those lengths onto the stall pose's heading (a shift sideways). Each stretch at least
+        :data:`CORRECTION_MIN_STRETCH` (a shorter one is no move to drive). Of the paths that keep the planner's margin
+        to ``obstacles`` (as :meth:`plan` takes them) and end parked (:func:`in_stall`), the one ending farthest inside
+        the stall's limits (to the centimetre), then the shortest; ``method`` "correction". Not found when the car is
+        not within :data:`CORRECTION_NEAR` of the stall pose, or no path is clear and ends parked (then :meth:`plan` is
+        the way in)."""
+        t0 = time.process_time()
+        cfg, car, marking = self.config, self.car, self.scene.world.marking_width
+        stall = self.scene.stalls.stalls[stall_id]
+        m = maneuver(maneuver_name)
+        goal = park_pose(stall, car, m.name)
+        start = tuple(float(v) for v in start)
+        base = dict(stall=int(stall_id), maneuver=m.name, start=start, goal=goal, method="correction")
+        near, turn = CORRECTION_NEAR
+        if math.hypot(start[0] - goal[0], start[1] - goal[1]) > near or \
+                abs(math.degrees(_wrap(goal[2] - start[2]))) > turn:
+            return ParkPlan(found=False, reason=f"the car is not within {near:g} m and {turn:g} deg of the stall pose",
+                            planning_time=time.process_time() - t0, verdict="unproven", **base)
+        obs = obstacles if obstacles is not None else park_obstacles(self.obstacles(), stall_id, occupied)
+        g, s = centre_to_rear(goal, car), centre_to_rear(start, car)
+        hx, hy = math.cos(g[2]), math.sin(g[2])
+        kappa = 1.0 / self.radius
+
+        def arc(p: np.ndarray, gear: int, to: float, length: float) -> np.ndarray | None:
+            """From ``p`` in ``gear`` over ``length`` onto heading ``to`` (None: tighter than the plans' turns)."""
+            miss = float(_wrap(to - p[2]))
+            if abs(miss) < 1e-9:
+                return _straight(p, gear, length, cfg.step)
+            return None if abs(miss) > kappa * length else _arc(p, gear, miss / (gear * length), cfg.step, abs(miss))
+
+        paths = []
+        for d in CORRECTION_RUNS:
+            for gear in ((1, -1) if is_parallel(stall) else (m.exit_gear,)):
+                for off in CORRECTION_TURNS:
+                    first = arc(s, gear, g[2] + math.radians(off), d)
+                    if first is None:
+                        continue
+                    if off == 0:
+                        back = (first[-1, 0] - g[0]) * hx + (first[-1, 1] - g[1]) * hy  # [m] past the stall pose
+                        ends = [first, *([_straight(first[-1], -gear, abs(back), cfg.step)]
+                                         if np.sign(back) == gear else [])]
+                    else:
+                        ends = [arc(first[-1], -gear, g[2], d2) for d2 in CORRECTION_RUNS]
+                    for end in ends:
+                        path = first if end is first else None if end is None else _join(first, end)
+                        if path is None or min(_stretches(path)) < CORRECTION_MIN_STRETCH:
+                            continue
+                        fit = in_stall(stall, car, rear_to_centre(path[-1:], car)[0], m.name, marking)
+                        if fit.parked:
+                            length = float(np.linalg.norm(np.diff(path[:, :2], axis=0), axis=1).sum())
+                            paths.append((-round(fit.margin, 2), length, len(paths), path))
+        region = self._region(np.array([s, *(p[-1][-1] for p in paths)]))
+        checker = _Checker(self.near(obs, region), car, cfg.margin, region)
+        for *_, path in sorted(paths, key=lambda p: p[:3]):
+            if checker.clear(path).all():
+                return self._found(path[::-1], obs, t0, **base)
+        return ParkPlan(found=False, reason="no correction is clear and ends parked", planning_time=time.process_time()
+                        - t0, verdict="unproven", **base)
 
     # -- steps of a plan ---------------------------------------------------------------------------------------
     def _search(self, stall: Stall, m: Maneuver, start, goal, obs: Obstacles) -> tuple[np.ndarray, str, int, int]:

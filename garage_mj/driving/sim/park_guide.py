@@ -17,7 +17,9 @@ Like a park assist, it plans again when the plan has not brought the car into th
 for :data:`REPLAN_AT_END` where the plan ends or :data:`REPLAN_STUCK` anywhere else is shown a new plan from where
 it stands into the stall, around the parked cars as they stand (the env plans it with the test's own planner and
 obstacles, :meth:`ParkGuide.replace`; at most ``guide_replans`` times a test, :data:`MAX_REPLANS` by default; a
-failed try counts). The test is still judged along its own reference plan.
+failed try counts). A car that stopped near the stall pose is shown a correction where one is clear (an arc onto the
+stall's heading and back: :meth:`~garage_mj.scene.park_planning.ParkPlanner.correct`). The test is still judged
+along its own reference plan.
 
 It is route information (where the planned way goes, like ``waypoint``), not the car's pose in the garage or
 another road user's state; the observation table (:mod:`~garage_mj.driving.sim.observations`) has it as the
@@ -44,6 +46,9 @@ START_RADIUS = 1.5  # [m] the guide follows the car once it has come this close 
 REPLAN_AT_END = 1.5  # [s] at rest this long at its plan's end, not parked: the guide plans again from where the car is
 REPLAN_STUCK = 4.0  # [s] at rest this long anywhere else on the plan, not parked: the same (half the monitor's window)
 MAX_REPLANS = 3  # new plans after the test's own, at most (the default of the env's ``guide_replans``)
+#: [m] a plan's first stretch shorter than this is shown as driven: the car, at rest where the plan starts, is shown the
+#: second (a move of a few centimetres from rest, which a learned driver does not start; later shuffles are shown)
+SHORT_FIRST = 0.2
 MAX_CURVATURE = 10.0  # [1/m] the curvature read is clipped to this (a plan's turns are under 0.3)
 #: the ``park_guide`` entry, in order
 GUIDE_KEYS = ("gear", "lateral", "heading", "curvature_near", "curvature_far", "stretch_left", "stretches_after")
@@ -59,7 +64,7 @@ class ParkGuide:
     """
 
     def __init__(self, poses, directions, car: CarGeometry, max_replans: int = MAX_REPLANS) -> None:
-        self.tracker = ParkTracker(poses, directions, car, GUIDE_TRACKING)
+        self.tracker = self._tracker(poses, directions, car)
         self.poses, self.directions = np.asarray(poses, dtype=float), np.asarray(directions)  # the plan shown
         self.max_replans = int(max_replans)
         self._start = np.asarray(poses, dtype=float)[0, :2]
@@ -68,6 +73,14 @@ class ParkGuide:
         self.tries = 0  # new plans tried for (a try the planner found no plan for counts too)
         self.left = math.inf  # [m] the stretch left at the last update
 
+    @staticmethod
+    def _tracker(poses, directions, car: CarGeometry) -> ParkTracker:
+        """The tracker of the plan shown, past a first stretch shorter than :data:`SHORT_FIRST`."""
+        tracker = ParkTracker(poses, directions, car, GUIDE_TRACKING)
+        if len(tracker.segments) > 1 and tracker.segments[0].length < SHORT_FIRST:
+            tracker.k = 1
+        return tracker
+
     def _near_start(self, pose) -> bool:
         if not self.started:
             self.started = math.hypot(float(pose[0]) - self._start[0], float(pose[1]) - self._start[1]) <= START_RADIUS
@@ -75,7 +88,7 @@ class ParkGuide:
 
     def replace(self, poses, directions) -> None:
         """Show a new plan (from the car's pose), from its first stretch: one more of :attr:`replans` and :attr:`tries`."""
-        self.tracker = ParkTracker(poses, directions, self.tracker.car, GUIDE_TRACKING)
+        self.tracker = self._tracker(poses, directions, self.tracker.car)
         self.poses, self.directions = np.asarray(poses, dtype=float), np.asarray(directions)
         self.started = True
         self.replans += 1
