@@ -231,3 +231,21 @@ def test_a_plans_first_stretch_of_a_few_centimetres_is_shown_as_driven():
     assert guide.stretch == 0 and guide.read(longer[0])[0] == 1
     guide.replace(short, synthetic_plan([(1, 0.1, 0.0), (-1, 3.0, 0.0), (1, 0.1, 0.0), (-1, 1.0, 0.0)])[1])
     assert guide.stretch == 1
+
+
+def test_a_car_stopped_a_little_short_of_a_cusp_is_shown_the_next_stretch():
+    """A car at rest up to STUCK_CUSP_WITHIN short of a cusp, due a new plan and given none, is shown the next
+    stretch; one farther short, or on the last stretch, is not."""
+    from garage_mj.driving.sim.park_guide import STUCK_CUSP_WITHIN, ParkGuide
+    from tests.test_park_oracle import CAR, synthetic_plan
+
+    poses, gears = synthetic_plan([(1, 3.0, 0.0), (-1, 3.0, 0.0)])
+    guide = ParkGuide(poses, gears, CAR)
+    guide.update(poses[0], 0.0)
+    guide.left = STUCK_CUSP_WITHIN + 0.05  # farther short: a new plan, not the next stretch
+    assert not guide.skip_to_next() and guide.stretch == 0
+    guide.left = 0.15  # over CUSP_WITHIN (so the cusp was not taken), within STUCK_CUSP_WITHIN
+    assert guide.skip_to_next() and guide.stretch == 1 and guide.skips == 1
+    assert guide.read(poses[30])[0] == -1  # the reverse stretch is shown
+    guide.left = 0.1
+    assert not guide.skip_to_next() and guide.stretch == 1  # the last stretch: nothing after it

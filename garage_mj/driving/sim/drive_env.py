@@ -684,7 +684,8 @@ class GarageDriveEnv(gym.Env):
     def _guide(self, pose, speed: float) -> None:
         """Move the park guide on; where the car has rested, not parked, as long as the guide's rule says, plan
         again from its pose into the stall around the parked cars as they stand (the test's planner and obstacles;
-        the judge's reference stays the test's)."""
+        the judge's reference stays the test's), and where no plan is found, show it the next stretch if it stopped
+        a little short of a cusp (:meth:`ParkGuide.skip_to_next`)."""
         guide = self.park_guide
         guide.update(pose, speed)
         if abs(speed) >= self.park_outcome_config.rest_speed:
@@ -696,13 +697,14 @@ class GarageDriveEnv(gym.Env):
         fit = self.monitor.fit
         if (fit is not None and fit.parked) or not guide.wants_plan(now - self._rest_since):
             return
+        self._rest_since = now  # planned, moved on or not, the next try waits as long again
         plan = self.plan_from(pose)
-        self._rest_since = now  # planned or not, the next try waits as long again
         if plan.found and len(plan.poses) >= 2:
             guide.replace(plan.poses, plan.directions)
             self.monitor.follow(Route(plan.poses[:, :2]))  # driving it out and in again is progress, not a stop
         else:
             guide.tries += 1
+            guide.skip_to_next()  # no plan: a car stopped a little short of a cusp is shown the next stretch
 
     def _observe(self, pose: tuple[float, float, float] | None = None, speed: float | None = None
                  ) -> dict[str, np.ndarray]:

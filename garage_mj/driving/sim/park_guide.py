@@ -17,7 +17,8 @@ Like a park assist, it plans again when the plan has not brought the car into th
 for :data:`REPLAN_AT_END` where the plan ends or :data:`REPLAN_STUCK` anywhere else is shown a new plan from where
 it stands into the stall, around the parked cars as they stand (the env plans it with the test's own planner and
 obstacles, :meth:`ParkGuide.replace`; at most ``guide_replans`` times a test, :data:`MAX_REPLANS` by default; a
-failed try counts). A car that stopped near the stall pose is shown a correction where one is clear (an arc onto the
+failed try counts); where the planner finds none, a car that stopped less than :data:`STUCK_CUSP_WITHIN` short of a
+cusp is shown the next stretch (:meth:`ParkGuide.skip_to_next`). A car that stopped near the stall pose is shown a correction where one is clear (an arc onto the
 stall's heading and back: :meth:`~garage_mj.scene.park_planning.ParkPlanner.correct`). The test is still judged
 along its own reference plan.
 
@@ -46,6 +47,9 @@ START_RADIUS = 1.5  # [m] the guide follows the car once it has come this close 
 REPLAN_AT_END = 1.5  # [s] at rest this long at its plan's end, not parked: the guide plans again from where the car is
 REPLAN_STUCK = 4.0  # [s] at rest this long anywhere else on the plan, not parked: the same (half the monitor's window)
 MAX_REPLANS = 3  # new plans after the test's own, at most (the default of the env's ``guide_replans``)
+#: [m] a car at rest :data:`REPLAN_STUCK` this close short of a cusp (over :data:`CUSP_WITHIN`), for which no new plan
+#: is found, is shown the next stretch (a park assist telling a driver who stopped a little early to change gear)
+STUCK_CUSP_WITHIN = 0.3
 #: [m] a plan's first stretch shorter than this is shown as driven: the car, at rest where the plan starts, is shown the
 #: second (a move of a few centimetres from rest, which a learned driver does not start; later shuffles are shown)
 SHORT_FIRST = 0.2
@@ -71,6 +75,7 @@ class ParkGuide:
         self.started = False  # the car has come within START_RADIUS of the plan's start (an AVP test's comes later)
         self.replans = 0  # new plans shown after the test's own (:meth:`replace`)
         self.tries = 0  # new plans tried for (a try the planner found no plan for counts too)
+        self.skips = 0  # cusps taken as reached for a car stopped a little short of them (:meth:`skip_to_next`)
         self.left = math.inf  # [m] the stretch left at the last update
 
     @staticmethod
@@ -104,6 +109,17 @@ class ParkGuide:
         t = self.tracker
         at_end = t.k == len(t.segments) - 1 and (t.stopping or self.left <= CUSP_WITHIN)
         return rested >= (REPLAN_AT_END if at_end else REPLAN_STUCK)
+
+    def skip_to_next(self) -> bool:
+        """For a car at rest that was due a new plan (:meth:`wants_plan`) and got none, on a stretch before the last
+        and at most :data:`STUCK_CUSP_WITHIN` short of its end: show the next stretch (the cusp counts as reached);
+        whether it did. One of :attr:`skips`."""
+        t = self.tracker
+        if t.k >= len(t.segments) - 1 or not 0.0 <= self.left <= STUCK_CUSP_WITHIN:
+            return False
+        t.k, t.index, t.stopping = t.k + 1, 0, False
+        self.skips += 1
+        return True
 
     @property
     def stretch(self) -> int:
