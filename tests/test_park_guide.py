@@ -217,20 +217,22 @@ def test_cruise_guide_replans_reaches_the_env_and_the_default_leaves_run_json_as
 
 def test_a_plans_first_stretch_of_a_few_centimetres_is_shown_as_driven():
     """A plan (the test's or a new one) that begins with a stretch shorter than SHORT_FIRST shows the car, at rest
-    where it starts, the second stretch; a longer first stretch, and every later short one, is shown."""
+    where it starts, the second stretch; a longer first stretch, and every later short one, is shown; with
+    ``guide_replans`` 0 the test's plan is shown as it is."""
     from garage_mj.driving.sim.park_guide import SHORT_FIRST, ParkGuide
     from tests.test_park_oracle import CAR, synthetic_plan
 
-    short, gears = synthetic_plan([(1, 0.1, 0.0), (-1, 3.0, 0.0), (1, 0.1, 0.0), (-1, 1.0, 0.0)])
+    short, short_gears = synthetic_plan([(1, 0.1, 0.0), (-1, 3.0, 0.0), (1, 0.1, 0.0), (-1, 1.0, 0.0)])
     assert 0.1 < SHORT_FIRST
-    guide = ParkGuide(short, gears, CAR)
+    guide = ParkGuide(short, short_gears, CAR)
     assert guide.stretch == 1 and guide.read(short[0])[0] == -1  # reverse: the 0.1 m forward nudge is not shown
     assert len(guide.tracker.segments) == 4  # the 0.1 m shuffle later in the plan stays
     longer, gears = synthetic_plan([(1, 0.3, 0.0), (-1, 3.0, 0.0)])
     guide.replace(longer, gears)
     assert guide.stretch == 0 and guide.read(longer[0])[0] == 1
-    guide.replace(short, synthetic_plan([(1, 0.1, 0.0), (-1, 3.0, 0.0), (1, 0.1, 0.0), (-1, 1.0, 0.0)])[1])
+    guide.replace(short, short_gears)
     assert guide.stretch == 1
+    assert ParkGuide(short, short_gears, CAR, max_replans=0).stretch == 0  # guide_replans 0: the plan as it is
 
 
 def test_a_car_stopped_a_little_short_of_a_cusp_is_shown_the_next_stretch():

@@ -28,7 +28,9 @@ from garage_mj.driving.sim.park_guide import (
     MAX_CURVATURE,
     REPLAN_AT_END,
     REPLAN_STUCK,
+    SHORT_FIRST,
     START_RADIUS,
+    STUCK_CUSP_WITHIN,
 )
 from garage_mj.driving.sim.park_sensors import (
     ALL_SENSORS,
@@ -267,7 +269,9 @@ OBSERVATIONS: tuple[ObservationEntry, ...] = (
                      "turn), the stretch left [m] (negative past its end), the stretches after it; the next stretch "
                      "once the car is at rest at the end of this one; a new plan from where the car stands when it has rested "
                      f"outside the stall {REPLAN_AT_END:g} s where the plan ends or {REPLAN_STUCK:g} s elsewhere (the "
-                     "env's `guide_replans`); zeros without a plan and, in an AVP test, until the "
+                     "env's `guide_replans`; near the stall pose a short correction; with no plan found, the next "
+                     f"stretch for a car stopped up to {STUCK_CUSP_WITHIN:g} m short of a cusp) and, with those, a first "
+                     f"stretch under {SHORT_FIRST:g} m shown as driven; zeros without a plan and, in an AVP test, until the "
                      f"car is within {START_RADIUS:g} m of the park plan's start; park and AVP tests only",
                      _park_guide),
     ObservationEntry("rear_depth", _sensor(lambda c: c.rear_camera, _depth_space), False,

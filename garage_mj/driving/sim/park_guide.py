@@ -68,9 +68,9 @@ class ParkGuide:
     """
 
     def __init__(self, poses, directions, car: CarGeometry, max_replans: int = MAX_REPLANS) -> None:
+        self.max_replans = int(max_replans)
         self.tracker = self._tracker(poses, directions, car)
         self.poses, self.directions = np.asarray(poses, dtype=float), np.asarray(directions)  # the plan shown
-        self.max_replans = int(max_replans)
         self._start = np.asarray(poses, dtype=float)[0, :2]
         self.started = False  # the car has come within START_RADIUS of the plan's start (an AVP test's comes later)
         self.replans = 0  # new plans shown after the test's own (:meth:`replace`)
@@ -78,11 +78,11 @@ class ParkGuide:
         self.skips = 0  # cusps taken as reached for a car stopped a little short of them (:meth:`skip_to_next`)
         self.left = math.inf  # [m] the stretch left at the last update
 
-    @staticmethod
-    def _tracker(poses, directions, car: CarGeometry) -> ParkTracker:
-        """The tracker of the plan shown, past a first stretch shorter than :data:`SHORT_FIRST`."""
+    def _tracker(self, poses, directions, car: CarGeometry) -> ParkTracker:
+        """The tracker of the plan shown; past a first stretch shorter than :data:`SHORT_FIRST` when the guide plans
+        again (``max_replans`` > 0: with none it shows the test's plan as it is, as the shipped models were trained)."""
         tracker = ParkTracker(poses, directions, car, GUIDE_TRACKING)
-        if len(tracker.segments) > 1 and tracker.segments[0].length < SHORT_FIRST:
+        if self.max_replans > 0 and len(tracker.segments) > 1 and tracker.segments[0].length < SHORT_FIRST:
             tracker.k = 1
         return tracker
 
