@@ -251,3 +251,26 @@ def test_a_car_stopped_a_little_short_of_a_cusp_is_shown_the_next_stretch():
     assert guide.read(poses[30])[0] == -1  # the reverse stretch is shown
     guide.left = 0.1
     assert not guide.skip_to_next() and guide.stretch == 1  # the last stretch: nothing after it
+
+
+def test_the_env_shows_a_correction_to_a_car_stopped_turned_in_its_stall_and_a_plan_to_one_farther_off():
+    """``GarageDriveEnv.plan_from``, which the guide's new plans come from: a car a few degrees off the stall pose
+    gets a correction ending parked; a car at the test's start gets the planner's plan into the stall."""
+    import math
+
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+    from garage_mj.scene.park_planning import in_stall
+
+    (source,) = painted_sources("tiny_7x11", 1, seed=0)
+    env = GarageDriveEnv(garage=source.garage, action_type="continuous", task="park", maneuver="reverse")
+    try:
+        env.reset(seed=2)
+        x, y, yaw = env._park.stall_pose
+        near = env.plan_from((x, y, yaw + math.radians(4.0)))
+        stall = env.park_planner.scene.stalls.stalls[env._park.stall]
+        assert near.found and near.method == "correction", near.reason
+        assert in_stall(stall, env.park_planner.car, near.poses[-1], "reverse").parked
+        far = env.plan_from(env._park.start)
+        assert far.found and far.method != "correction" and np.allclose(far.poses[-1], (x, y, yaw))
+    finally:
+        env.close()
