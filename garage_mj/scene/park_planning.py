@@ -91,7 +91,7 @@ SLOT_EXIT_PAST = 0.5
 SLOT_EXIT_TURNS = (1.0, 0.7, 0.4)
 #: [m] how far ahead of a parallel slot's stall pose (behind it, nose-in) the analytic attempt's pre-park poses lie
 PRE_PARK_AHEAD = (1.5, 2.5, 3.5, 4.5, 5.5, 6.5)
-#: [m] the lengths of a correction's arc (:meth:`ParkPlanner.correct`), tried shortest path first
+#: [m] the lengths of a correction's arcs (:meth:`ParkPlanner.correct`)
 CORRECTION_RUNS = (0.3, 0.4, 0.6, 0.8, 1.2)
 #: [deg] the headings off the stall pose's a correction's first arc may end on, to shift the car sideways on its second
 CORRECTION_TURNS = (0.0, 1.0, -1.0, 2.0, -2.0, 4.0, -4.0)

@@ -674,8 +674,8 @@ class GarageDriveEnv(gym.Env):
     def plan_from(self, pose) -> ParkPlan:
         """The reference planner's plan from ``pose`` (car centre x, y, yaw) into this park test's stall with its
         maneuver, around its parked cars as they stand: the test's plan made again from where the car is. A car that
-        stopped near the stall pose is shown a correction (:meth:`ParkPlanner.correct`: out along the stall's axis and
-        straight back in) where one is clear, as a park assist straightens a car in its slot."""
+        stopped near the stall pose is shown a correction (:meth:`ParkPlanner.correct`: an arc onto the stall's heading
+        and back) where one is clear, as a park assist straightens a car in its slot."""
         test, planner = self._park, self.park_planner
         obstacles = body_obstacles(planner.obstacles(), test.stall, test.bodies)
         plan = planner.correct(pose, test.stall, test.maneuver, obstacles=obstacles)

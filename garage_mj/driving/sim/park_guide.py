@@ -18,9 +18,9 @@ for :data:`REPLAN_AT_END` where the plan ends or :data:`REPLAN_STUCK` anywhere e
 it stands into the stall, around the parked cars as they stand (the env plans it with the test's own planner and
 obstacles, :meth:`ParkGuide.replace`; at most ``guide_replans`` times a test, :data:`MAX_REPLANS` by default; a
 failed try counts); where the planner finds none, a car that stopped less than :data:`STUCK_CUSP_WITHIN` short of a
-cusp is shown the next stretch (:meth:`ParkGuide.skip_to_next`). A car that stopped near the stall pose is shown a correction where one is clear (an arc onto the
-stall's heading and back: :meth:`~garage_mj.scene.park_planning.ParkPlanner.correct`). The test is still judged
-along its own reference plan.
+cusp is shown the next stretch (:meth:`ParkGuide.skip_to_next`). A car that stopped near the stall pose is shown a
+correction where one is clear (an arc onto the stall's heading and back:
+:meth:`~garage_mj.scene.park_planning.ParkPlanner.correct`). The test is still judged along its own reference plan.
 
 It is route information (where the planned way goes, like ``waypoint``), not the car's pose in the garage or
 another road user's state; the observation table (:mod:`~garage_mj.driving.sim.observations`) has it as the
