@@ -816,12 +816,12 @@ class ParkPlanner:
                         ends = [arc(first[-1], -gear, g[2], d2) for d2 in CORRECTION_RUNS]
                     for end in ends:
                         path = first if end is first else None if end is None else _join(first, end)
-                        if path is None or min(_stretches(path)) < CORRECTION_MIN_STRETCH:
+                        stretches = [] if path is None else _stretches(path)
+                        if not stretches or min(stretches) < CORRECTION_MIN_STRETCH:
                             continue
                         fit = in_stall(stall, car, rear_to_centre(path[-1:], car)[0], m.name, marking)
                         if fit.parked:
-                            length = float(np.linalg.norm(np.diff(path[:, :2], axis=0), axis=1).sum())
-                            paths.append((-round(fit.margin, 2), length, len(paths), path))
+                            paths.append((-round(fit.margin, 2), sum(stretches), len(paths), path))
         region = self._region(np.array([s, *(p[-1][-1] for p in paths)]))
         checker = _Checker(self.near(obs, region), car, cfg.margin, region)
         for *_, path in sorted(paths, key=lambda p: p[:3]):
