@@ -808,16 +808,16 @@ class ParkPlanner:
                     first = arc(s, gear, g[2] + math.radians(off), d)
                     if first is None:
                         continue
-                    if off == 0:
+                    if off == 0:  # the arc alone, or with a straight move back level with the stall pose
                         back = (first[-1, 0] - g[0]) * hx + (first[-1, 1] - g[1]) * hy  # [m] past the stall pose
-                        ends = [first, *([_straight(first[-1], -gear, abs(back), cfg.step)]
-                                         if np.sign(back) == gear else [])]
-                    else:
-                        ends = [arc(first[-1], -gear, g[2], d2) for d2 in CORRECTION_RUNS]
-                    for end in ends:
-                        path = first if end is first else None if end is None else _join(first, end)
-                        stretches = [] if path is None else _stretches(path)
-                        if not stretches or min(stretches) < CORRECTION_MIN_STRETCH:
+                        moves = [first, *([_join(first, _straight(first[-1], -gear, abs(back), cfg.step))]
+                                          if np.sign(back) == gear else [])]
+                    else:  # the arc, then a second one back onto the stall pose's heading
+                        seconds = (arc(first[-1], -gear, g[2], d2) for d2 in CORRECTION_RUNS)
+                        moves = [_join(first, second) for second in seconds if second is not None]
+                    for path in moves:
+                        stretches = _stretches(path)
+                        if min(stretches) < CORRECTION_MIN_STRETCH:
                             continue
                         fit = in_stall(stall, car, rear_to_centre(path[-1:], car)[0], m.name, marking)
                         if fit.parked:
