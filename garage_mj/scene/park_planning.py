@@ -452,9 +452,11 @@ class _Checker:
             cells = self.lo + (np.stack([ix.ravel(), iy.ravel()], axis=1) + 0.5) * self.CELL  # cell centres
             gap = np.maximum(np.abs(cells[:, None, :] - self.centre[None]) - self.half[None], 0.0)
             near = np.hypot(gap[..., 0], gap[..., 1]) <= reach  # (cells, M)
-            for k in np.flatnonzero(near.any(axis=1)):
-                self.grid[(int(ix.ravel()[k]), int(iy.ravel()[k]))] = [
-                    (*self.centre[j], *self.half[j], self.axes[j]) for j in np.flatnonzero(near[k])]
+            entries = [(*map(float, self.centre[j]), *map(float, self.half[j]), self.axes[j]) for j in range(len(boxes))]
+            cell, box = np.nonzero(near)  # by cell, then by box: each cell's boxes in their order
+            starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]]) if len(cell) else np.zeros(0, int)
+            for k, j in zip(cell[starts].tolist(), np.split(box, starts[1:])):
+                self.grid[(k // ny, k % ny)] = [entries[i] for i in j.tolist()]
 
     def __call__(self, state) -> bool:
         self.calls += 1
@@ -627,20 +629,27 @@ class _Curves:
 
     def _cusp(self, lo: float, hi: float, p0: np.ndarray, gear: int) -> tuple[float, np.ndarray]:
         """Where (curve parameter, pose) the car stops and changes gear: farthest along its heading in its gear
-        from ``p0`` (golden section search between ``lo`` and ``hi``)."""
-        u = np.array([math.cos(p0[2]), math.sin(p0[2])]) * gear
+        from ``p0`` (golden section search between ``lo`` and ``hi``, each probe's reach kept for the next step)."""
+        ux, uy = math.cos(p0[2]) * gear, math.sin(p0[2]) * gear
+        x0, y0 = float(p0[0]), float(p0[1])
 
         def reach(t: float) -> float:
-            return float(np.dot(np.array(self._pose(t)[:2]) - p0[:2], u))
+            x, y, _ = self._pose(t)
+            return (x - x0) * ux + (y - y0) * uy
 
         g = (math.sqrt(5) - 1) / 2
         a, b = lo, hi
+        c, d = b - g * (b - a), a + g * (b - a)
+        rc, rd = reach(c), reach(d)
         for _ in range(40):
-            c, d = b - g * (b - a), a + g * (b - a)
-            if reach(c) >= reach(d):
-                b = d
+            if rc >= rd:  # the farthest lies in [a, d]: d becomes the upper probe
+                b, d, rd = d, c, rc
+                c = b - g * (b - a)
+                rc = reach(c)
             else:
-                a = c
+                a, c, rc = c, d, rd
+                d = a + g * (b - a)
+                rd = reach(d)
         return (a + b) / 2, np.array(self._pose((a + b) / 2))
 
 

@@ -145,6 +145,7 @@ def _open_context(model: mujoco.MjModel, height: int, width: int):
 
 
 CULL_MARGIN = np.deg2rad(2.0)  # [rad] widens the culling frustum: never cull a geom at the image edge
+_GEOM = int(mujoco.mjtObj.mjOBJ_GEOM)
 _HIDDEN_GROUP = 5  # geom group the culled geoms visit while the scene is built (hidden in the option)
 
 
@@ -192,6 +193,11 @@ class Camera:
         self._rgb_buf = np.empty((cfg.height, cfg.width, 3), np.uint8)
         self._depth_buf = np.empty((cfg.height, cfg.width), np.float32)
         self._metres = np.empty((cfg.height, cfg.width), np.float64)  # depth in metres, computed in place
+        # the depth buffer's constants (float32 as mujoco.Renderer computes them), worked out once
+        near, far = np.float32(cfg.near), np.float32(cfg.far)
+        self._far, self._span = far, far - near
+        self._c = np.float32(-0.5) * (-(far + near) / (far - near)) - np.float32(0.5)
+        self._d = np.float32(-0.5) * (-(np.float32(2) * far * near) / (far - near))
         # class per geom id, plus one slot (index ngeom) for background and non-geom objects
         self._lut = np.append(geom_classes(model), 0).astype(np.uint8)
         perspective = model.cam_projection[self.camera_id] == mujoco.mjtProjection.mjPROJ_PERSPECTIVE
@@ -250,20 +256,16 @@ class Camera:
         """One segmentation pass: its ID colours and its depth buffer, read together."""
         self._draw(segment=True)
         mujoco.mjr_readPixels(self._rgb_buf, self._depth_buf, self._rect, self._ctx)
-        cfg = self.config
         # depth: undo the reversed-Z perspective projection (as mujoco.Renderer does), in float64
-        near, far = np.float32(cfg.near), np.float32(cfg.far)
         z = self._metres
         np.copyto(z, self._depth_buf[::-1])
         if self._scene.camera[0].orthographic:
-            z *= far - near
-            np.subtract(far, z, out=z)
+            z *= self._span
+            np.subtract(self._far, z, out=z)
         else:
-            c = np.float32(-0.5) * (-(far + near) / (far - near)) - np.float32(0.5)
-            d = np.float32(-0.5) * (-(np.float32(2) * far * near) / (far - near))
-            z += c
-            np.divide(d, z, out=z)
-        depth = np.minimum(z, far, out=z).astype(np.float32)
+            z += self._c
+            np.divide(self._d, z, out=z)
+        depth = np.minimum(z, self._far, out=z).astype(np.float32)
         # segmentation: colour = scene geom index + 1 (0 = nothing); scene geom -> model geom -> class
         scn = self._scene
         n = scn.ngeom
@@ -273,10 +275,9 @@ class Camera:
             rgb = self._rgb_buf[::-1].astype(np.int32)
             segid = rgb[..., 0] | (rgb[..., 1] << 8) | (rgb[..., 2] << 16)
         table = np.zeros(n + 2, np.uint8)  # [0] nothing, [1..n] scene geoms, [n+1] out of range
-        geom = int(mujoco.mjtObj.mjOBJ_GEOM)
-        ids = np.array([g.objid if g.objtype == geom else -1 for g in scn.geoms[:n]], np.int64)
-        table[1:n + 1] = self._lut[np.where(ids >= 0, ids, self.model.ngeom)]
-        return depth, table[np.minimum(segid, n + 1)]
+        geom, none = _GEOM, self.model.ngeom
+        table[1:n + 1] = self._lut[[g.objid if g.objtype == geom else none for g in scn.geoms[:n]]]
+        return depth, np.take(table, segid, mode="clip")  # an id past n reads as out of range
 
     def render(self, data: mujoco.MjData) -> dict[str, np.ndarray]:
         """The images the config asks for, from the current state of ``data``."""
