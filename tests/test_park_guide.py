@@ -274,3 +274,48 @@ def test_the_env_shows_a_correction_to_a_car_stopped_turned_in_its_stall_and_a_p
         assert far.found and far.method != "correction" and np.allclose(far.poses[-1], (x, y, yaw))
     finally:
         env.close()
+
+
+def test_at_a_cusp_a_car_turned_so_the_next_stretch_would_hit_something_is_shown_a_new_plan():
+    """``ParkGuide.stretch_from`` is the stretch moved rigidly onto the car's rear axle (itself for a car on it); at a
+    cusp the env shows a new plan from the car's pose when that would hit something (its own budget, not the new plans
+    of a car at rest), and keeps the plan for a car on it; with ``guide_replans`` 0 no cusp is checked."""
+    import math
+
+    from garage_mj.driving.sim.drive_env import GarageDriveEnv
+    from garage_mj.driving.sim.park_guide import ParkGuide
+    from garage_mj.scene.clearance import nearest_obstacle
+
+    (source,) = painted_sources("tiny_7x11", 1, seed=0)
+    env = GarageDriveEnv(garage=source.garage, action_type="continuous", task="park", maneuver="reverse")
+    try:
+        env.reset(seed=2)
+        guide = env.park_guide
+        tracker = guide.tracker
+        seg = tracker.segments[1]  # the reverse stretch into the stall, after the plan's one cusp
+        b = tracker.car.rear_axle
+
+        def at_cusp(turn_deg: float) -> tuple[float, float, float]:
+            yaw = float(seg.yaw[0]) + math.radians(turn_deg)
+            return seg.points[0, 0] - b * math.cos(yaw), seg.points[0, 1] - b * math.sin(yaw), yaw
+
+        tracker.k, tracker.index = 1, 0  # the cusp taken
+        rear, heading = guide.stretch_from(at_cusp(0.0))
+        np.testing.assert_allclose(rear, seg.points, atol=1e-9)
+        np.testing.assert_allclose(heading, seg.yaw, atol=1e-12)
+        rear, heading = guide.stretch_from(at_cusp(-40.0))
+        np.testing.assert_allclose(heading, seg.yaw - math.radians(40.0), atol=1e-12)
+        turned = np.hypot(*(rear[-1] - seg.points[0])), np.hypot(*(seg.points[-1] - seg.points[0]))
+        assert turned[0] == pytest.approx(turned[1])  # the same shape, turned about the rear axle
+        clearance, _ = nearest_obstacle(env._park_obstacles(), env.car_geometry, rear, heading)
+        assert clearance.min() <= 0.0  # driven from there, the stretch hits something
+        env._check_cusp(at_cusp(0.0))
+        assert guide.tracker is tracker and guide.cusp_plans == 0 and guide.replans == 0
+        env._check_cusp(at_cusp(-40.0))
+        assert guide.tracker is not tracker and guide.cusp_plans == 1
+        assert guide.replans == 1 and guide.tries == 0  # shown, and the car at rest keeps its own new plans
+        assert np.hypot(*(guide.poses[0, :2] - at_cusp(-40.0)[:2])) < 0.05  # from where the car stands
+        assert guide.wants_cusp_check() and not ParkGuide(guide.poses, guide.directions, tracker.car,
+                                                          max_replans=0).wants_cusp_check()
+    finally:
+        env.close()

@@ -101,6 +101,7 @@ from garage_mj.grid.garage import Garage
 from garage_mj.scene.actor_bodies import ActorBodies, add_actor_bodies
 from garage_mj.scene.actor_spec import ActorSpec
 from garage_mj.scene.car import FRONT_CAMERA, REAR_CAMERA, CarConfig, car_camera, car_geometry
+from garage_mj.scene.clearance import Obstacles, nearest_obstacle
 from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_planner
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
@@ -677,9 +678,27 @@ class GarageDriveEnv(gym.Env):
         stopped near the stall pose is shown a correction (:meth:`ParkPlanner.correct`: an arc onto the stall's heading
         and back) where one is clear, as a park assist straightens a car in its slot."""
         test, planner = self._park, self.park_planner
-        obstacles = body_obstacles(planner.obstacles(), test.stall, test.bodies)
+        obstacles = self._park_obstacles()
         plan = planner.correct(pose, test.stall, test.maneuver, obstacles=obstacles)
         return plan if plan.found else planner.plan(pose, test.stall, test.maneuver, obstacles=obstacles)
+
+    def _park_obstacles(self) -> Obstacles:
+        """The park test's obstacles: the garage's walls, pillars and blocks and its parked cars as they stand."""
+        return body_obstacles(self.park_planner.obstacles(), self._park.stall, self._park.bodies)
+
+    def _check_cusp(self, pose) -> None:
+        """At a cusp just taken: where the next stretch, driven from the car's pose, would hit something, show a new
+        plan from here (:meth:`plan_from`; :data:`~garage_mj.driving.sim.park_guide.MAX_CUSP_PLANS` tries a test)."""
+        guide = self.park_guide
+        rear, heading = guide.stretch_from(pose)
+        clearance, _ = nearest_obstacle(self._park_obstacles(), self.car_geometry, rear, heading)
+        if clearance.min() > 0.0:
+            return
+        guide.cusp_plans += 1
+        plan = self.plan_from(pose)
+        if plan.found and len(plan.poses) >= 2:
+            guide.replace(plan.poses, plan.directions, at_cusp=True)
+            self.monitor.follow(Route(plan.poses[:, :2]))
 
     def _guide(self, pose, speed: float) -> None:
         """Move the park guide on; where the car has rested, not parked, as long as the guide's rule says, plan
@@ -687,7 +706,10 @@ class GarageDriveEnv(gym.Env):
         the judge's reference stays the test's), and where no plan is found, show it the next stretch if it stopped
         a little short of a cusp (:meth:`ParkGuide.skip_to_next`)."""
         guide = self.park_guide
+        tracker, stretch = guide.tracker, guide.stretch
         guide.update(pose, speed)
+        if guide.tracker is tracker and guide.stretch > stretch and guide.wants_cusp_check():
+            self._check_cusp(pose)
         if abs(speed) >= self.park_outcome_config.rest_speed:
             self._rest_since = None
             return

@@ -53,6 +53,11 @@ STUCK_CUSP_WITHIN = 0.3
 #: [m] a plan's first stretch shorter than this is shown as driven: the car, at rest where the plan starts, is shown the
 #: second (a move of a few centimetres from rest, which a learned driver does not start; later shuffles are shown)
 SHORT_FIRST = 0.2
+#: new plans shown at cusps, at most, a test (apart from the ``max_replans`` of a car at rest): at a cusp the car is
+#: shown the next stretch as planned, unless that stretch, driven from where the car stands, would hit something
+#: (:meth:`ParkGuide.stretch_from`); then it is shown a new plan from there, as a park assist plans again when the car
+#: is off its plan
+MAX_CUSP_PLANS = 8
 MAX_CURVATURE = 10.0  # [1/m] the curvature read is clipped to this (a plan's turns are under 0.3)
 #: the ``park_guide`` entry, in order
 GUIDE_KEYS = ("gear", "lateral", "heading", "curvature_near", "curvature_far", "stretch_left", "stretches_after")
@@ -76,6 +81,7 @@ class ParkGuide:
         self.replans = 0  # new plans shown after the test's own (:meth:`replace`)
         self.tries = 0  # new plans tried for (a try the planner found no plan for counts too)
         self.skips = 0  # cusps taken as reached for a car stopped a little short of them (:meth:`skip_to_next`)
+        self.cusp_plans = 0  # new plans tried for at cusps (of them, the ones found count in :attr:`replans`)
         self.left = math.inf  # [m] the stretch left at the last update
 
     def _tracker(self, poses, directions, car: CarGeometry) -> ParkTracker:
@@ -91,13 +97,38 @@ class ParkGuide:
             self.started = math.hypot(float(pose[0]) - self._start[0], float(pose[1]) - self._start[1]) <= START_RADIUS
         return self.started
 
-    def replace(self, poses, directions) -> None:
-        """Show a new plan (from the car's pose), from its first stretch: one more of :attr:`replans` and :attr:`tries`."""
+    def replace(self, poses, directions, at_cusp: bool = False) -> None:
+        """Show a new plan (from the car's pose), from its first stretch: one more of :attr:`replans`, and of
+        :attr:`tries` unless it is shown ``at_cusp`` (those have their own budget, :data:`MAX_CUSP_PLANS`)."""
         self.tracker = self._tracker(poses, directions, self.tracker.car)
         self.poses, self.directions = np.asarray(poses, dtype=float), np.asarray(directions)
         self.started = True
         self.replans += 1
-        self.tries += 1
+        self.tries += not at_cusp
+
+    def wants_cusp_check(self) -> bool:
+        """Whether a cusp just taken should be checked (:meth:`stretch_from`): the guide plans again
+        (``max_replans`` > 0) and fewer than :data:`MAX_CUSP_PLANS` plans were tried for at cusps."""
+        return self.max_replans > 0 and self.cusp_plans < MAX_CUSP_PLANS
+
+    def stretch_from(self, pose) -> tuple[np.ndarray, np.ndarray]:
+        """The rest of the stretch the car is on, from the car's place on it, moved rigidly so that it starts at the
+        car's rear axle as the car at ``pose`` (centre x, y, yaw) stands: ``(rear (N, 2), heading (N,))``, where the
+        car would go driving the stretch's shape from here. A plan is clear from the pose it was planned from; a car
+        that took a cusp turned a few degrees off it may not be."""
+        t = self.tracker
+        keep = t.index
+        t.errors(pose)  # the car's place on the stretch
+        i, t.index = t.index, keep
+        seg = t.segment
+        x, y, yaw = (float(v) for v in pose)
+        b = t.car.rear_axle
+        turn = math.remainder(yaw - float(seg.yaw[i]), math.tau)
+        c, s = math.cos(turn), math.sin(turn)
+        rel = seg.points[i:] - seg.points[i]
+        rear = np.column_stack([x + b * math.cos(yaw) + c * rel[:, 0] - s * rel[:, 1],
+                                y + b * math.sin(yaw) + s * rel[:, 0] + c * rel[:, 1]])
+        return rear, seg.yaw[i:] + turn
 
     def wants_plan(self, rested: float) -> bool:
         """Whether a car at rest for ``rested`` seconds, not parked, is due a new plan: once the plan has begun, at
