@@ -26,6 +26,7 @@ from garage_mj.core.words import a_noun
 from garage_mj.driving.sim.park_guide import (
     GUIDE_KEYS,
     MAX_CURVATURE,
+    MAX_CUSP_PLANS,
     REPLAN_AT_END,
     REPLAN_STUCK,
     SHORT_FIRST,
@@ -271,7 +272,9 @@ OBSERVATIONS: tuple[ObservationEntry, ...] = (
                      f"outside the stall {REPLAN_AT_END:g} s where the plan ends or {REPLAN_STUCK:g} s elsewhere (the "
                      "env's `guide_replans`; near the stall pose a short correction; with no plan found, the next "
                      f"stretch for a car stopped up to {STUCK_CUSP_WITHIN:g} m short of a cusp) and, with those, a first "
-                     f"stretch under {SHORT_FIRST:g} m shown as driven; zeros without a plan and, in an AVP test, until the "
+                     f"stretch under {SHORT_FIRST:g} m shown as driven and, at a cusp, a new plan from where the car "
+                     f"stands where the next stretch driven from there would hit something (up to {MAX_CUSP_PLANS} a test); "
+                     "zeros without a plan and, in an AVP test, until the "
                      f"car is within {START_RADIUS:g} m of the park plan's start; park and AVP tests only",
                      _park_guide),
     ObservationEntry("rear_depth", _sensor(lambda c: c.rear_camera, _depth_space), False,

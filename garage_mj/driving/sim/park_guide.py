@@ -20,7 +20,10 @@ obstacles, :meth:`ParkGuide.replace`; at most ``guide_replans`` times a test, :d
 failed try counts); where the planner finds none, a car that stopped less than :data:`STUCK_CUSP_WITHIN` short of a
 cusp is shown the next stretch (:meth:`ParkGuide.skip_to_next`). A car that stopped near the stall pose is shown a
 correction where one is clear (an arc onto the stall's heading and back:
-:meth:`~garage_mj.scene.park_planning.ParkPlanner.correct`). The test is still judged along its own reference plan.
+:meth:`~garage_mj.scene.park_planning.ParkPlanner.correct`). And at each cusp, where the next stretch, driven from
+where the car stands, would hit something (the car took the cusp a few degrees off the plan, whose stretches keep
+0.1 m to the walls and parked cars), it is shown a new plan from there (:meth:`ParkGuide.stretch_from`, at most
+:data:`MAX_CUSP_PLANS` a test). The test is still judged along its own reference plan.
 
 It is route information (where the planned way goes, like ``waypoint``), not the car's pose in the garage or
 another road user's state; the observation table (:mod:`~garage_mj.driving.sim.observations`) has it as the
