@@ -369,3 +369,28 @@ def test_cli_export_writes_park_problems_for_a_vehicle_class(painted_tiny, tmp_p
     van = FLEET["van"]
     assert (car["length"], car["width"], car["wheelbase"]) == pytest.approx((van.length, van.width, van.wheelbase))
     assert car["min_turning_radius"] == pytest.approx(van.min_radius)
+
+
+def test_a_parked_car_in_the_way_of_the_tests_route_stands_as_the_longest_class_that_leaves_it_clear(painted_tiny):
+    """A van overhanging its bay (5.14 m in a 4.5 m stall) into the lane a test's route drives stands as the longest
+    class that keeps the drive planner's margin from the route (here the SUV, 0.52 m over); every other car is drawn as
+    without the route, and without it the van stands."""
+    from garage_mj.scene.drivable import DEFAULT_DRIVE
+    from garage_mj.scene.garage_scene import GarageScene
+    from garage_mj.scene.parked_fleet import ParkedFleet, RouteLane, draw_parked, fleet_rng
+
+    stalls = GarageScene(painted_tiny).stalls.stalls
+    fleet = ParkedFleet("mixed", 0.0)
+    seed = next(s for s in range(200) if draw_parked(stalls, range(len(stalls)), None, fleet,
+                                                     fleet_rng(s))[0].vehicle == "van")
+    stall = stalls[0]
+    u = np.array([math.cos(stall.car_yaw), math.sin(stall.car_yaw)])  # the bay's axis, out of its open end
+    v = np.array([-u[1], u[0]])
+    open_end = np.array([stall.x, stall.y]) + u * stall.length / 2
+    rear = open_end + 1.85 * u + np.outer(np.arange(-6.0, 6.01, 0.1), v)  # the car's side 0.9 m past the open end
+    lane = RouteLane(rear, np.full(len(rear), math.atan2(v[1], v[0])), car_geometry(), DEFAULT_DRIVE.clearance_margin)
+    without = draw_parked(stalls, range(len(stalls)), None, fleet, fleet_rng(seed))
+    kept = draw_parked(stalls, range(len(stalls)), None, fleet, fleet_rng(seed), lane=lane)
+    assert without[0].vehicle == "van" and not lane.clear(without[0])
+    assert kept[0].vehicle == "suv" and lane.clear(kept[0]) and kept[0].stall == 0
+    assert {s: b for s, b in kept.items() if s != 0} == {s: b for s, b in without.items() if s != 0}

@@ -17,6 +17,13 @@ it, heading as ``Stall.car_yaw`` says). :class:`ParkedFleet` says what a test ma
   parked car (as placed, or where a car placed later stands without jitter): a draw that would is halved toward the
   stall's axis until it does not (:data:`JITTER_HALVINGS` times, then the car stands as without jitter).
 
+A test that drives a cruise route (a cruise or an AVP test) passes ``lane`` (:class:`RouteLane`): the route's swept
+footprint, which the drive planner keeps its clearance margin from every stall's outline. A parked car that comes
+closer to it than that margin (a van overhanging its bay into a 6.5 m aisle at a turn, which the route would hit)
+stands as the longest class of the fleet that keeps the margin, with the same jitter (as a parallel slot's car that
+does not fit stands as the longest that does): the route the test is planned along is clear of the real bodies, as
+of the stall outlines.
+
 :func:`draw_parked` makes those draws from a generator of their own, never the test's other draws (so a
 uniform
 fleet without jitter draws nothing and every other draw of a test stays what it was). The result is one
@@ -34,7 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from garage_mj.scene.clearance import Obstacles
+from garage_mj.scene.car import CarGeometry
+from garage_mj.scene.clearance import Obstacles, nearest_obstacle
 from garage_mj.scene.stalls import Stall
 from garage_mj.scene.templates import PARKED_CAR, load_template
 from garage_mj.scene.vehicles import FLEET, VehicleClass
@@ -177,19 +185,58 @@ def _fitting(stall: Stall, vehicle: VehicleClass) -> VehicleClass:
     return max(fits, key=lambda v: v.length) if fits else min(FLEET.values(), key=lambda v: v.length)
 
 
+@dataclass(frozen=True)
+class RouteLane:
+    """The swept footprint of a test's cruise route: ``car``'s body along the rear-axle path ``rear`` (N, 2) with
+    ``heading`` (N,), which parked cars keep ``margin`` [m] clear of (:func:`draw_parked`)."""
+
+    rear: np.ndarray
+    heading: np.ndarray
+    car: CarGeometry
+    margin: float
+
+    def clear(self, body: ParkedBody) -> bool:
+        """Whether ``body`` keeps :attr:`margin` from the car anywhere along the route."""
+        car = self.car
+        reach = math.hypot(max(car.front, -car.rear) + abs(car.rear_axle), car.half_width)  # rear axle to a corner
+        near = np.hypot(self.rear[:, 0] - body.x, self.rear[:, 1] - body.y) <= (
+            reach + math.hypot(body.length, body.width) / 2 + self.margin)
+        if not near.any():
+            return True
+        obstacle = Obstacles.from_polygons([body.corners()], ["parked_car"], [body.stall])
+        dist, _ = nearest_obstacle(obstacle, car, self.rear[near], self.heading[near])
+        return bool(dist.min() >= self.margin)
+
+
+def _shorter_clear(stall: Stall, body: ParkedBody, lateral: float, dyaw: float, shift: float, lane: RouteLane,
+                   ok) -> ParkedBody:
+    """``body``, or where it comes within ``lane``'s margin of the route, the longest shorter class of the fleet in its
+    place with the same jitter that keeps the margin and ``ok(corners)`` (clear of the target stall and the other
+    cars); ``body`` where none does."""
+    if lane.clear(body):
+        return body
+    for v in sorted(FLEET.values(), key=lambda v: -v.length):
+        if v.length < body.length:
+            trial = _place(stall, v.name, (v.length, v.width, v.height), lateral, dyaw, shift)
+            if lane.clear(trial) and ok(trial.corners()):
+                return trial
+    return body
+
+
 def fleet_rng(seed: int) -> np.random.Generator:
     """The generator of a test's parked-fleet draws: seeded by the test's seed, apart from its other draws."""
     return np.random.default_rng([FLEET_STREAM, int(seed)])
 
 
 def draw_parked(stalls: list[Stall], occupied, target: int | None, fleet: ParkedFleet, rng: np.random.Generator,
-                marking: float = DEFAULT_WORLD.marking_width) -> dict[int, ParkedBody]:
+                marking: float = DEFAULT_WORLD.marking_width, lane: RouteLane | None = None) -> dict[int, ParkedBody]:
     """The parked car of each ``occupied`` stall (module docstring), stall id -> :class:`ParkedBody`.
 
     ``stalls``: every stall of the scene, by id. Per stall in id order, whether occupied or not (so the same seed
     gives each stall the same draw whatever the occupancy): one class index (mixed), then the lateral and heading
     uniforms (jitter; in a garage of parallel slots a third, along the slot); then the cars are placed in stall id
-    order. ``target``: the stall under test, kept clear inside its paint (None: no test stall).
+    order. ``target``: the stall under test, kept clear inside its paint (None: no test stall). ``lane``: the test's
+    cruise route, which the cars keep its margin from (module docstring; None: no route).
     """
     want = {int(s) for s in occupied} - ({int(target)} if target is not None else set())
     names = list(FLEET)
@@ -214,7 +261,8 @@ def draw_parked(stalls: list[Stall], occupied, target: int | None, fleet: Parked
     placed: dict[int, ParkedBody] = {}
     for sid, (name, size, lateral, dyaw, shift) in cars.items():
         me = square[sid]
-        if lateral == 0.0 and dyaw == 0.0 and shift == 0.0:  # no jitter: nothing to check
+        moved = not (lateral == 0.0 and dyaw == 0.0 and shift == 0.0)
+        if not moved and (lane is None or lane.clear(me)):  # no jitter, the route clear: nothing to check
             placed[sid] = me
             continue
         # [m] farther cars cannot touch it (moved across, and in a parallel slot along, by up to MAX_PARKED_JITTER)
@@ -222,15 +270,20 @@ def draw_parked(stalls: list[Stall], occupied, target: int | None, fleet: Parked
         near = [b for b in (*placed.values(), *(square[o] for o in cars if o != sid and o not in placed))
                 if math.hypot(b.x - me.x, b.y - me.y) <= reach + math.hypot(b.length, b.width) / 2]
         others = [b.corners() for b in near]
+
+        def ok(c: np.ndarray, others: list[np.ndarray] = others) -> bool:
+            return not ((keep_out is not None and _overlap(c, keep_out)) or any(_overlap(c, o, CAR_GAP) for o in others))
+
         body = me
-        for _ in range(JITTER_HALVINGS + 1):
+        for _ in range(JITTER_HALVINGS + 1 if moved else 0):
             trial = _place(stalls[sid], name, size, lateral, dyaw, shift)
-            c = trial.corners()
-            if not ((keep_out is not None and _overlap(c, keep_out)) or any(_overlap(c, o, CAR_GAP) for o in others)):
+            if ok(trial.corners()):
                 body = trial
                 break
             lateral, dyaw, shift = lateral / 2, dyaw / 2, shift / 2
-        placed[sid] = body
+        if body is me:
+            lateral = dyaw = shift = 0.0
+        placed[sid] = body if lane is None else _shorter_clear(stalls[sid], body, lateral, dyaw, shift, lane, ok)
     return placed
 
 

@@ -106,7 +106,14 @@ from garage_mj.scene.drivable import START_OFFSET, DriveConfig, TestPlan, drive_
 from garage_mj.scene.garage_scene import GarageScene
 from garage_mj.scene.mjcf_scene import ParkedCars, build_scene
 from garage_mj.scene.park_planning import ParkConfig, ParkPlan, ParkPlanner
-from garage_mj.scene.parked_fleet import ParkedBody, ParkedFleet, body_obstacles, draw_parked, fleet_rng
+from garage_mj.scene.parked_fleet import (
+    ParkedBody,
+    ParkedFleet,
+    RouteLane,
+    body_obstacles,
+    draw_parked,
+    fleet_rng,
+)
 from garage_mj.scene.route_line import Route
 from garage_mj.scene.semantics import COLLIDABLE, Semantic, geom_classes
 from garage_mj.scene.vehicles import VehicleClass, vehicle_class
@@ -493,7 +500,7 @@ class GarageDriveEnv(gym.Env):
         mujoco.mj_resetData(self.model, self.data)
         self._parked_cars.apply(self.model, None, occupied)
         if not self.parked_fleet.default:
-            self.parked_bodies = self.draw_parked_bodies(target, occupied)
+            self.parked_bodies = self.draw_parked_bodies(target, occupied, plan)
             self._parked_cars.place(self.model, None, self.parked_bodies)
         self._place_actors()
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward
@@ -524,11 +531,16 @@ class GarageDriveEnv(gym.Env):
         dyaw = rng.uniform(-1.0, 1.0) * self.start_noise[1]
         return occupied, lateral, dyaw
 
-    def draw_parked_bodies(self, target: int, occupied: list[int]) -> dict[int, ParkedBody]:
+    def draw_parked_bodies(self, target: int, occupied: list[int], route: TestPlan | None = None
+                           ) -> dict[int, ParkedBody]:
         """The parked cars of this reset's test on ``target`` as they stand (:func:`~garage_mj.scene.parked_fleet.
-        draw_parked` from the reset's fleet generator; the scene's own cars, centred, with the default fleet)."""
+        draw_parked` from the reset's fleet generator; the scene's own cars, centred, with the default fleet). With the
+        cruise ``route`` the test drives (a cruise or an AVP test), they keep the drive planner's clearance margin from
+        it as from the stall outlines (:class:`~garage_mj.scene.parked_fleet.RouteLane`)."""
+        lane = None if route is None or not route.feasible else RouteLane(
+            route.rear, route.heading, self.car_geometry, self.planner.config.clearance_margin)
         return draw_parked(self.stalls, occupied, target, self.parked_fleet, self._fleet_rng,
-                           self.scene.world.marking_width)
+                           self.scene.world.marking_width, lane)
 
     def _reset_park(self, rng, options: dict[str, Any], seed: int | None = None):
         """:meth:`reset` of a park or AVP test (:mod:`~garage_mj.driving.sim.park_task`): the test drawn from ``rng``,

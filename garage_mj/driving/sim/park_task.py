@@ -124,8 +124,8 @@ def _draw_one(env: GarageDriveEnv, rng: np.random.Generator, options: dict[str, 
     target = fixed if fixed is not None else int(rng.choice(candidates))
     occupied, lateral, dyaw = env.draw_parked_and_noise(rng, target, options)
     name = env.maneuver if env.maneuver != "any" else tuple(MANEUVERS)[int(rng.integers(len(MANEUVERS)))]
-    bodies = env.draw_parked_bodies(target, occupied)
     cruise = env.planner.plan(target)
+    bodies = env.draw_parked_bodies(target, occupied, cruise if env.task == "avp" else None)  # an AVP test drives it
     if not cruise.feasible:  # no start pose: never driven, the car waits at the entrance
         x0, y0, h0 = env.scene.entrance_pose
         ahead = Route([(x0 + k * math.cos(h0), y0 + k * math.sin(h0)) for k in (0.0, START_OFFSET + 5.0)])
