@@ -113,8 +113,10 @@ def test_bad_backend_fails_before_any_job():
 
 
 def test_generation_experiment_on_ray_gives_the_same_runs(ray2, tmp_path):
+    # 12,000 timesteps: the default learner steps 32 garages together, and its figures need a finished episode per
+    # run (an episode ends at the latest after 4 x 7 x 11 steps of one garage)
     path = tmp_path / "p.toml"
-    path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 200\n"
+    path.write_text("[experiment]\nname = 't'\nmaps = ['tiny_7x11']\nseeds = [0, 1]\ntimesteps = 12000\n"
                     "[dqn]\ncheckpoint_every = 100\nlearning_starts = 100\n")
     protocol = load_protocol(path)
     local = run_experiment(protocol, tmp_path / "local", compute=Compute(progress=False))
