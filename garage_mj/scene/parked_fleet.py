@@ -261,7 +261,7 @@ def draw_parked(stalls: list[Stall], occupied, target: int | None, fleet: Parked
     placed: dict[int, ParkedBody] = {}
     for sid, (name, size, lateral, dyaw, shift) in cars.items():
         me = square[sid]
-        moved = not (lateral == 0.0 and dyaw == 0.0 and shift == 0.0)
+        moved = lateral != 0.0 or dyaw != 0.0 or shift != 0.0
         if not moved and (lane is None or lane.clear(me)):  # no jitter, the route clear: nothing to check
             placed[sid] = me
             continue
@@ -275,12 +275,13 @@ def draw_parked(stalls: list[Stall], occupied, target: int | None, fleet: Parked
             return not ((keep_out is not None and _overlap(c, keep_out)) or any(_overlap(c, o, CAR_GAP) for o in others))
 
         body = me
-        for _ in range(JITTER_HALVINGS + 1 if moved else 0):
-            trial = _place(stalls[sid], name, size, lateral, dyaw, shift)
-            if ok(trial.corners()):
-                body = trial
-                break
-            lateral, dyaw, shift = lateral / 2, dyaw / 2, shift / 2
+        if moved:  # the jitter, halved toward the stall's axis until the car stands clear
+            for _ in range(JITTER_HALVINGS + 1):
+                trial = _place(stalls[sid], name, size, lateral, dyaw, shift)
+                if ok(trial.corners()):
+                    body = trial
+                    break
+                lateral, dyaw, shift = lateral / 2, dyaw / 2, shift / 2
         if body is me:
             lateral = dyaw = shift = 0.0
         placed[sid] = body if lane is None else _shorter_clear(stalls[sid], body, lateral, dyaw, shift, lane, ok)
