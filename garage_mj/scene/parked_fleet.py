@@ -195,12 +195,19 @@ class RouteLane:
     car: CarGeometry
     margin: float
 
+    @functools.cached_property
+    def _centres(self) -> np.ndarray:
+        """(N, 2) the car body's centre along the route."""
+        off = (self.car.front + self.car.rear) / 2 - self.car.rear_axle  # [m] rear axle to the body's centre
+        return self.rear + off * np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
+
     def clear(self, body: ParkedBody) -> bool:
         """Whether ``body`` keeps :attr:`margin` from the car anywhere along the route."""
         car = self.car
-        reach = math.hypot(max(car.front, -car.rear) + abs(car.rear_axle), car.half_width)  # rear axle to a corner
-        near = np.hypot(self.rear[:, 0] - body.x, self.rear[:, 1] - body.y) <= (
-            reach + math.hypot(body.length, body.width) / 2 + self.margin)
+        radius = math.hypot((car.front - car.rear) / 2, car.half_width)  # [m] the car body's centre to a corner
+        c = self._centres
+        near = np.hypot(c[:, 0] - body.x, c[:, 1] - body.y) <= (
+            radius + math.hypot(body.length, body.width) / 2 + self.margin)  # the poses that may come that near
         if not near.any():
             return True
         obstacle = Obstacles.from_polygons([body.corners()], ["parked_car"], [body.stall])
