@@ -319,3 +319,26 @@ def test_at_a_cusp_a_car_turned_so_the_next_stretch_would_hit_something_is_shown
                                                           max_replans=0).wants_cusp_check()
     finally:
         env.close()
+
+
+def test_the_env_checks_each_cusp_the_guide_takes_and_an_oracle_on_its_plan_needs_no_new_one(env):
+    """Driving a plan, the env checks the next stretch once at each cusp the guide takes, never elsewhere; the oracle,
+    on its plan, is shown no new plan there."""
+    from garage_mj.driving.drivers.oracle import OracleDriver
+
+    checked: list[int] = []
+    check = env._check_cusp
+    env._check_cusp = lambda pose: (checked.append(env.park_guide.stretch), check(pose))
+    try:
+        oracle = OracleDriver()
+        obs, info = env.reset(seed=2)
+        oracle.reset(env.driver_info(2))
+        stretches = len(env.park_guide.tracker.segments)
+        done = False
+        while not done:
+            obs, _, term, trunc, info = env.step(oracle.act(obs))
+            done = term or trunc
+        assert info["outcome"] == "success", info.get("reason")
+        assert checked == list(range(1, stretches)) and env.park_guide.cusp_plans == 0
+    finally:
+        del env._check_cusp
