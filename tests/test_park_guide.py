@@ -342,19 +342,3 @@ def test_the_env_checks_each_cusp_the_guide_takes_and_an_oracle_on_its_plan_need
         assert checked == list(range(1, stretches)) and env.park_guide.cusp_plans == 0
     finally:
         del env._check_cusp
-
-
-def test_a_short_first_stretch_is_shown_after_all_where_the_second_would_hit_something():
-    """``ParkGuide.show_first``: a plan whose first stretch the guide took as driven (under SHORT_FIRST) shows it
-    after all; ``skipped_first`` says which plans were skipped."""
-    from garage_mj.driving.sim.park_guide import ParkGuide
-    from tests.test_park_oracle import CAR, synthetic_plan
-
-    short, gears = synthetic_plan([(1, 0.1, 0.0), (-1, 3.0, 0.0)])
-    guide = ParkGuide(short, gears, CAR)
-    assert guide.skipped_first and guide.stretch == 1
-    guide.show_first()
-    assert not guide.skipped_first and guide.stretch == 0 and guide.read(short[0])[0] == 1  # forward: the nudge
-    longer, gears = synthetic_plan([(1, 0.3, 0.0), (-1, 3.0, 0.0)])
-    guide.replace(longer, gears)
-    assert not guide.skipped_first and guide.stretch == 0

@@ -568,8 +568,6 @@ class GarageDriveEnv(gym.Env):
             self._parked_cars.place(self.model, None, test.bodies)
         self._place_actors()
         self.car.reset(self.data, x, y, yaw)  # runs mj_forward; in D, at rest
-        if self.park_guide is not None and self.task == "park":  # the car stands where the parking starts
-            self._check_first(test.start)
         # the solid bodies as they stand (clutter included; a walking or driving actor is nowhere for long)
         moving = np.isin(self.classes, [int(Semantic.PEDESTRIAN), int(Semantic.MOVING_CAR)])
         self._bodies = solid_bodies(self.model, self.data, self.car.geom_mask | moving, self.classes)
@@ -700,31 +698,19 @@ class GarageDriveEnv(gym.Env):
         """The park test's obstacles: the garage's walls, pillars and blocks and its parked cars as they stand."""
         return body_obstacles(self.park_planner.obstacles(), self._park.stall, self._park.bodies)
 
-    def _stretch_hits(self, pose) -> bool:
-        """Whether the guide's stretch, driven from the car's ``pose`` (:meth:`ParkGuide.stretch_from`), hits
-        something."""
-        rear, heading = self.park_guide.stretch_from(pose)
-        clearance, _ = nearest_obstacle(self._park_obstacles(), self.car_geometry, rear, heading)
-        return bool(clearance.min() <= 0.0)
-
-    def _check_first(self, pose) -> None:
-        """A plan just shown whose first stretch, a few centimetres, the guide took as driven: where the second,
-        driven from the car's ``pose``, would hit something, show the first after all."""
-        if self.park_guide.skipped_first and self._stretch_hits(pose):
-            self.park_guide.show_first()
-
     def _check_cusp(self, pose) -> None:
         """At a cusp just taken: where the next stretch, driven from the car's pose, would hit something, show a new
         plan from here (:meth:`plan_from`; :data:`~garage_mj.driving.sim.park_guide.MAX_CUSP_PLANS` tries a test)."""
         guide = self.park_guide
-        if not self._stretch_hits(pose):
+        rear, heading = guide.stretch_from(pose)
+        clearance, _ = nearest_obstacle(self._park_obstacles(), self.car_geometry, rear, heading)
+        if clearance.min() > 0.0:
             return
         guide.cusp_plans += 1
         plan = self.plan_from(pose)
         if plan.found and len(plan.poses) >= 2:
             guide.replace(plan.poses, plan.directions, at_cusp=True)
             self.monitor.follow(Route(plan.poses[:, :2]))
-            self._check_first(pose)
 
     def _guide(self, pose, speed: float) -> None:
         """Move the park guide on; where the car has rested, not parked, as long as the guide's rule says, plan
@@ -732,11 +718,9 @@ class GarageDriveEnv(gym.Env):
         the judge's reference stays the test's), and where no plan is found, show it the next stretch if it stopped
         a little short of a cusp (:meth:`ParkGuide.skip_to_next`)."""
         guide = self.park_guide
-        tracker, stretch, started = guide.tracker, guide.stretch, guide.started
+        tracker, stretch = guide.tracker, guide.stretch
         guide.update(pose, speed)
-        if guide.started and not started:  # an AVP test's plan begins: the car is where the parking starts
-            self._check_first(pose)
-        elif guide.tracker is tracker and guide.stretch > stretch and guide.wants_cusp_check():
+        if guide.tracker is tracker and guide.stretch > stretch and guide.wants_cusp_check():
             self._check_cusp(pose)
         if abs(speed) >= self.park_outcome_config.rest_speed:
             self._rest_since = None
@@ -751,7 +735,6 @@ class GarageDriveEnv(gym.Env):
         plan = self.plan_from(pose)
         if plan.found and len(plan.poses) >= 2:
             guide.replace(plan.poses, plan.directions)
-            self._check_first(pose)
             self.monitor.follow(Route(plan.poses[:, :2]))  # driving it out and in again is progress, not a stop
         else:
             guide.tries += 1

@@ -91,17 +91,9 @@ class ParkGuide:
         """The tracker of the plan shown; past a first stretch shorter than :data:`SHORT_FIRST` when the guide plans
         again (``max_replans`` > 0: with none it shows the test's plan as it is, as the shipped models were trained)."""
         tracker = ParkTracker(poses, directions, car, GUIDE_TRACKING)
-        #: the plan's first stretch was shown as driven (:meth:`show_first` shows it after all)
-        self.skipped_first = self.max_replans > 0 and len(tracker.segments) > 1 and tracker.segments[0].length < SHORT_FIRST
-        if self.skipped_first:
+        if self.max_replans > 0 and len(tracker.segments) > 1 and tracker.segments[0].length < SHORT_FIRST:
             tracker.k = 1
         return tracker
-
-    def show_first(self) -> None:
-        """Show the plan's first stretch after all, where :meth:`_tracker` took it as driven (the env does when the
-        second stretch, driven from where the car stands, would hit something: :meth:`stretch_from`)."""
-        self.tracker.k, self.tracker.index, self.tracker.stopping = 0, 0, False
-        self.skipped_first = False
 
     def _near_start(self, pose) -> bool:
         if not self.started:
