@@ -284,9 +284,13 @@ class ParkTracker:
         whether it did. The one rule by which :meth:`command` and
         :class:`~garage_mj.driving.sim.park_guide.ParkGuide` go from one segment to the next."""
         if self.stop_state(remaining, speed) and abs(speed) < self.config.at_rest and self.k < len(self.segments) - 1:
-            self.k, self.index, self.stopping = self.k + 1, 0, False
+            self.next_segment()
             return True
         return False
+
+    def next_segment(self) -> None:
+        """Move on to the next segment, from its start."""
+        self.k, self.index, self.stopping = self.k + 1, 0, False
 
     def command(self, pose, speed: float, gear: Gear | None = None,
                 steer: float | None = None, actors=None) -> tuple[float, float, Gear]:

@@ -92,7 +92,7 @@ class ParkGuide:
         again (``max_replans`` > 0: with none it shows the test's plan as it is, as the shipped models were trained)."""
         tracker = ParkTracker(poses, directions, car, GUIDE_TRACKING)
         if self.max_replans > 0 and len(tracker.segments) > 1 and tracker.segments[0].length < SHORT_FIRST:
-            tracker.k = 1
+            tracker.next_segment()
         return tracker
 
     def _near_start(self, pose) -> bool:
@@ -151,7 +151,7 @@ class ParkGuide:
         t = self.tracker
         if t.k >= len(t.segments) - 1 or not 0.0 <= self.left <= STUCK_CUSP_WITHIN:
             return False
-        t.k, t.index, t.stopping = t.k + 1, 0, False
+        t.next_segment()
         self.skips += 1
         return True
 
