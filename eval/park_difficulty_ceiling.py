@@ -33,12 +33,15 @@ import numpy as np
 from _provenance import provenance  # eval/_provenance.py: command, date, machine, commit
 
 from garage_mj.core.fsutil import write_json
+from garage_mj.driving.difficulty.fit import DifficultyFitError
 from garage_mj.driving.difficulty.park import load_park_runs
 from garage_mj.driving.difficulty.park_rating import choose_park_model
 from garage_mj.driving.difficulty.regression import auc
 from garage_mj.scene.park_difficulty import PARK_FEATURES, fit_park
 
 BEHAVIOURS = ("behind_stall", "beside_stall")  # the pedestrians' park behaviours (garage_mj.scene.actor_spec)
+#: the park features but the pedestrians' behaviours (park features too, of the same names), the base models' features
+BASE_FEATURES = tuple(f for f in PARK_FEATURES if f not in BEHAVIOURS)
 
 
 def pedestrian_behaviours(run: Path, records: list[dict]) -> dict[tuple[str, int], dict[str, int]]:
@@ -73,14 +76,20 @@ def read_tests(runs: list[Path], only: str | None = None, behaviours: bool = Fal
         raise SystemExit(f"no tests.csv in {', '.join(map(str, runs))}: give park run folders")
     rows = []
     for folder in folders:
-        records = [r for r in load_park_runs([folder]) if only is None or (r["actors"] > 0) == (only == "actors")]
+        try:  # a run that records its pedestrians' behaviours: every park feature
+            records = load_park_runs([folder])
+        except DifficultyFitError:  # an older run: the others
+            records = load_park_runs([folder], BASE_FEATURES)
+        records = [r for r in records if only is None or (r["actors"] > 0) == (only == "actors")]
         drawn = pedestrian_behaviours(folder, [r for r in records if r["actors"] > 0]) if behaviours else {}
         for r in records:
             model = choose_park_model(True, r["driver"]).model
-            features = {k: r[k] for k in PARK_FEATURES}
+            features = {k: r[k] for k in BASE_FEATURES}
+            recorded = {b: r[b] for b in BEHAVIOURS if b in r}
+            walking = drawn.get((r["garage_hash"], r["test"]), recorded or dict.fromkeys(BEHAVIOURS, 0))
             rows.append({"features": features, "failed": bool(r["failed"]), "garage": r["garage_hash"],
-                         "rated": float(model.test_probability(features)),
-                         "behaviours": drawn.get((r["garage_hash"], r["test"]), dict.fromkeys(BEHAVIOURS, 0))})
+                         "rated": float(model.test_probability({**features, **(recorded or walking)})),
+                         "behaviours": walking})
     return rows
 
 
@@ -104,13 +113,13 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("this benchmark needs scikit-learn: make install (or pip install -e '.[dev]')") from None
     prov = provenance(argv)
     rows = read_tests(args.runs, args.only, args.behaviours)
-    X = np.array([[r["features"][k] for k in PARK_FEATURES] for r in rows])
+    X = np.array([[r["features"][k] for k in BASE_FEATURES] for r in rows])
     B = np.array([[r["behaviours"][b] for b in BEHAVIOURS] for r in rows], dtype=float)
     y = np.array([r["failed"] for r in rows], dtype=bool)
     groups = np.array([r["garage"] for r in rows])
 
     def park_model(train: np.ndarray, test: np.ndarray) -> np.ndarray:
-        m = fit_park([rows[i]["features"] for i in train], y[train].tolist())
+        m = fit_park([rows[i]["features"] for i in train], y[train].tolist(), BASE_FEATURES)
         return np.array([m.test_probability(rows[i]["features"]) for i in test])
 
     def park_model_behaviours(train: np.ndarray, test: np.ndarray) -> np.ndarray:
@@ -118,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         from garage_mj.scene.route_difficulty import fit
 
         feats = [{**rows[i]["features"], **rows[i]["behaviours"]} for i in range(len(rows))]
-        m = fit([feats[i] for i in train], y[train].tolist(), (*PARK_FEATURES, *BEHAVIOURS))
+        m = fit([feats[i] for i in train], y[train].tolist(), (*BASE_FEATURES, *BEHAVIOURS))
         return np.array([m.test_probability(feats[i]) for i in test])
 
     def sklearn_model(make, with_behaviours: bool = False):
@@ -160,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)
     rated = auc([r["rated"] for r in rows], y.tolist())
     out = {"runs": [str(r) for r in args.runs], "only": args.only, "behaviours": args.behaviours, "tests": len(rows), "garages": int(len(np.unique(groups))),
-           "failed_pct": round(100 * float(y.mean()), 1), "features": list(PARK_FEATURES),
+           "failed_pct": round(100 * float(y.mean()), 1), "features": list(BASE_FEATURES),
            "rated_auc": round(rated, 4), "folds": args.folds, "repeats": args.repeats, "cross_validated": cv,
            "best_cross_validated_auc": max(v["auc_mean"] for v in cv.values()), "provenance": prov}
     if args.json:

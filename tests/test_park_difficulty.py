@@ -47,7 +47,8 @@ def _row(i: int, outcome: str, *, task: str = "park", level: str = "complex", **
                outcome=outcome, difficulty="0.5", mean_road_length="2", mean_intersection_degree="2", wall_s="0.1",
                task=task, maneuver="reverse" if i % 2 else "forward", park_level=level, stall_angle_deg="90.0",
                plan_length_m=str(8 + i % 5), plan_cusps=str(i % 3), plan_clearance_m=str(0.2 + 0.1 * (i % 4)),
-               pedestrians="0", moving_cars="0", clutter=str(i % 2), vehicle="sedan", parked_fleet="uniform",
+               pedestrians="0", moving_cars="0", clutter=str(i % 2), pedestrians_behind="0", pedestrians_beside="0",
+               vehicle="sedan", parked_fleet="uniform",
                parked_jitter_m="0", bay_margin_m="0.6", aisle_width_m="9.0", start_distance_m=str(5 + i % 6))
     row.update(cells)
     return row
@@ -130,6 +131,24 @@ def test_fit_round_trips_and_is_monotone_in_every_feature(tmp_path):
     assert park_difficulty_cell(back, rows[-1]) == ""  # the infeasible test
     # a plan with nothing near it (an infinite clearance, written empty) reads as the cap, not as a missing cell
     assert park_features({**rows[1], "plan_clearance_m": ""})["tight_plan"] == -PLAN_CLEAR_CAP
+
+
+def test_a_run_without_the_pedestrians_behaviours_is_rated_and_scored_by_a_model_without_them(tmp_path, capsys):
+    """A run of an older garage-mj has no pedestrians_behind / pedestrians_beside cells: a model fitted without those
+    features still rates and scores its tests; a fit on every feature names the missing column."""
+    rows = [{**r, "pedestrians_behind": "", "pedestrians_beside": ""} for r in _park_run(tmp_path / "new")]
+    _run(tmp_path / "old", rows)
+    without = tuple(f for f in PARK_FEATURES if f not in ("behind_stall", "beside_stall"))
+    recs = load_park_runs([tmp_path / "new"], without)
+    model = fit_park(recs, [r["failed"] for r in recs], without)
+    assert 0 < model.of_row(rows[1]) < 1 and set(park_features(rows[1], without)) == set(without)
+    model.save(tmp_path / "old_model.json")
+    assert main(["difficulty", "score", "--task", "park", str(tmp_path / "old"), "--model",
+                 str(tmp_path / "old_model.json")]) == 0
+    assert "per-test AUC" in capsys.readouterr().out
+    assert main(["difficulty", "fit", "--task", "park", str(tmp_path / "old"), "--out", str(tmp_path / "m.json")]) == 2
+    assert "column pedestrians_behind is empty" in capsys.readouterr().err
+    assert park_difficulty_cell(load_park_model("learned_park"), rows[1]) == ""  # the shipped model reads them
 
 
 def test_cli_fits_and_scores_park_runs_beside_the_levels(tmp_path, capsys):

@@ -10,7 +10,7 @@ import pytest
 from garage_mj.cli import main
 from garage_mj.scene.car import car_geometry
 from garage_mj.scene.garage_scene import GarageScene
-from garage_mj.scene.park_difficulty import load_park_model, park_features
+from garage_mj.scene.park_difficulty import PARK_FEATURES, SHIPPED_PARK_MODELS, load_park_model, park_features
 from garage_mj.scene.park_planning import ParkPlanner
 from garage_mj.scene.park_rating import ParkRater, garage_park_difficulty, geometry_key, park_row
 from garage_mj.scene.world import DEFAULT_WORLD, GeometryError, world_with
@@ -29,7 +29,8 @@ def test_a_garage_park_difficulty_is_a_seeded_mean_of_its_park_tests(painted_tin
     car = car_geometry()
     row = next(r for sid in range(len(scene.stalls.stalls))
                if (r := park_row(scene, car, ParkPlanner(scene, car), sid, "reverse", np.random.default_rng(0))))
-    assert set(park_features(row)) == set(load_park_model().features)
+    assert set(park_features(row)) == set(PARK_FEATURES)  # every feature: any shipped model rates it
+    assert all(set(load_park_model(name).features) <= set(PARK_FEATURES) for name in SHIPPED_PARK_MODELS)
     assert row["plan_length_m"] > 0 and row["aisle_width_m"] == DEFAULT_WORLD.aisle_width
     assert math.isnan(garage_park_difficulty(painted_tiny, stalls=0))  # no test: no value
 

@@ -180,8 +180,10 @@ def run_park_score(args: argparse.Namespace) -> int:
     if args.library is not None:
         raise UserError("--library finds the garages of a route score; a park score reads the runs' tests.csv "
                         "alone: leave it out")
-    records = load_park_runs(args.results)
-    result = score_park(load_park_model(args.model), records)
+    load_park_runs(args.results, ())  # the runs first: a folder that is no park run is named before the model
+    model = load_park_model(args.model)
+    records = load_park_runs(args.results, model.features)  # the model's features: an older run lacks newer ones
+    result = score_park(model, records)
     _print_park_score(result)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

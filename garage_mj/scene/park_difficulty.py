@@ -5,7 +5,7 @@ a logistic regression on standardized features with every weight >= 0, fitted by
 :func:`~garage_mj.scene.route_difficulty.fit`) on the park features of a test's ``tests.csv`` row
 (:data:`PARK_FEATURES`, :func:`park_features`), each oriented so that larger is harder: a tighter bay, a narrower
 aisle, a tighter, longer plan with more cusps, a farther start, an angled or a parallel stall, a reverse maneuver,
-more actors, more jitter of the parked cars. A test's park difficulty is its fitted failure probability, in [0, 1].
+more actors, more pedestrians crossing behind the stall or walking beside it, more jitter of the parked cars. A test's park difficulty is its fitted failure probability, in [0, 1].
 
 Its file has a format of its own (:data:`FORMAT`): a route model is never read as a park model, nor the other way.
 The shipped ones are in ``models/difficulty`` (:data:`SHIPPED_PARK_MODELS`, per driver, each fitted on the park tests
@@ -76,6 +76,10 @@ PARK_FEATURE_TABLE = {
     "parallel": ("1 for a parallel slot (0 degrees)", lambda r: float(_angle(r) == 0.0)),
     "reverse": ("1 for a reverse-in maneuver", lambda r: float(str(r.get("maneuver", "")) == "reverse")),
     "actors": ("pedestrians + moving cars + clutter", _actors),
+    "behind_stall": ("pedestrians that cross behind the stall (pedestrians_behind)",
+                     lambda r: _cell(r, "pedestrians_behind")),
+    "beside_stall": ("pedestrians that walk beside the stall (pedestrians_beside)",
+                     lambda r: _cell(r, "pedestrians_beside")),
     "jitter": ("the parked cars' jitter bound [m] (parked_jitter_m)", lambda r: _cell(r, "parked_jitter_m")),
     "mixed_fleet": ("1 for a mixed parked fleet", lambda r: float(str(r.get("parked_fleet", "")) == "mixed")),
 }
@@ -92,11 +96,13 @@ class ParkFeatureError(GarageMJError):
     """A test's row lacks a cell a park feature is read from (a cruise row, or a run of an older garage-mj)."""
 
 
-def park_features(row: Mapping[str, Any]) -> dict[str, float]:
-    """The :data:`PARK_FEATURES` of a park or AVP test's row (cells as ``tests.csv`` holds them, text or numbers);
-    a :class:`ParkFeatureError` naming the empty or missing column."""
+def park_features(row: Mapping[str, Any], features: Sequence[str] = PARK_FEATURES) -> dict[str, float]:
+    """The ``features`` (default: every one of :data:`PARK_FEATURES`) of a park or AVP test's row (cells as
+    ``tests.csv`` holds them, text or numbers); a :class:`ParkFeatureError` naming the empty or missing column (a run
+    of an older garage-mj lacks the pedestrians' behaviours: a model without them still rates its rows)."""
     out = {}
-    for name, (_, read) in PARK_FEATURE_TABLE.items():
+    for name in features:
+        read = PARK_FEATURE_TABLE[name][1]
         try:
             out[name] = read(row)
         except KeyError as exc:
@@ -118,7 +124,7 @@ class ParkDifficulty(RouteDifficulty):
 
     def of_row(self, row: Mapping[str, Any]) -> float:
         """The park difficulty of one test's row (a :class:`ParkFeatureError` where a feature's cell is empty)."""
-        return float(self.test_probability(park_features(row)))
+        return float(self.test_probability(park_features(row, self.features)))
 
     def describe(self) -> str:
         """The formula and its weights, one feature a line, largest weight first."""

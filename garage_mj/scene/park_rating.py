@@ -76,7 +76,8 @@ def park_row(scene: GarageScene, car: CarGeometry, planner: ParkPlanner, stall_i
             "stall_angle_deg": float(stall.angle), "maneuver": maneuver,
             "bay_margin_m": float(stall.width) - across, "aisle_width_m": float(scene.world.aisle_width),
             "start_distance_m": math.hypot(start[0] - stall.x, start[1] - stall.y),
-            "pedestrians": 0, "moving_cars": 0, "clutter": 0, "parked_jitter_m": 0.0, "parked_fleet": "uniform"}
+            "pedestrians": 0, "moving_cars": 0, "clutter": 0, "pedestrians_behind": 0, "pedestrians_beside": 0,
+            "parked_jitter_m": 0.0, "parked_fleet": "uniform"}
 
 
 def garage_park_difficulty(garage: Garage | GarageScene, world: WorldConfig = DEFAULT_WORLD,

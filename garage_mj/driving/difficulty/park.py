@@ -58,15 +58,16 @@ def _run_rows(run: Path) -> list[dict[str, str]]:
     return rows
 
 
-def load_park_runs(runs: Sequence[str | Path]) -> list[dict[str, Any]]:
-    """One record per driven test of the park or AVP ``runs``: its park features, level and whether it failed."""
+def load_park_runs(runs: Sequence[str | Path], features: Sequence[str] = PARK_FEATURES) -> list[dict[str, Any]]:
+    """One record per driven test of the park or AVP ``runs``: its park ``features`` (default: all), level and whether
+    it failed."""
     out = []
     for run in map(Path, runs):
         for row in _run_rows(run):
             if row["outcome"] in NOT_DRIVEN or row["feasible"] != "1":
                 continue
             try:
-                feats = park_features(row)
+                feats = park_features(row, features)
             except ParkFeatureError as exc:
                 raise DifficultyFitError(f"{run}: test {row['test']} of {row['garage']}: {exc} (a run of an older "
                                          "garage-mj, without the park columns: run it again into a new --out)") from None
@@ -92,7 +93,7 @@ def fit_park_runs(runs: Sequence[str | Path], out: str | Path, features: Sequenc
     out = Path(out)
     data = out.with_suffix(".fit.csv")
     _check_out(out, data)
-    records = load_park_runs(runs)
+    records = load_park_runs(runs, features)
     info = {"runs": [str(r) for r in runs], "drivers": sorted({r["driver"] for r in records}),
             "tasks": sorted({r["task"] for r in records}),
             "garages": len({(r["run"], r["garage_hash"]) for r in records}), "fit_data": data.name}
