@@ -5,7 +5,8 @@ a logistic regression on standardized features with every weight >= 0, fitted by
 :func:`~garage_mj.scene.route_difficulty.fit`) on the park features of a test's ``tests.csv`` row
 (:data:`PARK_FEATURES`, :func:`park_features`), each oriented so that larger is harder: a tighter bay, a narrower
 aisle, a tighter, longer plan with more cusps, a farther start, an angled or a parallel stall, a reverse maneuver,
-more actors, more pedestrians crossing behind the stall or walking beside it, more jitter of the parked cars. A test's park difficulty is its fitted failure probability, in [0, 1].
+more actors, more pedestrians crossing behind the stall or walking beside it, more jitter of the parked cars. A test's
+park difficulty is its fitted failure probability, in [0, 1]. A model reads only the features it was fitted on.
 
 Its file has a format of its own (:data:`FORMAT`): a route model is never read as a park model, nor the other way.
 The shipped ones are in ``models/difficulty`` (:data:`SHIPPED_PARK_MODELS`, per driver, each fitted on the park tests
