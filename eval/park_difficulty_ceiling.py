@@ -34,7 +34,7 @@ from _provenance import provenance  # eval/_provenance.py: command, date, machin
 
 from garage_mj.core.fsutil import write_json
 from garage_mj.driving.difficulty.fit import DifficultyFitError
-from garage_mj.driving.difficulty.park import load_park_runs
+from garage_mj.driving.difficulty.park import park_records, read_park_runs
 from garage_mj.driving.difficulty.park_rating import choose_park_model
 from garage_mj.driving.difficulty.regression import auc
 from garage_mj.scene.park_difficulty import PARK_FEATURES, fit_park
@@ -76,10 +76,11 @@ def read_tests(runs: list[Path], only: str | None = None, behaviours: bool = Fal
         raise SystemExit(f"no tests.csv in {', '.join(map(str, runs))}: give park run folders")
     rows = []
     for folder in folders:
+        read = read_park_runs([folder])
         try:  # a run that records its pedestrians' behaviours: every park feature
-            records = load_park_runs([folder])
+            records = park_records(read)
         except DifficultyFitError:  # an older run: the others
-            records = load_park_runs([folder], BASE_FEATURES)
+            records = park_records(read, BASE_FEATURES)
         records = [r for r in records if only is None or (r["actors"] > 0) == (only == "actors")]
         drawn = pedestrian_behaviours(folder, [r for r in records if r["actors"] > 0]) if behaviours else {}
         for r in records:

@@ -10,7 +10,7 @@ from garage_mj.cli import UserError
 from garage_mj.cli._common import SHIPPED_ROUTE_MODELS, int_in, refuse_overwriting, seed, user_errors
 from garage_mj.core.fsutil import write_json
 from garage_mj.driving.difficulty.fit import driver_agreement, fit_runs, load_runs, score
-from garage_mj.driving.difficulty.park import fit_park_runs, load_park_runs, score_park
+from garage_mj.driving.difficulty.park import fit_park_runs, park_records, read_park_runs, score_park
 from garage_mj.driving.difficulty.regression import r_text, too_few
 from garage_mj.driving.garage_set import load_garage_set
 from garage_mj.scene.park_difficulty import (
@@ -180,10 +180,9 @@ def run_park_score(args: argparse.Namespace) -> int:
     if args.library is not None:
         raise UserError("--library finds the garages of a route score; a park score reads the runs' tests.csv "
                         "alone: leave it out")
-    load_park_runs(args.results, ())  # the runs first: a folder that is no park run is named before the model
+    read = read_park_runs(args.results)  # the runs first: a folder that is no park run is named before the model
     model = load_park_model(args.model)
-    records = load_park_runs(args.results, model.features)  # the model's features: an older run lacks newer ones
-    result = score_park(model, records)
+    result = score_park(model, park_records(read, model.features))  # its features: an older run lacks newer ones
     _print_park_score(result)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -58,12 +58,24 @@ def _run_rows(run: Path) -> list[dict[str, str]]:
     return rows
 
 
+def read_park_runs(runs: Sequence[str | Path]) -> list[tuple[Path, list[dict[str, str]]]]:
+    """Each park or AVP run of ``runs`` with its ``tests.csv`` rows; a one-line :class:`DifficultyFitError` for a
+    folder that is not one."""
+    return [(run, _run_rows(run)) for run in map(Path, runs)]
+
+
 def load_park_runs(runs: Sequence[str | Path], features: Sequence[str] = PARK_FEATURES) -> list[dict[str, Any]]:
     """One record per driven test of the park or AVP ``runs``: its park ``features`` (default: all), level and whether
     it failed."""
+    return park_records(read_park_runs(runs), features)
+
+
+def park_records(read: Sequence[tuple[Path, list[dict[str, str]]]], features: Sequence[str] = PARK_FEATURES
+                 ) -> list[dict[str, Any]]:
+    """:func:`load_park_runs` of what :func:`read_park_runs` read."""
     out = []
-    for run in map(Path, runs):
-        for row in _run_rows(run):
+    for run, rows in read:
+        for row in rows:
             if row["outcome"] in NOT_DRIVEN or row["feasible"] != "1":
                 continue
             try:
@@ -77,7 +89,7 @@ def load_park_runs(runs: Sequence[str | Path], features: Sequence[str] = PARK_FE
                         "failed": int(row["outcome"] != "success"), "park_level": row["park_level"],
                         "level": LEVEL_RANK[row["park_level"]], **feats})
     if not out:
-        raise DifficultyFitError(f"{len(runs)} park run(s) hold no driven test (every test infeasible or unproven)")
+        raise DifficultyFitError(f"{len(read)} park run(s) hold no driven test (every test infeasible or unproven)")
     return out
 
 
@@ -148,4 +160,5 @@ def score_park(model: ParkDifficulty, records: Sequence[dict[str, Any]], seed: i
     return out
 
 
-__all__ = ["PARK_RECORD_COLUMNS", "fit_park_runs", "load_park_runs", "score_park", "write_park_records"]
+__all__ = ["PARK_RECORD_COLUMNS", "fit_park_runs", "load_park_runs", "park_records", "read_park_runs",
+           "score_park", "write_park_records"]
