@@ -17,10 +17,12 @@ test's :data:`~garage_mj.scene.park_difficulty.PARK_FEATURES` (what is known bef
 If the flexible models, fitted on the very tests they are scored on (held-out folds aside), reach no higher AUC than
 the shipped model, the features, not the model's form, bound what a park difficulty can predict for this driver.
 
-``--behaviours`` adds what the features lack about the actors: each test with actors is drawn again (its run's
-settings and garage, its seed: the env's reset, nothing driven) to count its pedestrians by behaviour (crossing
-behind the stall, walking beside it), and the two free-form models and the park difficulty's own form are also
-cross-validated with these counts as two more features. Writes the figures and the provenance to ``--json``.
+The base models leave out the pedestrians' behaviours (crossing behind the stall, walking beside it: park features
+too, ``behind_stall`` and ``beside_stall``). ``--behaviours`` adds them: the two free-form models and the park
+difficulty's own form are also cross-validated with these counts as two more features. A run's ``tests.csv`` records
+them; a run of an older garage-mj does not, and each of its tests with actors is drawn again (its run's settings and
+garage, its seed: the env's reset, nothing driven) to count them, with ``--behaviours`` or where a driver's shipped
+park model reads them. Writes the figures and the provenance to ``--json``.
 """
 
 from __future__ import annotations
@@ -67,8 +69,9 @@ def pedestrian_behaviours(run: Path, records: list[dict]) -> dict[tuple[str, int
 def read_tests(runs: list[Path], only: str | None = None, behaviours: bool = False) -> list[dict]:
     """The driven park tests of ``runs`` (a run folder or a folder of run folders) as
     :func:`~garage_mj.driving.difficulty.park.load_park_runs` reads them, each rated under its driver's park model
-    as shipped (``only``: ``"static"`` or ``"actors"``, the tests without or with actors; ``behaviours``: their
-    pedestrians by behaviour too, drawn again, :func:`pedestrian_behaviours`)."""
+    as shipped (``only``: ``"static"`` or ``"actors"``, the tests without or with actors), with their pedestrians by
+    behaviour: as ``tests.csv`` records them, or for a run of an older garage-mj drawn again
+    (:func:`pedestrian_behaviours`) when ``behaviours`` asks for them or a driver's park model reads them."""
     folders = []
     for run in runs:
         folders += [run] if (run / "tests.csv").is_file() else sorted(p.parent for p in run.glob("*/tests.csv"))
@@ -78,18 +81,20 @@ def read_tests(runs: list[Path], only: str | None = None, behaviours: bool = Fal
     for folder in folders:
         read = read_park_runs([folder])
         try:  # a run that records its pedestrians' behaviours: every park feature
-            records = park_records(read)
-        except DifficultyFitError:  # an older run: the others
-            records = park_records(read, BASE_FEATURES)
+            records, recorded = park_records(read), True
+        except DifficultyFitError:  # a run of an older garage-mj: the others, the behaviours drawn again if wanted
+            records, recorded = park_records(read, BASE_FEATURES), False
         records = [r for r in records if only is None or (r["actors"] > 0) == (only == "actors")]
-        drawn = pedestrian_behaviours(folder, [r for r in records if r["actors"] > 0]) if behaviours else {}
+        models = {d: choose_park_model(True, d).model for d in {r["driver"] for r in records}}
+        rated_needs = any(set(BEHAVIOURS) & set(m.features) for m in models.values())
+        drawn = {} if recorded or not (behaviours or rated_needs) else \
+            pedestrian_behaviours(folder, [r for r in records if r["actors"] > 0])
         for r in records:
-            model = choose_park_model(True, r["driver"]).model
             features = {k: r[k] for k in BASE_FEATURES}
-            recorded = {b: r[b] for b in BEHAVIOURS if b in r}
-            walking = drawn.get((r["garage_hash"], r["test"]), recorded or dict.fromkeys(BEHAVIOURS, 0))
+            walking = {b: r[b] for b in BEHAVIOURS} if recorded else \
+                drawn.get((r["garage_hash"], r["test"]), dict.fromkeys(BEHAVIOURS, 0))  # no actors: none walk
             rows.append({"features": features, "failed": bool(r["failed"]), "garage": r["garage_hash"],
-                         "rated": float(model.test_probability({**features, **(recorded or walking)})),
+                         "rated": float(models[r["driver"]].test_probability({**features, **walking})),
                          "behaviours": walking})
     return rows
 
@@ -99,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("runs", nargs="+", type=Path, help="park run folders (or folders of them)")
     ap.add_argument("--only", choices=("static", "actors"), help="only the tests without (static) or with actors")
     ap.add_argument("--behaviours", action="store_true",
-                    help="also with the pedestrians' behaviours as features (each test with actors drawn again)")
+                    help="also with the pedestrians' behaviours as features (an older run's tests with actors drawn again)")
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", type=Path)
